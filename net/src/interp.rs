@@ -1,0 +1,148 @@
+//! Snapshot interpolation on remote peers: a per-object buffer played back with a delay of
+//! about two send intervals plus measured jitter; bounded extrapolation; snap on teleports.
+
+use std::collections::VecDeque;
+use std::time::Duration;
+
+use glam::{Quat, Vec3};
+
+use crate::time::Instant;
+
+/// A replicated object state: center transform plus particle offsets in the center's frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Snapshot {
+    /// Sample time, in the local clock (sender time mapped through the link's offset).
+    pub time: Instant,
+    /// Center position.
+    pub pos: Vec3,
+    /// Center rotation.
+    pub rot: Quat,
+    /// Particle offsets in the center's local frame.
+    pub offsets: Vec<Vec3>,
+}
+
+/// Interpolation settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InterpolationConfig {
+    /// Delay in send intervals (before jitter is added).
+    pub intervals: f32,
+    /// Jitter multiplier added to the delay.
+    pub jitter_factor: f32,
+    /// Longest extrapolation past the newest sample.
+    pub max_extrapolation: Duration,
+    /// Snap (drop history) when a new sample is this far from the previous one (metres).
+    pub snap_distance_m: f32,
+}
+
+impl Default for InterpolationConfig {
+    fn default() -> Self {
+        InterpolationConfig {
+            intervals: 2.0,
+            jitter_factor: 2.0,
+            max_extrapolation: Duration::from_millis(50),
+            snap_distance_m: 2.0,
+        }
+    }
+}
+
+/// Buffer of recent snapshots of one object.
+#[derive(Clone, Debug, Default)]
+pub struct SnapshotBuffer {
+    samples: VecDeque<Snapshot>,
+}
+
+const MAX_SAMPLES: usize = 64;
+
+impl SnapshotBuffer {
+    /// Add a sample (older-than-newest samples are inserted in order; duplicates replace).
+    pub fn push(&mut self, s: Snapshot, cfg: &InterpolationConfig) {
+        if let Some(last) = self.samples.back() {
+            if last.pos.distance(s.pos) > cfg.snap_distance_m {
+                self.samples.clear();
+            }
+        }
+        let at = self.samples.partition_point(|x| x.time <= s.time);
+        if at > 0 && self.samples.get(at - 1).is_some_and(|x| x.time == s.time) {
+            if let Some(x) = self.samples.get_mut(at - 1) {
+                *x = s;
+            }
+        } else {
+            self.samples.insert(at, s);
+        }
+        while self.samples.len() > MAX_SAMPLES {
+            self.samples.pop_front();
+        }
+    }
+
+    /// Newest sample.
+    pub fn latest(&self) -> Option<&Snapshot> {
+        self.samples.back()
+    }
+
+    /// State shown at local time `t` (already delayed by the caller).
+    pub fn sample(&mut self, t: Instant, cfg: &InterpolationConfig) -> Option<Snapshot> {
+        // drop samples no longer needed (keep one before t)
+        while self.samples.len() > 2 && self.samples.get(1).is_some_and(|s| s.time <= t) {
+            self.samples.pop_front();
+        }
+        let first = self.samples.front()?;
+        if t <= first.time {
+            return Some(Snapshot { time: t, ..first.clone() });
+        }
+        let n = self.samples.len();
+        for i in 0..n.saturating_sub(1) {
+            let (Some(a), Some(b)) = (self.samples.get(i), self.samples.get(i + 1)) else {
+                break;
+            };
+            if t >= a.time && t <= b.time {
+                let span = (b.time - a.time).as_secs_f32();
+                let f = if span > 0.0 {
+                    (t - a.time).as_secs_f32() / span
+                } else {
+                    1.0
+                };
+                return Some(lerp(a, b, f, t));
+            }
+        }
+        // past the newest: bounded extrapolation from the last two samples
+        let last = self.samples.back()?;
+        if n >= 2 {
+            if let Some(prev) = self.samples.get(n - 2) {
+                let span = (last.time - prev.time).as_secs_f32();
+                let ahead = (t - last.time).min(cfg.max_extrapolation).as_secs_f32();
+                if span > 0.0 && span < 0.5 {
+                    let f = 1.0 + ahead / span;
+                    return Some(lerp(prev, last, f, t));
+                }
+            }
+        }
+        Some(Snapshot { time: t, ..last.clone() })
+    }
+}
+
+fn lerp(a: &Snapshot, b: &Snapshot, f: f32, t: Instant) -> Snapshot {
+    let offsets = if a.offsets.len() == b.offsets.len() {
+        a.offsets
+            .iter()
+            .zip(&b.offsets)
+            .map(|(x, y)| x.lerp(*y, f))
+            .collect()
+    } else {
+        b.offsets.clone()
+    };
+    let rot = if f <= 1.0 {
+        a.rot.slerp(b.rot, f)
+    } else {
+        // extrapolate rotation: apply the a→b delta scaled by (f - 1)
+        let delta = b.rot * a.rot.inverse();
+        let (axis, angle) = delta.to_axis_angle();
+        let extra = Quat::from_axis_angle(axis, angle * (f - 1.0));
+        (extra * b.rot).normalize()
+    };
+    Snapshot {
+        time: t,
+        pos: a.pos.lerp(b.pos, f),
+        rot: if rot.is_finite() { rot } else { b.rot },
+        offsets,
+    }
+}

@@ -1,0 +1,190 @@
+//! Per-class replication policy and session configuration.
+
+use std::time::Duration;
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+use crate::quant::VecQuantizer;
+
+/// How a soft body is replicated (thesis 5.4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum SoftBodyMode {
+    /// Thesis 5.4.1: only the center transform; remotes simulate the particles themselves.
+    CenterOnly,
+    /// Thesis 5.4.2: center transform plus particle positions relative to the center.
+    Particles,
+}
+
+/// Who may take an object's authority.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum AuthorityPolicy {
+    /// Granted unless another peer currently holds it.
+    Free,
+    /// While held, the holder is asked and must agree.
+    OwnerMustAgree,
+    /// Never granted: stays with the host.
+    Locked,
+}
+
+/// Send policy of one object class (thesis 5.3 plus rest sync and keyframes).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SendPolicy {
+    /// Updates per second.
+    pub rate_hz: f32,
+    /// Position changes below this are not sent (metres).
+    pub position_threshold_m: f32,
+    /// Rotation changes below this are not sent (radians).
+    pub rotation_threshold_rad: f32,
+    /// Particle offset changes below this are not sent (metres).
+    pub particle_threshold_m: f32,
+    /// An object unchanged for this long is at rest: its exact pose is sent (rest sync).
+    pub rest_after: Duration,
+    /// Full keyframe at least this often while moving (loss recovery); `None` disables.
+    pub keyframe_interval: Option<Duration>,
+}
+
+impl Default for SendPolicy {
+    fn default() -> Self {
+        SendPolicy {
+            rate_hz: 20.0,
+            position_threshold_m: 0.005,
+            rotation_threshold_rad: 0.5_f32.to_radians(),
+            particle_threshold_m: 0.005,
+            rest_after: Duration::from_millis(150),
+            keyframe_interval: Some(Duration::from_secs(3)),
+        }
+    }
+}
+
+impl SendPolicy {
+    /// Interval between send ticks.
+    pub fn interval(&self) -> Duration {
+        let hz = if self.rate_hz.is_finite() && self.rate_hz > 0.1 {
+            self.rate_hz
+        } else {
+            0.1
+        };
+        Duration::from_secs_f32(1.0 / hz)
+    }
+}
+
+/// Everything that describes one object class; must be identical on every peer.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ClassConfig {
+    /// Human-readable name (stats are reported per class).
+    pub name: String,
+    /// Send policy.
+    pub send: SendPolicy,
+    /// Default authority policy of spawned objects.
+    pub authority: AuthorityPolicy,
+    /// Soft-body replication mode (ignored for rigid objects).
+    pub soft_body_mode: SoftBodyMode,
+    /// Lower corner of the world box positions are quantized in.
+    pub bounds_min: [f32; 3],
+    /// Upper corner of that box.
+    pub bounds_max: [f32; 3],
+    /// Position grid step (metres).
+    pub position_resolution_m: f32,
+    /// Bits per smallest-three component.
+    pub rotation_bits: u32,
+    /// Half-extent of particle offsets around the center (metres).
+    pub particle_extent_m: f32,
+    /// Particle offset grid step (metres).
+    pub particle_resolution_m: f32,
+    /// Particles per replication chunk (a soft body is split by particle ranges).
+    pub particles_per_chunk: u16,
+}
+
+impl ClassConfig {
+    /// A rigid-object class with the given send policy.
+    pub fn rigid(name: &str, send: SendPolicy) -> Self {
+        ClassConfig {
+            name: name.to_string(),
+            send,
+            authority: AuthorityPolicy::Free,
+            soft_body_mode: SoftBodyMode::Particles,
+            bounds_min: [-16.0, -4.0, -16.0],
+            bounds_max: [16.0, 12.0, 16.0],
+            position_resolution_m: 0.0005,
+            rotation_bits: 11,
+            particle_extent_m: 0.5,
+            particle_resolution_m: 0.0005,
+            particles_per_chunk: 128,
+        }
+    }
+
+    /// A soft-body class replicated in `mode`.
+    pub fn soft_body(name: &str, send: SendPolicy, mode: SoftBodyMode) -> Self {
+        ClassConfig {
+            soft_body_mode: mode,
+            ..ClassConfig::rigid(name, send)
+        }
+    }
+
+    /// Position quantizer.
+    pub fn position_quantizer(&self) -> VecQuantizer {
+        VecQuantizer::new(
+            Vec3::from_array(self.bounds_min),
+            Vec3::from_array(self.bounds_max),
+            self.position_resolution_m,
+        )
+    }
+
+    /// Particle offset quantizer.
+    pub fn particle_quantizer(&self) -> VecQuantizer {
+        let e = self.particle_extent_m.abs().max(0.01);
+        VecQuantizer::new(Vec3::splat(-e), Vec3::splat(e), self.particle_resolution_m)
+    }
+
+    /// Rotation bits clamped to a sane range.
+    pub fn rot_bits(&self) -> u32 {
+        self.rotation_bits.clamp(4, 16)
+    }
+
+    /// Particles per chunk, at least 1.
+    pub fn chunk_len(&self) -> usize {
+        usize::from(self.particles_per_chunk.max(1))
+    }
+}
+
+/// Configuration of a session (the class table must match across peers: checked at join).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SessionConfig {
+    /// Object classes, indexed by [`crate::ClassId`].
+    pub classes: Vec<ClassConfig>,
+    /// A peer silent this long is gone, whatever the transport says.
+    pub peer_timeout: Duration,
+    /// Heartbeat period (also the RTT probe).
+    pub heartbeat_interval: Duration,
+    /// Largest datagram we ever emit.
+    pub mtu: usize,
+    /// Minimum retransmission timeout of reliable control messages.
+    pub min_rto: Duration,
+}
+
+impl Default for SessionConfig {
+    fn default() -> Self {
+        SessionConfig {
+            classes: vec![ClassConfig::rigid("rigid", SendPolicy::default())],
+            peer_timeout: Duration::from_secs(1),
+            heartbeat_interval: Duration::from_millis(200),
+            mtu: 1200,
+            min_rto: Duration::from_millis(60),
+        }
+    }
+}
+
+impl SessionConfig {
+    /// A digest of everything that must agree across peers (compared in the join handshake).
+    pub fn digest(&self) -> u64 {
+        // FNV-1a over the class table's JSON-free debug text: stable within one build.
+        let text = format!("{:?}", self.classes);
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        for b in text.bytes() {
+            h ^= u64::from(b);
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+        h
+    }
+}

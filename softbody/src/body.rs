@@ -1,0 +1,541 @@
+//! The thesis's particle soft body on rapier3d (chapter 3, Appendix A.6–A.12), made sound:
+//! an exact per-step restoring fraction instead of the `dt / (1/90)` scaling, neighbour
+//! coupling that cannot feed back on itself, the center's rigid velocity fed forward, and a
+//! closed-form (drift-free) deformation.
+
+use glam::{Quat, Vec3};
+use rapier3d::prelude::{
+    ColliderBuilder, ColliderHandle, Group, InteractionGroups, InteractionTestMode, PhysicsWorld,
+    RigidBodyBuilder, RigidBodyHandle,
+};
+
+use crate::cluster::{build_particle_map, ParticleMap};
+use crate::config::{CenterCollider, ParticleCollider, SimulationSpace, SoftBodyConfig};
+use crate::mesh::{enclosed_volume, Mesh, WeldedMesh};
+use crate::SoftBodyError;
+
+/// Generational handle of a soft body in a [`SoftBodySet`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct SoftBodyHandle {
+    index: u32,
+    generation: u32,
+}
+
+/// One particle soft body: its rapier bodies, its particle map and its deformed mesh.
+#[derive(Debug)]
+pub struct SoftBody {
+    config: SoftBodyConfig,
+    welded: WeldedMesh,
+    render_triangles: Vec<[u32; 3]>,
+    /// Welded rest vertices relative to the rest center.
+    rest_vertices: Vec<Vec3>,
+    map: ParticleMap,
+    /// Particle rest positions relative to the rest center.
+    rest_offsets: Vec<Vec3>,
+    /// Per particle: `neighbour_share / Σ w`, so the shares of its neighbours sum to the share.
+    neighbour_scale: Vec<f32>,
+    center: RigidBodyHandle,
+    center_collider: Option<ColliderHandle>,
+    particles: Vec<RigidBodyHandle>,
+    particle_colliders: Vec<Option<ColliderHandle>>,
+    particle_radius_m: Vec<f32>,
+    /// Per particle: a position it is driven to (a grab), if any.
+    drives: Vec<Option<Vec3>>,
+    /// Per particle: displacement from its rigid rest target after the last step.
+    displacement: Vec<Vec3>,
+    scratch: Vec<Vec3>,
+    /// Deformed welded vertices, world space.
+    vertices: Vec<Vec3>,
+    render_positions: Vec<Vec3>,
+    render_normals: Vec<Vec3>,
+    slot_normals: Vec<Vec3>,
+    rest_volume_m3: f32,
+    size_m: f32,
+    non_finite_recoveries: u64,
+}
+
+/// A set of soft bodies in the rapier style: generational handles, one pipeline step.
+#[derive(Debug, Default)]
+pub struct SoftBodySet {
+    slots: Vec<(u32, Option<SoftBody>)>,
+    free: Vec<u32>,
+    groups_used: u32,
+}
+
+impl SoftBodySet {
+    /// An empty set.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Builds a soft body from `mesh` (already baked into world space) and inserts its bodies
+    /// and colliders into `world`.
+    pub fn insert(
+        &mut self,
+        mesh: &Mesh,
+        config: SoftBodyConfig,
+        world: &mut PhysicsWorld,
+    ) -> Result<SoftBodyHandle, SoftBodyError> {
+        config.validate()?;
+        mesh.validate("<soft body mesh>")?;
+        let bit = 1 + 2 * (self.groups_used % 15);
+        self.groups_used += 1;
+        let body = SoftBody::build(mesh, config, world, bit)?;
+        let index = match self.free.pop() {
+            Some(i) => {
+                let slot = &mut self.slots[i as usize];
+                slot.0 = slot.0.wrapping_add(1);
+                slot.1 = Some(body);
+                i
+            }
+            None => {
+                self.slots.push((0, Some(body)));
+                (self.slots.len() - 1) as u32
+            }
+        };
+        Ok(SoftBodyHandle { index, generation: self.slots[index as usize].0 })
+    }
+
+    /// Removes a soft body and its rapier bodies.
+    pub fn remove(&mut self, handle: SoftBodyHandle, world: &mut PhysicsWorld) -> Option<SoftBody> {
+        let slot = self.slots.get_mut(handle.index as usize)?;
+        if slot.0 != handle.generation {
+            return None;
+        }
+        let body = slot.1.take()?;
+        self.free.push(handle.index);
+        for &h in body.particles.iter().chain(std::iter::once(&body.center)) {
+            world.remove_body(h);
+        }
+        Some(body)
+    }
+
+    /// The body behind a handle.
+    pub fn get(&self, handle: SoftBodyHandle) -> Option<&SoftBody> {
+        self.slots
+            .get(handle.index as usize)
+            .filter(|s| s.0 == handle.generation)
+            .and_then(|s| s.1.as_ref())
+    }
+
+    /// The body behind a handle, mutably.
+    pub fn get_mut(&mut self, handle: SoftBodyHandle) -> Option<&mut SoftBody> {
+        self.slots
+            .get_mut(handle.index as usize)
+            .filter(|s| s.0 == handle.generation)
+            .and_then(|s| s.1.as_mut())
+    }
+
+    /// All bodies with their handles.
+    pub fn iter(&self) -> impl Iterator<Item = (SoftBodyHandle, &SoftBody)> {
+        self.slots.iter().enumerate().filter_map(|(i, (g, b))| {
+            b.as_ref().map(|b| (SoftBodyHandle { index: i as u32, generation: *g }, b))
+        })
+    }
+
+    /// Number of bodies.
+    pub fn len(&self) -> usize {
+        self.slots.iter().filter(|s| s.1.is_some()).count()
+    }
+
+    /// True if the set holds no body.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Sets every body's particle velocities for the coming step (thesis 3.2.2). Call before
+    /// stepping `world` with the same `dt_s`.
+    pub fn pre_physics(&mut self, world: &mut PhysicsWorld, dt_s: f32) {
+        for (_, b) in self.slots.iter_mut() {
+            if let Some(b) = b {
+                b.apply_restoring_velocities(world, dt_s);
+            }
+        }
+    }
+
+    /// Deforms every body's mesh from its particles (thesis 3.3). Call after stepping `world`.
+    pub fn post_physics(&mut self, world: &PhysicsWorld) {
+        for (_, b) in self.slots.iter_mut() {
+            if let Some(b) = b {
+                b.deform(world);
+            }
+        }
+    }
+
+    /// One fixed step: restoring velocities, `world.step()` at `dt_s`, deformation.
+    pub fn step(&mut self, world: &mut PhysicsWorld, dt_s: f32) {
+        world.integration_parameters.dt = dt_s;
+        self.pre_physics(world, dt_s);
+        world.step();
+        self.post_physics(world);
+    }
+}
+
+fn groups(bit: u32, self_collisions: bool) -> (InteractionGroups, InteractionGroups) {
+    // Two bits per body: particles P, center C. Particles never touch their own center
+    // (Appendix A.10) and touch each other only with self-collisions on (thesis 3.5.3).
+    let p = Group::from_bits_truncate(1 << bit);
+    let c = Group::from_bits_truncate(1 << (bit + 1));
+    let particle_filter = if self_collisions { Group::ALL - c } else { Group::ALL - c - p };
+    (
+        InteractionGroups::new(p, particle_filter, InteractionTestMode::And),
+        InteractionGroups::new(c, Group::ALL - p, InteractionTestMode::And),
+    )
+}
+
+impl SoftBody {
+    fn build(mesh: &Mesh, config: SoftBodyConfig, world: &mut PhysicsWorld, bit: u32) -> Result<Self, SoftBodyError> {
+        let welded = mesh.weld(config.weld_epsilon_m);
+        let soft: Vec<bool> = match &config.soft_region {
+            Some(r) => welded.positions.iter().map(|p| r.contains(*p)).collect(),
+            None => vec![true; welded.positions.len()],
+        };
+        let (lo, hi) = crate::mesh::bounds(&welded.positions);
+        let size_m = (hi - lo).max_element().max(1e-6);
+        let mut affect = config.affect_range_m;
+        let map0 = build_particle_map(&welded.positions, &welded.triangles, &soft, config.cluster, 0.0)?;
+        if affect == 0.0 {
+            affect = 2.5 * mean_spacing(&map0.rest_particles);
+        }
+        let map = if affect > 0.0 {
+            build_particle_map(&welded.positions, &welded.triangles, &soft, config.cluster, affect)?
+        } else {
+            map0
+        };
+        // Thesis 3.2.1 / Figure 3.8: the center is the mean of the particles.
+        let rest_center = map.rest_particles.iter().copied().sum::<Vec3>() / map.len() as f32;
+        let rest_offsets: Vec<Vec3> = map.rest_particles.iter().map(|p| *p - rest_center).collect();
+        let rest_vertices: Vec<Vec3> = welded.positions.iter().map(|p| *p - rest_center).collect();
+        let neighbour_scale = (0..map.len())
+            .map(|i| {
+                let (_, w) = map.neighbours.row(i);
+                let s: f32 = w.iter().sum();
+                if s > 0.0 { config.neighbour_share / s } else { 0.0 }
+            })
+            .collect();
+        let (pg, cg) = groups(bit, config.self_collisions);
+
+        let center_builder = match config.space {
+            SimulationSpace::Local => RigidBodyBuilder::fixed(),
+            SimulationSpace::World => RigidBodyBuilder::dynamic().can_sleep(true),
+        }
+        .translation(rest_center);
+        let center = world.insert_body(center_builder);
+        let center_collider = match config.space {
+            SimulationSpace::Local => None,
+            SimulationSpace::World => {
+                let builder = match config.center_collider {
+                    CenterCollider::Ball => {
+                        let r = rest_vertices.iter().map(|v| v.length()).sum::<f32>() / rest_vertices.len() as f32;
+                        Some(ColliderBuilder::ball((r * config.center_scale).max(1e-4)))
+                    }
+                    CenterCollider::ConvexHull => {
+                        let pts: Vec<Vec3> = rest_vertices.iter().map(|v| *v * config.center_scale).collect();
+                        ColliderBuilder::convex_hull(&pts)
+                    }
+                };
+                let builder = builder.ok_or_else(|| {
+                    SoftBodyError::Config("the mesh has no convex hull (flat or degenerate)".into())
+                })?;
+                Some(world.insert_collider(
+                    builder.mass(config.center_mass_kg).friction(config.friction).collision_groups(cg),
+                    Some(center),
+                ))
+            }
+        };
+
+        let mut particles = Vec::with_capacity(map.len());
+        let mut particle_colliders = Vec::with_capacity(map.len());
+        let mut particle_radius_m = Vec::with_capacity(map.len());
+        for (i, p) in map.rest_particles.iter().enumerate() {
+            let h = world.insert_body(
+                RigidBodyBuilder::dynamic()
+                    .translation(*p)
+                    .gravity_scale(0.0)
+                    .angular_damping(config.angular_damping)
+                    .additional_mass(if config.collider == ParticleCollider::None { config.particle_mass_kg } else { 0.0 }),
+            );
+            let r = (map.particle_extent_m[i] * config.particle_scale).max(1e-4);
+            let shape = match config.collider {
+                ParticleCollider::Sphere => Some(ColliderBuilder::ball(r)),
+                ParticleCollider::Box => Some(ColliderBuilder::cuboid(r, r, r)),
+                ParticleCollider::None => None,
+            };
+            let ch = shape.map(|s| {
+                world.insert_collider(
+                    s.mass(config.particle_mass_kg).friction(config.friction).collision_groups(pg),
+                    Some(h),
+                )
+            });
+            particles.push(h);
+            particle_colliders.push(ch);
+            particle_radius_m.push(r);
+        }
+        let n = map.len();
+        let rest_volume_m3 = enclosed_volume(&welded.positions, &welded.triangles);
+        let mut body = SoftBody {
+            render_triangles: mesh.triangles.clone(),
+            vertices: welded.positions.clone(),
+            render_positions: vec![Vec3::ZERO; welded.render_to_welded.len()],
+            render_normals: vec![Vec3::ZERO; welded.render_to_welded.len()],
+            slot_normals: vec![Vec3::ZERO; welded.normal_slots],
+            welded,
+            rest_vertices,
+            map,
+            rest_offsets,
+            neighbour_scale,
+            center,
+            center_collider,
+            particles,
+            particle_colliders,
+            particle_radius_m,
+            drives: vec![None; n],
+            displacement: vec![Vec3::ZERO; n],
+            scratch: vec![Vec3::ZERO; n],
+            rest_volume_m3,
+            size_m,
+            config,
+            non_finite_recoveries: 0,
+        };
+        body.deform(world);
+        Ok(body)
+    }
+
+    /// The restoring step of thesis 3.2.2 / Appendix A.6–A.7, made sound.
+    ///
+    /// Thesis: `v = MoveTowards(v, (dest − x − Σ w·(dest_j − x_j)) · k · dt/(1/90), 10)`. Its
+    /// per-step displacement fraction is `k·dt²·90`: it grows with the step size and passes 1
+    /// (overshoot) at k·dt > 1/(90·dt), i.e. k > 90 at 90 Hz and k > 40 at 60 Hz, and diverges at
+    /// twice that. Here the fraction is `α = 1 − exp(−k·dt)`, which matches the thesis for small
+    /// k·dt and never reaches 1. The neighbour term follows neighbours' displacement *relative*
+    /// to the particle's own, with shares summing to `neighbour_share ≤ 0.5`; by Gershgorin the
+    /// update `u ← u − α(I + L)u` then contracts for every α < 1 — no stiffness or step rate
+    /// can destabilise it. A uniform displacement (the whole body lagging its center) decays at
+    /// the full rate instead of being amplified as in the thesis's form.
+    fn apply_restoring_velocities(&mut self, world: &mut PhysicsWorld, dt_s: f32) {
+        let Some(center) = world.bodies.get(self.center) else { return };
+        let c = center.translation();
+        let r = *center.rotation();
+        let vc = center.linvel();
+        let wc = center.angvel();
+        let dt = dt_s.max(1e-6);
+        let alpha = 1.0 - (-self.config.stiffness * dt).exp();
+        // u_i = x_i − dest_i (Appendix A.6: dest = center + rotation · rest offset).
+        for (i, &h) in self.particles.iter().enumerate() {
+            let x = world.bodies.get(h).map(|b| b.translation()).unwrap_or(Vec3::NAN);
+            let dest = c + r * self.rest_offsets[i];
+            let u = x - dest;
+            self.scratch[i] = if u.is_finite() { u } else { Vec3::ZERO };
+        }
+        let max_dv = self.config.max_velocity_change_mps;
+        for (j, &h) in self.particles.iter().enumerate() {
+            let uj = self.scratch[j];
+            let (ids, ws) = self.map.neighbours.row(j);
+            let mut pull = Vec3::ZERO;
+            for (&i, &w) in ids.iter().zip(ws) {
+                pull += (self.scratch[i as usize] - uj) * w;
+            }
+            let correction = -uj + pull * self.neighbour_scale[j];
+            let dest = c + r * self.rest_offsets[j];
+            let Some(body) = world.bodies.get_mut(h) else { continue };
+            if !body.translation().is_finite() {
+                // Never let a non-finite state live on: put the particle back at its target.
+                body.set_translation(dest, true);
+                body.set_linvel(vc, true);
+                self.non_finite_recoveries += 1;
+                continue;
+            }
+            let target = match self.drives[j] {
+                Some(goal) => (goal - body.translation()) / dt,
+                // Feed the center's rigid motion forward so a rigidly moving body has no lag.
+                None => vc + wc.cross(dest - c) + correction * (alpha / dt),
+            };
+            let v = body.linvel();
+            let dv = target - v;
+            let len = dv.length();
+            let new_v = if len > max_dv && self.drives[j].is_none() { v + dv * (max_dv / len) } else { target };
+            if body.is_sleeping() && (new_v - v).length_squared() < 1e-10 && uj.length_squared() < 1e-12 {
+                continue;
+            }
+            body.set_linvel(new_v, true);
+        }
+    }
+
+    /// Thesis 3.3 and Appendix A.11–A.12 in closed form: each vertex is its rest position moved
+    /// rigidly with the center, plus the weighted displacement of its particles. This equals
+    /// "translate by the particles' movement, then rotate about the weighted particle pivot"
+    /// applied incrementally, without the accumulation drift of the incremental form.
+    fn deform(&mut self, world: &PhysicsWorld) {
+        let Some(center) = world.bodies.get(self.center) else { return };
+        let c = center.translation();
+        let r = *center.rotation();
+        for (i, &h) in self.particles.iter().enumerate() {
+            let x = world.bodies.get(h).map(|b| b.translation()).unwrap_or(Vec3::NAN);
+            let u = x - (c + r * self.rest_offsets[i]);
+            self.displacement[i] = if u.is_finite() { u } else { Vec3::ZERO };
+        }
+        for (v, out) in self.vertices.iter_mut().enumerate() {
+            let mut p = c + r * self.rest_vertices[v];
+            if self.map.soft_vertex[v] {
+                let (ids, ws) = self.map.vertex_particles.row(v);
+                for (&pi, &w) in ids.iter().zip(ws) {
+                    p += self.displacement[pi as usize] * w;
+                }
+            }
+            *out = p;
+        }
+        // Normals: area-weighted face normals accumulated into normal slots.
+        self.slot_normals.iter_mut().for_each(|n| *n = Vec3::ZERO);
+        for t in &self.render_triangles {
+            let w = [
+                self.welded.render_to_welded[t[0] as usize],
+                self.welded.render_to_welded[t[1] as usize],
+                self.welded.render_to_welded[t[2] as usize],
+            ];
+            let (a, b, cc) = (self.vertices[w[0] as usize], self.vertices[w[1] as usize], self.vertices[w[2] as usize]);
+            let n = (b - a).cross(cc - a);
+            for &k in t {
+                self.slot_normals[self.welded.render_to_normal_slot[k as usize] as usize] += n;
+            }
+        }
+        for (k, (pos, nrm)) in self.render_positions.iter_mut().zip(self.render_normals.iter_mut()).enumerate() {
+            *pos = self.vertices[self.welded.render_to_welded[k] as usize];
+            *nrm = self.slot_normals[self.welded.render_to_normal_slot[k] as usize].normalize_or_zero();
+        }
+    }
+
+    /// The configuration it was built with.
+    pub fn config(&self) -> &SoftBodyConfig {
+        &self.config
+    }
+
+    /// The particle map.
+    pub fn particle_map(&self) -> &ParticleMap {
+        &self.map
+    }
+
+    /// The welded mesh (topology used for volume and metrics).
+    pub fn welded(&self) -> &WeldedMesh {
+        &self.welded
+    }
+
+    /// Rapier handle of the center body.
+    pub fn center(&self) -> RigidBodyHandle {
+        self.center
+    }
+
+    /// Rapier handle of the center's collider (world mode).
+    pub fn center_collider(&self) -> Option<ColliderHandle> {
+        self.center_collider
+    }
+
+    /// Rapier handles of the particle bodies.
+    pub fn particles(&self) -> &[RigidBodyHandle] {
+        &self.particles
+    }
+
+    /// Rapier handles of the particle colliders.
+    pub fn particle_colliders(&self) -> &[Option<ColliderHandle>] {
+        &self.particle_colliders
+    }
+
+    /// Collider radius of each particle, metres.
+    pub fn particle_radii_m(&self) -> &[f32] {
+        &self.particle_radius_m
+    }
+
+    /// Number of particles.
+    pub fn num_particles(&self) -> usize {
+        self.particles.len()
+    }
+
+    /// Particle positions, world space.
+    pub fn particle_positions(&self, world: &PhysicsWorld) -> Vec<Vec3> {
+        self.particles
+            .iter()
+            .map(|h| world.bodies.get(*h).map(|b| b.translation()).unwrap_or(Vec3::ZERO))
+            .collect()
+    }
+
+    /// Particle rest positions relative to the center, in the center's frame.
+    pub fn rest_offsets(&self) -> &[Vec3] {
+        &self.rest_offsets
+    }
+
+    /// Center pose (translation, rotation).
+    pub fn center_pose(&self, world: &PhysicsWorld) -> (Vec3, Quat) {
+        world
+            .bodies
+            .get(self.center)
+            .map(|b| (b.translation(), *b.rotation()))
+            .unwrap_or((Vec3::ZERO, Quat::IDENTITY))
+    }
+
+    /// Drives particle `i` to `goal` (a grab of one particle, thesis 4.1.2), or releases it.
+    pub fn set_particle_drive(&mut self, i: usize, goal: Option<Vec3>) {
+        if let Some(d) = self.drives.get_mut(i) {
+            *d = goal.filter(|g| g.is_finite());
+        }
+    }
+
+    /// Deformed welded vertices, world space (after the last step).
+    pub fn vertices(&self) -> &[Vec3] {
+        &self.vertices
+    }
+
+    /// Welded rest vertices relative to the rest center.
+    pub fn rest_vertices(&self) -> &[Vec3] {
+        &self.rest_vertices
+    }
+
+    /// Deformed render vertex positions, ready for a renderer.
+    pub fn render_positions(&self) -> &[Vec3] {
+        &self.render_positions
+    }
+
+    /// Recomputed render vertex normals.
+    pub fn render_normals(&self) -> &[Vec3] {
+        &self.render_normals
+    }
+
+    /// Render triangles (indices into the render vertices).
+    pub fn render_triangles(&self) -> &[[u32; 3]] {
+        &self.render_triangles
+    }
+
+    /// Enclosed volume of the rest mesh, m³.
+    pub fn rest_volume_m3(&self) -> f32 {
+        self.rest_volume_m3
+    }
+
+    /// Largest extent of the rest mesh, metres.
+    pub fn size_m(&self) -> f32 {
+        self.size_m
+    }
+
+    /// How many times a non-finite particle state was reset (should stay 0).
+    pub fn non_finite_recoveries(&self) -> u64 {
+        self.non_finite_recoveries
+    }
+}
+
+fn mean_spacing(points: &[Vec3]) -> f32 {
+    // Mean nearest-neighbour distance, by brute force on a sample of at most 256 points.
+    if points.len() < 2 {
+        return 0.0;
+    }
+    let step = (points.len() / 256).max(1);
+    let mut sum = 0.0;
+    let mut n = 0;
+    for i in (0..points.len()).step_by(step) {
+        let mut best = f32::MAX;
+        for (j, q) in points.iter().enumerate() {
+            if j != i {
+                best = best.min(points[i].distance(*q));
+            }
+        }
+        sum += best;
+        n += 1;
+    }
+    sum / n as f32
+}

@@ -1,0 +1,162 @@
+//! The soft-body component's options (thesis Appendix A, "Component to create a deformable
+//! soft mesh"), as a serde config with units.
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+use crate::{ClusterMethod, SoftBodyError};
+
+/// Collider shape of each particle (Appendix A item 2; thesis 3.2.3).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ParticleCollider {
+    /// A sphere of the particle's radius.
+    Sphere,
+    /// A cube whose half extent is the particle's radius.
+    Box,
+    /// No collider: the particle is moved by the shape restoration and grabs only.
+    None,
+}
+
+/// Where the body simulates (Appendix A item 11; thesis 3.4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SimulationSpace {
+    /// The center is fixed; the body deforms in place.
+    Local,
+    /// The center is a dynamic body with gravity and a collider; the particles follow it.
+    World,
+}
+
+/// Collider of the center body in world mode (Appendix A items 12–13).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CenterCollider {
+    /// A ball of radius `center_scale` × the mean vertex distance from the center.
+    Ball,
+    /// The convex hull of the mesh, scaled by `center_scale` about the center ("use mesh
+    /// collider for center").
+    ConvexHull,
+}
+
+/// A region of the body's local (baked) space; vertices inside are soft (thesis 3.5.2).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "shape")]
+pub enum SoftRegion {
+    /// An axis-aligned box.
+    Aabb {
+        /// Minimum corner, metres.
+        min_m: Vec3,
+        /// Maximum corner, metres.
+        max_m: Vec3,
+    },
+    /// A ball.
+    Ball {
+        /// Center, metres.
+        center_m: Vec3,
+        /// Radius, metres.
+        radius_m: f32,
+    },
+}
+
+impl SoftRegion {
+    /// True if `p` lies in the region.
+    pub fn contains(&self, p: Vec3) -> bool {
+        match *self {
+            SoftRegion::Aabb { min_m, max_m } => p.cmpge(min_m).all() && p.cmple(max_m).all(),
+            SoftRegion::Ball { center_m, radius_m } => p.distance_squared(center_m) <= radius_m * radius_m,
+        }
+    }
+}
+
+/// Every option of the thesis's soft-body component, plus the stability knobs this crate adds.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct SoftBodyConfig {
+    /// Particle grouping method and its distances (items 1, 6, 7, 9).
+    pub cluster: ClusterMethod,
+    /// Particle collider (item 2). Default sphere.
+    pub collider: ParticleCollider,
+    /// Mass per particle in kg (item 3), 0.01–10. Default 0.05.
+    pub particle_mass_kg: f32,
+    /// Angular damping of the particles (item 4, "angular drag"). Default 0.05.
+    pub angular_damping: f32,
+    /// Stiffness, "resistance" (item 5), 0.1–100: the rate in 1/s at which a displaced
+    /// particle returns to its rest position. Default 20.
+    pub stiffness: f32,
+    /// Neighbour distance δ in metres (item 8, "affection range"); 0 disables neighbours.
+    /// Default 0: derived as 2.5 × the mean particle spacing.
+    pub affect_range_m: f32,
+    /// Share in [0, 0.5] of the neighbours' displacement a particle follows (thesis 3.2.2's
+    /// "velocity from other particles", normalised so it cannot destabilise). Default 0.35.
+    pub neighbour_share: f32,
+    /// Scale of the particle colliders relative to their cluster's extent (item 10). Default 1.
+    pub particle_scale: f32,
+    /// Simulate in local or world space (item 11). Default world.
+    pub space: SimulationSpace,
+    /// Scale of the center collider (item 12). Default 0.8.
+    pub center_scale: f32,
+    /// Center collider shape (item 13). Default ball.
+    pub center_collider: CenterCollider,
+    /// Mass of the center body in kg (world mode). Default 1.
+    pub center_mass_kg: f32,
+    /// Particles of this body collide with each other (item 14). Default false (thesis 3.5.3).
+    pub self_collisions: bool,
+    /// Only vertices inside this region are soft (item 15). Default none: all soft.
+    pub soft_region: Option<SoftRegion>,
+    /// Largest velocity change per step in m/s (thesis 3.2.2's MoveTowards limit). Default 10.
+    pub max_velocity_change_mps: f32,
+    /// Contact friction of particles and center. Default 0.5.
+    pub friction: f32,
+    /// Distance below which vertices are welded, metres. Default 1e-6.
+    pub weld_epsilon_m: f32,
+}
+
+impl Default for SoftBodyConfig {
+    fn default() -> Self {
+        Self {
+            cluster: ClusterMethod::ClosestN { vertices_per_particle: 3 },
+            collider: ParticleCollider::Sphere,
+            particle_mass_kg: 0.05,
+            angular_damping: 0.05,
+            stiffness: 20.0,
+            affect_range_m: 0.0,
+            neighbour_share: 0.35,
+            particle_scale: 1.0,
+            space: SimulationSpace::World,
+            center_scale: 0.8,
+            center_collider: CenterCollider::Ball,
+            center_mass_kg: 1.0,
+            self_collisions: false,
+            soft_region: None,
+            max_velocity_change_mps: 10.0,
+            friction: 0.5,
+            weld_epsilon_m: 1e-6,
+        }
+    }
+}
+
+impl SoftBodyConfig {
+    /// Rejects values outside their documented range with a message naming the field.
+    pub fn validate(&self) -> Result<(), SoftBodyError> {
+        let check = |name: &str, v: f32, lo: f32, hi: f32| {
+            if v.is_finite() && v >= lo && v <= hi {
+                Ok(())
+            } else {
+                Err(SoftBodyError::Config(format!("{name} = {v} is outside [{lo}, {hi}]")))
+            }
+        };
+        check("particle_mass_kg", self.particle_mass_kg, 1e-4, 1e3)?;
+        check("angular_damping", self.angular_damping, 0.0, 1e3)?;
+        check("stiffness", self.stiffness, 0.01, 1e4)?;
+        check("affect_range_m", self.affect_range_m, 0.0, 1e3)?;
+        check("neighbour_share", self.neighbour_share, 0.0, 0.5)?;
+        check("particle_scale", self.particle_scale, 1e-3, 1e2)?;
+        check("center_scale", self.center_scale, 1e-3, 10.0)?;
+        check("center_mass_kg", self.center_mass_kg, 1e-4, 1e5)?;
+        check("max_velocity_change_mps", self.max_velocity_change_mps, 1e-3, 1e4)?;
+        check("friction", self.friction, 0.0, 100.0)?;
+        check("weld_epsilon_m", self.weld_epsilon_m, 0.0, 1.0)?;
+        Ok(())
+    }
+}

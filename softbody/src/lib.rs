@@ -1,0 +1,20 @@
+//! Particle soft bodies on rapier3d: the method of the thesis (chapter 3), made sound, with
+//! mesh loading, clustering, the particle map, deformation, metrics and test scenarios.
+//!
+//! The crate knows nothing of networking, rendering or clocks: `dt` is a parameter and every
+//! random choice takes a seed.
+
+mod body;
+pub mod cluster;
+mod config;
+mod error;
+pub mod mesh;
+pub mod metrics;
+pub mod scenario;
+
+pub use body::{SoftBody, SoftBodyHandle, SoftBodySet};
+pub use cluster::{build_particle_map, ClusterMethod, ParticleMap, WeightedRows};
+pub use config::{CenterCollider, ParticleCollider, SimulationSpace, SoftBodyConfig, SoftRegion};
+pub use error::SoftBodyError;
+pub use mesh::{Mesh, MeshSource, Placement, WeldedMesh};
+pub use rapier3d;
