@@ -15,13 +15,17 @@ pub struct NetId(pub u32);
 pub struct ClassId(pub u16);
 
 /// Room term: bumped by every host migration; messages of an older term are ignored.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize,
+)]
 pub struct Term(pub u32);
 
 /// Authority epoch of an object: bumped by every grant; ordered by (term, grant).
 ///
 /// Including the term means a new host's reassignments always beat grants of the old term.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize,
+)]
 pub struct AuthorityEpoch {
     /// Term in which the grant happened.
     pub term: u32,

@@ -87,7 +87,10 @@ impl SnapshotBuffer {
         }
         let first = self.samples.front()?;
         if t <= first.time {
-            return Some(Snapshot { time: t, ..first.clone() });
+            return Some(Snapshot {
+                time: t,
+                ..first.clone()
+            });
         }
         let n = self.samples.len();
         for i in 0..n.saturating_sub(1) {
@@ -116,7 +119,10 @@ impl SnapshotBuffer {
                 }
             }
         }
-        Some(Snapshot { time: t, ..last.clone() })
+        Some(Snapshot {
+            time: t,
+            ..last.clone()
+        })
     }
 }
 

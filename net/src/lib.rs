@@ -1,1 +1,35 @@
-//! net
+//! `softsync-net`: the sans-IO network core of softsync.
+//!
+//! One [`Session`] per local peer is a state machine in the style of quinn-proto: datagrams
+//! and `now` go in, datagrams, events and the next timeout come out. It implements the
+//! thesis's host model (chapter 5): a host relays between clients and is a client of itself,
+//! every object has exactly one owner, authority moves on request, transforms and soft-body
+//! particles are replicated under per-class send policies, packed into MTU-sized datagrams and
+//! interpolated on remote peers; when the host goes, the earliest joiner takes over.
+//!
+//! No sockets, no clock, no randomness inside: time and seeds are arguments.
+
+pub mod bits;
+pub mod error;
+pub mod harness;
+pub mod ids;
+pub mod interp;
+pub mod policy;
+pub mod quant;
+pub mod reliable;
+pub mod rng;
+pub mod session;
+pub mod stats;
+pub mod time;
+pub mod transport;
+pub mod wire;
+
+pub use error::NetError;
+pub use ids::{AuthorityEpoch, ClassId, NetId, PeerId, Term};
+pub use interp::InterpolationConfig;
+pub use policy::{AuthorityPolicy, ClassConfig, SendPolicy, SessionConfig, SoftBodyMode};
+pub use session::{DisplayedState, Event, ObjectState, Session, Transmit};
+pub use stats::Stats;
+pub use time::Instant;
+pub use transport::{ConditionerConfig, LinkConditioner, MemoryHub, PeerEvent, Transport};
+pub use wire::PROTOCOL_VERSION;

@@ -73,17 +73,16 @@ impl VecQuantizer {
     /// Clamp a (possibly hostile) grid value into range.
     pub fn clamp(&self, q: [i64; 3]) -> [u32; 3] {
         let mut out = [0u32; 3];
-        for i in 0..3 {
-            let max = (1i64 << self.bits[i]) - 1;
-            out[i] = q[i].clamp(0, max) as u32;
+        for ((o, v), b) in out.iter_mut().zip(q).zip(self.bits) {
+            *o = v.clamp(0, (1i64 << b) - 1) as u32;
         }
         out
     }
 
     /// Write an absolute grid value.
     pub fn write(&self, w: &mut BitWriter, q: [u32; 3]) {
-        for i in 0..3 {
-            w.write(q[i], self.bits[i]);
+        for (v, b) in q.iter().zip(self.bits) {
+            w.write(*v, b);
         }
     }
 

@@ -70,8 +70,14 @@ impl MemoryHub {
         let mut h = self.inner.borrow_mut();
         let others: Vec<PeerId> = h.inboxes.keys().copied().collect();
         for o in &others {
-            h.events.entry(*o).or_default().push_back(PeerEvent::Connected(id));
-            h.events.entry(id).or_default().push_back(PeerEvent::Connected(*o));
+            h.events
+                .entry(*o)
+                .or_default()
+                .push_back(PeerEvent::Connected(id));
+            h.events
+                .entry(id)
+                .or_default()
+                .push_back(PeerEvent::Connected(*o));
         }
         h.inboxes.entry(id).or_default();
         h.dead.remove(&id);
@@ -148,7 +154,12 @@ impl Transport for HubEndpoint {
     }
 
     fn poll_peer_event(&mut self) -> Option<PeerEvent> {
-        self.hub.inner.borrow_mut().events.get_mut(&self.id)?.pop_front()
+        self.hub
+            .inner
+            .borrow_mut()
+            .events
+            .get_mut(&self.id)?
+            .pop_front()
     }
 
     fn mtu(&self) -> usize {
@@ -348,7 +359,9 @@ impl<T: Transport> Transport for LinkConditioner<T> {
     }
 
     fn mtu(&self) -> usize {
-        self.cfg.mtu.map_or(self.inner.mtu(), |m| m.min(self.inner.mtu()))
+        self.cfg
+            .mtu
+            .map_or(self.inner.mtu(), |m| m.min(self.inner.mtu()))
     }
 
     fn poll_timeout(&self) -> Option<Instant> {

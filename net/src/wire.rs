@@ -285,7 +285,10 @@ impl Control {
 
 impl SpawnInfo {
     fn valid(&self) -> bool {
-        self.pos.iter().chain(self.rot.iter()).all(|v| v.is_finite() && v.abs() < 1e6)
+        self.pos
+            .iter()
+            .chain(self.rot.iter())
+            .all(|v| v.is_finite() && v.abs() < 1e6)
             && self.particles <= MAX_PARTICLES
     }
 }
@@ -580,7 +583,11 @@ fn gap_list_bits(list: &[(u32, [i32; 3])]) -> usize {
     let mut bits = eg_bits(list.len() as u32);
     let mut prev = 0u32;
     for (i, (idx, _)) in list.iter().enumerate() {
-        let gap = if i == 0 { *idx } else { idx.saturating_sub(prev + 1) };
+        let gap = if i == 0 {
+            *idx
+        } else {
+            idx.saturating_sub(prev + 1)
+        };
         bits += eg_bits(gap);
         prev = *idx;
     }
@@ -779,7 +786,9 @@ mod tests {
         };
         for list in [
             vec![(3u32, [1i32, -2, 3])],
-            (0..60).map(|i| (i, [i as i32 - 30, 0, 1])).collect::<Vec<_>>(),
+            (0..60)
+                .map(|i| (i, [i as i32 - 30, 0, 1]))
+                .collect::<Vec<_>>(),
         ] {
             let e = StateEntry {
                 id: NetId(7),
@@ -795,7 +804,8 @@ mod tests {
             let mut w = BitWriter::new();
             e.encode_body(&layout, &mut w);
             let bytes = w.into_bytes();
-            let d = StateEntry::decode_body(NetId(7), &layout, &mut BitReader::new(&bytes)).unwrap();
+            let d =
+                StateEntry::decode_body(NetId(7), &layout, &mut BitReader::new(&bytes)).unwrap();
             assert_eq!(d, e);
         }
     }

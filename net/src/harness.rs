@@ -1,0 +1,188 @@
+//! In-process N-peer harness on virtual time (a generalisation of quinn-proto's test `Pair`):
+//! step every peer, jump to the next timeout, kill peers, partition links, change the MTU.
+//! Used by the tests and the bench; no sockets, no sleeps.
+
+use std::time::Duration;
+
+use crate::ids::PeerId;
+use crate::policy::SessionConfig;
+use crate::session::{Event, Session};
+use crate::time::Instant;
+use crate::transport::{ConditionerConfig, HubEndpoint, LinkConditioner, MemoryHub, Transport};
+
+/// One peer in the harness.
+#[derive(Debug)]
+pub struct HarnessPeer {
+    /// Its session.
+    pub session: Session,
+    /// Its transport (conditioned hub endpoint).
+    pub transport: LinkConditioner<HubEndpoint>,
+    /// False once killed.
+    pub alive: bool,
+    /// Every event the session produced, in order.
+    pub events: Vec<Event>,
+    /// Last time this peer sent a datagram.
+    pub last_send: Option<Instant>,
+}
+
+/// A room of peers on one virtual clock.
+#[derive(Debug)]
+pub struct Harness {
+    /// Virtual time.
+    pub now: Instant,
+    /// The switch.
+    pub hub: MemoryHub,
+    /// Peers, in creation order (index 0 hosts).
+    pub peers: Vec<HarnessPeer>,
+    cfg: SessionConfig,
+    link: ConditionerConfig,
+}
+
+impl Harness {
+    /// A room with `n` peers (peer 0 hosts; the others join one after another), every
+    /// sender impaired by `link` (seed varied per peer).
+    pub fn new(n: usize, cfg: SessionConfig, link: ConditionerConfig) -> Self {
+        let mut h = Harness {
+            now: Instant::ZERO,
+            hub: MemoryHub::new(cfg.mtu),
+            peers: Vec::new(),
+            cfg,
+            link,
+        };
+        for _ in 0..n {
+            h.add_peer();
+        }
+        h
+    }
+
+    /// Peer id of index `i`.
+    pub fn id(i: usize) -> PeerId {
+        PeerId(100 + i as u64)
+    }
+
+    /// Add a peer that joins the current host (or hosts, if it is the first).
+    pub fn add_peer(&mut self) -> usize {
+        let i = self.peers.len();
+        self.add_peer_with(self.cfg.clone(), i)
+    }
+
+    /// Add a peer with its own config, joining whoever `join_via` says is host.
+    pub fn add_peer_with(&mut self, cfg: SessionConfig, join_via: usize) -> usize {
+        let i = self.peers.len();
+        let id = Harness::id(i);
+        let mut link = self.link.clone();
+        link.seed = link.seed.wrapping_mul(31).wrapping_add(i as u64 + 1);
+        let transport = LinkConditioner::new(self.hub.endpoint(id), link);
+        let session = if i == 0 {
+            Session::host(id, cfg, self.now)
+        } else {
+            let host = self
+                .peers
+                .get(join_via)
+                .and_then(|p| p.session.host_id())
+                .unwrap_or(Harness::id(0));
+            Session::join(id, host, cfg, self.now)
+        };
+        self.peers.push(HarnessPeer {
+            session,
+            transport,
+            alive: true,
+            events: Vec::new(),
+            last_send: None,
+        });
+        i
+    }
+
+    /// Crash peer `i`: it never sends or receives again.
+    pub fn kill(&mut self, i: usize) {
+        if let Some(p) = self.peers.get_mut(i) {
+            p.alive = false;
+            self.hub.kill(Harness::id(i));
+        }
+    }
+
+    /// Cut or restore the link between peers `a` and `b`.
+    pub fn partition(&mut self, a: usize, b: usize, cut: bool) {
+        self.hub.set_partition(Harness::id(a), Harness::id(b), cut);
+    }
+
+    /// Change the path MTU of the hub.
+    pub fn set_mtu(&mut self, mtu: usize) {
+        self.hub.set_mtu(mtu);
+    }
+
+    /// Session of peer `i`.
+    pub fn session(&mut self, i: usize) -> &mut Session {
+        &mut self.peers[i].session
+    }
+
+    /// Process everything due at the current time (several rounds, so replies go out).
+    pub fn step(&mut self) {
+        let now = self.now;
+        for _round in 0..4 {
+            let mut any = false;
+            for p in self.peers.iter_mut().filter(|p| p.alive) {
+                while let Some((from, bytes)) = p.transport.recv(now) {
+                    p.session.handle_packet(now, from, &bytes);
+                    any = true;
+                }
+                if p.session.poll_timeout().is_some_and(|t| t <= now) {
+                    p.session.handle_timeout(now);
+                }
+                while let Some(t) = p.session.poll_transmit(now) {
+                    p.transport.send(now, t.to, &t.payload);
+                    p.last_send = Some(now);
+                    any = true;
+                }
+                while let Some(e) = p.session.poll_event() {
+                    p.events.push(e);
+                }
+            }
+            if !any {
+                break;
+            }
+        }
+    }
+
+    /// Earliest future deadline of any live peer or transport.
+    pub fn next_deadline(&self) -> Option<Instant> {
+        self.peers
+            .iter()
+            .filter(|p| p.alive)
+            .flat_map(|p| [p.session.poll_timeout(), p.transport.poll_timeout()])
+            .flatten()
+            .min()
+    }
+
+    /// Run for `d` of virtual time, jumping from deadline to deadline.
+    pub fn advance(&mut self, d: Duration) {
+        let end = self.now + d;
+        self.step();
+        loop {
+            let next = self
+                .next_deadline()
+                .map_or(end, |t| t.max(self.now + Duration::from_micros(1)));
+            if next > end {
+                break;
+            }
+            self.now = next;
+            self.step();
+        }
+        self.now = end;
+        self.step();
+    }
+
+    /// Run in frames of `frame`, calling `f(harness)` before each (the application's frame).
+    pub fn run_frames(
+        &mut self,
+        total: Duration,
+        frame: Duration,
+        mut f: impl FnMut(&mut Harness),
+    ) {
+        let end = self.now + total;
+        while self.now < end {
+            f(self);
+            self.advance(frame);
+        }
+    }
+}

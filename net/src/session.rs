@@ -1,0 +1,2179 @@
+//! The room session: one sans-IO state machine per local peer.
+//!
+//! Packets and `now` go in ([`Session::handle_packet`], [`Session::handle_timeout`], local
+//! commands); datagrams, events and the next wake-up come out ([`Session::poll_transmit`],
+//! [`Session::poll_event`], [`Session::poll_timeout`]).
+
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
+use std::time::Duration;
+
+use glam::{Quat, Vec3};
+
+use crate::bits::BitWriter;
+use crate::error::NetError;
+use crate::ids::{AuthorityEpoch, ClassId, NetId, PeerId, Term};
+use crate::interp::{InterpolationConfig, Snapshot, SnapshotBuffer};
+use crate::policy::{AuthorityPolicy, ClassConfig, SessionConfig, SoftBodyMode};
+use crate::quant::{angle_between, dequantize_quat, quantize_quat, QuatQ, VecQuantizer};
+use crate::reliable::ReliableChannel;
+use crate::stats::Stats;
+use crate::time::{min_opt, Instant};
+use crate::wire::{
+    self, decode_packet, decode_refusal, decode_state_block, encode_refusal, entry_id_bits,
+    reliable_len, write_entry_id, write_reliable, ChunkEnc, Control, DenyReason, EntryLayout,
+    PacketHeader, PartBody, PosEnc, Section, SpawnInfo, StateEntry, PROTOCOL_VERSION,
+};
+
+/// An object's state as the application sees it: center transform and world-space particles.
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct ObjectState {
+    /// Center position.
+    pub pos: Vec3,
+    /// Center rotation.
+    pub rot: Quat,
+    /// Particle positions in world space (empty for rigid objects).
+    pub particles: Vec<Vec3>,
+}
+
+impl ObjectState {
+    /// A rigid pose.
+    pub fn rigid(pos: Vec3, rot: Quat) -> Self {
+        ObjectState {
+            pos,
+            rot,
+            particles: Vec::new(),
+        }
+    }
+
+    fn is_finite(&self) -> bool {
+        self.pos.is_finite() && self.rot.is_finite() && self.particles.iter().all(|p| p.is_finite())
+    }
+}
+
+/// What a remote peer displays for an object.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DisplayedState {
+    /// The interpolated state.
+    pub state: ObjectState,
+    /// The time, in the sending peer's clock, that this state represents.
+    pub source_time: Instant,
+    /// Interpolation delay applied.
+    pub delay: Duration,
+}
+
+/// A datagram to hand to the transport.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Transmit {
+    /// Destination.
+    pub to: PeerId,
+    /// Bytes (≤ mtu).
+    pub payload: Vec<u8>,
+}
+
+/// Things the application should know or act on.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Event {
+    /// We are in the room.
+    Joined {
+        /// Host.
+        host: PeerId,
+        /// Term.
+        term: Term,
+    },
+    /// The host refused us.
+    Refused {
+        /// Why.
+        reason: String,
+    },
+    /// A peer joined.
+    PeerJoined(PeerId),
+    /// A peer left or timed out.
+    PeerLeft(PeerId),
+    /// A new host took over.
+    HostChanged {
+        /// New host.
+        host: PeerId,
+        /// New term.
+        term: Term,
+    },
+    /// An object now exists locally.
+    Spawned {
+        /// Object.
+        id: NetId,
+        /// Class.
+        class: ClassId,
+        /// Owner.
+        owner: PeerId,
+        /// Our spawn request number, if we asked for it.
+        request: Option<u32>,
+    },
+    /// An object is gone.
+    Despawned(NetId),
+    /// An object changed owner.
+    AuthorityChanged {
+        /// Object.
+        id: NetId,
+        /// New owner.
+        owner: PeerId,
+        /// New epoch.
+        epoch: AuthorityEpoch,
+    },
+    /// Our authority request was denied.
+    AuthorityDenied {
+        /// Object.
+        id: NetId,
+        /// Why.
+        reason: DenyReason,
+    },
+    /// Request to the application: `by` wants our object; answer with
+    /// [`Session::answer_authority`].
+    AuthorityAsked {
+        /// Object.
+        id: NetId,
+        /// Asking peer.
+        by: PeerId,
+    },
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Role {
+    Joining,
+    Client,
+    Host,
+    Refused,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+enum PartQ {
+    Transform { pos: [u32; 3], rot: QuatQ },
+    Chunk(Vec<[u32; 3]>),
+}
+
+#[derive(Clone, Debug)]
+struct SendPart {
+    last: PartQ,
+    seq: u8,
+    last_key_at: Instant,
+}
+
+#[derive(Clone, Debug)]
+struct RecvPart {
+    seq: u8,
+    valid: bool,
+    base: PartQ,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct RestRepeat {
+    at: Instant,
+    gap: Duration,
+    left: u32,
+}
+
+#[derive(Clone, Debug, Default)]
+struct LinkClock {
+    last_full_ms: Option<i64>,
+    last_ms: u16,
+    min_offset_us: Option<i64>,
+    jitter_us: f64,
+}
+
+#[derive(Debug, Default)]
+struct Link {
+    reliable: ReliableChannel,
+    last_heard: Option<Instant>,
+    out_seq: u8,
+    in_seq: Option<u8>,
+    send: BTreeMap<(NetId, u32), SendPart>,
+    recv: BTreeMap<(NetId, u32), RecvPart>,
+    spawn_pending: BTreeMap<NetId, u16>,
+    pending: Vec<StateEntry>,
+    keyreq_out: BTreeSet<NetId>,
+    keyreq_sent: BTreeMap<NetId, Instant>,
+    pong_due: Option<u32>,
+    ping_due: bool,
+    clock: LinkClock,
+    rest_repeat: BTreeMap<NetId, RestRepeat>,
+    srtt: Option<Duration>,
+}
+
+#[derive(Debug)]
+struct Object {
+    info: SpawnInfo,
+    pos: [u32; 3],
+    rot: QuatQ,
+    particles: Vec<[u32; 3]>,
+    rest: bool,
+    last_change: Instant,
+    published: Option<ObjectState>,
+    buffer: SnapshotBuffer,
+    source: Option<PeerId>,
+}
+
+/// Seq `a` is newer than `b` in 4-bit wrapping order.
+fn seq4_newer(a: u8, b: u8) -> bool {
+    let d = a.wrapping_sub(b) & 0xF;
+    (1..8).contains(&d)
+}
+
+/// One peer's view of the room.
+#[derive(Debug)]
+pub struct Session {
+    cfg: SessionConfig,
+    interp: InterpolationConfig,
+    local: PeerId,
+    role: Role,
+    host: Option<PeerId>,
+    term: Term,
+    members: BTreeMap<PeerId, u32>,
+    links: BTreeMap<PeerId, Link>,
+    objects: BTreeMap<NetId, Object>,
+    next_net_id: u32,
+    next_join_seq: u32,
+    next_request: u32,
+    pending_spawns: BTreeMap<u32, ObjectState>,
+    pending_asks: BTreeMap<NetId, BTreeSet<PeerId>>,
+    events: VecDeque<Event>,
+    raw_out: VecDeque<Transmit>,
+    next_tick: Vec<Instant>,
+    next_heartbeat: Instant,
+    stats: Stats,
+    last_relay_at: Option<Instant>,
+}
+
+impl Session {
+    fn new(local: PeerId, cfg: SessionConfig, now: Instant, role: Role) -> Self {
+        let ticks = vec![now; cfg.classes.len()];
+        Session {
+            cfg,
+            interp: InterpolationConfig::default(),
+            local,
+            role,
+            host: None,
+            term: Term(0),
+            members: BTreeMap::new(),
+            links: BTreeMap::new(),
+            objects: BTreeMap::new(),
+            next_net_id: 1,
+            next_join_seq: 0,
+            next_request: 0,
+            pending_spawns: BTreeMap::new(),
+            pending_asks: BTreeMap::new(),
+            events: VecDeque::new(),
+            raw_out: VecDeque::new(),
+            next_tick: ticks,
+            next_heartbeat: now,
+            stats: Stats::default(),
+            last_relay_at: None,
+        }
+    }
+
+    /// Create a room and host it (term 1, join order 0).
+    pub fn host(local: PeerId, cfg: SessionConfig, now: Instant) -> Self {
+        let mut s = Session::new(local, cfg, now, Role::Host);
+        s.host = Some(local);
+        s.term = Term(1);
+        s.members.insert(local, 0);
+        s.next_join_seq = 1;
+        s
+    }
+
+    /// Join the room hosted by `host`.
+    pub fn join(local: PeerId, host: PeerId, cfg: SessionConfig, now: Instant) -> Self {
+        let mut s = Session::new(local, cfg, now, Role::Joining);
+        s.host = Some(host);
+        let hello = Control::Hello {
+            protocol: PROTOCOL_VERSION,
+            config_digest: s.cfg.digest(),
+        };
+        s.send_control(now, host, &hello);
+        s
+    }
+
+    /// Override the interpolation settings.
+    pub fn set_interpolation(&mut self, cfg: InterpolationConfig) {
+        self.interp = cfg;
+    }
+
+    // ---------------------------------------------------------------- queries
+
+    /// Our peer id.
+    pub fn local_id(&self) -> PeerId {
+        self.local
+    }
+
+    /// Current host, if known.
+    pub fn host_id(&self) -> Option<PeerId> {
+        self.host
+    }
+
+    /// Are we the host?
+    pub fn is_host(&self) -> bool {
+        self.role == Role::Host
+    }
+
+    /// Have we joined (or do we host) a room?
+    pub fn is_connected(&self) -> bool {
+        matches!(self.role, Role::Host | Role::Client)
+    }
+
+    /// Current room term.
+    pub fn term(&self) -> Term {
+        self.term
+    }
+
+    /// Members and their join order.
+    pub fn members(&self) -> &BTreeMap<PeerId, u32> {
+        &self.members
+    }
+
+    /// Known objects.
+    pub fn object_ids(&self) -> Vec<NetId> {
+        self.objects.keys().copied().collect()
+    }
+
+    /// Owner of an object according to our replica.
+    pub fn owner(&self, id: NetId) -> Option<PeerId> {
+        self.objects.get(&id).map(|o| o.info.owner)
+    }
+
+    /// Authority epoch of an object according to our replica.
+    pub fn epoch(&self, id: NetId) -> Option<AuthorityEpoch> {
+        self.objects.get(&id).map(|o| o.info.epoch)
+    }
+
+    /// Class of an object.
+    pub fn class_of(&self, id: NetId) -> Option<ClassId> {
+        self.objects.get(&id).map(|o| o.info.class)
+    }
+
+    /// Statistics.
+    pub fn stats(&self) -> &Stats {
+        &self.stats
+    }
+
+    /// Last time we (as host) relayed a state entry from one client to another.
+    pub fn last_relay_at(&self) -> Option<Instant> {
+        self.last_relay_at
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &SessionConfig {
+        &self.cfg
+    }
+
+    /// Latest replicated state (no interpolation): what the last update said.
+    pub fn latest_state(&self, id: NetId) -> Option<ObjectState> {
+        let o = self.objects.get(&id)?;
+        if o.info.owner == self.local {
+            if let Some(p) = &o.published {
+                return Some(p.clone());
+            }
+        }
+        let class = self.class(o.info.class)?;
+        Some(self.compose(o, class))
+    }
+
+    /// What this peer displays at `now`: the owner's published state for our own objects,
+    /// otherwise the interpolated remote state.
+    pub fn display_state(&mut self, now: Instant, id: NetId) -> Option<DisplayedState> {
+        let local = self.local;
+        let interp = self.interp;
+        let o = self.objects.get(&id)?;
+        if o.info.owner == local {
+            if let Some(p) = &o.published {
+                return Some(DisplayedState {
+                    state: p.clone(),
+                    source_time: now,
+                    delay: Duration::ZERO,
+                });
+            }
+        }
+        let class = self.cfg.classes.get(usize::from(o.info.class.0))?.clone();
+        let (delay, min_offset) = match o.source.and_then(|s| self.links.get(&s)) {
+            Some(l) => {
+                let base = class.send.interval().as_secs_f32() * interp.intervals;
+                let j = interp.jitter_factor * l.clock.jitter_us as f32 * 1e-6;
+                let cap = class.send.interval().as_secs_f32() * 4.0 + 0.1;
+                (
+                    Duration::from_secs_f32((base + j).min(cap)),
+                    l.clock.min_offset_us.unwrap_or(0),
+                )
+            }
+            None => (Duration::ZERO, 0),
+        };
+        let t = now - delay;
+        let o = self.objects.get_mut(&id)?;
+        let snap = match o.buffer.sample(t, &interp) {
+            Some(s) => s,
+            None => {
+                let st = self.latest_state(id)?;
+                return Some(DisplayedState {
+                    state: st,
+                    source_time: t,
+                    delay,
+                });
+            }
+        };
+        let particles = if class.soft_body_mode == SoftBodyMode::Particles {
+            snap.offsets
+                .iter()
+                .map(|o| snap.pos + snap.rot * *o)
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let src = t.as_micros() as i64 - min_offset;
+        Some(DisplayedState {
+            state: ObjectState {
+                pos: snap.pos,
+                rot: snap.rot,
+                particles,
+            },
+            source_time: Instant::from_micros(src.max(0) as u64),
+            delay,
+        })
+    }
+
+    fn class(&self, c: ClassId) -> Option<&ClassConfig> {
+        self.cfg.classes.get(usize::from(c.0))
+    }
+
+    fn compose(&self, o: &Object, class: &ClassConfig) -> ObjectState {
+        let pos = class.position_quantizer().dequantize(o.pos);
+        let rot = dequantize_quat(o.rot, class.rot_bits());
+        let pq = class.particle_quantizer();
+        let particles = if class.soft_body_mode == SoftBodyMode::Particles {
+            o.particles
+                .iter()
+                .map(|q| pos + rot * pq.dequantize(*q))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        ObjectState {
+            pos,
+            rot,
+            particles,
+        }
+    }
+
+    // ---------------------------------------------------------------- local commands
+
+    /// Spawn an object. On the host it exists at once (owned by the host) and its id is
+    /// returned; on a client the host is asked and `Event::Spawned { request }` follows,
+    /// with the returned number as `request` (and `NetId(0)` returned here).
+    pub fn spawn(
+        &mut self,
+        now: Instant,
+        class: ClassId,
+        state: ObjectState,
+    ) -> Result<(NetId, u32), NetError> {
+        let c = self
+            .class(class)
+            .ok_or(NetError::UnknownClass(class.0))?
+            .clone();
+        if !state.is_finite() {
+            return Err(NetError::InvalidState("non-finite state"));
+        }
+        if state.particles.len() > wire::MAX_PARTICLES as usize {
+            return Err(NetError::InvalidState("too many particles"));
+        }
+        let request = self.next_request;
+        self.next_request += 1;
+        match self.role {
+            Role::Host => {
+                let id = NetId(self.next_net_id);
+                self.next_net_id += 1;
+                let info = SpawnInfo {
+                    id,
+                    class,
+                    owner: self.local,
+                    epoch: AuthorityEpoch {
+                        term: self.term.0,
+                        grant: 0,
+                    },
+                    held: false,
+                    policy: c.authority,
+                    particles: state.particles.len() as u32,
+                    pos: state.pos.to_array(),
+                    rot: state.rot.to_array(),
+                };
+                self.insert_object(now, info.clone(), Some(request));
+                let _ = self.publish_state(now, id, &state);
+                self.broadcast(now, &Control::Spawn(info), None);
+                Ok((id, request))
+            }
+            Role::Client => {
+                let host = self.host.ok_or(NetError::NotConnected)?;
+                self.pending_spawns.insert(request, state.clone());
+                let msg = Control::SpawnRequest {
+                    request,
+                    class,
+                    particles: state.particles.len() as u32,
+                    pos: state.pos.to_array(),
+                    rot: state.rot.to_array(),
+                };
+                self.send_control(now, host, &msg);
+                Ok((NetId(0), request))
+            }
+            _ => Err(NetError::NotConnected),
+        }
+    }
+
+    /// Despawn an object we own (or any object, on the host).
+    pub fn despawn(&mut self, now: Instant, id: NetId) -> Result<(), NetError> {
+        let o = self.objects.get(&id).ok_or(NetError::UnknownObject(id))?;
+        if self.role == Role::Host {
+            self.host_despawn(now, id);
+            Ok(())
+        } else if o.info.owner == self.local {
+            let host = self.host.ok_or(NetError::NotConnected)?;
+            self.send_control(now, host, &Control::DespawnRequest { id });
+            Ok(())
+        } else {
+            Err(NetError::NotOwner(id, o.info.owner))
+        }
+    }
+
+    /// Ask for authority over an object (grab). The answer is an event.
+    pub fn request_authority(&mut self, now: Instant, id: NetId) -> Result<(), NetError> {
+        if !self.objects.contains_key(&id) {
+            return Err(NetError::UnknownObject(id));
+        }
+        match self.role {
+            Role::Host => {
+                let me = self.local;
+                self.host_authority_request(now, me, id);
+                Ok(())
+            }
+            Role::Client => {
+                let host = self.host.ok_or(NetError::NotConnected)?;
+                self.send_control(now, host, &Control::AuthorityRequest { id });
+                Ok(())
+            }
+            _ => Err(NetError::NotConnected),
+        }
+    }
+
+    /// Give authority back to the host (release).
+    pub fn release_authority(&mut self, now: Instant, id: NetId) -> Result<(), NetError> {
+        let o = self.objects.get(&id).ok_or(NetError::UnknownObject(id))?;
+        if o.info.owner != self.local {
+            return Err(NetError::NotOwner(id, o.info.owner));
+        }
+        match self.role {
+            Role::Host => {
+                let me = self.local;
+                self.host_release(now, me, id);
+                Ok(())
+            }
+            Role::Client => {
+                let host = self.host.ok_or(NetError::NotConnected)?;
+                self.send_control(now, host, &Control::AuthorityRelease { id });
+                Ok(())
+            }
+            _ => Err(NetError::NotConnected),
+        }
+    }
+
+    /// Answer an [`Event::AuthorityAsked`].
+    pub fn answer_authority(&mut self, now: Instant, id: NetId, by: PeerId, agree: bool) {
+        match self.role {
+            Role::Host => {
+                let me = self.local;
+                self.host_authority_answer(now, me, id, by, agree);
+            }
+            Role::Client => {
+                if let Some(host) = self.host {
+                    self.send_control(now, host, &Control::AuthorityAnswer { id, by, agree });
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// Publish the current state of an object we own (call every frame; the send policy
+    /// decides what goes on the wire).
+    pub fn publish_state(
+        &mut self,
+        now: Instant,
+        id: NetId,
+        state: &ObjectState,
+    ) -> Result<(), NetError> {
+        let local = self.local;
+        let o = self.objects.get(&id).ok_or(NetError::UnknownObject(id))?;
+        if o.info.owner != local {
+            return Err(NetError::NotOwner(id, o.info.owner));
+        }
+        if !state.is_finite() {
+            return Err(NetError::InvalidState("non-finite state"));
+        }
+        if state.particles.len() != o.info.particles as usize {
+            return Err(NetError::InvalidState("particle count differs from spawn"));
+        }
+        let class = self
+            .class(o.info.class)
+            .ok_or(NetError::UnknownClass(o.info.class.0))?;
+        let pos = class.position_quantizer().quantize(state.pos);
+        let rot = quantize_quat(state.rot, class.rot_bits());
+        let pq = class.particle_quantizer();
+        let inv = state.rot.inverse();
+        let particles: Vec<[u32; 3]> = state
+            .particles
+            .iter()
+            .map(|p| pq.quantize(inv * (*p - state.pos)))
+            .collect();
+        let o = self
+            .objects
+            .get_mut(&id)
+            .ok_or(NetError::UnknownObject(id))?;
+        if o.pos != pos || o.rot != rot || o.particles != particles {
+            o.pos = pos;
+            o.rot = rot;
+            o.particles = particles;
+            o.last_change = now;
+            if o.rest {
+                o.rest = false;
+                for l in self.links.values_mut() {
+                    l.rest_repeat.remove(&id);
+                }
+            }
+        }
+        o.published = Some(state.clone());
+        Ok(())
+    }
+
+    // ---------------------------------------------------------------- outputs
+
+    /// Next event.
+    pub fn poll_event(&mut self) -> Option<Event> {
+        self.events.pop_front()
+    }
+
+    /// When to call [`Session::handle_timeout`] next.
+    pub fn poll_timeout(&self) -> Option<Instant> {
+        let mut t = Some(self.next_heartbeat);
+        if self.role == Role::Refused {
+            return None;
+        }
+        for (c, tick) in self.next_tick.iter().enumerate() {
+            let owns = self
+                .objects
+                .values()
+                .any(|o| usize::from(o.info.class.0) == c && o.info.owner == self.local);
+            if owns {
+                t = min_opt(t, Some(*tick));
+            }
+        }
+        for (p, l) in &self.links {
+            t = min_opt(t, l.reliable.next_deadline());
+            for r in l.rest_repeat.values() {
+                t = min_opt(t, Some(r.at));
+            }
+            if self.members.contains_key(p) && *p != self.local {
+                if let Some(h) = l.last_heard {
+                    t = min_opt(t, Some(h + self.cfg.peer_timeout));
+                }
+            }
+        }
+        t
+    }
+
+    /// Next datagram to send.
+    pub fn poll_transmit(&mut self, now: Instant) -> Option<Transmit> {
+        if let Some(t) = self.raw_out.pop_front() {
+            return Some(t);
+        }
+        let peers: Vec<PeerId> = self.links.keys().copied().collect();
+        for p in peers {
+            if let Some(t) = self.build_datagram(now, p) {
+                return Some(t);
+            }
+        }
+        None
+    }
+
+    fn build_datagram(&mut self, now: Instant, to: PeerId) -> Option<Transmit> {
+        let mtu = self.cfg.mtu;
+        let term = self.term;
+        let rto = self.rto(to);
+        let link = self.links.get_mut(&to)?;
+        let has_work = link.reliable.ack_pending
+            || link.pong_due.is_some()
+            || link.ping_due
+            || !link.keyreq_out.is_empty()
+            || !link.pending.is_empty()
+            || link.reliable.has_due(now);
+        if !has_work {
+            return None;
+        }
+        let header = PacketHeader {
+            term,
+            seq: link.out_seq,
+            time_ms: now.wire_ms(),
+        };
+        let mut out = Vec::with_capacity(mtu.min(1500));
+        header.write(&mut out);
+        if link.reliable.ack_pending {
+            out.push(wire::tag::ACK);
+            out.extend_from_slice(&link.reliable.next_expected().to_le_bytes());
+            link.reliable.ack_pending = false;
+        }
+        if let Some(t) = link.pong_due.take() {
+            out.push(wire::tag::PONG);
+            crate::bits::write_varint(&mut out, u64::from(t));
+        }
+        if link.ping_due {
+            link.ping_due = false;
+            out.push(wire::tag::PING);
+            crate::bits::write_varint(&mut out, (now.as_micros() / 1000) & 0xFFFF_FFFF);
+        }
+        if !link.keyreq_out.is_empty() {
+            let ids: Vec<NetId> = link
+                .keyreq_out
+                .iter()
+                .copied()
+                .take(wire::MAX_KEYFRAME_REQUEST)
+                .collect();
+            let need = 2 + ids.len() * 5;
+            if out.len() + need <= mtu {
+                out.push(wire::tag::KEYFRAME_REQUEST);
+                crate::bits::write_varint(&mut out, ids.len() as u64);
+                for id in &ids {
+                    crate::bits::write_varint(&mut out, u64::from(id.0));
+                    link.keyreq_out.remove(id);
+                }
+            }
+        }
+        link.reliable.take_due(now, rto, |seq, bytes| {
+            if out.len() + reliable_len(bytes) <= mtu {
+                write_reliable(&mut out, seq, bytes);
+                true
+            } else {
+                false
+            }
+        });
+        // state entries
+        if !link.pending.is_empty() {
+            link.pending.sort_by_key(|e| e.id);
+            let budget_bits = mtu.saturating_sub(out.len() + 1 + 3 + 3) * 8;
+            let mut w = BitWriter::new();
+            let mut prev: Option<NetId> = None;
+            let mut taken = 0usize;
+            let mut oversize = Vec::new();
+            let mut class_bits: BTreeMap<u16, usize> = BTreeMap::new();
+            for (i, e) in link.pending.iter().enumerate() {
+                let Some(o) = self.objects.get(&e.id) else {
+                    taken = i + 1;
+                    continue;
+                };
+                let Some(class) = self.cfg.classes.get(usize::from(o.info.class.0)) else {
+                    taken = i + 1;
+                    continue;
+                };
+                let layout = EntryLayout {
+                    class,
+                    particles: o.info.particles,
+                };
+                let mut body = BitWriter::new();
+                e.encode_body(&layout, &mut body);
+                let bits = entry_id_bits(prev, e.id) + body.bit_len();
+                if w.bit_len() + bits > budget_bits {
+                    if w.bit_len() == 0 {
+                        oversize.push(i);
+                        taken = i + 1;
+                        continue;
+                    }
+                    break;
+                }
+                write_entry_id(&mut w, prev, e.id);
+                w.append(&body);
+                *class_bits.entry(o.info.class.0).or_default() += bits;
+                prev = Some(e.id);
+                taken = i + 1;
+            }
+            let count = taken - oversize.len();
+            self.stats.oversize_dropped += oversize.len() as u64;
+            link.pending.drain(..taken);
+            if w.bit_len() > 0 {
+                let bytes = w.into_bytes();
+                out.push(wire::tag::STATE);
+                crate::bits::write_varint(&mut out, count as u64);
+                crate::bits::write_varint(&mut out, bytes.len() as u64);
+                out.extend_from_slice(&bytes);
+                for (c, bits) in class_bits {
+                    if let Some(cl) = self.cfg.classes.get(usize::from(c)) {
+                        *self
+                            .stats
+                            .class_up_bytes
+                            .entry(cl.name.clone())
+                            .or_default() += bits as f64 / 8.0;
+                    }
+                }
+            }
+        }
+        if out.len() <= header.len() {
+            return None;
+        }
+        link.out_seq = link.out_seq.wrapping_add(1);
+        debug_assert!(out.len() <= mtu);
+        self.stats.on_send(to, out.len(), mtu);
+        Some(Transmit { to, payload: out })
+    }
+
+    fn rto(&self, to: PeerId) -> Duration {
+        let srtt = self
+            .links
+            .get(&to)
+            .and_then(|l| l.srtt)
+            .unwrap_or(Duration::from_millis(200));
+        (srtt * 2 + Duration::from_millis(10)).max(self.cfg.min_rto)
+    }
+
+    // ---------------------------------------------------------------- timers
+
+    /// Advance timers: heartbeats, timeouts, migration, send ticks, rest sync repeats.
+    pub fn handle_timeout(&mut self, now: Instant) {
+        if self.role == Role::Refused {
+            return;
+        }
+        if now >= self.next_heartbeat {
+            let peers: Vec<PeerId> = self
+                .members
+                .keys()
+                .copied()
+                .chain(self.host)
+                .filter(|p| *p != self.local)
+                .collect();
+            for p in peers {
+                self.links.entry(p).or_default().ping_due = true;
+            }
+            self.next_heartbeat = now + self.cfg.heartbeat_interval;
+        }
+        self.check_liveness(now);
+        for c in 0..self.next_tick.len() {
+            let due = self.next_tick.get(c).is_some_and(|t| now >= *t);
+            if due {
+                let interval = self
+                    .cfg
+                    .classes
+                    .get(c)
+                    .map_or(Duration::from_millis(50), |cl| cl.send.interval());
+                if let Some(t) = self.next_tick.get_mut(c) {
+                    *t += interval;
+                    if *t <= now {
+                        *t = now + interval;
+                    }
+                }
+                self.owner_tick(now, c as u16);
+            }
+        }
+        // rest sync repeats
+        let mut due = Vec::new();
+        for (p, l) in &self.links {
+            for (id, r) in &l.rest_repeat {
+                if r.at <= now {
+                    due.push((*p, *id));
+                }
+            }
+        }
+        for (p, id) in due {
+            let entries = self.build_entries(now, p, id, false, true);
+            if let Some(l) = self.links.get_mut(&p) {
+                l.pending.extend(entries);
+                if let Some(r) = l.rest_repeat.get_mut(&id) {
+                    if r.left <= 1 {
+                        l.rest_repeat.remove(&id);
+                    } else {
+                        r.left -= 1;
+                        r.at = now + r.gap;
+                        r.gap *= 2;
+                    }
+                }
+            }
+        }
+    }
+
+    fn alive(&self, p: PeerId, now: Instant) -> bool {
+        if p == self.local {
+            return true;
+        }
+        self.links
+            .get(&p)
+            .and_then(|l| l.last_heard)
+            .is_some_and(|h| now < h + self.cfg.peer_timeout)
+    }
+
+    fn check_liveness(&mut self, now: Instant) {
+        match self.role {
+            Role::Host => {
+                let gone: Vec<PeerId> = self
+                    .members
+                    .keys()
+                    .copied()
+                    .filter(|p| *p != self.local && !self.alive(*p, now))
+                    .collect();
+                for p in gone {
+                    self.host_peer_left(now, p);
+                }
+            }
+            Role::Client => {
+                let Some(host) = self.host else { return };
+                if self.alive(host, now) {
+                    return;
+                }
+                // Host silent: the earliest-joined surviving member takes over (no vote).
+                let candidate = self
+                    .members
+                    .iter()
+                    .filter(|(p, _)| **p != host && self.alive(**p, now))
+                    .min_by_key(|(_, seq)| **seq)
+                    .map(|(p, _)| *p);
+                if candidate == Some(self.local) {
+                    self.become_host(now, host);
+                }
+            }
+            Role::Joining | Role::Refused => {}
+        }
+    }
+
+    fn become_host(&mut self, now: Instant, old_host: PeerId) {
+        self.term = Term(self.term.0 + 1);
+        self.role = Role::Host;
+        self.host = Some(self.local);
+        let term = self.term;
+        let dead: Vec<PeerId> = self
+            .members
+            .keys()
+            .copied()
+            .filter(|p| *p == old_host || !self.alive(*p, now))
+            .collect();
+        for p in &dead {
+            self.members.remove(p);
+            if let Some(l) = self.links.get_mut(p) {
+                l.pending.clear();
+            }
+        }
+        self.next_join_seq = self.members.values().max().map_or(1, |m| m + 1);
+        self.next_net_id = self.objects.keys().max().map_or(1, |m| m.0 + 1);
+        let me = self.local;
+        let mut changed = Vec::new();
+        for o in self.objects.values_mut() {
+            if !self.members.contains_key(&o.info.owner) {
+                o.info.owner = me;
+                o.info.epoch = o.info.epoch.bumped(term);
+                o.info.held = false;
+                if o.published.is_none() {
+                    // we take over from our replica
+                    o.published = None;
+                }
+                changed.push((o.info.id, o.info.epoch));
+            }
+        }
+        for (id, epoch) in changed {
+            self.adopt_replica_as_published(id);
+            self.events.push_back(Event::AuthorityChanged {
+                id,
+                owner: me,
+                epoch,
+            });
+        }
+        let members: Vec<(PeerId, u32)> = self.members.iter().map(|(p, s)| (*p, *s)).collect();
+        let others: Vec<PeerId> = self.members.keys().copied().filter(|p| *p != me).collect();
+        for p in others {
+            if let Some(l) = self.links.get_mut(&p) {
+                l.send.clear();
+                l.spawn_pending.clear();
+            }
+            self.send_control(
+                now,
+                p,
+                &Control::NewHost {
+                    term,
+                    host: me,
+                    members: members.clone(),
+                },
+            );
+            self.send_snapshot(now, p);
+        }
+        self.events.push_back(Event::HostChanged { host: me, term });
+        for p in dead {
+            if p != me {
+                self.events.push_back(Event::PeerLeft(p));
+            }
+        }
+    }
+
+    fn adopt_replica_as_published(&mut self, id: NetId) {
+        let Some(o) = self.objects.get(&id) else {
+            return;
+        };
+        let Some(class) = self.class(o.info.class) else {
+            return;
+        };
+        let st = self.compose(o, class);
+        if let Some(o) = self.objects.get_mut(&id) {
+            if o.published.is_none() {
+                o.published = Some(st);
+            }
+        }
+    }
+
+    fn send_snapshot(&mut self, now: Instant, to: PeerId) {
+        let infos: Vec<SpawnInfo> = self
+            .objects
+            .values()
+            .map(|o| {
+                let mut i = o.info.clone();
+                if let Some(class) = self.class(o.info.class) {
+                    let st = self.compose(o, class);
+                    i.pos = st.pos.to_array();
+                    i.rot = st.rot.to_array();
+                }
+                i
+            })
+            .collect();
+        for info in infos {
+            let id = info.id;
+            let seq = self.send_control(now, to, &Control::Spawn(info));
+            if let Some(l) = self.links.get_mut(&to) {
+                l.spawn_pending.insert(id, seq);
+            }
+        }
+    }
+
+    /// One send tick of class `c`: replicate the objects we own.
+    fn owner_tick(&mut self, now: Instant, c: u16) {
+        let Some(class) = self.cfg.classes.get(usize::from(c)) else {
+            return;
+        };
+        let rest_after = class.send.rest_after;
+        let interval = class.send.interval();
+        let owned: Vec<NetId> = self
+            .objects
+            .values()
+            .filter(|o| o.info.class.0 == c && o.info.owner == self.local)
+            .map(|o| o.info.id)
+            .collect();
+        let targets: Vec<PeerId> = match self.role {
+            Role::Host => self
+                .members
+                .keys()
+                .copied()
+                .filter(|p| *p != self.local)
+                .collect(),
+            Role::Client => self.host.into_iter().collect(),
+            _ => Vec::new(),
+        };
+        for id in owned {
+            let mut became_rest = false;
+            if let Some(o) = self.objects.get_mut(&id) {
+                if !o.rest && now.saturating_since(o.last_change) >= rest_after {
+                    o.rest = true;
+                    became_rest = true;
+                }
+            }
+            for &p in &targets {
+                let entries = self.build_entries(now, p, id, true, false);
+                if let Some(l) = self.links.get_mut(&p) {
+                    l.pending.extend(entries);
+                    if became_rest {
+                        l.rest_repeat.insert(
+                            id,
+                            RestRepeat {
+                                at: now + interval * 2,
+                                gap: interval * 4,
+                                left: 4,
+                            },
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    /// Entries that bring link `to`'s view of `id` up to date.
+    /// `owner_thresholds`: apply the class's send thresholds (we own it and it moves);
+    /// otherwise send any grid change (relay, rest sync).
+    fn build_entries(
+        &mut self,
+        now: Instant,
+        to: PeerId,
+        id: NetId,
+        owner_thresholds: bool,
+        force_key: bool,
+    ) -> Vec<StateEntry> {
+        let mut out = Vec::new();
+        let Some(o) = self.objects.get(&id) else {
+            return out;
+        };
+        let Some(class) = self.cfg.classes.get(usize::from(o.info.class.0)) else {
+            return out;
+        };
+        let Some(link) = self.links.get_mut(&to) else {
+            return out;
+        };
+        if link.spawn_pending.contains_key(&id) {
+            return out; // the peer does not know the object yet
+        }
+        let use_thr = owner_thresholds && !o.rest;
+        let pos_thr = if use_thr {
+            class.send.position_threshold_m / class.position_resolution_m
+        } else {
+            0.0
+        };
+        let rot_thr = if use_thr {
+            class.send.rotation_threshold_rad
+        } else {
+            0.0
+        };
+        let part_thr = if use_thr {
+            class.send.particle_threshold_m / class.particle_resolution_m
+        } else {
+            0.0
+        };
+        let key_due = |sp: &SendPart| {
+            !o.rest
+                && class
+                    .send
+                    .keyframe_interval
+                    .is_some_and(|k| now >= sp.last_key_at + k)
+        };
+        let tag = o.info.epoch.tag();
+        let bits = class.rot_bits();
+        // transform part
+        {
+            let cur = PartQ::Transform {
+                pos: o.pos,
+                rot: o.rot,
+            };
+            let sp = link.send.get(&(id, 0));
+            let key = force_key || sp.is_none_or(key_due);
+            let body = if key {
+                Some(PartBody::Transform {
+                    pos: Some(PosEnc::Abs(o.pos)),
+                    rot: Some(o.rot),
+                })
+            } else if let Some(SendPart {
+                last: PartQ::Transform { pos, rot },
+                ..
+            }) = sp
+            {
+                let dpos = VecQuantizer::step_distance(*pos, o.pos);
+                let send_pos = dpos > pos_thr && *pos != o.pos;
+                let ang = angle_between(dequantize_quat(*rot, bits), dequantize_quat(o.rot, bits));
+                let send_rot = *rot != o.rot && ang > rot_thr;
+                if send_pos || send_rot {
+                    Some(PartBody::Transform {
+                        pos: send_pos.then(|| {
+                            PosEnc::Delta([0, 1, 2].map(|i| o.pos[i] as i32 - pos[i] as i32))
+                        }),
+                        rot: send_rot.then_some(o.rot),
+                    })
+                } else {
+                    None
+                }
+            } else {
+                None
+            };
+            if let Some(body) = body {
+                let (seq, last_key_at, mut last) = match link.send.get(&(id, 0)) {
+                    Some(sp) => (
+                        sp.seq.wrapping_add(1) & 0xF,
+                        sp.last_key_at,
+                        sp.last.clone(),
+                    ),
+                    None => (0, now, cur.clone()),
+                };
+                if let PartBody::Transform { pos, rot } = &body {
+                    if let PartQ::Transform { pos: lp, rot: lr } = &mut last {
+                        if pos.is_some() {
+                            *lp = o.pos;
+                        }
+                        if rot.is_some() {
+                            *lr = o.rot;
+                        }
+                    }
+                }
+                link.send.insert(
+                    (id, 0),
+                    SendPart {
+                        last: if key { cur } else { last },
+                        seq,
+                        last_key_at: if key { now } else { last_key_at },
+                    },
+                );
+                out.push(StateEntry {
+                    id,
+                    epoch_tag: tag,
+                    seq,
+                    key,
+                    rest: o.rest,
+                    body,
+                });
+            }
+        }
+        // particle chunks (thesis 5.4.2), skipped in center-only mode (5.4.1)
+        if class.soft_body_mode == SoftBodyMode::Particles && !o.particles.is_empty() {
+            let per = class.chunk_len();
+            for (ci, chunk) in o.particles.chunks(per).enumerate() {
+                let part = ci as u32 + 1;
+                let sp = link.send.get(&(id, part));
+                let key = force_key || sp.is_none_or(key_due);
+                let values = if key {
+                    Some(ChunkEnc::Abs(chunk.to_vec()))
+                } else if let Some(SendPart {
+                    last: PartQ::Chunk(prev),
+                    ..
+                }) = sp
+                {
+                    let list: Vec<(u32, [i32; 3])> = chunk
+                        .iter()
+                        .zip(prev.iter())
+                        .enumerate()
+                        .filter(|(_, (c, p))| {
+                            c != p && VecQuantizer::step_distance(**c, **p) > part_thr
+                        })
+                        .map(|(i, (c, p))| (i as u32, [0, 1, 2].map(|k| c[k] as i32 - p[k] as i32)))
+                        .collect();
+                    (!list.is_empty()).then_some(ChunkEnc::Delta(list))
+                } else {
+                    None
+                };
+                let Some(values) = values else { continue };
+                let (seq, last_key_at, mut last) = match link.send.get(&(id, part)) {
+                    Some(sp) => (
+                        sp.seq.wrapping_add(1) & 0xF,
+                        sp.last_key_at,
+                        sp.last.clone(),
+                    ),
+                    None => (0, now, PartQ::Chunk(chunk.to_vec())),
+                };
+                if let (ChunkEnc::Delta(list), PartQ::Chunk(l)) = (&values, &mut last) {
+                    for (i, _) in list {
+                        if let (Some(dst), Some(src)) =
+                            (l.get_mut(*i as usize), chunk.get(*i as usize))
+                        {
+                            *dst = *src;
+                        }
+                    }
+                }
+                link.send.insert(
+                    (id, part),
+                    SendPart {
+                        last: if key {
+                            PartQ::Chunk(chunk.to_vec())
+                        } else {
+                            last
+                        },
+                        seq,
+                        last_key_at: if key { now } else { last_key_at },
+                    },
+                );
+                out.push(StateEntry {
+                    id,
+                    epoch_tag: tag,
+                    seq,
+                    key,
+                    rest: o.rest,
+                    body: PartBody::Chunk {
+                        chunk: ci as u32,
+                        values,
+                    },
+                });
+            }
+        }
+        out
+    }
+
+    // ---------------------------------------------------------------- input
+
+    /// Feed a datagram received from `from`.
+    pub fn handle_packet(&mut self, now: Instant, from: PeerId, bytes: &[u8]) {
+        self.stats.on_recv(from, bytes.len());
+        if let Some((_, reason)) = decode_refusal(bytes) {
+            if self.role == Role::Joining && Some(from) == self.host {
+                self.role = Role::Refused;
+                self.events.push_back(Event::Refused { reason });
+            }
+            return;
+        }
+        let (header, sections) = match decode_packet(bytes) {
+            Ok(x) => x,
+            Err(NetError::VersionMismatch { ours, theirs }) => {
+                self.stats.decode_errors += 1;
+                if self.role == Role::Host {
+                    let reason = format!(
+                        "protocol version mismatch: host speaks {ours}, you speak {theirs}"
+                    );
+                    self.raw_out.push_back(Transmit {
+                        to: from,
+                        payload: encode_refusal(&reason),
+                    });
+                }
+                return;
+            }
+            Err(_) => {
+                self.stats.decode_errors += 1;
+                return;
+            }
+        };
+        let is_member = self.members.contains_key(&from) || Some(from) == self.host;
+        if is_member && header.term < self.term {
+            self.stats.dropped_old_term += 1;
+            return;
+        }
+        let link = self.links.entry(from).or_default();
+        link.last_heard = Some(now);
+        // loss statistics from the datagram sequence
+        let ls = self.stats.links.entry(from).or_default();
+        match link.in_seq {
+            Some(prev) => {
+                let gap = header.seq.wrapping_sub(prev);
+                if (1..128).contains(&gap) {
+                    ls.expected += u64::from(gap);
+                    ls.lost += u64::from(gap - 1);
+                    link.in_seq = Some(header.seq);
+                } else if gap >= 128 && ls.lost > 0 {
+                    ls.lost -= 1; // a late (reordered) datagram
+                }
+            }
+            None => {
+                ls.expected += 1;
+                link.in_seq = Some(header.seq);
+            }
+        }
+        // clock mapping for interpolation timing
+        let c = &mut link.clock;
+        let full = match c.last_full_ms {
+            Some(last) => last + i64::from(header.time_ms.wrapping_sub(c.last_ms) as i16),
+            None => i64::from(header.time_ms),
+        };
+        if c.last_full_ms.is_none_or(|l| full > l) {
+            c.last_full_ms = Some(full);
+            c.last_ms = header.time_ms;
+        }
+        let offset = now.as_micros() as i64 - full * 1000;
+        let min = match c.min_offset_us {
+            Some(m) => (m + 20).min(offset),
+            None => offset,
+        };
+        c.min_offset_us = Some(min);
+        c.jitter_us = 0.9 * c.jitter_us + 0.1 * (offset - min) as f64;
+        let sample_time = Instant::from_micros((full * 1000 + min).max(0) as u64);
+
+        let mut states = Vec::new();
+        let mut controls = Vec::new();
+        for s in sections {
+            match s {
+                Section::Ack { next_expected } => {
+                    if let Some(l) = self.links.get_mut(&from) {
+                        l.reliable.on_ack(next_expected);
+                        let acked: Vec<NetId> = l
+                            .spawn_pending
+                            .iter()
+                            .filter(|(_, seq)| l.reliable.is_acked(**seq))
+                            .map(|(id, _)| *id)
+                            .collect();
+                        for id in acked {
+                            l.spawn_pending.remove(&id);
+                        }
+                    }
+                }
+                Section::Reliable { seq, bytes } => {
+                    if let Some(l) = self.links.get_mut(&from) {
+                        for m in l.reliable.on_receive(seq, bytes) {
+                            match Control::decode(&m) {
+                                Ok(c) => controls.push(c),
+                                Err(_) => self.stats.decode_errors += 1,
+                            }
+                        }
+                    }
+                }
+                Section::Ping { time_ms } => {
+                    if let Some(l) = self.links.get_mut(&from) {
+                        l.pong_due = Some(time_ms);
+                    }
+                }
+                Section::Pong { time_ms } => {
+                    let now_ms = (now.as_micros() / 1000) & 0xFFFF_FFFF;
+                    let rtt_ms = (now_ms as u32).wrapping_sub(time_ms);
+                    if rtt_ms < 60_000 {
+                        let rtt = Duration::from_millis(u64::from(rtt_ms));
+                        if let Some(l) = self.links.get_mut(&from) {
+                            l.srtt = Some(match l.srtt {
+                                Some(s) => (s * 7 + rtt) / 8,
+                                None => rtt,
+                            });
+                            self.stats.links.entry(from).or_default().rtt = l.srtt;
+                        }
+                    }
+                }
+                Section::KeyframeRequest { ids } => {
+                    for id in ids {
+                        let sends = self
+                            .objects
+                            .get(&id)
+                            .is_some_and(|o| o.info.owner == self.local || self.role == Role::Host);
+                        if sends {
+                            let e = self.build_entries(now, from, id, false, true);
+                            if let Some(l) = self.links.get_mut(&from) {
+                                l.pending.extend(e);
+                            }
+                        }
+                    }
+                }
+                Section::State { count, bits } => states.push((count, bits)),
+            }
+        }
+        for c in controls {
+            self.handle_control(now, from, c);
+        }
+        if !self.members.contains_key(&from) && Some(from) != self.host {
+            return; // state only from members
+        }
+        let mut touched = BTreeSet::new();
+        for (count, bits) in states {
+            let cfg = &self.cfg;
+            let objects = &self.objects;
+            let parsed = decode_state_block(count, bits, |id| {
+                let o = objects.get(&id)?;
+                Some(EntryLayout {
+                    class: cfg.classes.get(usize::from(o.info.class.0))?,
+                    particles: o.info.particles,
+                })
+            });
+            let entries = match parsed {
+                Ok((e, _)) => e,
+                Err(_) => {
+                    self.stats.decode_errors += 1;
+                    continue;
+                }
+            };
+            for e in entries {
+                if let Some(class_name) = self
+                    .objects
+                    .get(&e.id)
+                    .and_then(|o| self.class(o.info.class))
+                    .map(|c| c.name.clone())
+                {
+                    let _ = class_name; // per-class down bytes are attributed below
+                }
+                if self.apply_entry(now, from, e, &mut touched) {
+                    // applied
+                }
+            }
+        }
+        for id in touched {
+            self.after_update(now, from, id, sample_time);
+        }
+    }
+
+    fn apply_entry(
+        &mut self,
+        now: Instant,
+        from: PeerId,
+        e: StateEntry,
+        touched: &mut BTreeSet<NetId>,
+    ) -> bool {
+        let Some(o) = self.objects.get(&e.id) else {
+            return false;
+        };
+        if o.info.owner == self.local {
+            self.stats.dropped_non_owner += 1;
+            return false;
+        }
+        let sender_ok = if self.role == Role::Host {
+            from == o.info.owner
+        } else {
+            Some(from) == self.host
+        };
+        if !sender_ok {
+            self.stats.dropped_non_owner += 1;
+            return false;
+        }
+        if e.epoch_tag != o.info.epoch.tag() {
+            self.stats.dropped_stale_epoch += 1;
+            return false;
+        }
+        let Some(class) = self.cfg.classes.get(usize::from(o.info.class.0)) else {
+            return false;
+        };
+        let pq = class.position_quantizer();
+        let part = e.part();
+        let Some(link) = self.links.get_mut(&from) else {
+            return false;
+        };
+        let rp = link.recv.get(&(e.id, part));
+        let in_chain = rp.is_some_and(|r| r.valid);
+        if let Some(r) = rp {
+            if r.valid && !seq4_newer(e.seq, r.seq) {
+                return false; // duplicate or reordered-old
+            }
+        }
+        let new_base = if e.key {
+            match &e.body {
+                PartBody::Transform {
+                    pos: Some(PosEnc::Abs(p)),
+                    rot: Some(r),
+                } => Some(PartQ::Transform {
+                    pos: pq.clamp(p.map(i64::from)),
+                    rot: *r,
+                }),
+                PartBody::Chunk {
+                    values: ChunkEnc::Abs(v),
+                    ..
+                } => Some(PartQ::Chunk(v.clone())),
+                _ => None,
+            }
+        } else if in_chain && rp.is_some_and(|r| e.seq == (r.seq.wrapping_add(1) & 0xF)) {
+            let base = rp.map(|r| r.base.clone());
+            match (&e.body, base) {
+                (PartBody::Transform { pos, rot }, Some(PartQ::Transform { pos: bp, rot: br })) => {
+                    let np = match pos {
+                        Some(PosEnc::Delta(d)) => {
+                            pq.clamp([0, 1, 2].map(|i| i64::from(bp[i]) + i64::from(d[i])))
+                        }
+                        Some(PosEnc::Abs(p)) => pq.clamp(p.map(i64::from)),
+                        None => bp,
+                    };
+                    Some(PartQ::Transform {
+                        pos: np,
+                        rot: rot.unwrap_or(br),
+                    })
+                }
+                (
+                    PartBody::Chunk {
+                        values: ChunkEnc::Delta(list),
+                        ..
+                    },
+                    Some(PartQ::Chunk(mut v)),
+                ) => {
+                    let q = class.particle_quantizer();
+                    for (i, d) in list {
+                        if let Some(x) = v.get_mut(*i as usize) {
+                            *x = q.clamp([0, 1, 2].map(|k| i64::from(x[k]) + i64::from(d[k])));
+                        }
+                    }
+                    Some(PartQ::Chunk(v))
+                }
+                _ => None,
+            }
+        } else {
+            // a delta without its base: ask for a keyframe (rate-limited)
+            self.stats.chain_breaks += 1;
+            if let Some(r) = link.recv.get_mut(&(e.id, part)) {
+                r.valid = false;
+            }
+            let limit = link
+                .srtt
+                .unwrap_or(Duration::from_millis(100))
+                .max(Duration::from_millis(50));
+            if link
+                .keyreq_sent
+                .get(&e.id)
+                .is_none_or(|t| now >= *t + limit)
+            {
+                link.keyreq_sent.insert(e.id, now);
+                link.keyreq_out.insert(e.id);
+            }
+            return false;
+        };
+        let Some(base) = new_base else {
+            return false;
+        };
+        link.recv.insert(
+            (e.id, part),
+            RecvPart {
+                seq: e.seq,
+                valid: true,
+                base: base.clone(),
+            },
+        );
+        let chunk_len = class.chunk_len();
+        let Some(o) = self.objects.get_mut(&e.id) else {
+            return false;
+        };
+        match base {
+            PartQ::Transform { pos, rot } => {
+                o.pos = pos;
+                o.rot = rot;
+            }
+            PartQ::Chunk(v) => {
+                let start = (part as usize - 1) * chunk_len;
+                for (i, x) in v.into_iter().enumerate() {
+                    if let Some(d) = o.particles.get_mut(start + i) {
+                        *d = x;
+                    }
+                }
+            }
+        }
+        if o.rest != e.rest {
+            o.rest = e.rest;
+            if e.rest {
+                o.last_change = now;
+            }
+        }
+        o.source = Some(from);
+        touched.insert(e.id);
+        true
+    }
+
+    fn after_update(&mut self, now: Instant, from: PeerId, id: NetId, sample_time: Instant) {
+        let interp = self.interp;
+        let Some(o) = self.objects.get(&id) else {
+            return;
+        };
+        let Some(class) = self.class(o.info.class) else {
+            return;
+        };
+        let pos = class.position_quantizer().dequantize(o.pos);
+        let rot = dequantize_quat(o.rot, class.rot_bits());
+        let pq = class.particle_quantizer();
+        let offsets = o.particles.iter().map(|q| pq.dequantize(*q)).collect();
+        let rest = o.rest;
+        let interval = class.send.interval();
+        if let Some(o) = self.objects.get_mut(&id) {
+            o.buffer.push(
+                Snapshot {
+                    time: sample_time,
+                    pos,
+                    rot,
+                    offsets,
+                },
+                &interp,
+            );
+        }
+        if self.role == Role::Host {
+            // relay (thesis Figure 5.2): forward to every other member
+            let targets: Vec<PeerId> = self
+                .members
+                .keys()
+                .copied()
+                .filter(|p| *p != self.local && *p != from)
+                .collect();
+            for p in targets {
+                let entries = self.build_entries(now, p, id, false, false);
+                if !entries.is_empty() {
+                    self.last_relay_at = Some(now);
+                }
+                if let Some(l) = self.links.get_mut(&p) {
+                    l.pending.extend(entries);
+                    if rest && !l.rest_repeat.contains_key(&id) {
+                        l.rest_repeat.insert(
+                            id,
+                            RestRepeat {
+                                at: now + interval * 2,
+                                gap: interval * 4,
+                                left: 4,
+                            },
+                        );
+                    } else if !rest {
+                        l.rest_repeat.remove(&id);
+                    }
+                }
+            }
+        }
+    }
+
+    // ---------------------------------------------------------------- control plane
+
+    fn send_control(&mut self, now: Instant, to: PeerId, msg: &Control) -> u16 {
+        let bytes = msg.encode();
+        self.links.entry(to).or_default().reliable.push(now, bytes)
+    }
+
+    fn broadcast(&mut self, now: Instant, msg: &Control, except: Option<PeerId>) {
+        let peers: Vec<PeerId> = self
+            .members
+            .keys()
+            .copied()
+            .filter(|p| *p != self.local && Some(*p) != except)
+            .collect();
+        for p in peers {
+            let seq = self.send_control(now, p, msg);
+            if let Control::Spawn(info) = msg {
+                if let Some(l) = self.links.get_mut(&p) {
+                    l.spawn_pending.insert(info.id, seq);
+                }
+            }
+        }
+    }
+
+    fn handle_control(&mut self, now: Instant, from: PeerId, msg: Control) {
+        let from_host = Some(from) == self.host && self.role != Role::Host;
+        match msg {
+            Control::Hello {
+                protocol,
+                config_digest,
+            } => self.on_hello(now, from, protocol, config_digest),
+            Control::Welcome {
+                term,
+                host,
+                join_seq: _,
+                members,
+            } if self.role == Role::Joining && from == host => {
+                self.role = Role::Client;
+                self.term = term;
+                self.host = Some(host);
+                self.members = members.into_iter().collect();
+                self.events.push_back(Event::Joined { host, term });
+            }
+            Control::Refused { reason } if self.role == Role::Joining => {
+                self.role = Role::Refused;
+                self.events.push_back(Event::Refused { reason });
+            }
+            Control::Redirect { host } if self.role == Role::Joining && from != host => {
+                self.host = Some(host);
+                let hello = Control::Hello {
+                    protocol: PROTOCOL_VERSION,
+                    config_digest: self.cfg.digest(),
+                };
+                self.send_control(now, host, &hello);
+            }
+            Control::PeerJoined { peer, join_seq } if from_host => {
+                self.members.insert(peer, join_seq);
+                self.links.entry(peer).or_default();
+                self.events.push_back(Event::PeerJoined(peer));
+            }
+            Control::PeerLeft { peer } if from_host => {
+                self.members.remove(&peer);
+                self.events.push_back(Event::PeerLeft(peer));
+            }
+            Control::Spawn(info) if from_host => self.on_spawn_from_host(now, info),
+            Control::Despawn { id } if from_host && self.objects.remove(&id).is_some() => {
+                self.events.push_back(Event::Despawned(id));
+            }
+            Control::OwnerChanged {
+                id,
+                owner,
+                epoch,
+                held,
+            } if from_host => self.set_owner(id, owner, epoch, held),
+            Control::AuthorityDenied { id, reason } if from_host => {
+                self.events.push_back(Event::AuthorityDenied { id, reason });
+            }
+            Control::AuthorityAsk { id, by } if from_host => {
+                self.events.push_back(Event::AuthorityAsked { id, by });
+            }
+            Control::NewHost {
+                term,
+                host,
+                members,
+            } if term > self.term && host == from => {
+                let was_host = self.role == Role::Host;
+                self.term = term;
+                self.host = Some(host);
+                self.role = Role::Client;
+                self.members = members.into_iter().collect();
+                if was_host {
+                    self.members.entry(self.local).or_insert(u32::MAX);
+                }
+                for l in self.links.values_mut() {
+                    l.send.clear();
+                    l.recv.clear();
+                    l.pending.clear();
+                    l.rest_repeat.clear();
+                    l.spawn_pending.clear();
+                }
+                // tell the new host what we own, so an in-flight handoff is not lost
+                let claims: Vec<SpawnInfo> = self
+                    .objects
+                    .values()
+                    .filter(|o| o.info.owner == self.local)
+                    .map(|o| o.info.clone())
+                    .collect();
+                for chunk in claims.chunks(16) {
+                    self.send_control(
+                        now,
+                        host,
+                        &Control::Resync {
+                            claims: chunk.to_vec(),
+                        },
+                    );
+                }
+                self.events.push_back(Event::HostChanged { host, term });
+            }
+            // ---- host side
+            Control::SpawnRequest {
+                request,
+                class,
+                particles,
+                pos,
+                rot,
+            } if self.is_member_client(from) => {
+                let Some(c) = self.class(class) else { return };
+                let policy = c.authority;
+                let id = NetId(self.next_net_id);
+                self.next_net_id += 1;
+                let info = SpawnInfo {
+                    id,
+                    class,
+                    owner: from,
+                    epoch: AuthorityEpoch {
+                        term: self.term.0,
+                        grant: 0,
+                    },
+                    held: true,
+                    policy,
+                    particles,
+                    pos,
+                    rot,
+                };
+                self.insert_object(now, info.clone(), None);
+                // the requester matches the Spawn to its oldest pending request (ordered channel)
+                let _ = request;
+                let mut to_owner = info.clone();
+                to_owner.policy = policy;
+                self.broadcast(now, &Control::Spawn(info), Some(from));
+                let seq = self.send_control(now, from, &Control::Spawn(to_owner));
+                if let Some(l) = self.links.get_mut(&from) {
+                    l.spawn_pending.insert(id, seq);
+                }
+                if let Some(o) = self.objects.get_mut(&id) {
+                    o.source = Some(from);
+                }
+            }
+            Control::DespawnRequest { id }
+                if self.is_member_client(from) && self.owner(id) == Some(from) =>
+            {
+                self.host_despawn(now, id);
+            }
+            Control::AuthorityRequest { id } if self.is_member_client(from) => {
+                self.host_authority_request(now, from, id);
+            }
+            Control::AuthorityAnswer { id, by, agree } if self.is_member_client(from) => {
+                self.host_authority_answer(now, from, id, by, agree);
+            }
+            Control::AuthorityRelease { id } if self.is_member_client(from) => {
+                self.host_release(now, from, id);
+            }
+            Control::Resync { claims } if self.is_member_client(from) => {
+                for c in claims {
+                    self.host_merge_claim(now, from, c);
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn is_member_client(&self, p: PeerId) -> bool {
+        self.role == Role::Host && p != self.local && self.members.contains_key(&p)
+    }
+
+    fn on_hello(&mut self, now: Instant, from: PeerId, protocol: u8, digest: u64) {
+        if self.role != Role::Host {
+            if let Some(host) = self.host {
+                if self.is_connected() {
+                    self.send_control(now, from, &Control::Redirect { host });
+                }
+            }
+            return;
+        }
+        if self.members.contains_key(&from) {
+            return;
+        }
+        if protocol != PROTOCOL_VERSION {
+            let reason = format!(
+                "protocol version mismatch: host speaks {PROTOCOL_VERSION}, you speak {protocol}"
+            );
+            self.send_control(now, from, &Control::Refused { reason });
+            return;
+        }
+        if digest != self.cfg.digest() {
+            let reason = "object class configuration differs from the host's".to_string();
+            self.send_control(now, from, &Control::Refused { reason });
+            return;
+        }
+        let join_seq = self.next_join_seq;
+        self.next_join_seq += 1;
+        self.members.insert(from, join_seq);
+        let members: Vec<(PeerId, u32)> = self.members.iter().map(|(p, s)| (*p, *s)).collect();
+        let welcome = Control::Welcome {
+            term: self.term,
+            host: self.local,
+            join_seq,
+            members,
+        };
+        self.send_control(now, from, &welcome);
+        self.send_snapshot(now, from);
+        self.broadcast(
+            now,
+            &Control::PeerJoined {
+                peer: from,
+                join_seq,
+            },
+            Some(from),
+        );
+        self.events.push_back(Event::PeerJoined(from));
+    }
+
+    fn insert_object(&mut self, now: Instant, info: SpawnInfo, request: Option<u32>) {
+        let Some(class) = self.class(info.class) else {
+            return;
+        };
+        let pos = class
+            .position_quantizer()
+            .quantize(Vec3::from_array(info.pos));
+        let rot = quantize_quat(Quat::from_array(info.rot), class.rot_bits());
+        let particles =
+            vec![class.particle_quantizer().quantize(Vec3::ZERO); info.particles as usize];
+        let id = info.id;
+        let ev = Event::Spawned {
+            id,
+            class: info.class,
+            owner: info.owner,
+            request,
+        };
+        self.objects.insert(
+            id,
+            Object {
+                info,
+                pos,
+                rot,
+                particles,
+                rest: false,
+                last_change: now,
+                published: None,
+                buffer: SnapshotBuffer::default(),
+                source: None,
+            },
+        );
+        self.events.push_back(ev);
+    }
+
+    fn on_spawn_from_host(&mut self, now: Instant, info: SpawnInfo) {
+        if self.class(info.class).is_none() {
+            return;
+        }
+        if let Some(o) = self.objects.get(&info.id) {
+            if o.info.class == info.class && o.info.particles == info.particles {
+                self.set_owner(info.id, info.owner, info.epoch, info.held);
+                return;
+            }
+            self.objects.remove(&info.id);
+        }
+        // a spawn we asked for: match the oldest pending request of ours
+        let mut request = None;
+        let mut published = None;
+        if info.owner == self.local {
+            if let Some((&r, _)) = self.pending_spawns.iter().next() {
+                request = Some(r);
+                published = self.pending_spawns.remove(&r);
+            }
+        }
+        let id = info.id;
+        self.insert_object(now, info, request);
+        if let Some(st) = published {
+            let _ = self.publish_state(now, id, &st);
+        } else if self.owner(id) == Some(self.local) {
+            self.adopt_replica_as_published(id);
+        }
+    }
+
+    fn set_owner(&mut self, id: NetId, owner: PeerId, epoch: AuthorityEpoch, held: bool) {
+        let local = self.local;
+        let Some(o) = self.objects.get_mut(&id) else {
+            return;
+        };
+        if epoch < o.info.epoch {
+            return;
+        }
+        let changed = o.info.owner != owner || o.info.epoch != epoch;
+        let was_mine = o.info.owner == local;
+        o.info.owner = owner;
+        o.info.epoch = epoch;
+        o.info.held = held;
+        if owner != local {
+            o.published = None;
+        }
+        if was_mine && owner != local {
+            for l in self.links.values_mut() {
+                l.rest_repeat.remove(&id);
+            }
+        }
+        if changed {
+            if owner == local {
+                self.adopt_replica_as_published(id);
+            }
+            self.events
+                .push_back(Event::AuthorityChanged { id, owner, epoch });
+        }
+    }
+
+    fn host_grant(&mut self, now: Instant, id: NetId, to: PeerId, held: bool) {
+        let term = self.term;
+        let Some(o) = self.objects.get(&id) else {
+            return;
+        };
+        let epoch = o.info.epoch.bumped(term);
+        self.set_owner(id, to, epoch, held);
+        // the new owner sends keyframes on its own link; our relay chains restart
+        for l in self.links.values_mut() {
+            l.recv.retain(|(oid, _), _| *oid != id);
+        }
+        self.broadcast(
+            now,
+            &Control::OwnerChanged {
+                id,
+                owner: to,
+                epoch,
+                held,
+            },
+            None,
+        );
+    }
+
+    fn host_authority_request(&mut self, now: Instant, from: PeerId, id: NetId) {
+        let Some(o) = self.objects.get(&id) else {
+            self.deny(now, from, id, DenyReason::Unknown);
+            return;
+        };
+        let (owner, held, policy) = (o.info.owner, o.info.held, o.info.policy);
+        if owner == from {
+            self.host_grant(now, id, from, true);
+            return;
+        }
+        match policy {
+            AuthorityPolicy::Locked => self.deny(now, from, id, DenyReason::Locked),
+            AuthorityPolicy::Free if held => self.deny(now, from, id, DenyReason::Held(owner)),
+            AuthorityPolicy::OwnerMustAgree if held => {
+                let asks = self.pending_asks.entry(id).or_default();
+                if asks.insert(from) {
+                    if owner == self.local {
+                        self.events
+                            .push_back(Event::AuthorityAsked { id, by: from });
+                    } else {
+                        self.send_control(now, owner, &Control::AuthorityAsk { id, by: from });
+                    }
+                }
+            }
+            _ => self.host_grant(now, id, from, true),
+        }
+    }
+
+    fn host_authority_answer(
+        &mut self,
+        now: Instant,
+        from: PeerId,
+        id: NetId,
+        by: PeerId,
+        agree: bool,
+    ) {
+        if self.owner(id) != Some(from) {
+            return;
+        }
+        let asked = self
+            .pending_asks
+            .get_mut(&id)
+            .is_some_and(|s| s.remove(&by));
+        if !asked {
+            return;
+        }
+        if agree && self.members.contains_key(&by) {
+            self.pending_asks.remove(&id);
+            self.host_grant(now, id, by, true);
+        } else {
+            self.deny(now, by, id, DenyReason::OwnerRefused);
+        }
+    }
+
+    fn deny(&mut self, now: Instant, to: PeerId, id: NetId, reason: DenyReason) {
+        if to == self.local {
+            self.events.push_back(Event::AuthorityDenied { id, reason });
+        } else {
+            self.send_control(now, to, &Control::AuthorityDenied { id, reason });
+        }
+    }
+
+    fn host_release(&mut self, now: Instant, from: PeerId, id: NetId) {
+        if self.owner(id) == Some(from) {
+            let me = self.local;
+            self.host_grant(now, id, me, false);
+        }
+    }
+
+    fn host_despawn(&mut self, now: Instant, id: NetId) {
+        if self.objects.remove(&id).is_some() {
+            self.events.push_back(Event::Despawned(id));
+            for l in self.links.values_mut() {
+                l.spawn_pending.remove(&id);
+                l.pending.retain(|e| e.id != id);
+                l.rest_repeat.remove(&id);
+                l.send.retain(|(o, _), _| *o != id);
+                l.recv.retain(|(o, _), _| *o != id);
+            }
+            self.broadcast(now, &Control::Despawn { id }, None);
+        }
+    }
+
+    fn host_peer_left(&mut self, now: Instant, p: PeerId) {
+        self.members.remove(&p);
+        if let Some(l) = self.links.get_mut(&p) {
+            l.pending.clear();
+            l.rest_repeat.clear();
+        }
+        self.links.remove(&p);
+        self.events.push_back(Event::PeerLeft(p));
+        self.broadcast(now, &Control::PeerLeft { peer: p }, None);
+        // authority returns to the host
+        let owned: Vec<NetId> = self
+            .objects
+            .values()
+            .filter(|o| o.info.owner == p)
+            .map(|o| o.info.id)
+            .collect();
+        let me = self.local;
+        for id in owned {
+            self.host_grant(now, id, me, false);
+        }
+        for asks in self.pending_asks.values_mut() {
+            asks.remove(&p);
+        }
+    }
+
+    fn host_merge_claim(&mut self, now: Instant, from: PeerId, claim: SpawnInfo) {
+        if claim.owner != from {
+            return;
+        }
+        match self.objects.get(&claim.id) {
+            None => {
+                if self.class(claim.class).is_none() {
+                    return;
+                }
+                let info = claim.clone();
+                self.insert_object(now, info.clone(), None);
+                self.next_net_id = self.next_net_id.max(claim.id.0 + 1);
+                self.broadcast(now, &Control::Spawn(info), Some(from));
+            }
+            Some(o) => {
+                if claim.epoch > o.info.epoch {
+                    self.set_owner(claim.id, from, claim.epoch, claim.held);
+                    self.broadcast(
+                        now,
+                        &Control::OwnerChanged {
+                            id: claim.id,
+                            owner: from,
+                            epoch: claim.epoch,
+                            held: claim.held,
+                        },
+                        None,
+                    );
+                } else if o.info.owner != from {
+                    let (owner, epoch, held) = (o.info.owner, o.info.epoch, o.info.held);
+                    self.send_control(
+                        now,
+                        from,
+                        &Control::OwnerChanged {
+                            id: claim.id,
+                            owner,
+                            epoch,
+                            held,
+                        },
+                    );
+                }
+            }
+        }
+    }
+}
