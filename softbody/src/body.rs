@@ -10,7 +10,7 @@ use rapier3d::prelude::{
 };
 
 use crate::cluster::{build_particle_map, ParticleMap};
-use crate::config::{CenterCollider, ParticleCollider, SimulationSpace, SoftBodyConfig};
+use crate::config::{CenterCollider, ParticleCollider, RestoringScheme, SimulationSpace, SoftBodyConfig};
 use crate::mesh::{enclosed_volume, Mesh, WeldedMesh};
 use crate::SoftBodyError;
 
@@ -328,6 +328,9 @@ impl SoftBody {
             self.scratch[i] = if u.is_finite() { u } else { Vec3::ZERO };
         }
         let max_dv = self.config.max_velocity_change_mps;
+        let thesis = self.config.restoring == RestoringScheme::Thesis;
+        // Thesis: expectedDelta = fixedDeltaTime / 0.0111112 (Appendix A.7).
+        let thesis_gain = self.config.stiffness * dt / 0.011_111_2;
         for (j, &h) in self.particles.iter().enumerate() {
             let uj = self.scratch[j];
             let (ids, ws) = self.map.neighbours.row(j);
@@ -347,6 +350,14 @@ impl SoftBody {
             }
             let target = match self.drives[j] {
                 Some(goal) => (goal - body.translation()) / dt,
+                None if thesis => {
+                    // dir_j − Σ_i w_ij · dir_i with dir = −u (Appendix A.6–A.7).
+                    let mut from_others = Vec3::ZERO;
+                    for (&i, &w) in ids.iter().zip(ws) {
+                        from_others += -self.scratch[i as usize] * w;
+                    }
+                    (-uj - from_others) * thesis_gain
+                }
                 // Feed the center's rigid motion forward so a rigidly moving body has no lag.
                 None => vc + wc.cross(dest - c) + correction * (alpha / dt),
             };

@@ -28,6 +28,18 @@ pub enum SimulationSpace {
     World,
 }
 
+/// How the shape-restoring velocity is computed each step (thesis 3.2.2).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RestoringScheme {
+    /// This crate's form: per-step fraction `1 − exp(−k·dt)`, normalised relative neighbour
+    /// coupling, the center's rigid velocity fed forward. Stable for every k and dt.
+    Exact,
+    /// The thesis's form (Appendix A.6–A.7), kept to compare: `(dir − Σ w·dir_nb) · k ·
+    /// dt/(1/90)`, raw neighbour weights, no feed-forward. Overshoots once k·dt²·90 > 1.
+    Thesis,
+}
+
 /// Collider of the center body in world mode (Appendix A items 12–13).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -106,6 +118,8 @@ pub struct SoftBodyConfig {
     pub soft_region: Option<SoftRegion>,
     /// Largest velocity change per step in m/s (thesis 3.2.2's MoveTowards limit). Default 10.
     pub max_velocity_change_mps: f32,
+    /// Restoring scheme. Default exact; `thesis` reproduces the original for comparison.
+    pub restoring: RestoringScheme,
     /// Contact friction of particles and center. Default 0.5.
     pub friction: f32,
     /// Distance below which vertices are welded, metres. Default 1e-6.
@@ -130,6 +144,7 @@ impl Default for SoftBodyConfig {
             self_collisions: false,
             soft_region: None,
             max_velocity_change_mps: 10.0,
+            restoring: RestoringScheme::Exact,
             friction: 0.5,
             weld_epsilon_m: 1e-6,
         }

@@ -170,6 +170,9 @@ impl Mesh {
                 _ => {}
             }
         }
+        if triangles.is_empty() && !vs.is_empty() {
+            return Err(SoftBodyError::malformed(src, format!("mesh has {} vertices but no triangles", vs.len())));
+        }
         let normals = if !normals.is_empty() && normals.iter().all(Option::is_some) {
             Some(normals.into_iter().flatten().map(|n| n.normalize_or_zero()).collect())
         } else {

@@ -1,0 +1,161 @@
+//! Mesh loading, validation, welding and baking; every bad-mesh case gives its error.
+#![allow(clippy::unwrap_used, missing_docs)]
+
+use std::path::PathBuf;
+
+use glam::{Quat, Vec3};
+use softsync_softbody::{Mesh, Placement, SoftBodyError};
+
+fn asset(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets").join(name)
+}
+
+fn tmp(name: &str, content: &[u8]) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("softsync-mesh-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join(name);
+    std::fs::write(&p, content).unwrap();
+    p
+}
+
+fn err_of(name: &str, content: &str) -> String {
+    let p = tmp(name, content.as_bytes());
+    let e = Mesh::load(&p).unwrap_err();
+    let s = e.to_string();
+    assert!(s.contains(name), "error does not name the file: {s}");
+    s
+}
+
+#[test]
+fn bunny_loads_with_1839_vertices_and_is_closed() {
+    let m = Mesh::load(asset("bunny.obj")).unwrap();
+    let w = m.weld(1e-7);
+    assert_eq!(w.positions.len(), 1839);
+    assert_eq!(w.triangles.len(), 3674);
+    // Closed, outward: positive volume.
+    assert!(w.volume(&w.positions) > 0.0);
+}
+
+#[test]
+fn icosphere4_has_2562_vertices() {
+    let m = Mesh::icosphere(0.1, 4);
+    assert_eq!(m.positions.len(), 2562);
+    assert_eq!(m.triangles.len(), 5120);
+    let w = m.weld(1e-6);
+    let v = w.volume(&w.positions);
+    let exact = 4.0 / 3.0 * std::f32::consts::PI * 0.001;
+    assert!((v / exact - 1.0).abs() < 0.01, "volume {v} vs {exact}");
+}
+
+#[test]
+fn welding_keeps_seams_closed_and_hard_edges_hard() {
+    let uv = Mesh::uv_sphere(1.0, 12, 24);
+    let w = uv.weld(1e-5);
+    // (rings-1) * segments + 2 poles unique positions.
+    assert_eq!(w.positions.len(), 11 * 24 + 2);
+    // The UV seam is smooth: both sides of the seam share a normal slot.
+    assert!(w.normal_slots < uv.positions.len());
+    let cube = Mesh::cuboid(Vec3::splat(0.5), 2);
+    let wc = cube.weld(1e-5);
+    assert_eq!(wc.positions.len(), 26);
+    // Each corner position carries three normal slots (one per face): hard edges stay hard.
+    assert_eq!(wc.normal_slots, cube.positions.len());
+}
+
+#[test]
+fn baking_folds_the_placement_into_the_vertices() {
+    let m = Mesh::cuboid(Vec3::splat(0.5), 1);
+    let place = Placement {
+        translation_m: Vec3::new(1.0, 2.0, 3.0),
+        rotation: Quat::from_rotation_y(std::f32::consts::FRAC_PI_2),
+        scale: Vec3::new(2.0, 1.0, 1.0),
+    };
+    let baked = m.clone().bake(&place);
+    for (a, b) in m.positions.iter().zip(&baked.positions) {
+        let expect = place.translation_m + place.rotation * (*a * place.scale);
+        assert!(expect.distance(*b) < 1e-5);
+    }
+    // Mirroring keeps the volume positive (winding flipped back).
+    let mirrored = m.bake(&Placement { scale: Vec3::new(-1.0, 1.0, 1.0), ..Default::default() });
+    let w = mirrored.weld(1e-6);
+    assert!(w.volume(&w.positions) > 0.0);
+}
+
+#[test]
+fn obj_with_normals_negative_indices_and_quads() {
+    let text = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvn 0 0 1\nf -4//1 -3//1 -2//1 -1//1\n";
+    let m = Mesh::from_obj_str(text, "quad.obj").unwrap();
+    assert_eq!(m.triangles.len(), 2);
+    assert_eq!(m.normals.as_ref().unwrap()[0], Vec3::Z);
+}
+
+#[test]
+fn gltf_with_data_uri_loads_with_node_transform() {
+    // One triangle, positions as a base64 data URI, node translated by (0, 2, 0).
+    let pos: [f32; 9] = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+    let bytes: Vec<u8> = pos.iter().flat_map(|f| f.to_le_bytes()).collect();
+    let b64 = base64(&bytes);
+    let json = format!(
+        r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0]}}],
+        "nodes":[{{"mesh":0,"translation":[0,2,0]}}],
+        "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}}}}]}}],
+        "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}}],
+        "bufferViews":[{{"buffer":0,"byteLength":36}}],
+        "buffers":[{{"byteLength":36,"uri":"data:application/octet-stream;base64,{b64}"}}]}}"#
+    );
+    let p = tmp("tri.gltf", json.as_bytes());
+    let m = Mesh::load(&p).unwrap();
+    assert_eq!(m.positions.len(), 3);
+    assert_eq!(m.positions[2], Vec3::new(0.0, 3.0, 0.0));
+    // The same document with a point primitive is refused.
+    let points = json.replace(r#""attributes":{"POSITION":0}"#, r#""attributes":{"POSITION":0},"mode":0"#);
+    let e = Mesh::load(tmp("points.gltf", points.as_bytes())).unwrap_err().to_string();
+    assert!(e.contains("not triangles"), "{e}");
+}
+
+fn base64(data: &[u8]) -> String {
+    const T: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut s = String::new();
+    for c in data.chunks(3) {
+        let n = (c[0] as u32) << 16 | (*c.get(1).unwrap_or(&0) as u32) << 8 | *c.get(2).unwrap_or(&0) as u32;
+        for k in 0..4 {
+            if k <= c.len() {
+                s.push(T[(n >> (18 - 6 * k) & 63) as usize] as char);
+            } else {
+                s.push('=');
+            }
+        }
+    }
+    s
+}
+
+#[test]
+fn every_bad_mesh_gives_its_error() {
+    let missing = Mesh::load("/nonexistent/softsync/none.obj").unwrap_err();
+    assert!(matches!(missing, SoftBodyError::Io { .. }), "{missing}");
+    assert!(missing.to_string().contains("none.obj"));
+
+    assert!(err_of("empty.obj", "").contains("no vertices"));
+    assert!(err_of("nofaces.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n").contains("no triangles"));
+    assert!(err_of("nan.obj", "v 0 0 nan\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").contains("non-finite"));
+    assert!(err_of("word.obj", "v 0 zero 0\n").contains("line 1"));
+    assert!(err_of("short.obj", "v 0 0\n").contains("needs 3 numbers"));
+    assert!(err_of("range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n").contains("out of range"));
+    assert!(err_of("zero.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n").contains("out of range"));
+    assert!(err_of("line.obj", "v 0 0 0\nv 1 0 0\nf 1 2\n").contains("at least 3"));
+    assert!(err_of("polyline.obj", "v 0 0 0\nv 1 0 0\nl 1 2\n").contains("not triangles"));
+    assert!(err_of("repeat.obj", "v 0 0 0\nv 1 0 0\nf 1 2 2\n").contains("repeats a vertex"));
+    let bin = tmp("binary.obj", &[0xff, 0xfe, 0x00, 0x01]);
+    assert!(Mesh::load(&bin).unwrap_err().to_string().contains("UTF-8"));
+    assert!(err_of("garbage.glb", "not a gltf at all").contains("invalid glTF"));
+    assert!(err_of("garbage.gltf", "{\"asset\":").contains("invalid glTF"));
+    let e = Mesh::load(tmp("mesh.stl", b"solid")).unwrap_err();
+    assert!(matches!(e, SoftBodyError::UnsupportedFormat { .. }), "{e}");
+}
+
+#[test]
+fn gltf_buffer_uris_cannot_escape_the_folder() {
+    let json = r#"{"asset":{"version":"2.0"},"buffers":[{"byteLength":4,"uri":"../../etc/passwd"}]}"#;
+    let e = Mesh::load(tmp("escape.gltf", json.as_bytes())).unwrap_err().to_string();
+    assert!(e.contains("leaves the file's folder"), "{e}");
+}
