@@ -17,11 +17,23 @@ fn main() -> Result<(), SoftBodyError> {
     let mesh = Mesh::icosphere(0.1, 3);
     let cluster = match std::env::var("CLUSTER").as_deref() {
         Ok("distance") => ClusterMethod::Distance { radius_m: 0.012 },
-        Ok("weighted") => ClusterMethod::WeightedDistance { radius_m: 0.012, soft_radius_m: 0.02 },
-        Ok("poisson") => ClusterMethod::PoissonDisk { radius_m: 0.012, seed: 1 },
-        _ => ClusterMethod::ClosestN { vertices_per_particle: 3 },
+        Ok("weighted") => ClusterMethod::WeightedDistance {
+            radius_m: 0.012,
+            soft_radius_m: 0.02,
+        },
+        Ok("poisson") => ClusterMethod::PoissonDisk {
+            radius_m: 0.012,
+            seed: 1,
+        },
+        _ => ClusterMethod::ClosestN {
+            vertices_per_particle: 3,
+        },
     };
-    let cfg = SoftBodyConfig { stiffness, cluster, ..Default::default() };
+    let cfg = SoftBodyConfig {
+        stiffness,
+        cluster,
+        ..Default::default()
+    };
     let mut s = Scenario::new(kind, &mesh, cfg, 1.0 / hz)?;
     let steps = (kind.duration_s() * hz) as usize;
     for i in 0..steps {
@@ -32,7 +44,14 @@ fn main() -> Result<(), SoftBodyError> {
             let (lo, hi) = softsync_softbody::mesh::bounds(v);
             println!(
                 "t={:.2} vol={:.3} rms={:.4} maxd={:.4} ke={:.2e} ylo={:.3} yhi={:.3} xhi={:.3}",
-                s.time_s(), m.volume_ratio, m.rest_rms_m, m.max_displacement_m, m.kinetic_energy_j, lo.y, hi.y, hi.x
+                s.time_s(),
+                m.volume_ratio,
+                m.rest_rms_m,
+                m.max_displacement_m,
+                m.kinetic_energy_j,
+                lo.y,
+                hi.y,
+                hi.x
             );
         }
     }

@@ -5,12 +5,15 @@
 
 use glam::{Quat, Vec3};
 use rapier3d::prelude::{
-    ColliderBuilder, ColliderHandle, Group, InteractionGroups, InteractionTestMode, PhysicsWorld,
-    RigidBodyBuilder, RigidBodyHandle,
+    Aabb, ColliderBuilder, ColliderHandle, Group, InteractionGroups, InteractionTestMode,
+    PhysicsWorld, QueryFilter, RigidBodyBuilder, RigidBodyHandle,
 };
 
 use crate::cluster::{build_particle_map, ParticleMap};
-use crate::config::{CenterCollider, ParticleCollider, RestoringScheme, SimulationSpace, SoftBodyConfig};
+use crate::config::{
+    CenterCollider, ContinuousCollision, ParticleCollider, RestoringScheme, SimulationSpace,
+    SoftBodyConfig,
+};
 use crate::mesh::{enclosed_volume, Mesh, WeldedMesh};
 use crate::SoftBodyError;
 
@@ -93,7 +96,10 @@ impl SoftBodySet {
                 (self.slots.len() - 1) as u32
             }
         };
-        Ok(SoftBodyHandle { index, generation: self.slots[index as usize].0 })
+        Ok(SoftBodyHandle {
+            index,
+            generation: self.slots[index as usize].0,
+        })
     }
 
     /// Removes a soft body and its rapier bodies.
@@ -129,7 +135,15 @@ impl SoftBodySet {
     /// All bodies with their handles.
     pub fn iter(&self) -> impl Iterator<Item = (SoftBodyHandle, &SoftBody)> {
         self.slots.iter().enumerate().filter_map(|(i, (g, b))| {
-            b.as_ref().map(|b| (SoftBodyHandle { index: i as u32, generation: *g }, b))
+            b.as_ref().map(|b| {
+                (
+                    SoftBodyHandle {
+                        index: i as u32,
+                        generation: *g,
+                    },
+                    b,
+                )
+            })
         })
     }
 
@@ -176,7 +190,11 @@ fn groups(bit: u32, self_collisions: bool) -> (InteractionGroups, InteractionGro
     // (Appendix A.10) and touch each other only with self-collisions on (thesis 3.5.3).
     let p = Group::from_bits_truncate(1 << bit);
     let c = Group::from_bits_truncate(1 << (bit + 1));
-    let particle_filter = if self_collisions { Group::ALL - c } else { Group::ALL - c - p };
+    let particle_filter = if self_collisions {
+        Group::ALL - c
+    } else {
+        Group::ALL - c - p
+    };
     (
         InteractionGroups::new(p, particle_filter, InteractionTestMode::And),
         InteractionGroups::new(c, Group::ALL - p, InteractionTestMode::And),
@@ -184,7 +202,12 @@ fn groups(bit: u32, self_collisions: bool) -> (InteractionGroups, InteractionGro
 }
 
 impl SoftBody {
-    fn build(mesh: &Mesh, config: SoftBodyConfig, world: &mut PhysicsWorld, bit: u32) -> Result<Self, SoftBodyError> {
+    fn build(
+        mesh: &Mesh,
+        config: SoftBodyConfig,
+        world: &mut PhysicsWorld,
+        bit: u32,
+    ) -> Result<Self, SoftBodyError> {
         let welded = mesh.weld(config.weld_epsilon_m);
         let soft: Vec<bool> = match &config.soft_region {
             Some(r) => welded.positions.iter().map(|p| r.contains(*p)).collect(),
@@ -193,24 +216,44 @@ impl SoftBody {
         let (lo, hi) = crate::mesh::bounds(&welded.positions);
         let size_m = (hi - lo).max_element().max(1e-6);
         let mut affect = config.affect_range_m;
-        let map0 = build_particle_map(&welded.positions, &welded.triangles, &soft, config.cluster, 0.0)?;
+        let map0 = build_particle_map(
+            &welded.positions,
+            &welded.triangles,
+            &soft,
+            config.cluster,
+            0.0,
+        )?;
         if affect == 0.0 {
             affect = 2.5 * mean_spacing(&map0.rest_particles);
         }
         let map = if affect > 0.0 {
-            build_particle_map(&welded.positions, &welded.triangles, &soft, config.cluster, affect)?
+            build_particle_map(
+                &welded.positions,
+                &welded.triangles,
+                &soft,
+                config.cluster,
+                affect,
+            )?
         } else {
             map0
         };
         // Thesis 3.2.1 / Figure 3.8: the center is the mean of the particles.
         let rest_center = map.rest_particles.iter().copied().sum::<Vec3>() / map.len() as f32;
-        let rest_offsets: Vec<Vec3> = map.rest_particles.iter().map(|p| *p - rest_center).collect();
+        let rest_offsets: Vec<Vec3> = map
+            .rest_particles
+            .iter()
+            .map(|p| *p - rest_center)
+            .collect();
         let rest_vertices: Vec<Vec3> = welded.positions.iter().map(|p| *p - rest_center).collect();
         let neighbour_scale = (0..map.len())
             .map(|i| {
                 let (_, w) = map.neighbours.row(i);
                 let s: f32 = w.iter().sum();
-                if s > 0.0 { config.neighbour_share / s } else { 0.0 }
+                if s > 0.0 {
+                    config.neighbour_share / s
+                } else {
+                    0.0
+                }
             })
             .collect();
         let (pg, cg) = groups(bit, config.self_collisions);
@@ -226,21 +269,30 @@ impl SoftBody {
             SimulationSpace::World => {
                 let builder = match config.center_collider {
                     CenterCollider::Ball => {
-                        let r = rest_vertices.iter().map(|v| v.length()).sum::<f32>() / rest_vertices.len() as f32;
+                        let r = rest_vertices.iter().map(|v| v.length()).sum::<f32>()
+                            / rest_vertices.len() as f32;
                         Some(ColliderBuilder::ball((r * config.center_scale).max(1e-4)))
                     }
                     CenterCollider::ConvexHull => {
-                        let pts: Vec<Vec3> = rest_vertices.iter().map(|v| *v * config.center_scale).collect();
+                        let pts: Vec<Vec3> = rest_vertices
+                            .iter()
+                            .map(|v| *v * config.center_scale)
+                            .collect();
                         ColliderBuilder::convex_hull(&pts)
                     }
                 };
                 let builder = builder.ok_or_else(|| {
                     SoftBodyError::Config("the mesh has no convex hull (flat or degenerate)".into())
                 })?;
-                Some(world.insert_collider(
-                    builder.mass(config.center_mass_kg).friction(config.friction).collision_groups(cg),
-                    Some(center),
-                ))
+                Some(
+                    world.insert_collider(
+                        builder
+                            .mass(config.center_mass_kg)
+                            .friction(config.friction)
+                            .collision_groups(cg),
+                        Some(center),
+                    ),
+                )
             }
         };
 
@@ -248,12 +300,24 @@ impl SoftBody {
         let mut particle_colliders = Vec::with_capacity(map.len());
         let mut particle_radius_m = Vec::with_capacity(map.len());
         for (i, p) in map.rest_particles.iter().enumerate() {
+            let (soft_ccd, full_ccd) = match config.continuous_collision {
+                ContinuousCollision::Off => (0.0, false),
+                ContinuousCollision::Soft { prediction_m } => (prediction_m.max(0.0), false),
+                ContinuousCollision::Full => (0.0, true),
+            };
             let h = world.insert_body(
                 RigidBodyBuilder::dynamic()
+                    .soft_ccd_prediction(soft_ccd)
+                    .ccd_enabled(full_ccd)
                     .translation(*p)
                     .gravity_scale(0.0)
+                    .can_sleep(config.particles_can_sleep)
                     .angular_damping(config.angular_damping)
-                    .additional_mass(if config.collider == ParticleCollider::None { config.particle_mass_kg } else { 0.0 }),
+                    .additional_mass(if config.collider == ParticleCollider::None {
+                        config.particle_mass_kg
+                    } else {
+                        0.0
+                    }),
             );
             let r = (map.particle_extent_m[i] * config.particle_scale).max(1e-4);
             let shape = match config.collider {
@@ -263,7 +327,9 @@ impl SoftBody {
             };
             let ch = shape.map(|s| {
                 world.insert_collider(
-                    s.mass(config.particle_mass_kg).friction(config.friction).collision_groups(pg),
+                    s.mass(config.particle_mass_kg)
+                        .friction(config.friction)
+                        .collision_groups(pg),
                     Some(h),
                 )
             });
@@ -313,7 +379,9 @@ impl SoftBody {
     /// can destabilise it. A uniform displacement (the whole body lagging its center) decays at
     /// the full rate instead of being amplified as in the thesis's form.
     fn apply_restoring_velocities(&mut self, world: &mut PhysicsWorld, dt_s: f32) {
-        let Some(center) = world.bodies.get(self.center) else { return };
+        let Some(center) = world.bodies.get(self.center) else {
+            return;
+        };
         let c = center.translation();
         let r = *center.rotation();
         let vc = center.linvel();
@@ -321,11 +389,25 @@ impl SoftBody {
         let dt = dt_s.max(1e-6);
         let alpha = 1.0 - (-self.config.stiffness * dt).exp();
         // u_i = x_i − dest_i (Appendix A.6: dest = center + rotation · rest offset).
+        let mut sleeping = 0usize;
+        let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
         for (i, &h) in self.particles.iter().enumerate() {
-            let x = world.bodies.get(h).map(|b| b.translation()).unwrap_or(Vec3::NAN);
+            let (x, asleep) = world
+                .bodies
+                .get(h)
+                .map(|b| (b.translation(), b.is_sleeping()))
+                .unwrap_or((Vec3::NAN, false));
+            sleeping += asleep as usize;
             let dest = c + r * self.rest_offsets[i];
             let u = x - dest;
             self.scratch[i] = if u.is_finite() { u } else { Vec3::ZERO };
+            if x.is_finite() {
+                lo = lo.min(x);
+                hi = hi.max(x);
+            }
+        }
+        if sleeping > 0 {
+            self.wake_if_approached(world, lo, hi, dt);
         }
         let max_dv = self.config.max_velocity_change_mps;
         let thesis = self.config.restoring == RestoringScheme::Thesis;
@@ -340,7 +422,9 @@ impl SoftBody {
             }
             let correction = -uj + pull * self.neighbour_scale[j];
             let dest = c + r * self.rest_offsets[j];
-            let Some(body) = world.bodies.get_mut(h) else { continue };
+            let Some(body) = world.bodies.get_mut(h) else {
+                continue;
+            };
             if !body.translation().is_finite() {
                 // Never let a non-finite state live on: put the particle back at its target.
                 body.set_translation(dest, true);
@@ -364,11 +448,73 @@ impl SoftBody {
             let v = body.linvel();
             let dv = target - v;
             let len = dv.length();
-            let new_v = if len > max_dv && self.drives[j].is_none() { v + dv * (max_dv / len) } else { target };
-            if body.is_sleeping() && (new_v - v).length_squared() < 1e-10 && uj.length_squared() < 1e-12 {
+            let new_v = if len > max_dv && self.drives[j].is_none() {
+                v + dv * (max_dv / len)
+            } else {
+                target
+            };
+            if body.is_sleeping()
+                && (new_v - v).length_squared() < 1e-10
+                && uj.length_squared() < 1e-12
+            {
                 continue;
             }
             body.set_linvel(new_v, true);
+        }
+    }
+
+    /// Rapier does not wake a sleeping particle when a kinematic body (a plate, a hand) moves
+    /// into it, and a particle that sleeps through the contact ends up on the wrong side. So a
+    /// body with sleeping particles checks each step for a moving collider, not its own, in
+    /// its bounds (expanded by the largest particle radius plus one step of that collider's
+    /// travel) and wakes all its particles if there is one.
+    fn wake_if_approached(&mut self, world: &mut PhysicsWorld, lo: Vec3, hi: Vec3, dt: f32) {
+        let margin = self
+            .particle_radius_m
+            .iter()
+            .copied()
+            .fold(0.0f32, f32::max)
+            + 0.01;
+        let own = self
+            .particle_colliders
+            .first()
+            .copied()
+            .flatten()
+            .and_then(|h| world.colliders.get(h))
+            .map(|c| c.collision_groups().memberships);
+        let aabb = Aabb::new(lo - Vec3::splat(margin), hi + Vec3::splat(margin));
+        let mut intruder = false;
+        for (_, co) in world.intersect_aabb_conservative(aabb, QueryFilter::default()) {
+            if Some(co.collision_groups().memberships) == own
+                || Some(co.parent()) == Some(Some(self.center))
+            {
+                continue;
+            }
+            let Some(parent) = co.parent().and_then(|p| world.bodies.get(p)) else {
+                continue;
+            };
+            let moving = if parent.is_kinematic() {
+                parent
+                    .next_position()
+                    .translation
+                    .distance_squared(parent.translation())
+                    > 0.0
+                    || parent.next_position().rotation != *parent.rotation()
+                    || parent.linvel().length_squared() * dt * dt > 0.0
+            } else {
+                parent.is_dynamic() && !parent.is_sleeping()
+            };
+            if moving {
+                intruder = true;
+                break;
+            }
+        }
+        if intruder {
+            for &h in &self.particles {
+                if let Some(b) = world.bodies.get_mut(h) {
+                    b.wake_up(true);
+                }
+            }
         }
     }
 
@@ -377,11 +523,17 @@ impl SoftBody {
     /// "translate by the particles' movement, then rotate about the weighted particle pivot"
     /// applied incrementally, without the accumulation drift of the incremental form.
     fn deform(&mut self, world: &PhysicsWorld) {
-        let Some(center) = world.bodies.get(self.center) else { return };
+        let Some(center) = world.bodies.get(self.center) else {
+            return;
+        };
         let c = center.translation();
         let r = *center.rotation();
         for (i, &h) in self.particles.iter().enumerate() {
-            let x = world.bodies.get(h).map(|b| b.translation()).unwrap_or(Vec3::NAN);
+            let x = world
+                .bodies
+                .get(h)
+                .map(|b| b.translation())
+                .unwrap_or(Vec3::NAN);
             let u = x - (c + r * self.rest_offsets[i]);
             self.displacement[i] = if u.is_finite() { u } else { Vec3::ZERO };
         }
@@ -403,15 +555,25 @@ impl SoftBody {
                 self.welded.render_to_welded[t[1] as usize],
                 self.welded.render_to_welded[t[2] as usize],
             ];
-            let (a, b, cc) = (self.vertices[w[0] as usize], self.vertices[w[1] as usize], self.vertices[w[2] as usize]);
+            let (a, b, cc) = (
+                self.vertices[w[0] as usize],
+                self.vertices[w[1] as usize],
+                self.vertices[w[2] as usize],
+            );
             let n = (b - a).cross(cc - a);
             for &k in t {
                 self.slot_normals[self.welded.render_to_normal_slot[k as usize] as usize] += n;
             }
         }
-        for (k, (pos, nrm)) in self.render_positions.iter_mut().zip(self.render_normals.iter_mut()).enumerate() {
+        for (k, (pos, nrm)) in self
+            .render_positions
+            .iter_mut()
+            .zip(self.render_normals.iter_mut())
+            .enumerate()
+        {
             *pos = self.vertices[self.welded.render_to_welded[k] as usize];
-            *nrm = self.slot_normals[self.welded.render_to_normal_slot[k] as usize].normalize_or_zero();
+            *nrm = self.slot_normals[self.welded.render_to_normal_slot[k] as usize]
+                .normalize_or_zero();
         }
     }
 
@@ -464,7 +626,13 @@ impl SoftBody {
     pub fn particle_positions(&self, world: &PhysicsWorld) -> Vec<Vec3> {
         self.particles
             .iter()
-            .map(|h| world.bodies.get(*h).map(|b| b.translation()).unwrap_or(Vec3::ZERO))
+            .map(|h| {
+                world
+                    .bodies
+                    .get(*h)
+                    .map(|b| b.translation())
+                    .unwrap_or(Vec3::ZERO)
+            })
             .collect()
     }
 

@@ -59,13 +59,23 @@ impl ClusterMethod {
     fn validate(&self) -> Result<(), SoftBodyError> {
         let ok = |r: f32| r.is_finite() && r > 0.0;
         match *self {
-            ClusterMethod::ClosestN { vertices_per_particle } if vertices_per_particle == 0 => {
-                Err(SoftBodyError::Config("closest_n: vertices_per_particle must be at least 1".into()))
+            ClusterMethod::ClosestN {
+                vertices_per_particle: 0,
+            } => Err(SoftBodyError::Config(
+                "closest_n: vertices_per_particle must be at least 1".into(),
+            )),
+            ClusterMethod::Distance { radius_m } | ClusterMethod::PoissonDisk { radius_m, .. }
+                if !ok(radius_m) =>
+            {
+                Err(SoftBodyError::Config(format!(
+                    "{}: radius_m must be a positive length, got {radius_m}",
+                    self.name()
+                )))
             }
-            ClusterMethod::Distance { radius_m } | ClusterMethod::PoissonDisk { radius_m, .. } if !ok(radius_m) => {
-                Err(SoftBodyError::Config(format!("{}: radius_m must be a positive length, got {radius_m}", self.name())))
-            }
-            ClusterMethod::WeightedDistance { radius_m, soft_radius_m } if !ok(radius_m) || !ok(soft_radius_m) || soft_radius_m < radius_m => {
+            ClusterMethod::WeightedDistance {
+                radius_m,
+                soft_radius_m,
+            } if !ok(radius_m) || !ok(soft_radius_m) || soft_radius_m < radius_m => {
                 Err(SoftBodyError::Config(format!(
                     "weighted: need 0 < radius_m ({radius_m}) <= soft_radius_m ({soft_radius_m})"
                 )))
@@ -88,7 +98,10 @@ pub struct WeightedRows {
 
 impl WeightedRows {
     fn from_lists(lists: &[Vec<(u32, f32)>]) -> Self {
-        let mut r = WeightedRows { offsets: Vec::with_capacity(lists.len() + 1), ..Default::default() };
+        let mut r = WeightedRows {
+            offsets: Vec::with_capacity(lists.len() + 1),
+            ..Default::default()
+        };
         r.offsets.push(0);
         for l in lists {
             for &(i, w) in l {
@@ -163,7 +176,10 @@ struct PointGrid {
 
 impl PointGrid {
     fn new(points: &[Vec3], ids: impl Iterator<Item = u32>, cell_m: f32) -> Self {
-        let mut g = PointGrid { inv_cell: 1.0 / cell_m.max(1e-6), cells: HashMap::new() };
+        let mut g = PointGrid {
+            inv_cell: 1.0 / cell_m.max(1e-6),
+            cells: HashMap::new(),
+        };
         for i in ids {
             let k = g.key(points[i as usize]);
             g.cells.entry(k).or_default().push(i);
@@ -278,11 +294,17 @@ pub fn build_particle_map(
 ) -> Result<ParticleMap, SoftBodyError> {
     method.validate()?;
     if !(affect_range_m.is_finite() && affect_range_m >= 0.0) {
-        return Err(SoftBodyError::Config(format!("affect_range_m must be a length >= 0, got {affect_range_m}")));
+        return Err(SoftBodyError::Config(format!(
+            "affect_range_m must be a length >= 0, got {affect_range_m}"
+        )));
     }
-    let soft: Vec<u32> = (0..positions.len() as u32).filter(|&v| soft_vertex[v as usize]).collect();
+    let soft: Vec<u32> = (0..positions.len() as u32)
+        .filter(|&v| soft_vertex[v as usize])
+        .collect();
     if soft.is_empty() {
-        return Err(SoftBodyError::Config("no vertex lies in the soft region".into()));
+        return Err(SoftBodyError::Config(
+            "no vertex lies in the soft region".into(),
+        ));
     }
     let edge = mean_edge_length(positions, triangles).max(1e-4);
     // Particle → list of (vertex, raw weight).
@@ -290,7 +312,9 @@ pub fn build_particle_map(
     let mut anchors: Vec<Vec3> = Vec::new();
     let mut recenter = true;
     match method {
-        ClusterMethod::ClosestN { vertices_per_particle } => {
+        ClusterMethod::ClosestN {
+            vertices_per_particle,
+        } => {
             let n = vertices_per_particle as usize;
             let cell = edge * (n as f32).sqrt().max(1.0);
             let mut grid = PointGrid::new(positions, soft.iter().copied(), cell);
@@ -304,7 +328,13 @@ pub fn build_particle_map(
                 clustered[v as usize] = true;
                 grid.remove(positions, v);
                 remaining -= 1;
-                grid.nearest(positions, positions[v as usize], n - 1, remaining, &mut near);
+                grid.nearest(
+                    positions,
+                    positions[v as usize],
+                    n - 1,
+                    remaining,
+                    &mut near,
+                );
                 let mut list = vec![(v, 1.0)];
                 for &(_, u) in &near {
                     clustered[u as usize] = true;
@@ -324,7 +354,9 @@ pub fn build_particle_map(
                     continue;
                 }
                 let mut list = Vec::new();
-                grid.within(positions, positions[v as usize], radius_m, |u, _| list.push((u, 1.0)));
+                grid.within(positions, positions[v as usize], radius_m, |u, _| {
+                    list.push((u, 1.0))
+                });
                 list.sort_unstable_by_key(|e| e.0);
                 for &(u, _) in &list {
                     clustered[u as usize] = true;
@@ -334,7 +366,10 @@ pub fn build_particle_map(
                 anchors.push(positions[v as usize]);
             }
         }
-        ClusterMethod::WeightedDistance { radius_m, soft_radius_m } => {
+        ClusterMethod::WeightedDistance {
+            radius_m,
+            soft_radius_m,
+        } => {
             let grid = PointGrid::new(positions, soft.iter().copied(), soft_radius_m);
             let mut clustered = vec![false; positions.len()];
             for &v in &soft {
@@ -360,7 +395,7 @@ pub fn build_particle_map(
             let mut order = soft.clone();
             let mut rng = SplitMix64(seed);
             for i in (1..order.len()).rev() {
-                let j = (rng.next() % (i as u64 + 1)) as usize;
+                let j = (rng.next_u64() % (i as u64 + 1)) as usize;
                 order.swap(i, j);
             }
             let mut accepted = PointGrid::new(positions, std::iter::empty(), radius_m);
@@ -392,7 +427,11 @@ pub fn build_particle_map(
     let mut rest: Vec<Vec3> = anchors;
     if recenter {
         for (p, list) in rest.iter_mut().zip(&members) {
-            *p = list.iter().map(|&(v, _)| positions[v as usize]).sum::<Vec3>() / list.len() as f32;
+            *p = list
+                .iter()
+                .map(|&(v, _)| positions[v as usize])
+                .sum::<Vec3>()
+                / list.len() as f32;
         }
     }
 
@@ -411,12 +450,22 @@ pub fn build_particle_map(
             ClusterMethod::WeightedDistance { .. } => {
                 // Figure 3.6: w_k = (1 - d_k / D) / Σ_j (1 - d_j / D), D = Σ d. With one
                 // particle (or all at distance 0) the thesis divides 0 by 0; the weight is 1.
-                let d: Vec<f32> = list.iter().map(|&(p, _)| positions[v].distance(rest[p as usize])).collect();
+                let d: Vec<f32> = list
+                    .iter()
+                    .map(|&(p, _)| positions[v].distance(rest[p as usize]))
+                    .collect();
                 let total: f32 = d.iter().sum();
-                let raw: Vec<f32> = d.iter().map(|&dk| if total > 0.0 { 1.0 - dk / total } else { 1.0 }).collect();
+                let raw: Vec<f32> = d
+                    .iter()
+                    .map(|&dk| if total > 0.0 { 1.0 - dk / total } else { 1.0 })
+                    .collect();
                 let sum: f32 = raw.iter().sum();
                 for (e, r) in list.iter_mut().zip(raw) {
-                    e.1 = if sum > 0.0 { r / sum } else { 1.0 / d.len() as f32 };
+                    e.1 = if sum > 0.0 {
+                        r / sum
+                    } else {
+                        1.0 / d.len() as f32
+                    };
                 }
             }
             _ => {
@@ -440,7 +489,11 @@ pub fn build_particle_map(
         (0..rest.len())
             .map(|p| {
                 pg.nearest(&rest, rest[p], 2, rest.len(), &mut near);
-                let d = near.iter().find(|e| e.1 as usize != p).map(|e| e.0).unwrap_or(edge);
+                let d = near
+                    .iter()
+                    .find(|e| e.1 as usize != p)
+                    .map(|e| e.0)
+                    .unwrap_or(edge);
                 (0.5 * d).max(0.25 * edge)
             })
             .collect()
@@ -480,7 +533,7 @@ pub struct SplitMix64(pub u64);
 
 impl SplitMix64 {
     /// Next 64 random bits.
-    pub fn next(&mut self) -> u64 {
+    pub fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
@@ -490,6 +543,6 @@ impl SplitMix64 {
 
     /// Uniform in [0, 1).
     pub fn next_f32(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
     }
 }

@@ -40,6 +40,23 @@ pub enum RestoringScheme {
     Thesis,
 }
 
+/// Continuous collision detection for the particles (the thesis sets its particles to
+/// `ContinuousDynamic`, Appendix A.1–2): without it, a particle pushed by a moving plate and
+/// pulled back by its restoring velocity can cross a thin wall in one step and stay caught.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "mode")]
+pub enum ContinuousCollision {
+    /// Discrete contacts only (cheapest; tunnels through walls thinner than a step's motion).
+    Off,
+    /// Rapier's soft CCD: predictive contacts up to this distance ahead along the motion.
+    Soft {
+        /// Prediction distance, metres.
+        prediction_m: f32,
+    },
+    /// Rapier's full CCD (shape casts and substeps).
+    Full,
+}
+
 /// Collider of the center body in world mode (Appendix A items 12–13).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -76,7 +93,9 @@ impl SoftRegion {
     pub fn contains(&self, p: Vec3) -> bool {
         match *self {
             SoftRegion::Aabb { min_m, max_m } => p.cmpge(min_m).all() && p.cmple(max_m).all(),
-            SoftRegion::Ball { center_m, radius_m } => p.distance_squared(center_m) <= radius_m * radius_m,
+            SoftRegion::Ball { center_m, radius_m } => {
+                p.distance_squared(center_m) <= radius_m * radius_m
+            }
         }
     }
 }
@@ -118,6 +137,12 @@ pub struct SoftBodyConfig {
     pub soft_region: Option<SoftRegion>,
     /// Largest velocity change per step in m/s (thesis 3.2.2's MoveTowards limit). Default 10.
     pub max_velocity_change_mps: f32,
+    /// Particles may sleep when they and the body are at rest (rapier islands). Default true:
+    /// an untouched body then costs almost nothing. Benchmarks turn it off to time every
+    /// particle active.
+    pub particles_can_sleep: bool,
+    /// Continuous collision detection of the particles. Default soft CCD, 5 cm.
+    pub continuous_collision: ContinuousCollision,
     /// Restoring scheme. Default exact; `thesis` reproduces the original for comparison.
     pub restoring: RestoringScheme,
     /// Contact friction of particles and center. Default 0.5.
@@ -129,7 +154,9 @@ pub struct SoftBodyConfig {
 impl Default for SoftBodyConfig {
     fn default() -> Self {
         Self {
-            cluster: ClusterMethod::ClosestN { vertices_per_particle: 3 },
+            cluster: ClusterMethod::ClosestN {
+                vertices_per_particle: 3,
+            },
             collider: ParticleCollider::Sphere,
             particle_mass_kg: 0.05,
             angular_damping: 0.05,
@@ -145,6 +172,8 @@ impl Default for SoftBodyConfig {
             soft_region: None,
             max_velocity_change_mps: 10.0,
             restoring: RestoringScheme::Exact,
+            particles_can_sleep: true,
+            continuous_collision: ContinuousCollision::Soft { prediction_m: 0.05 },
             friction: 0.5,
             weld_epsilon_m: 1e-6,
         }
@@ -158,7 +187,9 @@ impl SoftBodyConfig {
             if v.is_finite() && v >= lo && v <= hi {
                 Ok(())
             } else {
-                Err(SoftBodyError::Config(format!("{name} = {v} is outside [{lo}, {hi}]")))
+                Err(SoftBodyError::Config(format!(
+                    "{name} = {v} is outside [{lo}, {hi}]"
+                )))
             }
         };
         check("particle_mass_kg", self.particle_mass_kg, 1e-4, 1e3)?;
@@ -169,7 +200,12 @@ impl SoftBodyConfig {
         check("particle_scale", self.particle_scale, 1e-3, 1e2)?;
         check("center_scale", self.center_scale, 1e-3, 10.0)?;
         check("center_mass_kg", self.center_mass_kg, 1e-4, 1e5)?;
-        check("max_velocity_change_mps", self.max_velocity_change_mps, 1e-3, 1e4)?;
+        check(
+            "max_velocity_change_mps",
+            self.max_velocity_change_mps,
+            1e-3,
+            1e4,
+        )?;
         check("friction", self.friction, 0.0, 100.0)?;
         check("weld_epsilon_m", self.weld_epsilon_m, 0.0, 1.0)?;
         Ok(())

@@ -37,6 +37,9 @@ pub enum SoftBodyError {
 
 impl SoftBodyError {
     pub(crate) fn malformed(path: impl Into<PathBuf>, what: impl Into<String>) -> Self {
-        Self::Malformed { path: path.into(), what: what.into() }
+        Self::Malformed {
+            path: path.into(),
+            what: what.into(),
+        }
     }
 }

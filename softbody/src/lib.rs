@@ -14,7 +14,10 @@ pub mod scenario;
 
 pub use body::{SoftBody, SoftBodyHandle, SoftBodySet};
 pub use cluster::{build_particle_map, ClusterMethod, ParticleMap, WeightedRows};
-pub use config::{CenterCollider, ParticleCollider, RestoringScheme, SimulationSpace, SoftBodyConfig, SoftRegion};
+pub use config::{
+    CenterCollider, ContinuousCollision, ParticleCollider, RestoringScheme, SimulationSpace,
+    SoftBodyConfig, SoftRegion,
+};
 pub use error::SoftBodyError;
 pub use mesh::{Mesh, MeshSource, Placement, WeldedMesh};
 pub use rapier3d;

@@ -39,14 +39,21 @@ pub struct Placement {
 
 impl Default for Placement {
     fn default() -> Self {
-        Self { translation_m: Vec3::ZERO, rotation: Quat::IDENTITY, scale: Vec3::ONE }
+        Self {
+            translation_m: Vec3::ZERO,
+            rotation: Quat::IDENTITY,
+            scale: Vec3::ONE,
+        }
     }
 }
 
 impl Placement {
     /// A uniform scale.
     pub fn scaled(scale: f32) -> Self {
-        Self { scale: Vec3::splat(scale), ..Self::default() }
+        Self {
+            scale: Vec3::splat(scale),
+            ..Self::default()
+        }
     }
 }
 
@@ -76,8 +83,10 @@ impl Mesh {
             .and_then(|e| e.to_str())
             .map(str::to_ascii_lowercase)
             .unwrap_or_default();
-        let bytes = std::fs::read(path)
-            .map_err(|source| SoftBodyError::Io { path: path.to_path_buf(), source })?;
+        let bytes = std::fs::read(path).map_err(|source| SoftBodyError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
         match ext.as_str() {
             "obj" => {
                 let text = std::str::from_utf8(&bytes)
@@ -85,7 +94,9 @@ impl Mesh {
                 Self::from_obj_str(text, path)
             }
             "gltf" | "glb" => Self::from_gltf_slice(&bytes, path),
-            _ => Err(SoftBodyError::UnsupportedFormat { path: path.to_path_buf() }),
+            _ => Err(SoftBodyError::UnsupportedFormat {
+                path: path.to_path_buf(),
+            }),
         }
     }
 
@@ -110,10 +121,16 @@ impl Mesh {
                     let mut xyz = [0.0f32; 3];
                     for (k, slot) in xyz.iter_mut().enumerate() {
                         let tok = it.next().ok_or_else(|| {
-                            SoftBodyError::malformed(src, format!("line {line_no}: `{tag}` needs 3 numbers, found {k}"))
+                            SoftBodyError::malformed(
+                                src,
+                                format!("line {line_no}: `{tag}` needs 3 numbers, found {k}"),
+                            )
                         })?;
                         *slot = tok.parse::<f32>().map_err(|_| {
-                            SoftBodyError::malformed(src, format!("line {line_no}: `{tok}` is not a number"))
+                            SoftBodyError::malformed(
+                                src,
+                                format!("line {line_no}: `{tok}` is not a number"),
+                            )
                         })?;
                         if !slot.is_finite() {
                             return Err(SoftBodyError::malformed(
@@ -124,7 +141,10 @@ impl Mesh {
                     }
                     let target = if tag == "v" { &mut vs } else { &mut vns };
                     if target.len() >= MAX_MESH_ELEMENTS {
-                        return Err(SoftBodyError::malformed(src, format!("line {line_no}: more than {MAX_MESH_ELEMENTS} vertices")));
+                        return Err(SoftBodyError::malformed(
+                            src,
+                            format!("line {line_no}: more than {MAX_MESH_ELEMENTS} vertices"),
+                        ));
                     }
                     target.push(Vec3::from_array(xyz));
                 }
@@ -137,7 +157,9 @@ impl Mesh {
                         let vn = parts.next().filter(|s| !s.is_empty());
                         let vi = resolve_obj_index(vi, vs.len(), src, line_no, "vertex")?;
                         let vn = match vn {
-                            Some(s) => Some(resolve_obj_index(s, vns.len(), src, line_no, "normal")?),
+                            Some(s) => {
+                                Some(resolve_obj_index(s, vns.len(), src, line_no, "normal")?)
+                            }
                             None => None,
                         };
                         let next = positions.len() as u32;
@@ -151,12 +173,18 @@ impl Mesh {
                     if corners.len() < 3 {
                         return Err(SoftBodyError::malformed(
                             src,
-                            format!("line {line_no}: face has {} vertices; a face needs at least 3", corners.len()),
+                            format!(
+                                "line {line_no}: face has {} vertices; a face needs at least 3",
+                                corners.len()
+                            ),
                         ));
                     }
                     for k in 1..corners.len() - 1 {
                         if triangles.len() >= MAX_MESH_ELEMENTS {
-                            return Err(SoftBodyError::malformed(src, format!("line {line_no}: more than {MAX_MESH_ELEMENTS} triangles")));
+                            return Err(SoftBodyError::malformed(
+                                src,
+                                format!("line {line_no}: more than {MAX_MESH_ELEMENTS} triangles"),
+                            ));
                         }
                         triangles.push([corners[0], corners[k], corners[k + 1]]);
                     }
@@ -171,14 +199,27 @@ impl Mesh {
             }
         }
         if triangles.is_empty() && !vs.is_empty() {
-            return Err(SoftBodyError::malformed(src, format!("mesh has {} vertices but no triangles", vs.len())));
+            return Err(SoftBodyError::malformed(
+                src,
+                format!("mesh has {} vertices but no triangles", vs.len()),
+            ));
         }
         let normals = if !normals.is_empty() && normals.iter().all(Option::is_some) {
-            Some(normals.into_iter().flatten().map(|n| n.normalize_or_zero()).collect())
+            Some(
+                normals
+                    .into_iter()
+                    .flatten()
+                    .map(|n| n.normalize_or_zero())
+                    .collect(),
+            )
         } else {
             None
         };
-        let mesh = Mesh { positions, normals, triangles };
+        let mesh = Mesh {
+            positions,
+            normals,
+            triangles,
+        };
         mesh.validate(src)?;
         Ok(mesh)
     }
@@ -193,36 +234,50 @@ impl Mesh {
         let mut buffers: Vec<Vec<u8>> = Vec::new();
         for buffer in gltf.buffers() {
             let data = match buffer.source() {
-                gltf::buffer::Source::Bin => gltf
-                    .blob
-                    .clone()
-                    .ok_or_else(|| SoftBodyError::malformed(src, "glTF refers to a binary chunk that is missing"))?,
+                gltf::buffer::Source::Bin => gltf.blob.clone().ok_or_else(|| {
+                    SoftBodyError::malformed(src, "glTF refers to a binary chunk that is missing")
+                })?,
                 gltf::buffer::Source::Uri(uri) => {
                     if let Some(rest) = uri.strip_prefix("data:") {
-                        let b64 = rest
-                            .split_once(";base64,")
-                            .map(|(_, d)| d)
-                            .ok_or_else(|| SoftBodyError::malformed(src, "glTF data URI is not base64"))?;
-                        decode_base64(b64)
-                            .ok_or_else(|| SoftBodyError::malformed(src, "glTF data URI has invalid base64"))?
+                        let b64 = rest.split_once(";base64,").map(|(_, d)| d).ok_or_else(|| {
+                            SoftBodyError::malformed(src, "glTF data URI is not base64")
+                        })?;
+                        decode_base64(b64).ok_or_else(|| {
+                            SoftBodyError::malformed(src, "glTF data URI has invalid base64")
+                        })?
                     } else {
                         if uri.contains("..") || uri.starts_with('/') || uri.contains(':') {
-                            return Err(SoftBodyError::malformed(src, format!("glTF buffer URI `{uri}` leaves the file's folder")));
+                            return Err(SoftBodyError::malformed(
+                                src,
+                                format!("glTF buffer URI `{uri}` leaves the file's folder"),
+                            ));
                         }
                         let p = src.parent().unwrap_or(Path::new(".")).join(uri);
-                        std::fs::read(&p).map_err(|source| SoftBodyError::Io { path: p.clone(), source })?
+                        std::fs::read(&p).map_err(|source| SoftBodyError::Io {
+                            path: p.clone(),
+                            source,
+                        })?
                     }
                 }
             };
             if data.len() < buffer.length() {
                 return Err(SoftBodyError::malformed(
                     src,
-                    format!("glTF buffer {} has {} bytes, declares {}", buffer.index(), data.len(), buffer.length()),
+                    format!(
+                        "glTF buffer {} has {} bytes, declares {}",
+                        buffer.index(),
+                        data.len(),
+                        buffer.length()
+                    ),
                 ));
             }
             buffers.push(data);
         }
-        let mut out = Mesh { positions: Vec::new(), normals: Some(Vec::new()), triangles: Vec::new() };
+        let mut out = Mesh {
+            positions: Vec::new(),
+            normals: Some(Vec::new()),
+            triangles: Vec::new(),
+        };
         let scene = gltf.default_scene().or_else(|| gltf.scenes().next());
         let mut stack: Vec<(gltf::Node, glam::Mat4)> = match scene {
             Some(s) => s.nodes().map(|n| (n, glam::Mat4::IDENTITY)).collect(),
@@ -232,7 +287,10 @@ impl Mesh {
         while let Some((node, parent)) = stack.pop() {
             depth_guard += 1;
             if depth_guard > 100_000 {
-                return Err(SoftBodyError::malformed(src, "glTF node graph is too large or cyclic"));
+                return Err(SoftBodyError::malformed(
+                    src,
+                    "glTF node graph is too large or cyclic",
+                ));
             }
             let local = glam::Mat4::from_cols_array_2d(&node.transform().matrix());
             let world = parent * local;
@@ -245,13 +303,22 @@ impl Mesh {
                 if prim.mode() != gltf::mesh::Mode::Triangles {
                     return Err(SoftBodyError::malformed(
                         src,
-                        format!("glTF mesh {} primitive uses {:?}, not triangles", mesh.index(), prim.mode()),
+                        format!(
+                            "glTF mesh {} primitive uses {:?}, not triangles",
+                            mesh.index(),
+                            prim.mode()
+                        ),
                     ));
                 }
                 let reader = prim.reader(|b| buffers.get(b.index()).map(|d| d.as_slice()));
                 let pos: Vec<Vec3> = reader
                     .read_positions()
-                    .ok_or_else(|| SoftBodyError::malformed(src, format!("glTF mesh {} has no POSITION", mesh.index())))?
+                    .ok_or_else(|| {
+                        SoftBodyError::malformed(
+                            src,
+                            format!("glTF mesh {} has no POSITION", mesh.index()),
+                        )
+                    })?
                     .map(|p| world.transform_point3(Vec3::from_array(p)))
                     .collect();
                 let base = out.positions.len() as u32;
@@ -259,7 +326,9 @@ impl Mesh {
                 match reader.read_normals() {
                     Some(ns) if ns.len() == pos.len() => {
                         if let Some(v) = out.normals.as_mut() {
-                            v.extend(ns.map(|x| (normal_m * Vec3::from_array(x)).normalize_or_zero()));
+                            v.extend(
+                                ns.map(|x| (normal_m * Vec3::from_array(x)).normalize_or_zero()),
+                            );
                         }
                     }
                     _ => out.normals = None,
@@ -270,15 +339,26 @@ impl Mesh {
                     None => (0..n).collect(),
                 };
                 if idx.len() % 3 != 0 {
-                    return Err(SoftBodyError::malformed(src, format!("glTF index count {} is not a multiple of 3", idx.len())));
+                    return Err(SoftBodyError::malformed(
+                        src,
+                        format!("glTF index count {} is not a multiple of 3", idx.len()),
+                    ));
                 }
                 for t in idx.chunks_exact(3) {
                     if t.iter().any(|&i| i >= n) {
-                        return Err(SoftBodyError::malformed(src, format!("glTF index {} out of range (primitive has {n} vertices)", t.iter().max().copied().unwrap_or(0))));
+                        return Err(SoftBodyError::malformed(
+                            src,
+                            format!(
+                                "glTF index {} out of range (primitive has {n} vertices)",
+                                t.iter().max().copied().unwrap_or(0)
+                            ),
+                        ));
                     }
                     out.triangles.push([base + t[0], base + t[1], base + t[2]]);
                 }
-                if out.positions.len() > MAX_MESH_ELEMENTS || out.triangles.len() > MAX_MESH_ELEMENTS {
+                if out.positions.len() > MAX_MESH_ELEMENTS
+                    || out.triangles.len() > MAX_MESH_ELEMENTS
+                {
                     return Err(SoftBodyError::malformed(src, "glTF mesh is too large"));
                 }
             }
@@ -298,20 +378,32 @@ impl Mesh {
             return Err(SoftBodyError::malformed(src, "mesh has no triangles"));
         }
         if let Some(i) = self.positions.iter().position(|p| !p.is_finite()) {
-            return Err(SoftBodyError::malformed(src, format!("vertex {i} is not finite: {:?}", self.positions[i])));
+            return Err(SoftBodyError::malformed(
+                src,
+                format!("vertex {i} is not finite: {:?}", self.positions[i]),
+            ));
         }
         if let Some(n) = &self.normals {
             if n.len() != self.positions.len() {
-                return Err(SoftBodyError::malformed(src, "normal count differs from vertex count"));
+                return Err(SoftBodyError::malformed(
+                    src,
+                    "normal count differs from vertex count",
+                ));
             }
         }
         let nv = self.positions.len() as u32;
         for (t, tri) in self.triangles.iter().enumerate() {
             if let Some(&bad) = tri.iter().find(|&&i| i >= nv) {
-                return Err(SoftBodyError::malformed(src, format!("triangle {t} uses vertex {bad}, but there are {nv}")));
+                return Err(SoftBodyError::malformed(
+                    src,
+                    format!("triangle {t} uses vertex {bad}, but there are {nv}"),
+                ));
             }
             if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
-                return Err(SoftBodyError::malformed(src, format!("triangle {t} repeats a vertex: {tri:?}")));
+                return Err(SoftBodyError::malformed(
+                    src,
+                    format!("triangle {t} repeats a vertex: {tri:?}"),
+                ));
             }
         }
         Ok(())
@@ -413,7 +505,9 @@ impl Mesh {
         for (r, &w) in map.iter().enumerate() {
             let n = self.normals.as_ref().map(|ns| ns[r]).unwrap_or(Vec3::ZERO);
             let slots = &mut slots_of_welded[w as usize];
-            let hit = slots.iter().find(|(sn, _)| n == Vec3::ZERO || *sn == Vec3::ZERO || sn.dot(n) > 0.866);
+            let hit = slots
+                .iter()
+                .find(|(sn, _)| n == Vec3::ZERO || *sn == Vec3::ZERO || sn.dot(n) > 0.866);
             let s = match hit {
                 Some(&(_, s)) => s,
                 None => {
@@ -438,18 +532,43 @@ impl Mesh {
     pub fn icosphere(radius_m: f32, subdivisions: u32) -> Self {
         let t = (1.0 + 5.0f32.sqrt()) / 2.0;
         let mut pos: Vec<Vec3> = [
-            [-1.0, t, 0.0], [1.0, t, 0.0], [-1.0, -t, 0.0], [1.0, -t, 0.0],
-            [0.0, -1.0, t], [0.0, 1.0, t], [0.0, -1.0, -t], [0.0, 1.0, -t],
-            [t, 0.0, -1.0], [t, 0.0, 1.0], [-t, 0.0, -1.0], [-t, 0.0, 1.0],
+            [-1.0, t, 0.0],
+            [1.0, t, 0.0],
+            [-1.0, -t, 0.0],
+            [1.0, -t, 0.0],
+            [0.0, -1.0, t],
+            [0.0, 1.0, t],
+            [0.0, -1.0, -t],
+            [0.0, 1.0, -t],
+            [t, 0.0, -1.0],
+            [t, 0.0, 1.0],
+            [-t, 0.0, -1.0],
+            [-t, 0.0, 1.0],
         ]
         .iter()
         .map(|a| Vec3::from_array(*a).normalize())
         .collect();
         let mut tris: Vec<[u32; 3]> = vec![
-            [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11],
-            [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
-            [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
-            [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+            [0, 11, 5],
+            [0, 5, 1],
+            [0, 1, 7],
+            [0, 7, 10],
+            [0, 10, 11],
+            [1, 5, 9],
+            [5, 11, 4],
+            [11, 10, 2],
+            [10, 7, 6],
+            [7, 1, 8],
+            [3, 9, 4],
+            [3, 4, 2],
+            [3, 2, 6],
+            [3, 6, 8],
+            [3, 8, 9],
+            [4, 9, 5],
+            [2, 4, 11],
+            [6, 2, 10],
+            [8, 6, 7],
+            [9, 8, 1],
         ];
         for _ in 0..subdivisions {
             let mut mid: HashMap<(u32, u32), u32> = HashMap::new();
@@ -470,7 +589,11 @@ impl Mesh {
             tris = next;
         }
         let normals = pos.clone();
-        Mesh { positions: pos.into_iter().map(|p| p * radius_m).collect(), normals: Some(normals), triangles: tris }
+        Mesh {
+            positions: pos.into_iter().map(|p| p * radius_m).collect(),
+            normals: Some(normals),
+            triangles: tris,
+        }
     }
 
     /// A UV sphere with `rings` latitude bands and `segments` longitude bands; the seam and
@@ -484,7 +607,11 @@ impl Mesh {
             let theta = std::f32::consts::PI * r as f32 / rings as f32;
             for s in 0..=segments {
                 let phi = std::f32::consts::TAU * s as f32 / segments as f32;
-                let n = Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin());
+                let n = Vec3::new(
+                    theta.sin() * phi.cos(),
+                    theta.cos(),
+                    theta.sin() * phi.sin(),
+                );
                 positions.push(n * radius_m);
                 normals.push(n);
             }
@@ -503,7 +630,11 @@ impl Mesh {
                 }
             }
         }
-        Mesh { positions, normals: Some(normals), triangles }
+        Mesh {
+            positions,
+            normals: Some(normals),
+            triangles,
+        }
     }
 
     /// A box with `subdivisions` cells per edge on each face; faces have their own render
@@ -540,7 +671,11 @@ impl Mesh {
                 }
             }
         }
-        Mesh { positions, normals: Some(normals), triangles }
+        Mesh {
+            positions,
+            normals: Some(normals),
+            triangles,
+        }
     }
 }
 
@@ -555,7 +690,11 @@ impl WeldedMesh {
 pub fn enclosed_volume(positions: &[Vec3], triangles: &[[u32; 3]]) -> f32 {
     let mut v = 0.0f64;
     for t in triangles {
-        let (a, b, c) = (positions[t[0] as usize], positions[t[1] as usize], positions[t[2] as usize]);
+        let (a, b, c) = (
+            positions[t[0] as usize],
+            positions[t[1] as usize],
+            positions[t[2] as usize],
+        );
         v += a.as_dvec3().dot(b.as_dvec3().cross(c.as_dvec3()));
     }
     (v / 6.0) as f32
@@ -566,13 +705,22 @@ pub fn bounds(points: &[Vec3]) -> (Vec3, Vec3) {
     if points.is_empty() {
         return (Vec3::ZERO, Vec3::ZERO);
     }
-    points.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), p| (lo.min(*p), hi.max(*p)))
+    points.iter().fold(
+        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    )
 }
 
-fn resolve_obj_index(tok: &str, len: usize, src: &Path, line: usize, what: &str) -> Result<u32, SoftBodyError> {
-    let i: i64 = tok
-        .parse()
-        .map_err(|_| SoftBodyError::malformed(src, format!("line {line}: `{tok}` is not a {what} index")))?;
+fn resolve_obj_index(
+    tok: &str,
+    len: usize,
+    src: &Path,
+    line: usize,
+    what: &str,
+) -> Result<u32, SoftBodyError> {
+    let i: i64 = tok.parse().map_err(|_| {
+        SoftBodyError::malformed(src, format!("line {line}: `{tok}` is not a {what} index"))
+    })?;
     let resolved = if i < 0 { len as i64 + i } else { i - 1 };
     if i == 0 || resolved < 0 || resolved >= len as i64 {
         return Err(SoftBodyError::malformed(
@@ -636,8 +784,14 @@ impl MeshSource {
     pub fn build(&self) -> Result<Mesh, SoftBodyError> {
         match self {
             MeshSource::File(p) => Mesh::load(p),
-            MeshSource::Icosphere { radius_m, subdivisions } => Ok(Mesh::icosphere(*radius_m, (*subdivisions).min(7))),
-            MeshSource::Cuboid { half_extents_m, subdivisions } => Ok(Mesh::cuboid(*half_extents_m, (*subdivisions).min(64))),
+            MeshSource::Icosphere {
+                radius_m,
+                subdivisions,
+            } => Ok(Mesh::icosphere(*radius_m, (*subdivisions).min(7))),
+            MeshSource::Cuboid {
+                half_extents_m,
+                subdivisions,
+            } => Ok(Mesh::cuboid(*half_extents_m, (*subdivisions).min(64))),
         }
     }
 }

@@ -34,11 +34,18 @@ pub fn measure(body: &SoftBody, world: &PhysicsWorld) -> ShapeMetrics {
     let (c, r) = body.center_pose(world);
     let non_finite = verts.iter().any(|v| !v.is_finite());
     let (rest_rms_m, rest_max_m) = rigid_fit_error(verts, rest, r);
-    let max_displacement_m =
-        verts.iter().zip(rest).map(|(v, p)| v.distance(c + r * *p)).fold(0.0f32, f32::max);
+    let max_displacement_m = verts
+        .iter()
+        .zip(rest)
+        .map(|(v, p)| v.distance(c + r * *p))
+        .fold(0.0f32, f32::max);
     let mut ke = 0.0f32;
     let mut max_speed = 0.0f32;
-    for h in body.particles().iter().chain(std::iter::once(&body.center())) {
+    for h in body
+        .particles()
+        .iter()
+        .chain(std::iter::once(&body.center()))
+    {
         if let Some(b) = world.bodies.get(*h) {
             let v = b.linvel();
             max_speed = max_speed.max(v.length());
@@ -85,11 +92,17 @@ pub fn rigid_fit_error(current: &[Vec3], reference: &[Vec3], guess: Quat) -> (f3
 /// Rotational part of `a` (Müller et al. 2016, "A Robust Method to Extract the Rotational Part
 /// of Deformations"): converges from any start, never produces a reflection.
 pub fn extract_rotation(a: Mat3, guess: Quat) -> Quat {
-    let mut q = if guess.is_finite() { guess.normalize() } else { Quat::IDENTITY };
+    let mut q = if guess.is_finite() {
+        guess.normalize()
+    } else {
+        Quat::IDENTITY
+    };
     for _ in 0..40 {
         let r = Mat3::from_quat(q);
-        let omega_num = r.x_axis.cross(a.x_axis) + r.y_axis.cross(a.y_axis) + r.z_axis.cross(a.z_axis);
-        let omega_den = (r.x_axis.dot(a.x_axis) + r.y_axis.dot(a.y_axis) + r.z_axis.dot(a.z_axis)).abs() + 1e-9;
+        let omega_num =
+            r.x_axis.cross(a.x_axis) + r.y_axis.cross(a.y_axis) + r.z_axis.cross(a.z_axis);
+        let omega_den =
+            (r.x_axis.dot(a.x_axis) + r.y_axis.dot(a.y_axis) + r.z_axis.dot(a.z_axis)).abs() + 1e-9;
         let omega = omega_num / omega_den;
         let w = omega.length();
         if !w.is_finite() || w < 1e-7 {

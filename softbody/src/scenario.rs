@@ -7,7 +7,9 @@ use rapier3d::prelude::{ColliderBuilder, PhysicsWorld, RigidBodyBuilder, RigidBo
 use serde::{Deserialize, Serialize};
 
 use crate::metrics::{measure, ShapeMetrics};
-use crate::{Mesh, SimulationSpace, SoftBody, SoftBodyConfig, SoftBodyError, SoftBodyHandle, SoftBodySet};
+use crate::{
+    Mesh, SimulationSpace, SoftBody, SoftBodyConfig, SoftBodyError, SoftBodyHandle, SoftBodySet,
+};
 
 /// Which scenario to run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -29,8 +31,13 @@ pub enum ScenarioKind {
 
 impl ScenarioKind {
     /// All kinds.
-    pub const ALL: [ScenarioKind; 5] =
-        [ScenarioKind::Rest, ScenarioKind::Drop, ScenarioKind::Squeeze, ScenarioKind::Poke, ScenarioKind::Pull];
+    pub const ALL: [ScenarioKind; 5] = [
+        ScenarioKind::Rest,
+        ScenarioKind::Drop,
+        ScenarioKind::Squeeze,
+        ScenarioKind::Poke,
+        ScenarioKind::Pull,
+    ];
 
     /// Name for tables.
     pub fn name(&self) -> &'static str {
@@ -94,9 +101,16 @@ impl Scenario {
     /// Sets up `kind` for `mesh` (object space, any placement: it is re-centred at the origin)
     /// with `config` (its `space` is overridden: world for drop, local otherwise), stepping at
     /// `dt_s`.
-    pub fn new(kind: ScenarioKind, mesh: &Mesh, mut config: SoftBodyConfig, dt_s: f32) -> Result<Self, SoftBodyError> {
+    pub fn new(
+        kind: ScenarioKind,
+        mesh: &Mesh,
+        mut config: SoftBodyConfig,
+        dt_s: f32,
+    ) -> Result<Self, SoftBodyError> {
         if !(dt_s.is_finite() && dt_s > 0.0 && dt_s <= 0.1) {
-            return Err(SoftBodyError::Config(format!("dt_s = {dt_s} must be in (0, 0.1]")));
+            return Err(SoftBodyError::Config(format!(
+                "dt_s = {dt_s} must be in (0, 0.1]"
+            )));
         }
         let mut mesh = mesh.clone();
         mesh.recenter();
@@ -106,7 +120,11 @@ impl Scenario {
         let mut world = PhysicsWorld::new();
         world.integration_parameters.dt = dt_s;
         let mut set = SoftBodySet::new();
-        config.space = if kind == ScenarioKind::Drop { SimulationSpace::World } else { SimulationSpace::Local };
+        config.space = if kind == ScenarioKind::Drop {
+            SimulationSpace::World
+        } else {
+            SimulationSpace::Local
+        };
         let mut top_plate = None;
         let mut bottom_plate = None;
         let mut poker = None;
@@ -114,8 +132,12 @@ impl Scenario {
         match kind {
             ScenarioKind::Drop => {
                 // Floor top at y = 0; body bottom 0.5 m above it.
-                let floor = world.insert_body(RigidBodyBuilder::fixed().translation(Vec3::new(0.0, -0.5, 0.0)));
-                world.insert_collider(ColliderBuilder::cuboid(50.0, 0.5, 50.0).friction(0.8), Some(floor));
+                let floor = world
+                    .insert_body(RigidBodyBuilder::fixed().translation(Vec3::new(0.0, -0.5, 0.0)));
+                world.insert_collider(
+                    ColliderBuilder::cuboid(50.0, 0.5, 50.0).friction(0.8),
+                    Some(floor),
+                );
                 let lift = 0.5 - lo.y;
                 for p in &mut mesh.positions {
                     p.y += lift;
@@ -124,22 +146,38 @@ impl Scenario {
             ScenarioKind::Squeeze => {
                 let gap = 0.01 * size_m;
                 let t = world.insert_body(
-                    RigidBodyBuilder::kinematic_position_based()
-                        .translation(Vec3::new(0.0, hi.y + gap + plate_half.y, 0.0)),
+                    RigidBodyBuilder::kinematic_position_based().translation(Vec3::new(
+                        0.0,
+                        hi.y + gap + plate_half.y,
+                        0.0,
+                    )),
                 );
-                world.insert_collider(ColliderBuilder::cuboid(plate_half.x, plate_half.y, plate_half.z), Some(t));
+                world.insert_collider(
+                    ColliderBuilder::cuboid(plate_half.x, plate_half.y, plate_half.z),
+                    Some(t),
+                );
                 let b = world.insert_body(
-                    RigidBodyBuilder::kinematic_position_based()
-                        .translation(Vec3::new(0.0, lo.y - gap - plate_half.y, 0.0)),
+                    RigidBodyBuilder::kinematic_position_based().translation(Vec3::new(
+                        0.0,
+                        lo.y - gap - plate_half.y,
+                        0.0,
+                    )),
                 );
-                world.insert_collider(ColliderBuilder::cuboid(plate_half.x, plate_half.y, plate_half.z), Some(b));
+                world.insert_collider(
+                    ColliderBuilder::cuboid(plate_half.x, plate_half.y, plate_half.z),
+                    Some(b),
+                );
                 top_plate = Some(t);
                 bottom_plate = Some(b);
             }
             ScenarioKind::Poke => {
                 let r = 0.1 * size_m;
                 let h = world.insert_body(
-                    RigidBodyBuilder::kinematic_position_based().translation(Vec3::new(hi.x + r + 0.01 * size_m, 0.0, 0.0)),
+                    RigidBodyBuilder::kinematic_position_based().translation(Vec3::new(
+                        hi.x + r + 0.01 * size_m,
+                        0.0,
+                        0.0,
+                    )),
                 );
                 world.insert_collider(ColliderBuilder::ball(r), Some(h));
                 poker = Some(h);
@@ -147,8 +185,10 @@ impl Scenario {
             ScenarioKind::Rest | ScenarioKind::Pull => {}
         }
         let body = set.insert(&mesh, config, &mut world)?;
-        let max_particle_radius_m =
-            set.get(body).map(|b| b.particle_radii_m().iter().copied().fold(0.0, f32::max)).unwrap_or(0.0);
+        let max_particle_radius_m = set
+            .get(body)
+            .map(|b| b.particle_radii_m().iter().copied().fold(0.0, f32::max))
+            .unwrap_or(0.0);
         let median_particle_radius_m = set
             .get(body)
             .map(|b| {
@@ -159,8 +199,14 @@ impl Scenario {
             .unwrap_or(0.0);
         // Props start clear of the particle colliders.
         for (h, y) in [
-            (top_plate, hi.y + max_particle_radius_m + 0.01 * size_m + plate_half.y),
-            (bottom_plate, lo.y - max_particle_radius_m - 0.01 * size_m - plate_half.y),
+            (
+                top_plate,
+                hi.y + max_particle_radius_m + 0.01 * size_m + plate_half.y,
+            ),
+            (
+                bottom_plate,
+                lo.y - max_particle_radius_m - 0.01 * size_m - plate_half.y,
+            ),
         ] {
             if let Some(b) = h.and_then(|h| world.bodies.get_mut(h)) {
                 b.set_translation(Vec3::new(0.0, y, 0.0), false);
@@ -168,7 +214,10 @@ impl Scenario {
         }
         if let Some(b) = poker.and_then(|h| world.bodies.get_mut(h)) {
             let r = 0.1 * size_m;
-            b.set_translation(Vec3::new(hi.x + r + max_particle_radius_m + 0.01 * size_m, 0.0, 0.0), false);
+            b.set_translation(
+                Vec3::new(hi.x + r + max_particle_radius_m + 0.01 * size_m, 0.0, 0.0),
+                false,
+            );
         }
         let mut pulled = None;
         if kind == ScenarioKind::Pull {
@@ -217,7 +266,9 @@ impl Scenario {
     /// The soft body.
     pub fn soft_body(&self) -> &SoftBody {
         // The handle was returned by our own set and never removed.
-        self.set.get(self.body).unwrap_or_else(|| unreachable!("scenario body is never removed"))
+        self.set
+            .get(self.body)
+            .unwrap_or_else(|| unreachable!("scenario body is never removed"))
     }
 
     /// Metrics of the body now.
@@ -236,15 +287,20 @@ impl Scenario {
                 // Each plate closes over 0.8 s until its surface is a particle radius beyond
                 // 30 % of the rest height, holds until the release, then opens over 0.3 s.
                 let close = ramp(t, 0.0, 0.8) - ramp(t, release, 0.3);
-                let full = self.half_height_m * 0.7 + self.max_particle_radius_m + 0.01 * self.size_m
-                    - self.median_particle_radius_m;
+                let full =
+                    self.half_height_m * 0.7 + self.max_particle_radius_m + 0.01 * self.size_m
+                        - self.median_particle_radius_m;
                 self.plate_travel_m = close * full;
                 for (h, sign) in [(self.top_plate, 1.0f32), (self.bottom_plate, -1.0)] {
                     if let Some(b) = h.and_then(|h| self.world.bodies.get_mut(h)) {
                         let open = if sign > 0.0 { self.hi.y } else { self.lo.y }
                             + sign * (self.max_particle_radius_m + 0.01 * self.size_m);
                         let surface = open - sign * self.plate_travel_m;
-                        b.set_next_kinematic_translation(Vec3::new(0.0, surface + sign * 0.05, 0.0));
+                        b.set_next_kinematic_translation(Vec3::new(
+                            0.0,
+                            surface + sign * 0.05,
+                            0.0,
+                        ));
                     }
                 }
             }

@@ -1,5 +1,5 @@
 //! Clustering and particle-map invariants (thesis 3.1, 3.2.1; tear paper Algorithm 3).
-#![allow(clippy::unwrap_used, missing_docs)]
+#![allow(clippy::unwrap_used, clippy::needless_range_loop, missing_docs)]
 
 use glam::Vec3;
 use proptest::prelude::*;
@@ -13,10 +13,18 @@ fn icosphere4() -> (Vec<Vec3>, Vec<[u32; 3]>) {
 
 fn methods() -> Vec<ClusterMethod> {
     vec![
-        ClusterMethod::ClosestN { vertices_per_particle: 3 },
+        ClusterMethod::ClosestN {
+            vertices_per_particle: 3,
+        },
         ClusterMethod::Distance { radius_m: 0.01 },
-        ClusterMethod::WeightedDistance { radius_m: 0.01, soft_radius_m: 0.016 },
-        ClusterMethod::PoissonDisk { radius_m: 0.01, seed: 7 },
+        ClusterMethod::WeightedDistance {
+            radius_m: 0.01,
+            soft_radius_m: 0.016,
+        },
+        ClusterMethod::PoissonDisk {
+            radius_m: 0.01,
+            seed: 7,
+        },
     ]
 }
 
@@ -28,7 +36,10 @@ fn check_cover(map: &ParticleMap, n: usize) {
             assert!(!ids.is_empty(), "soft vertex {v} has no particle");
             let s: f32 = ws.iter().sum();
             assert!((s - 1.0).abs() < 1e-4, "vertex {v} weights sum to {s}");
-            assert!(ws.iter().all(|w| w.is_finite() && *w >= 0.0), "vertex {v} weights {ws:?}");
+            assert!(
+                ws.iter().all(|w| w.is_finite() && *w >= 0.0),
+                "vertex {v} weights {ws:?}"
+            );
         } else {
             assert!(ids.is_empty(), "rigid vertex {v} has particles");
         }
@@ -41,7 +52,12 @@ fn every_method_covers_every_vertex_with_unit_weights() {
     for m in methods() {
         let map = build_particle_map(&p, &t, &vec![true; p.len()], m, 0.03).unwrap();
         check_cover(&map, p.len());
-        assert!(map.len() > 50 && map.len() < p.len(), "{}: {} particles", m.name(), map.len());
+        assert!(
+            map.len() > 50 && map.len() < p.len(),
+            "{}: {} particles",
+            m.name(),
+            map.len()
+        );
     }
 }
 
@@ -49,10 +65,23 @@ fn every_method_covers_every_vertex_with_unit_weights() {
 fn closest_n_gives_n_vertices_per_particle_but_the_last() {
     let (p, t) = icosphere4();
     for n in [1u32, 3, 6, 10] {
-        let map = build_particle_map(&p, &t, &vec![true; p.len()], ClusterMethod::ClosestN { vertices_per_particle: n }, 0.0).unwrap();
+        let map = build_particle_map(
+            &p,
+            &t,
+            &vec![true; p.len()],
+            ClusterMethod::ClosestN {
+                vertices_per_particle: n,
+            },
+            0.0,
+        )
+        .unwrap();
         let rows = map.particle_vertices.rows();
         for i in 0..rows - 1 {
-            assert_eq!(map.particle_vertices.row(i).0.len(), n as usize, "particle {i} with n={n}");
+            assert_eq!(
+                map.particle_vertices.row(i).0.len(),
+                n as usize,
+                "particle {i} with n={n}"
+            );
         }
         assert!(map.particle_vertices.row(rows - 1).0.len() <= n as usize);
         assert_eq!(rows, p.len().div_ceil(n as usize));
@@ -63,7 +92,14 @@ fn closest_n_gives_n_vertices_per_particle_but_the_last() {
 fn distance_clusters_respect_their_radius() {
     let (p, t) = icosphere4();
     let r = 0.012;
-    let map = build_particle_map(&p, &t, &vec![true; p.len()], ClusterMethod::Distance { radius_m: r }, 0.0).unwrap();
+    let map = build_particle_map(
+        &p,
+        &t,
+        &vec![true; p.len()],
+        ClusterMethod::Distance { radius_m: r },
+        0.0,
+    )
+    .unwrap();
     for i in 0..map.len() {
         let (ids, _) = map.particle_vertices.row(i);
         // All members lie within r of the particle's anchor vertex, so within 2r of each other.
@@ -82,8 +118,20 @@ fn distance_clusters_respect_their_radius() {
 #[test]
 fn weighted_clusters_share_vertices_and_follow_figure_3_6() {
     let (p, t) = icosphere4();
-    let map = build_particle_map(&p, &t, &vec![true; p.len()], ClusterMethod::WeightedDistance { radius_m: 0.01, soft_radius_m: 0.018 }, 0.0).unwrap();
-    let shared = (0..p.len()).filter(|&v| map.vertex_particles.row(v).0.len() > 1).count();
+    let map = build_particle_map(
+        &p,
+        &t,
+        &vec![true; p.len()],
+        ClusterMethod::WeightedDistance {
+            radius_m: 0.01,
+            soft_radius_m: 0.018,
+        },
+        0.0,
+    )
+    .unwrap();
+    let shared = (0..p.len())
+        .filter(|&v| map.vertex_particles.row(v).0.len() > 1)
+        .count();
     assert!(shared > p.len() / 2, "only {shared} shared vertices");
     // Closer particles weigh more (inverse-distance weights).
     for v in 0..p.len() {
@@ -93,7 +141,10 @@ fn weighted_clusters_share_vertices_and_follow_figure_3_6() {
                 let da = p[v].distance(map.rest_particles[ids[a] as usize]);
                 let db = p[v].distance(map.rest_particles[ids[b] as usize]);
                 if da + 1e-6 < db {
-                    assert!(ws[a] >= ws[b] - 1e-6, "vertex {v}: nearer particle weighs less");
+                    assert!(
+                        ws[a] >= ws[b] - 1e-6,
+                        "vertex {v}: nearer particle weighs less"
+                    );
                 }
             }
         }
@@ -104,7 +155,17 @@ fn weighted_clusters_share_vertices_and_follow_figure_3_6() {
 fn poisson_anchors_keep_their_distance() {
     let (p, t) = icosphere4();
     let r = 0.015;
-    let map = build_particle_map(&p, &t, &vec![true; p.len()], ClusterMethod::PoissonDisk { radius_m: r, seed: 3 }, 0.0).unwrap();
+    let map = build_particle_map(
+        &p,
+        &t,
+        &vec![true; p.len()],
+        ClusterMethod::PoissonDisk {
+            radius_m: r,
+            seed: 3,
+        },
+        0.0,
+    )
+    .unwrap();
     for i in 0..map.len() {
         for j in 0..i {
             assert!(map.rest_particles[i].distance(map.rest_particles[j]) >= r - 1e-6);
@@ -128,7 +189,14 @@ fn clustering_is_deterministic() {
 fn neighbour_weights_are_clamped_and_symmetric() {
     let (p, t) = icosphere4();
     let delta = 0.03;
-    let map = build_particle_map(&p, &t, &vec![true; p.len()], ClusterMethod::Distance { radius_m: 0.01 }, delta).unwrap();
+    let map = build_particle_map(
+        &p,
+        &t,
+        &vec![true; p.len()],
+        ClusterMethod::Distance { radius_m: 0.01 },
+        delta,
+    )
+    .unwrap();
     for i in 0..map.len() {
         let (ids, ws) = map.neighbours.row(i);
         for (&j, &w) in ids.iter().zip(ws) {
@@ -136,7 +204,10 @@ fn neighbour_weights_are_clamped_and_symmetric() {
             let d = map.rest_particles[i].distance(map.rest_particles[j as usize]);
             assert!((w - (1.0 - d / delta)).abs() < 1e-5 && w > 0.0 && w <= 1.0);
             let (back, bw) = map.neighbours.row(j as usize);
-            let k = back.iter().position(|&x| x as usize == i).expect("symmetric");
+            let k = back
+                .iter()
+                .position(|&x| x as usize == i)
+                .expect("symmetric");
             assert!((bw[k] - w).abs() < 1e-6);
         }
     }
@@ -146,7 +217,14 @@ fn neighbour_weights_are_clamped_and_symmetric() {
 fn restricted_region_excludes_outside_vertices() {
     let (p, t) = icosphere4();
     let soft: Vec<bool> = p.iter().map(|v| v.x > 0.03).collect();
-    let map = build_particle_map(&p, &t, &soft, ClusterMethod::Distance { radius_m: 0.01 }, 0.03).unwrap();
+    let map = build_particle_map(
+        &p,
+        &t,
+        &soft,
+        ClusterMethod::Distance { radius_m: 0.01 },
+        0.03,
+    )
+    .unwrap();
     check_cover(&map, p.len());
     assert!(map.rest_particles.iter().all(|q| q.x > 0.02));
 }
@@ -156,16 +234,34 @@ fn bad_parameters_are_config_errors() {
     let (p, t) = icosphere4();
     let all = vec![true; p.len()];
     for m in [
-        ClusterMethod::ClosestN { vertices_per_particle: 0 },
+        ClusterMethod::ClosestN {
+            vertices_per_particle: 0,
+        },
         ClusterMethod::Distance { radius_m: f32::NAN },
         ClusterMethod::Distance { radius_m: -1.0 },
-        ClusterMethod::WeightedDistance { radius_m: 0.02, soft_radius_m: 0.01 },
-        ClusterMethod::PoissonDisk { radius_m: 0.0, seed: 0 },
+        ClusterMethod::WeightedDistance {
+            radius_m: 0.02,
+            soft_radius_m: 0.01,
+        },
+        ClusterMethod::PoissonDisk {
+            radius_m: 0.0,
+            seed: 0,
+        },
     ] {
         let e = build_particle_map(&p, &t, &all, m, 0.0).unwrap_err();
-        assert!(e.to_string().contains(m.name()) || e.to_string().contains("radius"), "{e}");
+        assert!(
+            e.to_string().contains(m.name()) || e.to_string().contains("radius"),
+            "{e}"
+        );
     }
-    assert!(build_particle_map(&p, &t, &vec![false; p.len()], ClusterMethod::Distance { radius_m: 0.01 }, 0.0).is_err());
+    assert!(build_particle_map(
+        &p,
+        &t,
+        &vec![false; p.len()],
+        ClusterMethod::Distance { radius_m: 0.01 },
+        0.0
+    )
+    .is_err());
 }
 
 proptest! {

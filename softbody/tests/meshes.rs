@@ -1,5 +1,5 @@
 //! Mesh loading, validation, welding and baking; every bad-mesh case gives its error.
-#![allow(clippy::unwrap_used, missing_docs)]
+#![allow(clippy::unwrap_used, clippy::needless_range_loop, missing_docs)]
 
 use std::path::PathBuf;
 
@@ -7,7 +7,9 @@ use glam::{Quat, Vec3};
 use softsync_softbody::{Mesh, Placement, SoftBodyError};
 
 fn asset(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets").join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../assets")
+        .join(name)
 }
 
 fn tmp(name: &str, content: &[u8]) -> PathBuf {
@@ -76,7 +78,10 @@ fn baking_folds_the_placement_into_the_vertices() {
         assert!(expect.distance(*b) < 1e-5);
     }
     // Mirroring keeps the volume positive (winding flipped back).
-    let mirrored = m.bake(&Placement { scale: Vec3::new(-1.0, 1.0, 1.0), ..Default::default() });
+    let mirrored = m.bake(&Placement {
+        scale: Vec3::new(-1.0, 1.0, 1.0),
+        ..Default::default()
+    });
     let w = mirrored.weld(1e-6);
     assert!(w.volume(&w.positions) > 0.0);
 }
@@ -108,8 +113,13 @@ fn gltf_with_data_uri_loads_with_node_transform() {
     assert_eq!(m.positions.len(), 3);
     assert_eq!(m.positions[2], Vec3::new(0.0, 3.0, 0.0));
     // The same document with a point primitive is refused.
-    let points = json.replace(r#""attributes":{"POSITION":0}"#, r#""attributes":{"POSITION":0},"mode":0"#);
-    let e = Mesh::load(tmp("points.gltf", points.as_bytes())).unwrap_err().to_string();
+    let points = json.replace(
+        r#""attributes":{"POSITION":0}"#,
+        r#""attributes":{"POSITION":0},"mode":0"#,
+    );
+    let e = Mesh::load(tmp("points.gltf", points.as_bytes()))
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("not triangles"), "{e}");
 }
 
@@ -117,7 +127,9 @@ fn base64(data: &[u8]) -> String {
     const T: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     let mut s = String::new();
     for c in data.chunks(3) {
-        let n = (c[0] as u32) << 16 | (*c.get(1).unwrap_or(&0) as u32) << 8 | *c.get(2).unwrap_or(&0) as u32;
+        let n = (c[0] as u32) << 16
+            | (*c.get(1).unwrap_or(&0) as u32) << 8
+            | *c.get(2).unwrap_or(&0) as u32;
         for k in 0..4 {
             if k <= c.len() {
                 s.push(T[(n >> (18 - 6 * k) & 63) as usize] as char);
@@ -155,7 +167,10 @@ fn every_bad_mesh_gives_its_error() {
 
 #[test]
 fn gltf_buffer_uris_cannot_escape_the_folder() {
-    let json = r#"{"asset":{"version":"2.0"},"buffers":[{"byteLength":4,"uri":"../../etc/passwd"}]}"#;
-    let e = Mesh::load(tmp("escape.gltf", json.as_bytes())).unwrap_err().to_string();
+    let json =
+        r#"{"asset":{"version":"2.0"},"buffers":[{"byteLength":4,"uri":"../../etc/passwd"}]}"#;
+    let e = Mesh::load(tmp("escape.gltf", json.as_bytes()))
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("leaves the file's folder"), "{e}");
 }

@@ -1,6 +1,6 @@
 //! Simulation behaviour: rest stability, squash and recover, world and local mode, rigid
 //! rotation, restricted region, and the stability sweep over stiffness × step rate × mass.
-#![allow(clippy::unwrap_used, missing_docs)]
+#![allow(clippy::unwrap_used, clippy::needless_range_loop, missing_docs)]
 
 use glam::{Quat, Vec3};
 use softsync_softbody::mesh::bounds;
@@ -13,7 +13,10 @@ fn sphere() -> Mesh {
 }
 
 fn distance_cfg() -> SoftBodyConfig {
-    SoftBodyConfig { cluster: ClusterMethod::Distance { radius_m: 0.012 }, ..Default::default() }
+    SoftBodyConfig {
+        cluster: ClusterMethod::Distance { radius_m: 0.012 },
+        ..Default::default()
+    }
 }
 
 #[test]
@@ -23,7 +26,13 @@ fn ten_seconds_at_rest_do_not_drift() {
         let start = s.soft_body().vertices().to_vec();
         s.run_until(10.0);
         let end = s.soft_body().vertices();
-        let rms = (start.iter().zip(end).map(|(a, b)| a.distance_squared(*b)).sum::<f32>() / start.len() as f32).sqrt();
+        let rms = (start
+            .iter()
+            .zip(end)
+            .map(|(a, b)| a.distance_squared(*b))
+            .sum::<f32>()
+            / start.len() as f32)
+            .sqrt();
         assert!(rms < 1e-5, "drift {rms} m");
         assert!(!s.metrics().non_finite);
     }
@@ -33,20 +42,48 @@ fn ten_seconds_at_rest_do_not_drift() {
 fn squash_to_30_percent_and_recover_volume_within_2_s() {
     for cluster in [
         ClusterMethod::Distance { radius_m: 0.012 },
-        ClusterMethod::WeightedDistance { radius_m: 0.012, soft_radius_m: 0.02 },
-        ClusterMethod::PoissonDisk { radius_m: 0.012, seed: 1 },
+        ClusterMethod::WeightedDistance {
+            radius_m: 0.012,
+            soft_radius_m: 0.02,
+        },
+        ClusterMethod::PoissonDisk {
+            radius_m: 0.012,
+            seed: 1,
+        },
     ] {
-        let cfg = SoftBodyConfig { cluster, ..Default::default() };
+        let cfg = SoftBodyConfig {
+            cluster,
+            ..Default::default()
+        };
         let mut s = Scenario::new(ScenarioKind::Squeeze, &sphere(), cfg, 1.0 / 90.0).unwrap();
         s.run_until(1.4);
         let (lo, hi) = bounds(s.soft_body().vertices());
         let height = (hi.y - lo.y) / 0.2;
-        assert!(height < 0.37, "{}: squeezed to {:.0} % of the height", cluster.name(), height * 100.0);
-        assert!(s.metrics().volume_ratio < 0.6, "{}: volume barely changed", cluster.name());
+        assert!(
+            height < 0.37,
+            "{}: squeezed to {:.0} % of the height",
+            cluster.name(),
+            height * 100.0
+        );
+        assert!(
+            s.metrics().volume_ratio < 0.6,
+            "{}: volume barely changed",
+            cluster.name()
+        );
         s.run_until(ScenarioKind::Squeeze.release_s() + 2.0);
         let m = s.metrics();
-        assert!((m.volume_ratio - 1.0).abs() < 0.05, "{}: volume {} after 2 s", cluster.name(), m.volume_ratio);
-        assert!(m.rest_rms_m < 1e-3, "{}: shape error {} m", cluster.name(), m.rest_rms_m);
+        assert!(
+            (m.volume_ratio - 1.0).abs() < 0.05,
+            "{}: volume {} after 2 s",
+            cluster.name(),
+            m.volume_ratio
+        );
+        assert!(
+            m.rest_rms_m < 1e-3,
+            "{}: shape error {} m",
+            cluster.name(),
+            m.rest_rms_m
+        );
     }
 }
 
@@ -65,7 +102,11 @@ fn world_mode_falls_and_rests_on_the_floor() {
     // Never through the floor (y = 0) by more than a particle radius's worth of contact slop.
     assert!(lowest > -0.01, "mesh went {lowest} m below the floor");
     let m = s.metrics();
-    assert!(m.kinetic_energy_j < 1e-3, "still moving: {} J", m.kinetic_energy_j);
+    assert!(
+        m.kinetic_energy_j < 1e-3,
+        "still moving: {} J",
+        m.kinetic_energy_j
+    );
     assert!(!m.non_finite && !m.exploded);
 }
 
@@ -81,11 +122,23 @@ fn local_mode_stays_put_under_gravity() {
 
 #[test]
 fn rotating_the_center_90_degrees_rotates_the_mesh_rigidly() {
-    let mut s = Scenario::new(ScenarioKind::Rest, &Mesh::load(concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/bunny.obj")).unwrap().fit_size(0.2), distance_cfg_for(0.2), 1.0 / 90.0).unwrap();
+    let mut s = Scenario::new(
+        ScenarioKind::Rest,
+        &Mesh::load(concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/bunny.obj"))
+            .unwrap()
+            .fit_size(0.2),
+        distance_cfg_for(0.2),
+        1.0 / 90.0,
+    )
+    .unwrap();
     let q = Quat::from_rotation_z(std::f32::consts::FRAC_PI_2);
     let center = s.soft_body().center();
     let (c, _) = s.soft_body().center_pose(&s.world);
-    s.world.bodies.get_mut(center).unwrap().set_position(Pose::from_parts(c, q), true);
+    s.world
+        .bodies
+        .get_mut(center)
+        .unwrap()
+        .set_position(Pose::from_parts(c, q), true);
     s.run_until(2.0);
     let body = s.soft_body();
     let size = body.size_m();
@@ -95,17 +148,28 @@ fn rotating_the_center_90_degrees_rotates_the_mesh_rigidly() {
         .zip(body.rest_vertices())
         .map(|(v, r)| v.distance(c + q * *r))
         .fold(0.0f32, f32::max);
-    assert!(worst < 1e-3 * size, "worst vertex {worst} m off the rigid rotation (size {size} m)");
+    assert!(
+        worst < 1e-3 * size,
+        "worst vertex {worst} m off the rigid rotation (size {size} m)"
+    );
 }
 
 fn distance_cfg_for(size: f32) -> SoftBodyConfig {
-    SoftBodyConfig { cluster: ClusterMethod::Distance { radius_m: 0.06 * size }, ..Default::default() }
+    SoftBodyConfig {
+        cluster: ClusterMethod::Distance {
+            radius_m: 0.06 * size,
+        },
+        ..Default::default()
+    }
 }
 
 #[test]
 fn restricted_region_keeps_outside_vertices_rigid() {
     let cfg = SoftBodyConfig {
-        soft_region: Some(SoftRegion::Aabb { min_m: Vec3::new(0.03, -1.0, -1.0), max_m: Vec3::splat(1.0) }),
+        soft_region: Some(SoftRegion::Aabb {
+            min_m: Vec3::new(0.03, -1.0, -1.0),
+            max_m: Vec3::splat(1.0),
+        }),
         ..distance_cfg()
     };
     let mut s = Scenario::new(ScenarioKind::Poke, &sphere(), cfg, 1.0 / 90.0).unwrap();
@@ -117,10 +181,17 @@ fn restricted_region_keeps_outside_vertices_rigid() {
         if body.particle_map().soft_vertex[i] {
             moved_inside = moved_inside.max(a.distance(*b));
         } else {
-            assert!(a.distance(*b) < 1e-6, "rigid vertex {i} moved {} m", a.distance(*b));
+            assert!(
+                a.distance(*b) < 1e-6,
+                "rigid vertex {i} moved {} m",
+                a.distance(*b)
+            );
         }
     }
-    assert!(moved_inside > 0.01, "the poke did not deform the soft part ({moved_inside} m)");
+    assert!(
+        moved_inside > 0.01,
+        "the poke did not deform the soft part ({moved_inside} m)"
+    );
 }
 
 #[test]
@@ -131,7 +202,10 @@ fn pulling_one_particle_drags_its_neighbours_less_and_it_springs_back() {
     assert!(m.max_displacement_m > 0.02, "pull had no effect: {m:?}");
     s.run_until(3.0);
     let m = s.metrics();
-    assert!(m.rest_rms_m < 1e-3 && m.max_displacement_m < 5e-3, "did not spring back: {m:?}");
+    assert!(
+        m.rest_rms_m < 1e-3 && m.max_displacement_m < 5e-3,
+        "did not spring back: {m:?}"
+    );
 }
 
 /// Point 5 of the issue: stiffness 0.1–100 × 60–144 Hz × mass 0.01–10; no NaN, no explosion,
@@ -143,20 +217,38 @@ fn stability_sweep() {
         for &hz in &[60.0f32, 90.0, 144.0] {
             for &mass in &[0.01f32, 1.0, 10.0] {
                 for kind in [ScenarioKind::Poke, ScenarioKind::Pull, ScenarioKind::Rest] {
-                    let cfg = SoftBodyConfig { stiffness: k, particle_mass_kg: mass, cluster: ClusterMethod::Distance { radius_m: 0.02 }, ..Default::default() };
+                    let cfg = SoftBodyConfig {
+                        stiffness: k,
+                        particle_mass_kg: mass,
+                        cluster: ClusterMethod::Distance { radius_m: 0.02 },
+                        ..Default::default()
+                    };
                     let mut s = Scenario::new(kind, &mesh, cfg, 1.0 / hz).unwrap();
                     let mut worst = 0.0f32;
                     while s.time_s() < kind.duration_s() {
                         s.step();
                         let m = s.metrics();
-                        assert!(!m.non_finite && !m.exploded, "k={k} hz={hz} m={mass} {}: {m:?}", kind.name());
+                        assert!(
+                            !m.non_finite && !m.exploded,
+                            "k={k} hz={hz} m={mass} {}: {m:?}",
+                            kind.name()
+                        );
                         worst = worst.max(m.max_displacement_m);
                     }
                     let m = s.metrics();
-                    assert!(worst < 0.2, "k={k} hz={hz} m={mass} {}: displacement {worst}", kind.name());
+                    assert!(
+                        worst < 0.2,
+                        "k={k} hz={hz} m={mass} {}: displacement {worst}",
+                        kind.name()
+                    );
                     // Recovery time constant is 1/k: after ≥ 2 s, k ≥ 10 has recovered fully.
                     if k >= 10.0 {
-                        assert!(m.rest_rms_m < 1e-3, "k={k} hz={hz} m={mass} {}: rms {}", kind.name(), m.rest_rms_m);
+                        assert!(
+                            m.rest_rms_m < 1e-3,
+                            "k={k} hz={hz} m={mass} {}: rms {}",
+                            kind.name(),
+                            m.rest_rms_m
+                        );
                     }
                     assert_eq!(s.soft_body().non_finite_recoveries(), 0);
                 }
@@ -171,7 +263,12 @@ fn stability_sweep() {
 fn thesis_scheme_fails_where_ours_holds() {
     let mesh = Mesh::icosphere(0.1, 2);
     let run = |restoring| {
-        let cfg = SoftBodyConfig { stiffness: 100.0, restoring, cluster: ClusterMethod::Distance { radius_m: 0.02 }, ..Default::default() };
+        let cfg = SoftBodyConfig {
+            stiffness: 100.0,
+            restoring,
+            cluster: ClusterMethod::Distance { radius_m: 0.02 },
+            ..Default::default()
+        };
         let mut s = Scenario::new(ScenarioKind::Pull, &mesh, cfg, 1.0 / 60.0).unwrap();
         s.run_until(ScenarioKind::Pull.release_s() + 0.01);
         let mut worst_late = 0.0f32;
@@ -186,7 +283,10 @@ fn thesis_scheme_fails_where_ours_holds() {
     let ours = run(RestoringScheme::Exact);
     let thesis = run(RestoringScheme::Thesis);
     assert!(ours < 1e-3, "ours did not settle: {ours}");
-    assert!(thesis > 10.0 * ours.max(1e-4), "thesis scheme settled too ({thesis} m): the limit test lost its point");
+    assert!(
+        thesis > 10.0 * ours.max(1e-4),
+        "thesis scheme settled too ({thesis} m): the limit test lost its point"
+    );
 }
 
 #[test]
@@ -194,11 +294,32 @@ fn invalid_config_is_rejected_with_the_field_name() {
     let mut world = PhysicsWorld::new();
     let mut set = SoftBodySet::new();
     for (cfg, field) in [
-        (SoftBodyConfig { stiffness: f32::NAN, ..Default::default() }, "stiffness"),
-        (SoftBodyConfig { particle_mass_kg: -1.0, ..Default::default() }, "particle_mass_kg"),
-        (SoftBodyConfig { neighbour_share: 0.9, ..Default::default() }, "neighbour_share"),
+        (
+            SoftBodyConfig {
+                stiffness: f32::NAN,
+                ..Default::default()
+            },
+            "stiffness",
+        ),
+        (
+            SoftBodyConfig {
+                particle_mass_kg: -1.0,
+                ..Default::default()
+            },
+            "particle_mass_kg",
+        ),
+        (
+            SoftBodyConfig {
+                neighbour_share: 0.9,
+                ..Default::default()
+            },
+            "neighbour_share",
+        ),
     ] {
-        let e = set.insert(&sphere(), cfg, &mut world).unwrap_err().to_string();
+        let e = set
+            .insert(&sphere(), cfg, &mut world)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains(field), "{e}");
     }
     assert!(set.is_empty());
@@ -225,7 +346,72 @@ fn render_output_follows_the_welded_vertices() {
     let body = s.soft_body();
     let w = body.welded();
     for (r, &wv) in w.render_to_welded.iter().enumerate() {
-        assert_eq!(body.render_positions()[r], body.vertices()[wv as usize], "seam cracked at {r}");
+        assert_eq!(
+            body.render_positions()[r],
+            body.vertices()[wv as usize],
+            "seam cracked at {r}"
+        );
         assert!((body.render_normals()[r].length() - 1.0).abs() < 1e-3);
     }
+}
+
+/// Regression: rapier does not wake sleeping particles when a kinematic plate moves into
+/// them; the plate passed through the resting bunny and carried particles away on its top.
+#[test]
+fn regression_sleeping_particles_wake_when_a_kinematic_plate_arrives() {
+    use softsync_softbody::rapier3d::prelude::{ColliderBuilder, RigidBodyBuilder};
+    let mut world = PhysicsWorld::new();
+    let mut set = SoftBodySet::new();
+    let cfg = SoftBodyConfig {
+        space: SimulationSpace::Local,
+        ..distance_cfg()
+    };
+    let h = set.insert(&sphere(), cfg, &mut world).unwrap();
+    let plate = world.insert_body(
+        RigidBodyBuilder::kinematic_position_based().translation(Vec3::new(0.0, 0.3, 0.0)),
+    );
+    world.insert_collider(ColliderBuilder::cuboid(0.2, 0.01, 0.2), Some(plate));
+    let dt = 1.0 / 90.0;
+    for _ in 0..270 {
+        set.step(&mut world, dt);
+    }
+    let asleep = set
+        .get(h)
+        .unwrap()
+        .particles()
+        .iter()
+        .filter(|p| world.bodies.get(**p).unwrap().is_sleeping())
+        .count();
+    assert!(
+        asleep > 0,
+        "precondition: the resting body's particles sleep"
+    );
+    // Down to y = 0.05 (the sphere's top is at 0.1) at 0.75 m/s, hold, back up.
+    let mut y = 0.3f32;
+    let mut pressed = 0.0f32;
+    for i in 0..360 {
+        let target = if i < 180 { 0.05 + 0.011 } else { 0.3 };
+        y += (target - y).clamp(-0.75 * dt, 0.75 * dt);
+        world
+            .bodies
+            .get_mut(plate)
+            .unwrap()
+            .set_next_kinematic_translation(Vec3::new(0.0, y, 0.0));
+        set.step(&mut world, dt);
+        pressed = pressed.max(
+            softsync_softbody::metrics::measure(set.get(h).unwrap(), &world).max_displacement_m,
+        );
+    }
+    assert!(
+        pressed > 0.03,
+        "the plate did not press the body ({pressed} m)"
+    );
+    for _ in 0..180 {
+        set.step(&mut world, dt);
+    }
+    let m = softsync_softbody::metrics::measure(set.get(h).unwrap(), &world);
+    assert!(
+        m.max_displacement_m < 2e-3,
+        "particles left caught on the plate: {m:?}"
+    );
 }

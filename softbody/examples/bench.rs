@@ -1,0 +1,445 @@
+//! Regenerates the soft-body benchmark tables and charts (thesis Tables 2–8, rapier's own soft
+//! bodies side by side, step time against shape accuracy).
+//!
+//! `cargo run --release -p softsync-softbody --example bench -- [--quick]`
+//!
+//! Writes `docs/results/softbody/{init,step,accuracy,native}.csv`, `accuracy.svg`,
+//! `README.md`, and prints `RESULT` lines.
+#![allow(
+    clippy::disallowed_methods,
+    clippy::unwrap_used,
+    clippy::print_stdout,
+    missing_docs
+)]
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use glam::Vec3;
+use plotters::prelude::*;
+use softsync_softbody::rapier3d::prelude::{
+    ColliderBuilder, PhysicsWorld, RigidBodyBuilder, SoftBodyBuilder,
+};
+use softsync_softbody::scenario::{Scenario, ScenarioKind};
+use softsync_softbody::{build_particle_map, ClusterMethod, Mesh, SoftBodyConfig};
+
+struct Stats {
+    min: f64,
+    median: f64,
+    max: f64,
+}
+
+fn stats(mut v: Vec<f64>) -> Stats {
+    v.sort_by(f64::total_cmp);
+    Stats {
+        min: v[0],
+        median: v[v.len() / 2],
+        max: v[v.len() - 1],
+    }
+}
+
+fn welded(mesh: &Mesh) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+    let w = mesh.weld(1e-6);
+    (w.positions, w.triangles)
+}
+
+/// A method of the given kind tuned (bisection on its radius) to give about `target` particles.
+fn method_for(kind: &str, p: &[Vec3], t: &[[u32; 3]], target: usize) -> ClusterMethod {
+    let make = |r: f32| match kind {
+        "distance" => ClusterMethod::Distance { radius_m: r },
+        "weighted" => ClusterMethod::WeightedDistance {
+            radius_m: r,
+            soft_radius_m: 1.6 * r,
+        },
+        _ => ClusterMethod::PoissonDisk {
+            radius_m: r,
+            seed: 1,
+        },
+    };
+    if kind == "closest_n" {
+        return ClusterMethod::ClosestN {
+            vertices_per_particle: ((p.len() as f32 / target as f32).round() as u32).max(1),
+        };
+    }
+    let soft = vec![true; p.len()];
+    let (lo, hi) = softsync_softbody::mesh::bounds(p);
+    let (mut a, mut b) = (1e-5f32, (hi - lo).max_element());
+    let mut best = make(b);
+    let mut best_err = usize::MAX;
+    for _ in 0..24 {
+        let r = (a * b).sqrt();
+        let n = build_particle_map(p, t, &soft, make(r), 0.0).unwrap().len();
+        if n.abs_diff(target) < best_err {
+            best_err = n.abs_diff(target);
+            best = make(r);
+        }
+        if n > target {
+            a = r;
+        } else {
+            b = r;
+        }
+    }
+    best
+}
+
+fn time_ms(f: impl FnOnce()) -> f64 {
+    let t = Instant::now();
+    f();
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+fn main() {
+    let quick = std::env::args().any(|a| a == "--quick");
+    let reps = if quick { 3 } else { 11 };
+    let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../docs/results/softbody");
+    std::fs::create_dir_all(&out).unwrap();
+    let bunny = Mesh::load(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets/bunny.obj"))
+        .unwrap()
+        .fit_size(0.2);
+    let ico = Mesh::icosphere(0.1, 4);
+    let meshes = [("bunny", &bunny), ("icosphere4", &ico)];
+    let kinds = ["closest_n", "distance", "weighted", "poisson"];
+    let targets = [250usize, 430, 860];
+    let mut md = String::new();
+    let mut results = Vec::new();
+
+    // ---- Tables 2–4: init time per clustering method.
+    let mut csv = String::from("mesh,vertices,method,target,particles,cluster_ms,insert_ms\n");
+    writeln!(
+        md,
+        "## Init time per clustering method (thesis Tables 2–4)\n"
+    )
+    .unwrap();
+    writeln!(md, "Median of {reps} runs. `cluster` = clustering + particle map (+ neighbours); `insert` = the whole soft body with its rapier bodies.\n").unwrap();
+    writeln!(md, "| mesh | vertices | method | particles | cluster ms | insert ms |\n|---|---|---|---|---|---|").unwrap();
+    let mut init_max: std::collections::BTreeMap<&str, f64> = Default::default();
+    for (mname, mesh) in meshes {
+        let (p, t) = welded(mesh);
+        for kind in kinds {
+            for &target in &targets {
+                let m = method_for(kind, &p, &t, target);
+                let soft = vec![true; p.len()];
+                let mut n = 0;
+                let cl = stats(
+                    (0..reps)
+                        .map(|_| {
+                            time_ms(|| {
+                                n = build_particle_map(&p, &t, &soft, m, 0.03).unwrap().len()
+                            })
+                        })
+                        .collect(),
+                );
+                let ins = stats(
+                    (0..reps)
+                        .map(|_| {
+                            let mut world = PhysicsWorld::new();
+                            let mut set = softsync_softbody::SoftBodySet::new();
+                            let cfg = SoftBodyConfig {
+                                cluster: m,
+                                ..Default::default()
+                            };
+                            time_ms(|| {
+                                set.insert(mesh, cfg, &mut world).unwrap();
+                            })
+                        })
+                        .collect(),
+                );
+                writeln!(
+                    csv,
+                    "{mname},{},{kind},{target},{n},{:.3},{:.3}",
+                    p.len(),
+                    cl.median,
+                    ins.median
+                )
+                .unwrap();
+                writeln!(
+                    md,
+                    "| {mname} | {} | {kind} | {n} | {:.2} | {:.2} |",
+                    p.len(),
+                    cl.median,
+                    ins.median
+                )
+                .unwrap();
+                if mname == "icosphere4" {
+                    let e = init_max.entry(kind).or_insert(0.0);
+                    *e = e.max(cl.median);
+                }
+            }
+        }
+    }
+    std::fs::write(out.join("init.csv"), &csv).unwrap();
+    results.push(format!(
+        "RESULT softbody.init icosphere4 {}",
+        init_max
+            .iter()
+            .map(|(k, v)| format!("{k}_ms={v:.2}"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    ));
+
+    // ---- Tables 5–8: step time, and accuracy against a dense reference.
+    let steps = if quick { 90 } else { 270 };
+    let dt = 1.0 / 90.0;
+    let mut csv = String::from(
+        "mesh,vertices,method,particles,min_ms,median_ms,max_ms,poke_rms_mm,squeeze_rms_mm\n",
+    );
+    writeln!(
+        md,
+        "\n## Step time incl. deformation of all vertices (thesis Tables 5–8)\n"
+    )
+    .unwrap();
+    writeln!(md, "Poke scenario at 90 Hz, {steps} steps, every particle kept awake (`particles_can_sleep: false`). Error: RMS vertex distance to the dense reference (every vertex a particle) at the same times, mean over the run.\n").unwrap();
+    writeln!(md, "| mesh | method | particles | min ms | median ms | max ms | poke rms mm | squeeze rms mm |\n|---|---|---|---|---|---|---|---|").unwrap();
+    let trace = |kind: ScenarioKind,
+                 mesh: &Mesh,
+                 cfg: SoftBodyConfig,
+                 steps: usize|
+     -> (Vec<f64>, Vec<Vec<Vec3>>) {
+        let mut s = Scenario::new(kind, mesh, cfg, dt).unwrap();
+        let mut times = Vec::with_capacity(steps);
+        let mut snaps = Vec::new();
+        for i in 0..steps {
+            times.push(time_ms(|| s.step()));
+            if i % 9 == 8 {
+                snaps.push(s.soft_body().vertices().to_vec());
+            }
+        }
+        (times, snaps)
+    };
+    let err = |a: &[Vec<Vec3>], b: &[Vec<Vec3>]| -> f64 {
+        let mut sum = 0.0;
+        let mut n = 0usize;
+        for (x, y) in a.iter().zip(b) {
+            for (p, q) in x.iter().zip(y) {
+                sum += p.distance_squared(*q) as f64;
+                n += 1;
+            }
+        }
+        (sum / n.max(1) as f64).sqrt() * 1e3
+    };
+    let mut curves: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    let mut p860_median = 0.0;
+    let mut p860_sleep_median = 0.0;
+    for (mname, mesh) in meshes {
+        let (p, t) = welded(mesh);
+        let dense = SoftBodyConfig {
+            cluster: ClusterMethod::ClosestN {
+                vertices_per_particle: 1,
+            },
+            particles_can_sleep: false,
+            ..Default::default()
+        };
+        let (_, ref_poke) = trace(ScenarioKind::Poke, mesh, dense.clone(), steps);
+        let (_, ref_sq) = trace(ScenarioKind::Squeeze, mesh, dense, steps);
+        for kind in kinds {
+            let mut curve = Vec::new();
+            for &target in &[120usize, 250, 430, 860] {
+                let m = method_for(kind, &p, &t, target);
+                let cfg = SoftBodyConfig {
+                    cluster: m,
+                    particles_can_sleep: false,
+                    ..Default::default()
+                };
+                let n = build_particle_map(&p, &t, &vec![true; p.len()], m, 0.0)
+                    .unwrap()
+                    .len();
+                let (times, poke) = trace(ScenarioKind::Poke, mesh, cfg.clone(), steps);
+                let (_, sq) = trace(ScenarioKind::Squeeze, mesh, cfg, steps);
+                let st = stats(times);
+                let (e1, e2) = (err(&poke, &ref_poke), err(&sq, &ref_sq));
+                writeln!(
+                    csv,
+                    "{mname},{},{kind},{n},{:.4},{:.4},{:.4},{e1:.3},{e2:.3}",
+                    p.len(),
+                    st.min,
+                    st.median,
+                    st.max
+                )
+                .unwrap();
+                if target != 120 {
+                    writeln!(
+                        md,
+                        "| {mname} | {kind} | {n} | {:.3} | {:.3} | {:.3} | {e1:.2} | {e2:.2} |",
+                        st.min, st.median, st.max
+                    )
+                    .unwrap();
+                }
+                if mname == "icosphere4" {
+                    curve.push((st.median, 0.5 * (e1 + e2)));
+                    if kind == "distance" && target == 860 {
+                        p860_median = st.median;
+                        // The same body with sleeping allowed: what an untouched region costs.
+                        let cfg = SoftBodyConfig {
+                            cluster: m,
+                            ..Default::default()
+                        };
+                        p860_sleep_median =
+                            stats(trace(ScenarioKind::Poke, mesh, cfg, steps).0).median;
+                    }
+                }
+            }
+            if mname == "icosphere4" {
+                curves.push((kind.to_string(), curve));
+            }
+        }
+    }
+    std::fs::write(out.join("step.csv"), &csv).unwrap();
+
+    // ---- Bare rapier: 860 free spheres (the floor under our overhead).
+    let bare = {
+        let mut w = PhysicsWorld::new();
+        w.gravity = Vec3::ZERO;
+        for i in 0..860 {
+            let h = w.insert_body(
+                RigidBodyBuilder::dynamic()
+                    .translation(Vec3::new(
+                        (i % 30) as f32 * 0.02,
+                        (i / 30) as f32 * 0.02,
+                        0.0,
+                    ))
+                    .linvel(Vec3::X * 0.01)
+                    .can_sleep(false),
+            );
+            w.insert_collider(ColliderBuilder::ball(0.005), Some(h));
+        }
+        w.integration_parameters.dt = dt;
+        stats((0..steps).map(|_| time_ms(|| w.step())).collect()).median
+    };
+
+    // ---- rapier 0.36's own soft bodies on the same mesh, same run.
+    let native_steps = if quick { 15 } else { 45 };
+    let mut csv = String::from("body,particles,min_ms,median_ms,max_ms\n");
+    writeln!(
+        md,
+        "\n## rapier 0.36's own soft bodies (outside baseline), same run\n"
+    )
+    .unwrap();
+    writeln!(md, "Dropped on a floor, `can_sleep(false)` so every frame is active; {native_steps} steps at 90 Hz.\n").unwrap();
+    writeln!(
+        md,
+        "| body | particles | min ms | median ms | max ms |\n|---|---|---|---|---|"
+    )
+    .unwrap();
+    let mut native_shell = f64::NAN;
+    let (ip, it) = welded(&ico);
+    let natives: Vec<(&str, Option<SoftBodyBuilder>)> = vec![
+        (
+            "sphere_shell_ico4",
+            Some(SoftBodyBuilder::sphere(Vec3::new(0.0, 0.3, 0.0), 0.1, 4)),
+        ),
+        (
+            "volumetric_skinned_ico4",
+            SoftBodyBuilder::volumetric_skinned(&ip, &it, 0.03)
+                .map(|b| b.translated(Vec3::new(0.0, 0.3, 0.0))),
+        ),
+    ];
+    for (name, builder) in natives {
+        let Some(builder) = builder else {
+            writeln!(md, "| {name} | – | builder returned None | | |").unwrap();
+            continue;
+        };
+        let mut w = PhysicsWorld::new();
+        w.integration_parameters.dt = dt;
+        let floor = w.insert_body(RigidBodyBuilder::fixed());
+        w.insert_collider(ColliderBuilder::cuboid(5.0, 0.05, 5.0), Some(floor));
+        let h = w.insert_soft_body(builder.can_sleep(false));
+        let n = w.soft_bodies.get(h).map(|b| b.num_particles()).unwrap_or(0);
+        let st = stats((0..native_steps).map(|_| time_ms(|| w.step())).collect());
+        writeln!(
+            csv,
+            "{name},{n},{:.3},{:.3},{:.3}",
+            st.min, st.median, st.max
+        )
+        .unwrap();
+        writeln!(
+            md,
+            "| {name} | {n} | {:.2} | {:.2} | {:.2} |",
+            st.min, st.median, st.max
+        )
+        .unwrap();
+        if name == "sphere_shell_ico4" {
+            native_shell = st.median;
+        }
+    }
+    std::fs::write(out.join("native.csv"), &csv).unwrap();
+    writeln!(
+        md,
+        "\nBare rapier world of 860 free spheres (no soft-body code): median {bare:.3} ms/step."
+    )
+    .unwrap();
+    results.push(format!(
+        "RESULT softbody.step icosphere4_p860 median_ms={p860_median:.3} rapier_native_ratio={:.1} bare_rapier_ms={bare:.3} sleeping_allowed_median_ms={p860_sleep_median:.3}",
+        native_shell / p860_median
+    ));
+
+    // ---- Chart: step time against accuracy.
+    let svg = out.join("accuracy.svg");
+    {
+        let root = SVGBackend::new(&svg, (820, 560)).into_drawing_area();
+        root.fill(&WHITE).unwrap();
+        let xmax = curves
+            .iter()
+            .flat_map(|c| c.1.iter().map(|p| p.0))
+            .fold(0.0, f64::max)
+            * 1.15;
+        let ymax = curves
+            .iter()
+            .flat_map(|c| c.1.iter().map(|p| p.1))
+            .fold(0.0, f64::max)
+            * 1.15;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(
+                "icosphere4 (2562 v): step time vs error to the dense reference",
+                ("sans-serif", 18),
+            )
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(56)
+            .build_cartesian_2d(0.0..xmax.max(1e-3), 0.0..ymax.max(1e-3))
+            .unwrap();
+        chart
+            .configure_mesh()
+            .x_desc("median step ms (incl. deformation)")
+            .y_desc("RMS error mm (poke+squeeze)")
+            .draw()
+            .unwrap();
+        let colors = [RED, BLUE, GREEN, MAGENTA];
+        for ((name, pts), col) in curves.iter().zip(colors) {
+            chart
+                .draw_series(LineSeries::new(pts.iter().copied(), col.stroke_width(2)))
+                .unwrap()
+                .label(name.as_str())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], col));
+            chart
+                .draw_series(pts.iter().map(|p| Circle::new(*p, 4, col.filled())))
+                .unwrap();
+        }
+        chart
+            .configure_series_labels()
+            .border_style(BLACK)
+            .background_style(WHITE)
+            .draw()
+            .unwrap();
+        root.present().unwrap();
+    }
+    let mut acc = String::from("method,median_ms,rms_mm\n");
+    for (name, pts) in &curves {
+        for p in pts {
+            writeln!(acc, "{name},{:.4},{:.3}", p.0, p.1).unwrap();
+        }
+    }
+    std::fs::write(out.join("accuracy.csv"), acc).unwrap();
+    writeln!(md, "\n![step time vs error](accuracy.svg)\n").unwrap();
+    writeln!(md, "```\n{}\n```", results.join("\n")).unwrap();
+    let header = format!(
+        "# Soft-body benchmark results\n\nGenerated by `cargo run --release -p softsync-softbody --example bench{}` on a {}-core machine. Do not edit by hand.\n\n",
+        if quick { " -- --quick" } else { "" },
+        std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
+    );
+    std::fs::write(out.join("README.md"), header + &md).unwrap();
+    println!("{md}");
+    for r in &results {
+        println!("{r}");
+    }
+}
