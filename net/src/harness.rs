@@ -51,6 +51,8 @@ impl Harness {
         };
         for _ in 0..n {
             h.add_peer();
+            // stagger joins so join order follows index order on benign links
+            h.advance(Duration::from_millis(50));
         }
         h
     }
@@ -109,6 +111,24 @@ impl Harness {
     /// Change the path MTU of the hub.
     pub fn set_mtu(&mut self, mtu: usize) {
         self.hub.set_mtu(mtu);
+    }
+
+    /// Index of the live peer that joined earliest (lowest join order), excluding `except`.
+    pub fn earliest_live_joiner(&self, except: usize) -> Option<usize> {
+        let view = self.peers.iter().position(|p| p.alive)?;
+        let members = self.peers[view].session.members();
+        (0..self.peers.len())
+            .filter(|i| *i != except && self.peers[*i].alive)
+            .filter_map(|i| members.get(&Harness::id(i)).map(|s| (*s, i)))
+            .min()
+            .map(|(_, i)| i)
+    }
+
+    /// Index of the peer that currently believes it is host (first found).
+    pub fn host_index(&self) -> Option<usize> {
+        self.peers
+            .iter()
+            .position(|p| p.alive && p.session.is_host())
     }
 
     /// Session of peer `i`.

@@ -42,6 +42,12 @@ pub struct SendPolicy {
     pub rest_after: Duration,
     /// Full keyframe at least this often while moving (loss recovery); `None` disables.
     pub keyframe_interval: Option<Duration>,
+    /// A change smaller than the threshold is still sent once the last send is this old
+    /// (bounds how long slow motion stays wrong); `None`: thesis behaviour.
+    pub max_staleness: Option<Duration>,
+    /// When an entry is sent anyway, changes above this fraction of the threshold ride along
+    /// (1.0: thesis behaviour).
+    pub piggyback_fraction: f32,
 }
 
 impl Default for SendPolicy {
@@ -53,6 +59,8 @@ impl Default for SendPolicy {
             particle_threshold_m: 0.005,
             rest_after: Duration::from_millis(150),
             keyframe_interval: Some(Duration::from_secs(3)),
+            max_staleness: Some(Duration::from_millis(200)),
+            piggyback_fraction: 0.4,
         }
     }
 }

@@ -63,7 +63,10 @@ impl ReliableChannel {
                 break;
             }
             m.sends += 1;
-            let backoff = rto * (1u32 << m.sends.min(4)) / 2;
+            // gentle backoff (×1, ×1.5, ×2 …, at most ×3, capped at 1.5 s): control messages are few and
+            // latency-critical (authority, spawn), loss bursts are short
+            let factor = 1 + m.sends.min(5);
+            let backoff = (rto * factor / 2).min(Duration::from_millis(1500));
             m.next_send = now + backoff;
         }
     }

@@ -154,6 +154,7 @@ struct SendPart {
     last: PartQ,
     seq: u8,
     last_key_at: Instant,
+    last_sent_at: Instant,
 }
 
 #[derive(Clone, Debug)]
@@ -181,6 +182,8 @@ struct LinkClock {
 #[derive(Debug, Default)]
 struct Link {
     reliable: ReliableChannel,
+    last_sent: Option<Instant>,
+    last_ping: Option<Instant>,
     last_heard: Option<Instant>,
     out_seq: u8,
     in_seq: Option<u8>,
@@ -188,6 +191,8 @@ struct Link {
     recv: BTreeMap<(NetId, u32), RecvPart>,
     spawn_pending: BTreeMap<NetId, u16>,
     pending: Vec<StateEntry>,
+    /// Time the owner's pending entries describe (the datagram is stamped with it).
+    pending_sample: Option<Instant>,
     keyreq_out: BTreeSet<NetId>,
     keyreq_sent: BTreeMap<NetId, Instant>,
     pong_due: Option<u32>,
@@ -206,6 +211,7 @@ struct Object {
     rest: bool,
     last_change: Instant,
     published: Option<ObjectState>,
+    published_at: Instant,
     buffer: SnapshotBuffer,
     source: Option<PeerId>,
 }
@@ -641,6 +647,7 @@ impl Session {
             }
         }
         o.published = Some(state.clone());
+        o.published_at = now;
         Ok(())
     }
 
@@ -726,6 +733,7 @@ impl Session {
         }
         if link.ping_due {
             link.ping_due = false;
+            link.last_ping = Some(now);
             out.push(wire::tag::PING);
             crate::bits::write_varint(&mut out, (now.as_micros() / 1000) & 0xFFFF_FFFF);
         }
@@ -796,6 +804,15 @@ impl Session {
             let count = taken - oversize.len();
             self.stats.oversize_dropped += oversize.len() as u64;
             link.pending.drain(..taken);
+            if link.pending.is_empty() {
+                if let Some(ts) = link.pending_sample.take() {
+                    // stamp the datagram with the time its samples describe
+                    let at = header.len() - 2;
+                    if let Some(b) = out.get_mut(at..at + 2) {
+                        b.copy_from_slice(&ts.wire_ms().to_le_bytes());
+                    }
+                }
+            }
             if w.bit_len() > 0 {
                 let bytes = w.into_bytes();
                 out.push(wire::tag::STATE);
@@ -817,6 +834,7 @@ impl Session {
             return None;
         }
         link.out_seq = link.out_seq.wrapping_add(1);
+        link.last_sent = Some(now);
         debug_assert!(out.len() <= mtu);
         self.stats.on_send(to, out.len(), mtu);
         Some(Transmit { to, payload: out })
@@ -828,7 +846,7 @@ impl Session {
             .get(&to)
             .and_then(|l| l.srtt)
             .unwrap_or(Duration::from_millis(200));
-        (srtt * 2 + Duration::from_millis(10)).max(self.cfg.min_rto)
+        (srtt * 5 / 4 + Duration::from_millis(20)).max(self.cfg.min_rto)
     }
 
     // ---------------------------------------------------------------- timers
@@ -846,8 +864,18 @@ impl Session {
                 .chain(self.host)
                 .filter(|p| *p != self.local)
                 .collect();
+            let hb = self.cfg.heartbeat_interval;
             for p in peers {
-                self.links.entry(p).or_default().ping_due = true;
+                let l = self.links.entry(p).or_default();
+                // Any datagram is a heartbeat: an explicit ping only if the link was quiet,
+                // and at least once a second for the RTT estimate.
+                let quiet = l.last_sent.is_none_or(|t| now >= t + hb);
+                let rtt_due = l
+                    .last_ping
+                    .is_none_or(|t| now >= t + Duration::from_secs(1));
+                if quiet || rtt_due {
+                    l.ping_due = true;
+                }
             }
             self.next_heartbeat = now + self.cfg.heartbeat_interval;
         }
@@ -1074,9 +1102,14 @@ impl Session {
                     became_rest = true;
                 }
             }
+            let sampled = self.objects.get(&id).map_or(now, |o| o.published_at);
             for &p in &targets {
                 let entries = self.build_entries(now, p, id, true, false);
                 if let Some(l) = self.links.get_mut(&p) {
+                    if !entries.is_empty() {
+                        l.pending_sample =
+                            Some(l.pending_sample.map_or(sampled, |t| t.max(sampled)));
+                    }
                     l.pending.extend(entries);
                     if became_rest {
                         l.rest_repeat.insert(
@@ -1117,7 +1150,16 @@ impl Session {
         if link.spawn_pending.contains_key(&id) {
             return out; // the peer does not know the object yet
         }
-        let use_thr = owner_thresholds && !o.rest;
+        let use_thr_base = owner_thresholds && !o.rest;
+        let max_stale = class.send.max_staleness;
+        let piggy = class.send.piggyback_fraction.clamp(0.0, 1.0);
+        let fresh = |k: u32| {
+            link.send
+                .get(&(id, k))
+                .is_none_or(|sp| max_stale.is_none_or(|m| now < sp.last_sent_at + m))
+        };
+        // a change below the threshold is still sent once it is older than max_staleness
+        let use_thr = use_thr_base && fresh(0);
         let pos_thr = if use_thr {
             class.send.position_threshold_m / class.position_resolution_m
         } else {
@@ -1128,7 +1170,7 @@ impl Session {
         } else {
             0.0
         };
-        let part_thr = if use_thr {
+        let part_thr = if use_thr_base {
             class.send.particle_threshold_m / class.particle_resolution_m
         } else {
             0.0
@@ -1161,9 +1203,13 @@ impl Session {
             }) = sp
             {
                 let dpos = VecQuantizer::step_distance(*pos, o.pos);
-                let send_pos = dpos > pos_thr && *pos != o.pos;
                 let ang = angle_between(dequantize_quat(*rot, bits), dequantize_quat(o.rot, bits));
-                let send_rot = *rot != o.rot && ang > rot_thr;
+                let pos_over = *pos != o.pos && dpos > pos_thr;
+                let rot_over = *rot != o.rot && ang > rot_thr;
+                // once an entry is paid for, smaller changes of the other field ride along
+                let pb = piggy;
+                let send_pos = *pos != o.pos && (pos_over || (rot_over && dpos > pos_thr * pb));
+                let send_rot = *rot != o.rot && (rot_over || (pos_over && ang > rot_thr * pb));
                 if send_pos || send_rot {
                     Some(PartBody::Transform {
                         pos: send_pos.then(|| {
@@ -1202,6 +1248,7 @@ impl Session {
                         last: if key { cur } else { last },
                         seq,
                         last_key_at: if key { now } else { last_key_at },
+                        last_sent_at: now,
                     },
                 );
                 out.push(StateEntry {
@@ -1219,6 +1266,15 @@ impl Session {
             let per = class.chunk_len();
             for (ci, chunk) in o.particles.chunks(per).enumerate() {
                 let part = ci as u32 + 1;
+                let part_thr = if link
+                    .send
+                    .get(&(id, part))
+                    .is_none_or(|sp| max_stale.is_none_or(|m| now < sp.last_sent_at + m))
+                {
+                    part_thr
+                } else {
+                    0.0
+                };
                 let sp = link.send.get(&(id, part));
                 let key = force_key || sp.is_none_or(key_due);
                 let values = if key {
@@ -1228,13 +1284,22 @@ impl Session {
                     ..
                 }) = sp
                 {
+                    let triggered = chunk
+                        .iter()
+                        .zip(prev.iter())
+                        .any(|(c, p)| c != p && VecQuantizer::step_distance(*c, *p) > part_thr);
+                    // when the chunk goes out anyway, particles past a fraction of the
+                    // threshold ride along (fewer particles left stale at up to the threshold)
+                    let thr = if triggered {
+                        part_thr * piggy
+                    } else {
+                        part_thr
+                    };
                     let list: Vec<(u32, [i32; 3])> = chunk
                         .iter()
                         .zip(prev.iter())
                         .enumerate()
-                        .filter(|(_, (c, p))| {
-                            c != p && VecQuantizer::step_distance(**c, **p) > part_thr
-                        })
+                        .filter(|(_, (c, p))| c != p && VecQuantizer::step_distance(**c, **p) > thr)
                         .map(|(i, (c, p))| (i as u32, [0, 1, 2].map(|k| c[k] as i32 - p[k] as i32)))
                         .collect();
                     (!list.is_empty()).then_some(ChunkEnc::Delta(list))
@@ -1269,6 +1334,7 @@ impl Session {
                         },
                         seq,
                         last_key_at: if key { now } else { last_key_at },
+                        last_sent_at: now,
                     },
                 );
                 out.push(StateEntry {
@@ -1320,7 +1386,8 @@ impl Session {
             }
         };
         let is_member = self.members.contains_key(&from) || Some(from) == self.host;
-        if is_member && header.term < self.term {
+        // term 0: a joiner's datagrams before it learned the term
+        if is_member && header.term < self.term && header.term.0 != 0 {
             self.stats.dropped_old_term += 1;
             return;
         }
@@ -1936,6 +2003,7 @@ impl Session {
                 rest: false,
                 last_change: now,
                 published: None,
+                published_at: now,
                 buffer: SnapshotBuffer::default(),
                 source: None,
             },

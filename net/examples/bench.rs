@@ -1,0 +1,554 @@
+//! Bandwidth vs. accuracy benchmark reproducing the thesis's Tables 9–11 on the harness, plus
+//! the host-migration resume time.
+//!
+//! `cargo run --release -p softsync-net --example bench -- [--quick]`
+//!
+//! Writes `docs/results/net/bandwidth.csv`, `docs/results/net/bandwidth.svg` and
+//! `docs/results/net/migration.csv`, prints markdown tables and ends with `RESULT` lines.
+#![allow(clippy::unwrap_used, clippy::print_stdout)]
+
+use std::fmt::Write as _;
+use std::path::Path;
+use std::time::Duration;
+
+use glam::{Quat, Vec3};
+use plotters::prelude::*;
+use softsync_net::harness::Harness;
+use softsync_net::stats::TRANSPORT_OVERHEAD_BYTES;
+use softsync_net::{
+    ClassConfig, ClassId, ConditionerConfig, Instant, NetId, ObjectState, SendPolicy,
+    SessionConfig, SoftBodyMode,
+};
+
+const RATES: [f32; 5] = [5.0, 10.0, 15.0, 20.0, 25.0];
+const THRESHOLDS: [f32; 3] = [0.005, 0.015, 0.025];
+/// Thesis Table 10 (avatar, bytes/s) and Table 11 (60-particle soft body; no 25 Hz row).
+const THESIS_AVATAR: [[u32; 3]; 5] = [
+    [762, 662, 596],
+    [1419, 1222, 971],
+    [2071, 1560, 1196],
+    [2312, 1951, 1425],
+    [2455, 2015, 1537],
+];
+const THESIS_SOFT: [[u32; 3]; 4] = [
+    [3974, 3155, 2785],
+    [7567, 5785, 4917],
+    [11459, 7687, 6813],
+    [14895, 10984, 8773],
+];
+const FRAME: Duration = Duration::from_micros(11_111); // 90 Hz VR frame
+
+#[derive(Clone, Copy, PartialEq)]
+enum Scenario {
+    Avatar,
+    SoftBody,
+}
+
+#[derive(Clone, Debug)]
+struct Row {
+    scenario: &'static str,
+    rate_hz: f32,
+    threshold_m: f32,
+    bytes_per_s: f64,
+    packets_per_s: f64,
+    down_bytes_per_s: f64,
+    p50_mm: f64,
+    p95_mm: f64,
+    max_mm: f64,
+    delay_ms: f64,
+    mtu_fill: f64,
+}
+
+fn smoothstep(x: f32) -> f32 {
+    let x = x.clamp(0.0, 1.0);
+    x * x * (3.0 - 2.0 * x)
+}
+
+/// Head and two hands: smooth reaching motions with pauses (deterministic script).
+fn avatar_pose(t: f32) -> [(Vec3, Quat); 3] {
+    // 4 s cycle: reach 1.2 s, hold 0.8 s, return 1.2 s, pause 0.8 s
+    let c = t % 4.0;
+    let reach = if c < 1.2 {
+        smoothstep(c / 1.2)
+    } else if c < 2.0 {
+        1.0
+    } else if c < 3.2 {
+        1.0 - smoothstep((c - 2.0) / 1.2)
+    } else {
+        0.0
+    };
+    let cycle = (t / 4.0).floor();
+    let side = if cycle as i64 % 2 == 0 { 1.0 } else { -1.0 };
+    let head = Vec3::new(0.03 * (t * 0.7).sin(), 1.65 + 0.01 * (t * 1.3).sin(), 0.0)
+        + Vec3::new(0.0, -0.05, 0.08) * reach;
+    let head_rot = Quat::from_rotation_y(0.25 * side * reach + 0.05 * (t * 0.5).sin())
+        * Quat::from_rotation_x(-0.2 * reach);
+    let rest_r = Vec3::new(0.25, 1.05, 0.15);
+    let rest_l = Vec3::new(-0.25, 1.05, 0.15);
+    let target = Vec3::new(0.15 * side, 1.0, 0.55);
+    let (r_reach, l_reach) = if side > 0.0 {
+        (reach, 0.15 * reach)
+    } else {
+        (0.15 * reach, reach)
+    };
+    let right = rest_r.lerp(target + Vec3::X * 0.05, r_reach);
+    let left = rest_l.lerp(target - Vec3::X * 0.05, l_reach);
+    let rr = Quat::from_rotation_z(-0.6 * r_reach) * Quat::from_rotation_x(0.3 * r_reach);
+    let lr = Quat::from_rotation_z(0.6 * l_reach) * Quat::from_rotation_x(0.3 * l_reach);
+    [(head, head_rot), (right, rr), (left, lr)]
+}
+
+fn rest_offsets() -> Vec<Vec3> {
+    (0..60)
+        .map(|i| {
+            let t = (i as f32 + 0.5) / 60.0;
+            let phi = std::f32::consts::PI * (1.0 + 5f32.sqrt()) * i as f32;
+            let y = 1.0 - 2.0 * t;
+            let r = (1.0 - y * y).max(0.0).sqrt();
+            Vec3::new(r * phi.cos(), y, r * phi.sin()) * 0.12
+        })
+        .collect()
+}
+
+/// A 60-particle body held and squeezed/released continuously (synthetic deformation: a
+/// local dent under the fingers plus a global squash, center carried by the hand).
+fn soft_state(t: f32, rest: &[Vec3]) -> ObjectState {
+    // 2 s cycle: press 0.7 s, hold 0.3 s, release 0.7 s, 0.3 s relaxed
+    let c = t % 2.0;
+    let press = if c < 0.7 {
+        smoothstep(c / 0.7)
+    } else if c < 1.0 {
+        1.0
+    } else if c < 1.7 {
+        1.0 - smoothstep((c - 1.0) / 0.7)
+    } else {
+        0.0
+    };
+    let depth = 0.035 * press;
+    let center = Vec3::new(0.1 * (t * 0.4).sin(), 1.1 + 0.03 * (t * 0.9).sin(), 0.4);
+    let rot = Quat::from_rotation_y(0.3 * (t * 0.3).sin());
+    let contact = Vec3::new(0.12, 0.0, 0.0);
+    let particles = rest
+        .iter()
+        .map(|&o| {
+            let squash = Vec3::new(1.0 - 2.0 * depth, 1.0 + depth, 1.0 + depth);
+            let w = (-(o - contact).length_squared() / (0.08 * 0.08)).exp();
+            let local = o * squash - Vec3::X * depth * w;
+            center + rot * local
+        })
+        .collect();
+    ObjectState {
+        pos: center,
+        rot,
+        particles,
+    }
+}
+
+fn percentile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return 0.0;
+    }
+    let i = ((sorted.len() - 1) as f64 * p).round() as usize;
+    sorted[i.min(sorted.len() - 1)]
+}
+
+fn run(scenario: Scenario, rate_hz: f32, threshold_m: f32, secs: f32) -> Row {
+    let send = SendPolicy {
+        rate_hz,
+        position_threshold_m: threshold_m,
+        // the rotation that moves a point 0.2 m from the center by the threshold
+        rotation_threshold_rad: threshold_m / 0.2,
+        particle_threshold_m: threshold_m,
+        ..SendPolicy::default()
+    };
+    let class = match scenario {
+        Scenario::Avatar => ClassConfig::rigid("avatar", send),
+        Scenario::SoftBody => {
+            let mut c = ClassConfig::soft_body("softbody60", send, SoftBodyMode::Particles);
+            c.particle_extent_m = 0.25;
+            c
+        }
+    };
+    let cfg = SessionConfig {
+        classes: vec![class],
+        ..SessionConfig::default()
+    };
+    // two users as in the thesis: peer 1 interacts, peer 0 (host) observes; LAN-like link
+    let link = ConditionerConfig {
+        seed: 42,
+        latency: Duration::from_millis(20),
+        jitter: Duration::from_millis(5),
+        ..ConditionerConfig::default()
+    };
+    let mut h = Harness::new(2, cfg, link);
+    h.advance(Duration::from_millis(1000));
+    let rest = rest_offsets();
+    let now = h.now;
+    let mut reqs = Vec::new();
+    match scenario {
+        Scenario::Avatar => {
+            for (p, q) in avatar_pose(0.0) {
+                reqs.push(
+                    h.session(1)
+                        .spawn(now, ClassId(0), ObjectState::rigid(p, q))
+                        .unwrap()
+                        .1,
+                );
+            }
+        }
+        Scenario::SoftBody => {
+            reqs.push(
+                h.session(1)
+                    .spawn(now, ClassId(0), soft_state(0.0, &rest))
+                    .unwrap()
+                    .1,
+            );
+        }
+    }
+    h.advance(Duration::from_millis(500));
+    let ids: Vec<NetId> = reqs
+        .iter()
+        .map(|r| {
+            h.peers[1]
+                .events
+                .iter()
+                .find_map(|e| match e {
+                    softsync_net::Event::Spawned {
+                        id,
+                        request: Some(x),
+                        ..
+                    } if x == r => Some(*id),
+                    _ => None,
+                })
+                .unwrap()
+        })
+        .collect();
+    let t0 = h.now;
+    let state_at = |t: Instant, i: usize| -> ObjectState {
+        let s = (t.as_secs_f64() - t0.as_secs_f64()).max(0.0) as f32;
+        match scenario {
+            Scenario::Avatar => {
+                let (p, q) = avatar_pose(s)[i];
+                ObjectState::rigid(p, q)
+            }
+            Scenario::SoftBody => soft_state(s, &rest),
+        }
+    };
+    let warmup = 1.0;
+    let mut errors: Vec<f64> = Vec::new();
+    let mut delays: Vec<f64> = Vec::new();
+    let mut up0 = None;
+    let end = t0 + Duration::from_secs_f32(secs + warmup);
+    while h.now < end {
+        let now = h.now;
+        for (i, id) in ids.iter().enumerate() {
+            let st = state_at(now, i);
+            h.session(1).publish_state(now, *id, &st).unwrap();
+        }
+        h.advance(FRAME);
+        let now = h.now;
+        let measuring = now.as_secs_f64() - t0.as_secs_f64() >= f64::from(warmup);
+        if measuring {
+            if up0.is_none() {
+                let st = h.peers[1].session.stats();
+                let l = st.links.get(&Harness::id(0)).cloned().unwrap_or_default();
+                up0 = Some((now, l.up, l.down, st.mtu_fill_sum, st.up.packets));
+            }
+            for (i, id) in ids.iter().enumerate() {
+                let d = h.session(0).display_state(now, *id).unwrap();
+                let truth = state_at(d.source_time, i);
+                errors.push(f64::from(d.state.pos.distance(truth.pos)));
+                for (a, b) in d.state.particles.iter().zip(&truth.particles) {
+                    errors.push(f64::from(a.distance(*b)));
+                }
+                delays.push(d.delay.as_secs_f64());
+            }
+        }
+    }
+    let (tm, up_start, down_start, fill_start, pk_start) = up0.unwrap();
+    let st = h.peers[1].session.stats();
+    let l = st.links.get(&Harness::id(0)).cloned().unwrap_or_default();
+    let dt = (h.now - tm).as_secs_f64();
+    let packets = (l.up.packets - up_start.packets) as f64;
+    errors.sort_by(|a, b| a.total_cmp(b));
+    Row {
+        scenario: match scenario {
+            Scenario::Avatar => "avatar",
+            Scenario::SoftBody => "softbody60",
+        },
+        rate_hz,
+        threshold_m,
+        bytes_per_s: (l.up.bytes - up_start.bytes) as f64 / dt,
+        packets_per_s: packets / dt,
+        down_bytes_per_s: (l.down.bytes - down_start.bytes) as f64 / dt,
+        p50_mm: percentile(&errors, 0.5) * 1000.0,
+        p95_mm: percentile(&errors, 0.95) * 1000.0,
+        max_mm: errors.last().copied().unwrap_or(0.0) * 1000.0,
+        delay_ms: delays.iter().sum::<f64>() / delays.len().max(1) as f64 * 1000.0,
+        mtu_fill: (st.mtu_fill_sum - fill_start) / ((st.up.packets - pk_start).max(1)) as f64,
+    }
+}
+
+/// Kill the host while a client moves an object; time from the host's last datagram until
+/// the new host relays that client's state again (default 1 s peer timeout).
+fn migration(seed: u64) -> f64 {
+    let cfg = SessionConfig {
+        classes: vec![ClassConfig::rigid("rigid", SendPolicy::default())],
+        ..SessionConfig::default()
+    };
+    let link = ConditionerConfig {
+        seed,
+        latency: Duration::from_millis(20),
+        jitter: Duration::from_millis(5),
+        ..ConditionerConfig::default()
+    };
+    let mut h = Harness::new(4, cfg, link);
+    h.advance(Duration::from_millis(1000));
+    let now = h.now;
+    let (_, r) = h
+        .session(2)
+        .spawn(
+            now,
+            ClassId(0),
+            ObjectState::rigid(Vec3::ZERO, Quat::IDENTITY),
+        )
+        .unwrap();
+    h.advance(Duration::from_millis(500));
+    let id = h.peers[2]
+        .events
+        .iter()
+        .find_map(|e| match e {
+            softsync_net::Event::Spawned {
+                id,
+                request: Some(x),
+                ..
+            } if *x == r => Some(*id),
+            _ => None,
+        })
+        .unwrap();
+    let t0 = h.now;
+    let mv = |t: Instant| {
+        let s = (t - t0).as_secs_f32();
+        ObjectState::rigid(Vec3::new(s.sin() * 0.5, 1.0, 0.0), Quat::from_rotation_y(s))
+    };
+    let kill_at = t0 + Duration::from_millis(1000 + seed * 37 % 200);
+    let mut killed = false;
+    let mut host_last = None;
+    let end = t0 + Duration::from_secs(6);
+    while h.now < end {
+        let now = h.now;
+        h.session(2).publish_state(now, id, &mv(now)).unwrap();
+        h.advance(FRAME);
+        if !killed && h.now >= kill_at {
+            host_last = h.peers[0].last_send;
+            h.kill(0);
+            killed = true;
+        }
+        if killed {
+            if let Some(t) = h
+                .host_index()
+                .and_then(|i| h.peers[i].session.last_relay_at())
+            {
+                return (t - host_last.unwrap()).as_secs_f64() * 1000.0;
+            }
+        }
+    }
+    eprintln!(
+        "migration seed {seed}: no relay; host {:?} term {:?} members {:?}",
+        h.peers[1].session.host_id(),
+        h.peers[1].session.term(),
+        h.peers[1].session.members()
+    );
+    f64::NAN
+}
+
+fn chart(rows: &[Row], path: &Path) -> Result<(), Box<dyn std::error::Error>> {
+    let root = SVGBackend::new(path, (1100, 480)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let (left, right) = root.split_horizontally(550);
+    for (area, scen, title) in [
+        (left, "avatar", "VR avatar (head + 2 hands)"),
+        (
+            right,
+            "softbody60",
+            "60-particle soft body, squeeze/release",
+        ),
+    ] {
+        let rs: Vec<&Row> = rows.iter().filter(|r| r.scenario == scen).collect();
+        let xmax = rs.iter().map(|r| r.bytes_per_s).fold(10.0, f64::max) * 1.1;
+        let ymax = rs.iter().map(|r| r.p95_mm).fold(1.0, f64::max) * 1.15;
+        let mut c = ChartBuilder::on(&area)
+            .caption(title, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(50)
+            .build_cartesian_2d(0.0..xmax, 0.0..ymax)?;
+        c.configure_mesh()
+            .x_desc("bytes/s (our datagrams)")
+            .y_desc("p95 remote error (mm)")
+            .draw()?;
+        let colors = [RED, BLUE, GREEN];
+        for (k, thr) in THRESHOLDS.iter().enumerate() {
+            let color = colors[k];
+            let pts: Vec<(f64, f64)> = rs
+                .iter()
+                .filter(|r| (r.threshold_m - thr).abs() < 1e-6)
+                .map(|r| (r.bytes_per_s, r.p95_mm))
+                .collect();
+            c.draw_series(LineSeries::new(pts.clone(), color))?
+                .label(format!("threshold {} m", thr))
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
+            c.draw_series(pts.iter().map(|p| Circle::new(*p, 3, color.filled())))?;
+            for r in rs.iter().filter(|r| (r.threshold_m - thr).abs() < 1e-6) {
+                c.draw_series(std::iter::once(Text::new(
+                    format!("{}Hz", r.rate_hz),
+                    (r.bytes_per_s, r.p95_mm),
+                    ("sans-serif", 11),
+                )))?;
+            }
+        }
+        c.configure_series_labels()
+            .border_style(BLACK)
+            .background_style(WHITE.mix(0.8))
+            .draw()?;
+    }
+    root.present()?;
+    Ok(())
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let quick = std::env::args().any(|a| a == "--quick");
+    let secs = if quick { 8.0 } else { 24.0 };
+    let out_dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/results/net");
+    std::fs::create_dir_all(&out_dir)?;
+    if std::env::args().any(|a| a == "--migration-only") {
+        for s in 1..=5 {
+            println!("migration seed {s}: {:.1} ms", migration(s));
+        }
+        return Ok(());
+    }
+    let mut rows = Vec::new();
+    for scenario in [Scenario::Avatar, Scenario::SoftBody] {
+        for &rate in &RATES {
+            for &thr in &THRESHOLDS {
+                rows.push(run(scenario, rate, thr, secs));
+            }
+        }
+    }
+    let mut csv = String::from(
+        "scenario,rate_hz,threshold_m,bytes_per_s,packets_per_s,transport_overhead_bytes_per_s,bytes_per_s_with_transport,down_bytes_per_s,p50_mm,p95_mm,max_mm,interp_delay_ms,mtu_fill\n",
+    );
+    for r in &rows {
+        let ovh = r.packets_per_s * TRANSPORT_OVERHEAD_BYTES as f64;
+        writeln!(
+            csv,
+            "{},{},{},{:.1},{:.2},{:.1},{:.1},{:.1},{:.3},{:.3},{:.3},{:.1},{:.4}",
+            r.scenario,
+            r.rate_hz,
+            r.threshold_m,
+            r.bytes_per_s,
+            r.packets_per_s,
+            ovh,
+            r.bytes_per_s + ovh,
+            r.down_bytes_per_s,
+            r.p50_mm,
+            r.p95_mm,
+            r.max_mm,
+            r.delay_ms,
+            r.mtu_fill
+        )?;
+    }
+    std::fs::write(out_dir.join("bandwidth.csv"), &csv)?;
+    chart(&rows, &out_dir.join("bandwidth.svg"))?;
+
+    for (scen, title, thesis) in [
+        (
+            "avatar",
+            "Tables 9/10 — VR avatar (head + two hands)",
+            &THESIS_AVATAR[..],
+        ),
+        (
+            "softbody60",
+            "Table 11 — 60-particle soft body",
+            &THESIS_SOFT[..],
+        ),
+    ] {
+        println!(
+            "\n### {title}: bytes/s of our datagrams (p95 remote error mm) [thesis bytes/s]\n"
+        );
+        println!("| Hz | 0.005 m | 0.015 m | 0.025 m |");
+        println!("|---:|---:|---:|---:|");
+        for (ri, &rate) in RATES.iter().enumerate() {
+            let mut line = format!("| {rate} |");
+            for (ti, &thr) in THRESHOLDS.iter().enumerate() {
+                let r = rows
+                    .iter()
+                    .find(|r| r.scenario == scen && r.rate_hz == rate && r.threshold_m == thr)
+                    .unwrap();
+                let th = thesis
+                    .get(ri)
+                    .map_or("—".to_string(), |t| t[ti].to_string());
+                line += &format!(" {:.0} ({:.2}) [{th}] |", r.bytes_per_s, r.p95_mm);
+            }
+            println!("{line}");
+        }
+    }
+    println!(
+        "\nTransport overhead below our datagrams (IPv4+UDP+DTLS+SCTP ≈ {TRANSPORT_OVERHEAD_BYTES} B/datagram):"
+    );
+    println!("| scenario | Hz | thr | datagrams/s | + overhead B/s | p50 mm | max mm | delay ms | MTU fill |");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    for r in rows.iter().filter(|r| r.threshold_m == 0.005) {
+        println!(
+            "| {} | {} | {} | {:.1} | {:.0} | {:.2} | {:.2} | {:.0} | {:.1}% |",
+            r.scenario,
+            r.rate_hz,
+            r.threshold_m,
+            r.packets_per_s,
+            r.packets_per_s * TRANSPORT_OVERHEAD_BYTES as f64,
+            r.p50_mm,
+            r.max_mm,
+            r.delay_ms,
+            r.mtu_fill * 100.0
+        );
+    }
+
+    let seeds: Vec<u64> = if quick {
+        vec![1, 2, 3]
+    } else {
+        (1..=10).collect()
+    };
+    let mut mig: Vec<f64> = seeds.iter().map(|s| migration(*s)).collect();
+    let mut mcsv = String::from("seed,resume_ms\n");
+    for (s, m) in seeds.iter().zip(&mig) {
+        writeln!(mcsv, "{s},{m:.1}")?;
+    }
+    std::fs::write(out_dir.join("migration.csv"), &mcsv)?;
+    mig.sort_by(|a, b| a.total_cmp(b));
+    let mig_max = mig.last().copied().unwrap_or(f64::NAN);
+    println!(
+        "\nMigration resume (host's last datagram → new host relays), {} runs: median {:.0} ms, max {:.0} ms",
+        mig.len(),
+        percentile(&mig, 0.5),
+        mig_max
+    );
+
+    let sb = rows
+        .iter()
+        .find(|r| r.scenario == "softbody60" && r.rate_hz == 20.0 && r.threshold_m == 0.005)
+        .unwrap();
+    let av = rows
+        .iter()
+        .find(|r| r.scenario == "avatar" && r.rate_hz == 20.0 && r.threshold_m == 0.005)
+        .unwrap();
+    println!(
+        "\nRESULT net.softbody60 hz=20 bytes_per_s={:.0} p95_mm={:.2} delay_ms={:.0}",
+        sb.bytes_per_s, sb.p95_mm, sb.delay_ms
+    );
+    println!(
+        "RESULT net.avatar hz=20 bytes_per_s={:.0} p95_mm={:.2}",
+        av.bytes_per_s, av.p95_mm
+    );
+    println!("RESULT net.migration resume_ms={mig_max:.0}");
+    Ok(())
+}
