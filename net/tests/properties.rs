@@ -1,0 +1,312 @@
+//! Property tests: codec round trip, MTU bound, hostile bytes, ownership invariant.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use std::collections::BTreeSet;
+use std::time::Duration;
+
+use common::*;
+use glam::{Quat, Vec3};
+use proptest::prelude::*;
+use softsync_net::bits::{BitReader, BitWriter};
+use softsync_net::harness::Harness;
+use softsync_net::ids::AuthorityEpoch;
+use softsync_net::policy::AuthorityPolicy;
+use softsync_net::quant::{dequantize_quat, quantize_quat, QuatQ};
+use softsync_net::wire::{
+    decode_packet, decode_state_block, ChunkEnc, Control, EntryLayout, PacketHeader, PartBody,
+    PosEnc, Section, SpawnInfo, StateEntry,
+};
+use softsync_net::{
+    ClassConfig, ClassId, ConditionerConfig, NetId, ObjectState, PeerId, SendPolicy, Session,
+    SessionConfig, SoftBodyMode, Term,
+};
+
+fn soft_class() -> ClassConfig {
+    ClassConfig::soft_body("sb", SendPolicy::default(), SoftBodyMode::Particles)
+}
+
+fn arb_grid(bits: [u32; 3]) -> impl Strategy<Value = [u32; 3]> {
+    (
+        0..(1u32 << bits[0]),
+        0..(1u32 << bits[1]),
+        0..(1u32 << bits[2]),
+    )
+        .prop_map(|(a, b, c)| [a, b, c])
+}
+
+fn arb_quat(bits: u32) -> impl Strategy<Value = QuatQ> {
+    let m = 1u32 << bits;
+    (0u8..4, 0..m, 0..m, 0..m).prop_map(|(l, a, b, c)| QuatQ {
+        largest: l,
+        comps: [a, b, c],
+    })
+}
+
+fn arb_delta() -> impl Strategy<Value = [i32; 3]> {
+    prop::array::uniform3(-(1i32 << 20)..(1i32 << 20))
+}
+
+prop_compose! {
+    fn arb_entry(particles: u32)(
+        id in 0u32..5000,
+        tag in 0u8..16,
+        seq in 0u8..16,
+        rest in any::<bool>(),
+        kind in 0u8..4,
+        pos in arb_grid(soft_class().position_quantizer().bits()),
+        delta in arb_delta(),
+        rot in arb_quat(soft_class().rot_bits()),
+        has in (any::<bool>(), any::<bool>()),
+        abs in prop::collection::vec(arb_grid(soft_class().particle_quantizer().bits()), 128),
+        mask in prop::collection::btree_set(0u32..128, 1..40),
+        deltas in prop::collection::vec(arb_delta(), 40),
+    ) -> StateEntry {
+        let chunk_len = (particles as usize).min(128);
+        let (key, body) = match kind {
+            0 => (true, PartBody::Transform { pos: Some(PosEnc::Abs(pos)), rot: Some(rot) }),
+            1 => {
+                let (hp, hr) = if !has.0 && !has.1 { (true, false) } else { has };
+                (false, PartBody::Transform {
+                    pos: hp.then_some(PosEnc::Delta(delta)),
+                    rot: hr.then_some(rot),
+                })
+            }
+            2 => (true, PartBody::Chunk { chunk: 0, values: ChunkEnc::Abs(abs[..chunk_len].to_vec()) }),
+            _ => {
+                let list: Vec<(u32, [i32; 3])> = mask
+                    .iter()
+                    .filter(|i| (**i as usize) < chunk_len)
+                    .zip(deltas.iter())
+                    .map(|(i, d)| (*i, *d))
+                    .collect();
+                let list = if list.is_empty() { vec![(0, delta)] } else { list };
+                (false, PartBody::Chunk { chunk: 0, values: ChunkEnc::Delta(list) })
+            }
+        };
+        StateEntry { id: NetId(id), epoch_tag: tag, seq, key, rest, body }
+    }
+}
+
+fn arb_control() -> impl Strategy<Value = Control> {
+    let info = (
+        0u32..1000,
+        0u16..3,
+        any::<u64>(),
+        any::<(u32, u32)>(),
+        any::<bool>(),
+        0u32..5000,
+        prop::array::uniform3(-100f32..100.0),
+    )
+        .prop_map(|(id, c, o, (t, g), held, n, p)| SpawnInfo {
+            id: NetId(id),
+            class: ClassId(c),
+            owner: PeerId(o),
+            epoch: AuthorityEpoch { term: t, grant: g },
+            held,
+            policy: AuthorityPolicy::OwnerMustAgree,
+            particles: n,
+            pos: p,
+            rot: [0.0, 0.0, 0.0, 1.0],
+        });
+    prop_oneof![
+        (any::<u8>(), any::<u64>()).prop_map(|(p, d)| Control::Hello {
+            protocol: p,
+            config_digest: d
+        }),
+        info.clone().prop_map(Control::Spawn),
+        prop::collection::vec(info, 0..16).prop_map(|claims| Control::Resync { claims }),
+        (
+            any::<u32>(),
+            any::<u64>(),
+            prop::collection::vec((any::<u64>(), any::<u32>()), 0..8)
+        )
+            .prop_map(|(t, h, m)| Control::NewHost {
+                term: Term(t),
+                host: PeerId(h),
+                members: m.into_iter().map(|(p, s)| (PeerId(p), s)).collect()
+            }),
+        "[a-z ]{0,60}".prop_map(|reason| Control::Refused { reason }),
+        (any::<u32>(), any::<u64>(), any::<bool>()).prop_map(|(i, b, a)| {
+            Control::AuthorityAnswer {
+                id: NetId(i),
+                by: PeerId(b),
+                agree: a,
+            }
+        }),
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
+
+    #[test]
+    fn state_entries_round_trip(entries in prop::collection::vec(arb_entry(100), 1..12)) {
+        let class = soft_class();
+        let layout = EntryLayout { class: &class, particles: 100 };
+        let mut entries = entries;
+        entries.sort_by_key(|e| e.id);
+        let mut w = BitWriter::new();
+        let mut prev = None;
+        for e in &entries {
+            softsync_net::wire::write_entry_id(&mut w, prev, e.id);
+            e.encode_body(&layout, &mut w);
+            prev = Some(e.id);
+        }
+        let bytes = w.into_bytes();
+        let (got, complete) =
+            decode_state_block(entries.len() as u32, &bytes, |_| Some(layout)).unwrap();
+        prop_assert!(complete);
+        prop_assert_eq!(got, entries);
+    }
+
+    #[test]
+    fn control_round_trip(c in arb_control()) {
+        let bytes = c.encode();
+        prop_assert_eq!(Control::decode(&bytes).unwrap(), c);
+    }
+
+    #[test]
+    fn quaternion_quantization_is_unit_and_close(x in -1f32..1.0, y in -1f32..1.0, z in -1f32..1.0, w in -1f32..1.0) {
+        let q = Quat::from_xyzw(x, y, z, w);
+        prop_assume!(q.length() > 0.1);
+        let q = q.normalize();
+        let d = dequantize_quat(quantize_quat(q, 11), 11);
+        prop_assert!((d.length() - 1.0).abs() < 1e-4);
+        prop_assert!(softsync_net::quant::angle_between(q, d) < 0.003);
+    }
+
+    /// Any byte string: an error or a value, never a panic, never non-finite state.
+    #[test]
+    fn hostile_bytes_never_panic(bytes in prop::collection::vec(any::<u8>(), 0..300), prefix in any::<bool>()) {
+        let mut data = bytes.clone();
+        if prefix {
+            // a valid header so the section parsers get exercised
+            let mut h = Vec::new();
+            PacketHeader { term: Term(1), seq: 0, time_ms: 0 }.write(&mut h);
+            h.extend_from_slice(&bytes);
+            data = h;
+        }
+        let _ = Control::decode(&bytes);
+        let class = soft_class();
+        let layout = EntryLayout { class: &class, particles: 300 };
+        let _ = decode_state_block(64, &bytes, |_| Some(layout));
+        if let Ok((_, sections)) = decode_packet(&data) {
+            for s in sections {
+                if let Section::State { count, bits } = s {
+                    let _ = decode_state_block(count, bits, |_| Some(layout));
+                }
+            }
+        }
+        // feed a live host and a live client with objects
+        let mut h = room(2, ConditionerConfig::default());
+        let now = h.now;
+        let (id, _) = h.session(0).spawn(now, SOFT, soft_state(Vec3::Y, Quat::IDENTITY, 0.0)).unwrap();
+        h.advance(Duration::from_millis(200));
+        let now = h.now;
+        h.session(0).handle_packet(now, Harness::id(1), &data);
+        h.session(1).handle_packet(now, Harness::id(0), &data);
+        h.advance(Duration::from_millis(200));
+        for i in 0..2 {
+            let st = h.session(i).latest_state(id).unwrap();
+            prop_assert!(st.pos.is_finite() && st.rot.is_finite());
+            prop_assert!(st.particles.iter().all(|p| p.is_finite()));
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+
+    /// Whatever the objects, particle counts, chunk sizes and MTU, no datagram exceeds the MTU
+    /// and nothing is silently dropped for size.
+    #[test]
+    fn datagrams_never_exceed_mtu(
+        mtu in 300usize..1500,
+        chunk in 16u16..200,
+        counts in prop::collection::vec(0usize..1500, 1..6),
+        seed in any::<u64>(),
+    ) {
+        let mut cfg: SessionConfig = config();
+        cfg.mtu = mtu;
+        cfg.classes[1].particles_per_chunk = chunk;
+        // a full keyframe chunk must fit: 3 axes × bits per particle
+        let bits = cfg.classes[1].particle_quantizer().total_bits() as usize;
+        prop_assume!(usize::from(chunk) * bits / 8 + 40 < mtu);
+        let mut h = Harness::new(3, cfg, ConditionerConfig::rough(seed, 10, 5, 0.05));
+        h.set_mtu(mtu);
+        h.advance(Duration::from_millis(800));
+        let now = h.now;
+        let mut ids = Vec::new();
+        for n in &counts {
+            let st = ObjectState {
+                pos: Vec3::Y,
+                rot: Quat::IDENTITY,
+                particles: (0..*n).map(|i| Vec3::Y + Vec3::X * (i as f32 * 1e-4)).collect(),
+            };
+            ids.push((h.session(0).spawn(now, SOFT, st).unwrap().0, *n));
+        }
+        let start = h.now;
+        h.run_frames(Duration::from_millis(600), Duration::from_millis(11), |h| {
+            let s = (h.now - start).as_secs_f32();
+            let now = h.now;
+            for (id, n) in &ids {
+                let st = ObjectState {
+                    pos: Vec3::Y + Vec3::X * s,
+                    rot: Quat::from_rotation_y(s),
+                    particles: (0..*n)
+                        .map(|i| Vec3::Y + Vec3::X * s + Vec3::new((i as f32 + s * 30.0).sin(), (i as f32 * 0.1).cos(), 0.0) * 0.2)
+                        .collect(),
+                };
+                h.session(0).publish_state(now, *id, &st).unwrap();
+            }
+        });
+        for p in &h.peers {
+            prop_assert!(p.session.stats().max_datagram <= mtu);
+            prop_assert_eq!(p.session.stats().oversize_dropped, 0);
+        }
+        prop_assert_eq!(h.hub.dropped_over_mtu(), 0);
+    }
+
+    /// Random grabs, releases, kills and waits: once things settle every live peer agrees on
+    /// one live owner per object, and the owner knows it.
+    #[test]
+    fn ownership_invariant_under_random_event_orders(
+        ops in prop::collection::vec((0u8..5, 0usize..5, 0usize..3, 0u64..400), 1..25),
+        seed in any::<u64>(),
+    ) {
+        let mut h = room(5, ConditionerConfig::rough(seed, 15, 10, 0.05));
+        let now = h.now;
+        let mut ids = Vec::new();
+        for k in 0..3 {
+            ids.push(h.session(0).spawn(now, RIGID, ObjectState::rigid(Vec3::X * k as f32, Quat::IDENTITY)).unwrap().0);
+        }
+        h.advance(Duration::from_millis(500));
+        let mut kills = 0;
+        for (op, peer, obj, wait) in ops {
+            let id = ids[obj];
+            if !h.peers[peer].alive || !h.peers[peer].session.is_connected() {
+                continue;
+            }
+            let now = h.now;
+            match op {
+                0 | 1 => { let _ = h.session(peer).request_authority(now, id); }
+                2 => { let _ = h.session(peer).release_authority(now, id); }
+                3 if kills < 2 => { h.kill(peer); kills += 1; }
+                _ => {}
+            }
+            h.advance(Duration::from_millis(wait));
+        }
+        h.advance(Duration::from_millis(5000));
+        let live: Vec<usize> = (0..5).filter(|i| h.peers[*i].alive).collect();
+        for id in &ids {
+            let owners: BTreeSet<PeerId> = live.iter().map(|i| h.peers[*i].session.owner(*id).unwrap()).collect();
+            prop_assert_eq!(owners.len(), 1, "disagreement on {:?}: {:?}", id, owners);
+            let owner = *owners.iter().next().unwrap();
+            prop_assert!(live.iter().any(|i| Harness::id(*i) == owner), "owner {:?} is dead", owner);
+        }
+        let hosts: Vec<usize> = live.iter().copied().filter(|i| h.peers[*i].session.is_host()).collect();
+        prop_assert_eq!(hosts.len(), 1);
+    }
+}
