@@ -63,6 +63,17 @@ pub struct SoftBodySet {
     slots: Vec<(u32, Option<SoftBody>)>,
     free: Vec<u32>,
     groups_used: u32,
+    /// Rapier body → (soft body, particle index or `None` for the center).
+    owners: std::collections::HashMap<RigidBodyHandle, (SoftBodyHandle, Option<u32>)>,
+}
+
+/// What a rapier body is to a soft body.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SoftPart {
+    /// The center body.
+    Center(SoftBodyHandle),
+    /// Particle `index` of the soft body.
+    Particle(SoftBodyHandle, u32),
 }
 
 impl SoftBodySet {
@@ -96,9 +107,24 @@ impl SoftBodySet {
                 (self.slots.len() - 1) as u32
             }
         };
-        Ok(SoftBodyHandle {
+        let handle = SoftBodyHandle {
             index,
             generation: self.slots[index as usize].0,
+        };
+        if let Some(b) = self.slots[index as usize].1.as_ref() {
+            self.owners.insert(b.center, (handle, None));
+            for (i, &p) in b.particles.iter().enumerate() {
+                self.owners.insert(p, (handle, Some(i as u32)));
+            }
+        }
+        Ok(handle)
+    }
+
+    /// Which soft body (and which part of it) a rapier body belongs to, if any.
+    pub fn part_of(&self, body: RigidBodyHandle) -> Option<SoftPart> {
+        self.owners.get(&body).map(|&(h, p)| match p {
+            None => SoftPart::Center(h),
+            Some(i) => SoftPart::Particle(h, i),
         })
     }
 
@@ -110,6 +136,10 @@ impl SoftBodySet {
         }
         let body = slot.1.take()?;
         self.free.push(handle.index);
+        self.owners.remove(&body.center);
+        for p in &body.particles {
+            self.owners.remove(p);
+        }
         for &h in body.particles.iter().chain(std::iter::once(&body.center)) {
             world.remove_body(h);
         }

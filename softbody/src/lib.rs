@@ -12,7 +12,7 @@ pub mod mesh;
 pub mod metrics;
 pub mod scenario;
 
-pub use body::{SoftBody, SoftBodyHandle, SoftBodySet};
+pub use body::{SoftBody, SoftBodyHandle, SoftBodySet, SoftPart};
 pub use cluster::{build_particle_map, ClusterMethod, ParticleMap, WeightedRows};
 pub use config::{
     CenterCollider, ContinuousCollision, ParticleCollider, RestoringScheme, SimulationSpace,
