@@ -11,6 +11,7 @@
 
 pub mod bits;
 pub mod error;
+pub mod fuzzing;
 pub mod harness;
 pub mod ids;
 pub mod interp;

@@ -9,7 +9,7 @@ use std::time::Duration;
 use common::*;
 use glam::{Quat, Vec3};
 use proptest::prelude::*;
-use softsync_net::bits::{BitReader, BitWriter};
+use softsync_net::bits::BitWriter;
 use softsync_net::harness::Harness;
 use softsync_net::ids::AuthorityEpoch;
 use softsync_net::policy::AuthorityPolicy;
@@ -19,8 +19,8 @@ use softsync_net::wire::{
     PosEnc, Section, SpawnInfo, StateEntry,
 };
 use softsync_net::{
-    ClassConfig, ClassId, ConditionerConfig, NetId, ObjectState, PeerId, SendPolicy, Session,
-    SessionConfig, SoftBodyMode, Term,
+    ClassConfig, ClassId, ConditionerConfig, NetId, ObjectState, PeerId, SendPolicy, SessionConfig,
+    SoftBodyMode, Term,
 };
 
 fn soft_class() -> ClassConfig {

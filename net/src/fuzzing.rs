@@ -1,0 +1,75 @@
+//! Entry point shared by the cargo-fuzz target (`net/fuzz`) and the stable tests: feed
+//! arbitrary bytes to every decoder and to live sessions; panics are bugs.
+
+use glam::{Quat, Vec3};
+
+use crate::ids::{ClassId, PeerId};
+use crate::policy::{ClassConfig, SendPolicy, SessionConfig, SoftBodyMode};
+use crate::session::{ObjectState, Session};
+use crate::time::Instant;
+use crate::wire::{decode_packet, decode_state_block, Control, EntryLayout, Section};
+
+/// Decode `data` every way we can; asserts that decoded state stays finite.
+pub fn decode_all(data: &[u8]) {
+    let class = ClassConfig::soft_body("fuzz", SendPolicy::default(), SoftBodyMode::Particles);
+    let layout = EntryLayout {
+        class: &class,
+        particles: 300,
+    };
+    let _ = Control::decode(data);
+    let _ = decode_state_block(64, data, |_| Some(layout));
+    if let Ok((_, sections)) = decode_packet(data) {
+        for s in sections {
+            match s {
+                Section::State { count, bits } => {
+                    let _ = decode_state_block(count, bits, |_| Some(layout));
+                }
+                Section::Reliable { bytes, .. } => {
+                    let _ = Control::decode(bytes);
+                }
+                _ => {}
+            }
+        }
+    }
+    // a joined host/client pair with a soft body, each fed the bytes from the other
+    let (mut host, mut client, id) = joined_pair(class);
+    let now = Instant::from_millis(100);
+    host.handle_packet(now, PeerId(2), data);
+    client.handle_packet(now, PeerId(1), data);
+    for s in [&mut host, &mut client] {
+        s.handle_timeout(now);
+        while s.poll_transmit(now).is_some() {}
+        if let Some(st) = id.and_then(|id| s.latest_state(id)) {
+            assert!(st.pos.is_finite() && st.rot.is_finite());
+            assert!(st.particles.iter().all(|p| p.is_finite()));
+        }
+    }
+}
+
+fn joined_pair(class: ClassConfig) -> (Session, Session, Option<crate::ids::NetId>) {
+    let cfg = SessionConfig {
+        classes: vec![class],
+        ..SessionConfig::default()
+    };
+    let now = Instant::ZERO;
+    let mut host = Session::host(PeerId(1), cfg.clone(), now);
+    let mut client = Session::join(PeerId(2), PeerId(1), cfg, now);
+    let particles = (0..60)
+        .map(|i| Vec3::new(i as f32 * 0.01, 1.0, 0.0))
+        .collect();
+    let st = ObjectState {
+        pos: Vec3::Y,
+        rot: Quat::IDENTITY,
+        particles,
+    };
+    let id = host.spawn(now, ClassId(0), st).map(|x| x.0).ok();
+    for _ in 0..8 {
+        while let Some(t) = host.poll_transmit(now) {
+            client.handle_packet(now, PeerId(1), &t.payload);
+        }
+        while let Some(t) = client.poll_transmit(now) {
+            host.handle_packet(now, PeerId(2), &t.payload);
+        }
+    }
+    (host, client, id)
+}
