@@ -1443,8 +1443,20 @@ impl Session {
                             .filter(|(_, seq)| l.reliable.is_acked(**seq))
                             .map(|(id, _)| *id)
                             .collect();
-                        for id in acked {
-                            l.spawn_pending.remove(&id);
+                        for id in &acked {
+                            l.spawn_pending.remove(id);
+                        }
+                        // the peer now knows these objects: give it their current state at
+                        // once (a resting object would otherwise never be sent again)
+                        if self.role == Role::Host {
+                            for id in acked {
+                                if self.owner(id) != Some(from) {
+                                    let e = self.build_entries(now, from, id, false, true);
+                                    if let Some(l) = self.links.get_mut(&from) {
+                                        l.pending.extend(e);
+                                    }
+                                }
+                            }
                         }
                     }
                 }

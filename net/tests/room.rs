@@ -564,3 +564,39 @@ fn rest_sync_removes_threshold_error() {
     let got = h.session(1).latest_state(id).unwrap().pos;
     assert!(truth.distance(got) < 0.0015, "{truth} vs {got}");
 }
+
+/// A late joiner must get the particles of a soft body that a client moved and left at rest
+/// (the host only relays on change, so the join itself has to carry the state).
+#[test]
+fn late_joiner_gets_resting_client_owned_soft_body() {
+    let mut h = room(2, ConditionerConfig::rough(6, 20, 5, 0.05));
+    let now = h.now;
+    let (_, r) = h
+        .session(1)
+        .spawn(now, SOFT, soft_state(Vec3::Y, Quat::IDENTITY, 0.0))
+        .unwrap();
+    h.advance(ms(1000));
+    let id = spawned_id(&h, 1, r).unwrap();
+    let start = t(&h);
+    h.run_frames(ms(800), ms(11), |h| {
+        let s = (t(h) - start).min(0.7);
+        let now = h.now;
+        h.session(1)
+            .publish_state(
+                now,
+                id,
+                &soft_state(Vec3::Y + Vec3::X * s, Quat::from_rotation_y(s), 0.4 * s),
+            )
+            .unwrap();
+    });
+    h.advance(ms(3000));
+    let n = h.add_peer();
+    h.advance(ms(2000));
+    let truth = h.session(1).latest_state(id).unwrap();
+    let got = h.session(n).latest_state(id).unwrap();
+    assert!(
+        max_particle_error(&truth, &got) < 0.0015,
+        "{}",
+        max_particle_error(&truth, &got)
+    );
+}
