@@ -42,9 +42,9 @@ pub struct SendPolicy {
     pub rest_after: Duration,
     /// Full keyframe at least this often while moving (loss recovery); `None` disables.
     pub keyframe_interval: Option<Duration>,
-    /// A change smaller than the threshold is still sent once the last send is this old
-    /// (bounds how long slow motion stays wrong); `None`: thesis behaviour.
-    pub max_staleness: Option<Duration>,
+    /// A change smaller than the threshold is still sent once the last send is this many
+    /// send intervals old (bounds how long slow motion stays wrong); `None`: thesis behaviour.
+    pub stale_after_intervals: Option<f32>,
     /// When an entry is sent anyway, changes above this fraction of the threshold ride along
     /// (1.0: thesis behaviour).
     pub piggyback_fraction: f32,
@@ -59,7 +59,7 @@ impl Default for SendPolicy {
             particle_threshold_m: 0.005,
             rest_after: Duration::from_millis(150),
             keyframe_interval: Some(Duration::from_secs(3)),
-            max_staleness: Some(Duration::from_millis(200)),
+            stale_after_intervals: Some(4.0),
             piggyback_fraction: 0.4,
         }
     }

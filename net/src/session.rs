@@ -154,7 +154,8 @@ struct SendPart {
     last: PartQ,
     seq: u8,
     last_key_at: Instant,
-    last_sent_at: Instant,
+    /// When each field was last sent (transform: position, rotation; chunk: per particle).
+    sent_at: Vec<Instant>,
 }
 
 #[derive(Clone, Debug)]
@@ -1150,30 +1151,25 @@ impl Session {
         if link.spawn_pending.contains_key(&id) {
             return out; // the peer does not know the object yet
         }
-        let use_thr_base = owner_thresholds && !o.rest;
-        let max_stale = class.send.max_staleness;
+        let use_thr = owner_thresholds && !o.rest;
+        let interval = class.send.interval();
+        let max_stale = class
+            .send
+            .stale_after_intervals
+            .map(|k| interval.mul_f32(k.clamp(0.0, 1e4)));
+        // half an interval of slack so the tick phase does not alias with the bound
+        let half = interval / 2;
+        // a change below the threshold is still sent once its last send is this old
+        let stale = |at: Instant| use_thr && max_stale.is_some_and(|m| now + half >= at + m);
         let piggy = class.send.piggyback_fraction.clamp(0.0, 1.0);
-        let fresh = |k: u32| {
-            link.send
-                .get(&(id, k))
-                .is_none_or(|sp| max_stale.is_none_or(|m| now < sp.last_sent_at + m))
-        };
-        // a change below the threshold is still sent once it is older than max_staleness
-        let use_thr = use_thr_base && fresh(0);
-        let pos_thr = if use_thr {
-            class.send.position_threshold_m / class.position_resolution_m
+        let (pos_thr, rot_thr, part_thr) = if use_thr {
+            (
+                class.send.position_threshold_m / class.position_resolution_m,
+                class.send.rotation_threshold_rad,
+                class.send.particle_threshold_m / class.particle_resolution_m,
+            )
         } else {
-            0.0
-        };
-        let rot_thr = if use_thr {
-            class.send.rotation_threshold_rad
-        } else {
-            0.0
-        };
-        let part_thr = if use_thr_base {
-            class.send.particle_threshold_m / class.particle_resolution_m
-        } else {
-            0.0
+            (0.0, 0.0, 0.0)
         };
         let key_due = |sp: &SendPart| {
             !o.rest
@@ -1184,122 +1180,44 @@ impl Session {
         };
         let tag = o.info.epoch.tag();
         let bits = class.rot_bits();
-        // transform part
-        {
-            let cur = PartQ::Transform {
-                pos: o.pos,
-                rot: o.rot,
-            };
-            let sp = link.send.get(&(id, 0));
-            let key = force_key || sp.is_none_or(key_due);
-            let body = if key {
-                Some(PartBody::Transform {
-                    pos: Some(PosEnc::Abs(o.pos)),
-                    rot: Some(o.rot),
-                })
-            } else if let Some(SendPart {
-                last: PartQ::Transform { pos, rot },
-                ..
-            }) = sp
-            {
-                let dpos = VecQuantizer::step_distance(*pos, o.pos);
-                let ang = angle_between(dequantize_quat(*rot, bits), dequantize_quat(o.rot, bits));
-                let pos_over = *pos != o.pos && dpos > pos_thr;
-                let rot_over = *rot != o.rot && ang > rot_thr;
-                // once an entry is paid for, smaller changes of the other field ride along
-                let pb = piggy;
-                let send_pos = *pos != o.pos && (pos_over || (rot_over && dpos > pos_thr * pb));
-                let send_rot = *rot != o.rot && (rot_over || (pos_over && ang > rot_thr * pb));
-                if send_pos || send_rot {
-                    Some(PartBody::Transform {
-                        pos: send_pos.then(|| {
-                            PosEnc::Delta([0, 1, 2].map(|i| o.pos[i] as i32 - pos[i] as i32))
-                        }),
-                        rot: send_rot.then_some(o.rot),
-                    })
-                } else {
-                    None
-                }
-            } else {
-                None
-            };
-            if let Some(body) = body {
-                let (seq, last_key_at, mut last) = match link.send.get(&(id, 0)) {
-                    Some(sp) => (
-                        sp.seq.wrapping_add(1) & 0xF,
-                        sp.last_key_at,
-                        sp.last.clone(),
-                    ),
-                    None => (0, now, cur.clone()),
-                };
-                if let PartBody::Transform { pos, rot } = &body {
-                    if let PartQ::Transform { pos: lp, rot: lr } = &mut last {
-                        if pos.is_some() {
-                            *lp = o.pos;
-                        }
-                        if rot.is_some() {
-                            *lr = o.rot;
-                        }
-                    }
-                }
-                link.send.insert(
-                    (id, 0),
-                    SendPart {
-                        last: if key { cur } else { last },
-                        seq,
-                        last_key_at: if key { now } else { last_key_at },
-                        last_sent_at: now,
-                    },
-                );
-                out.push(StateEntry {
-                    id,
-                    epoch_tag: tag,
-                    seq,
-                    key,
-                    rest: o.rest,
-                    body,
-                });
-            }
-        }
         // particle chunks (thesis 5.4.2), skipped in center-only mode (5.4.1)
         if class.soft_body_mode == SoftBodyMode::Particles && !o.particles.is_empty() {
             let per = class.chunk_len();
             for (ci, chunk) in o.particles.chunks(per).enumerate() {
                 let part = ci as u32 + 1;
-                let part_thr = if link
-                    .send
-                    .get(&(id, part))
-                    .is_none_or(|sp| max_stale.is_none_or(|m| now < sp.last_sent_at + m))
-                {
-                    part_thr
-                } else {
-                    0.0
-                };
                 let sp = link.send.get(&(id, part));
                 let key = force_key || sp.is_none_or(key_due);
                 let values = if key {
                     Some(ChunkEnc::Abs(chunk.to_vec()))
                 } else if let Some(SendPart {
                     last: PartQ::Chunk(prev),
+                    sent_at,
                     ..
                 }) = sp
                 {
-                    let triggered = chunk
+                    let dist: Vec<f32> = chunk
                         .iter()
                         .zip(prev.iter())
-                        .any(|(c, p)| c != p && VecQuantizer::step_distance(*c, *p) > part_thr);
+                        .map(|(c, p)| VecQuantizer::step_distance(*c, *p))
+                        .collect();
+                    let over = |i: usize| {
+                        dist.get(i).is_some_and(|d| *d > part_thr)
+                            || sent_at.get(i).is_some_and(|t| stale(*t))
+                    };
+                    let triggered =
+                        (0..chunk.len()).any(|i| chunk.get(i) != prev.get(i) && over(i));
                     // when the chunk goes out anyway, particles past a fraction of the
                     // threshold ride along (fewer particles left stale at up to the threshold)
-                    let thr = if triggered {
-                        part_thr * piggy
-                    } else {
-                        part_thr
-                    };
                     let list: Vec<(u32, [i32; 3])> = chunk
                         .iter()
                         .zip(prev.iter())
                         .enumerate()
-                        .filter(|(_, (c, p))| c != p && VecQuantizer::step_distance(**c, **p) > thr)
+                        .filter(|(i, (c, p))| {
+                            c != p
+                                && (over(*i)
+                                    || (triggered
+                                        && dist.get(*i).is_some_and(|d| *d > part_thr * piggy)))
+                        })
                         .map(|(i, (c, p))| (i as u32, [0, 1, 2].map(|k| c[k] as i32 - p[k] as i32)))
                         .collect();
                     (!list.is_empty()).then_some(ChunkEnc::Delta(list))
@@ -1307,34 +1225,42 @@ impl Session {
                     None
                 };
                 let Some(values) = values else { continue };
-                let (seq, last_key_at, mut last) = match link.send.get(&(id, part)) {
-                    Some(sp) => (
-                        sp.seq.wrapping_add(1) & 0xF,
-                        sp.last_key_at,
-                        sp.last.clone(),
-                    ),
-                    None => (0, now, PartQ::Chunk(chunk.to_vec())),
+                let prev = link.send.get(&(id, part));
+                let seq = prev.map_or(0, |sp| sp.seq.wrapping_add(1) & 0xF);
+                let mut last = match prev.map(|sp| &sp.last) {
+                    Some(PartQ::Chunk(v)) if v.len() == chunk.len() => v.clone(),
+                    _ => chunk.to_vec(),
                 };
-                if let (ChunkEnc::Delta(list), PartQ::Chunk(l)) = (&values, &mut last) {
-                    for (i, _) in list {
-                        if let (Some(dst), Some(src)) =
-                            (l.get_mut(*i as usize), chunk.get(*i as usize))
-                        {
-                            *dst = *src;
+                let mut sent_at = prev.map_or(vec![now; chunk.len()], |sp| sp.sent_at.clone());
+                sent_at.resize(chunk.len(), now);
+                match &values {
+                    ChunkEnc::Abs(_) => {
+                        last = chunk.to_vec();
+                        sent_at.iter_mut().for_each(|t| *t = now);
+                    }
+                    ChunkEnc::Delta(list) => {
+                        for (i, _) in list {
+                            let i = *i as usize;
+                            if let (Some(dst), Some(src)) = (last.get_mut(i), chunk.get(i)) {
+                                *dst = *src;
+                            }
+                            if let Some(t) = sent_at.get_mut(i) {
+                                *t = now;
+                            }
                         }
                     }
                 }
+                let last_key_at = match prev {
+                    Some(sp) if !key => sp.last_key_at,
+                    _ => now,
+                };
                 link.send.insert(
                     (id, part),
                     SendPart {
-                        last: if key {
-                            PartQ::Chunk(chunk.to_vec())
-                        } else {
-                            last
-                        },
+                        last: PartQ::Chunk(last),
                         seq,
-                        last_key_at: if key { now } else { last_key_at },
-                        last_sent_at: now,
+                        last_key_at,
+                        sent_at,
                     },
                 );
                 out.push(StateEntry {
@@ -1348,6 +1274,90 @@ impl Session {
                         values,
                     },
                 });
+            }
+        }
+        // transform part (position and rotation sent separately, thesis 5.3); when particles
+        // went out, any center change rides along: particle offsets are relative to it
+        let chunks_sent = !out.is_empty();
+        let (pos_thr, rot_thr) = if chunks_sent {
+            (0.0, 0.0)
+        } else {
+            (pos_thr, rot_thr)
+        };
+        {
+            let sp = link.send.get(&(id, 0));
+            let key = force_key || sp.is_none_or(key_due);
+            let (body, sent_pos, sent_rot) = if key {
+                let body = PartBody::Transform {
+                    pos: Some(PosEnc::Abs(o.pos)),
+                    rot: Some(o.rot),
+                };
+                (Some(body), true, true)
+            } else if let Some(SendPart {
+                last: PartQ::Transform { pos, rot },
+                sent_at,
+                ..
+            }) = sp
+            {
+                let dpos = VecQuantizer::step_distance(*pos, o.pos);
+                let ang = angle_between(dequantize_quat(*rot, bits), dequantize_quat(o.rot, bits));
+                let pos_at = sent_at.first().copied().unwrap_or(now);
+                let rot_at = sent_at.get(1).copied().unwrap_or(now);
+                let pos_over = dpos > pos_thr || stale(pos_at);
+                let rot_over = ang > rot_thr || stale(rot_at);
+                // once an entry is paid for, smaller changes of the other field ride along
+                let send_pos = *pos != o.pos && (pos_over || (rot_over && dpos > pos_thr * piggy));
+                let send_rot = *rot != o.rot && (rot_over || (pos_over && ang > rot_thr * piggy));
+                let body = (send_pos || send_rot).then(|| PartBody::Transform {
+                    pos: send_pos
+                        .then(|| PosEnc::Delta([0, 1, 2].map(|i| o.pos[i] as i32 - pos[i] as i32))),
+                    rot: send_rot.then_some(o.rot),
+                });
+                (body, send_pos, send_rot)
+            } else {
+                (None, false, false)
+            };
+            if let Some(body) = body {
+                let prev = link.send.get(&(id, 0));
+                let seq = prev.map_or(0, |sp| sp.seq.wrapping_add(1) & 0xF);
+                let (mut lp, mut lr) = match prev.map(|sp| &sp.last) {
+                    Some(PartQ::Transform { pos, rot }) => (*pos, *rot),
+                    _ => (o.pos, o.rot),
+                };
+                let mut sent_at = prev.map_or(vec![now; 2], |sp| sp.sent_at.clone());
+                sent_at.resize(2, now);
+                if sent_pos {
+                    lp = o.pos;
+                    sent_at[0] = now;
+                }
+                if sent_rot {
+                    lr = o.rot;
+                    sent_at[1] = now;
+                }
+                let last_key_at = match prev {
+                    Some(sp) if !key => sp.last_key_at,
+                    _ => now,
+                };
+                link.send.insert(
+                    (id, 0),
+                    SendPart {
+                        last: PartQ::Transform { pos: lp, rot: lr },
+                        seq,
+                        last_key_at,
+                        sent_at,
+                    },
+                );
+                out.insert(
+                    0,
+                    StateEntry {
+                        id,
+                        epoch_tag: tag,
+                        seq,
+                        key,
+                        rest: o.rest,
+                        body,
+                    },
+                );
             }
         }
         out

@@ -600,3 +600,92 @@ fn late_joiner_gets_resting_client_owned_soft_body() {
         max_particle_error(&truth, &got)
     );
 }
+
+#[test]
+fn owner_must_agree_policy_asks_the_holder() {
+    let mut cfg = config();
+    cfg.classes[0].authority = softsync_net::AuthorityPolicy::OwnerMustAgree;
+    let mut h = Harness::new(3, cfg, ConditionerConfig::rough(12, 30, 10, 0.0));
+    h.advance(ms(800));
+    let now = h.now;
+    let (id, _) = h
+        .session(0)
+        .spawn(now, RIGID, ObjectState::rigid(Vec3::ZERO, Quat::IDENTITY))
+        .unwrap();
+    h.advance(ms(300));
+    let now = h.now;
+    h.session(1).request_authority(now, id).unwrap();
+    h.advance(ms(300));
+    assert_eq!(
+        h.peers[2].session.owner(id),
+        Some(Harness::id(1)),
+        "unheld: granted"
+    );
+    // peer 2 asks; the holder refuses, then agrees to a second ask
+    let now = h.now;
+    h.session(2).request_authority(now, id).unwrap();
+    h.advance(ms(300));
+    let asked = h.peers[1]
+        .events
+        .iter()
+        .any(|e| matches!(e, Event::AuthorityAsked { by, .. } if *by == Harness::id(2)));
+    assert!(asked);
+    let now = h.now;
+    h.session(1)
+        .answer_authority(now, id, Harness::id(2), false);
+    h.advance(ms(300));
+    assert!(h.peers[2].events.iter().any(|e| matches!(
+        e,
+        Event::AuthorityDenied {
+            reason: DenyReason::OwnerRefused,
+            ..
+        }
+    )));
+    assert_eq!(h.peers[0].session.owner(id), Some(Harness::id(1)));
+    let now = h.now;
+    h.session(2).request_authority(now, id).unwrap();
+    h.advance(ms(300));
+    let now = h.now;
+    h.session(1).answer_authority(now, id, Harness::id(2), true);
+    // sample the handoff every 2 ms: two peers acting as owner at once for at most one RTT
+    let mut both = std::time::Duration::ZERO;
+    for _ in 0..300 {
+        h.advance(ms(2));
+        let believers = (0..3)
+            .filter(|i| h.peers[*i].session.owner(id) == Some(Harness::id(*i)))
+            .count();
+        assert!(believers <= 2);
+        if believers == 2 {
+            both += ms(2);
+        }
+    }
+    assert!(both <= ms(80), "overlap {both:?} exceeds one round trip");
+    for i in 0..3 {
+        assert_eq!(h.peers[i].session.owner(id), Some(Harness::id(2)));
+    }
+}
+
+#[test]
+fn locked_objects_are_never_granted() {
+    let mut cfg = config();
+    cfg.classes[0].authority = softsync_net::AuthorityPolicy::Locked;
+    let mut h = Harness::new(2, cfg, ConditionerConfig::default());
+    h.advance(ms(500));
+    let now = h.now;
+    let (id, _) = h
+        .session(0)
+        .spawn(now, RIGID, ObjectState::rigid(Vec3::ZERO, Quat::IDENTITY))
+        .unwrap();
+    h.advance(ms(200));
+    let now = h.now;
+    h.session(1).request_authority(now, id).unwrap();
+    h.advance(ms(200));
+    assert_eq!(h.peers[1].session.owner(id), Some(Harness::id(0)));
+    assert!(h.peers[1].events.iter().any(|e| matches!(
+        e,
+        Event::AuthorityDenied {
+            reason: DenyReason::Locked,
+            ..
+        }
+    )));
+}
