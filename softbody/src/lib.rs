@@ -10,6 +10,7 @@ mod config;
 mod error;
 pub mod mesh;
 pub mod metrics;
+mod ply;
 pub mod scenario;
 
 pub use body::{SoftBody, SoftBodyHandle, SoftBodySet, SoftPart};

@@ -75,7 +75,7 @@ pub struct WeldedMesh {
 }
 
 impl Mesh {
-    /// Loads an OBJ, glTF or GLB file, chosen by extension.
+    /// Loads an OBJ, glTF, GLB or PLY file, chosen by extension.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, SoftBodyError> {
         let path = path.as_ref();
         let ext = path
@@ -94,6 +94,7 @@ impl Mesh {
                 Self::from_obj_str(text, path)
             }
             "gltf" | "glb" => Self::from_gltf_slice(&bytes, path),
+            "ply" => crate::ply::parse_ply(&bytes, path),
             _ => Err(SoftBodyError::UnsupportedFormat {
                 path: path.to_path_buf(),
             }),

@@ -166,6 +166,36 @@ fn every_bad_mesh_gives_its_error() {
 }
 
 #[test]
+fn ply_ascii_and_binary_load_the_same_mesh() {
+    let ascii = "ply\nformat ascii 1.0\ncomment a quad\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n";
+    let a = Mesh::load(tmp("quad.ply", ascii.as_bytes())).unwrap();
+    assert_eq!(a.positions.len(), 4);
+    assert_eq!(a.triangles, vec![[0, 1, 2], [0, 2, 3]]);
+    let mut bin = b"ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n".to_vec();
+    for p in &a.positions {
+        for c in p.to_array() {
+            bin.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    bin.push(4);
+    for i in [0i32, 1, 2, 3] {
+        bin.extend_from_slice(&i.to_le_bytes());
+    }
+    let b = Mesh::load(tmp("quad_bin.ply", &bin)).unwrap();
+    assert_eq!(a, b);
+    // Hostile: a huge vertex count in a short file is refused before any allocation.
+    let huge = String::from_utf8_lossy(&bin)
+        .replace("element vertex 4", "element vertex 3999999")
+        .into_bytes();
+    let e = Mesh::load(tmp("huge.ply", &huge)).unwrap_err().to_string();
+    assert!(e.contains("too short"), "{e}");
+    // Out-of-range face index, truncated body, missing header end.
+    assert!(err_of("range.ply", &ascii.replace("4 0 1 2 3", "3 0 1 9")).contains("out of range"));
+    assert!(err_of("trunc.ply", &ascii.replace("4 0 1 2 3\n", "4 0 1")).contains("truncated"));
+    assert!(err_of("nohdr.ply", "ply\nformat ascii 1.0\n").contains("end_header"));
+}
+
+#[test]
 fn gltf_buffer_uris_cannot_escape_the_folder() {
     let json =
         r#"{"asset":{"version":"2.0"},"buffers":[{"byteLength":4,"uri":"../../etc/passwd"}]}"#;
