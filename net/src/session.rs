@@ -1541,17 +1541,23 @@ impl Session {
                 }
             };
             for e in entries {
-                if let Some(class_name) = self
-                    .objects
-                    .get(&e.id)
-                    .and_then(|o| self.class(o.info.class))
-                    .map(|c| c.name.clone())
-                {
-                    let _ = class_name; // per-class down bytes are attributed below
+                // per-class down bytes: the entry's encoded size (re-encoded, bits / 8)
+                if let Some(o) = self.objects.get(&e.id) {
+                    if let Some(class) = self.cfg.classes.get(usize::from(o.info.class.0)) {
+                        let mut w = BitWriter::new();
+                        let layout = EntryLayout {
+                            class,
+                            particles: o.info.particles,
+                        };
+                        e.encode_body(&layout, &mut w);
+                        *self
+                            .stats
+                            .class_down_bytes
+                            .entry(class.name.clone())
+                            .or_default() += w.bit_len() as f64 / 8.0;
+                    }
                 }
-                if self.apply_entry(now, from, e, &mut touched) {
-                    // applied
-                }
+                self.apply_entry(now, from, e, &mut touched);
             }
         }
         for id in touched {

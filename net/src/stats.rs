@@ -15,6 +15,15 @@ pub struct Traffic {
 }
 
 impl Traffic {
+    /// (bytes/s, packets/s) between an `earlier` reading and this one, `dt` apart.
+    pub fn rate_since(&self, earlier: &Traffic, dt: Duration) -> (f64, f64) {
+        let s = dt.as_secs_f64().max(1e-9);
+        (
+            self.bytes.saturating_sub(earlier.bytes) as f64 / s,
+            self.packets.saturating_sub(earlier.packets) as f64 / s,
+        )
+    }
+
     fn add(&mut self, bytes: usize) {
         self.bytes += bytes as u64;
         self.packets += 1;

@@ -689,3 +689,46 @@ fn locked_objects_are_never_granted() {
         }
     )));
 }
+
+#[test]
+fn stats_report_traffic_rtt_loss_and_classes() {
+    let mut link = ConditionerConfig::rough(21, 40, 0, 0.10);
+    link.p_enter_burst = 0.0;
+    link.duplicate = 0.0;
+    link.reorder = 0.0;
+    let mut h = room(2, link);
+    let now = h.now;
+    let (id, _) = h
+        .session(0)
+        .spawn(now, SOFT, soft_state(Vec3::Y, Quat::IDENTITY, 0.0))
+        .unwrap();
+    let start = t(&h);
+    h.run_frames(ms(6000), ms(11), |h| {
+        let s = t(h) - start;
+        let now = h.now;
+        h.session(0)
+            .publish_state(
+                now,
+                id,
+                &soft_state(
+                    Vec3::Y + Vec3::X * s.sin(),
+                    Quat::IDENTITY,
+                    0.3 * s.sin().abs(),
+                ),
+            )
+            .unwrap();
+    });
+    let host = h.peers[0].session.stats().clone();
+    let client = h.peers[1].session.stats().clone();
+    let l = client.links.get(&Harness::id(0)).unwrap();
+    let rtt = l.rtt.unwrap();
+    assert!(rtt >= ms(75) && rtt <= ms(110), "rtt {rtt:?}");
+    assert!((l.loss() - 0.10).abs() < 0.05, "loss {}", l.loss());
+    assert!(host.class_up_bytes.get("soft").copied().unwrap_or(0.0) > 1000.0);
+    assert!(client.class_down_bytes.get("soft").copied().unwrap_or(0.0) > 500.0);
+    assert!(host.mtu_fill() > 0.0 && host.mtu_fill() < 1.0);
+    assert_eq!(
+        host.up.bytes,
+        host.links.values().map(|l| l.up.bytes).sum::<u64>()
+    );
+}
