@@ -9,6 +9,7 @@ pub mod cluster;
 mod config;
 mod error;
 pub mod mesh;
+pub mod methods;
 pub mod metrics;
 mod ply;
 pub mod scenario;

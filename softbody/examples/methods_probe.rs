@@ -1,0 +1,71 @@
+//! Prints each method's metrics over a scenario (a quick look at the dynamics).
+//! `cargo run --release -p softsync-softbody --example methods_probe -- squeeze ispc bunny`
+#![allow(clippy::disallowed_methods, clippy::unwrap_used, missing_docs)]
+use softsync_softbody::methods::scene::ModelScene;
+use softsync_softbody::methods::{MethodKind, MethodSpec};
+use softsync_softbody::scenario::ScenarioKind;
+use softsync_softbody::Mesh;
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let kind = match args.get(1).map(String::as_str) {
+        Some("drop") => ScenarioKind::Drop,
+        Some("squeeze") => ScenarioKind::Squeeze,
+        Some("poke") => ScenarioKind::Poke,
+        _ => ScenarioKind::Rest,
+    };
+    let methods: Vec<MethodKind> = match args.get(2).map(String::as_str) {
+        Some("all") | None => MethodKind::ALL.to_vec(),
+        Some(n) => MethodKind::ALL
+            .iter()
+            .copied()
+            .filter(|m| m.name() == n)
+            .collect(),
+    };
+    let mesh = match args.get(3).map(String::as_str) {
+        Some("bunny") => Mesh::load(concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/bunny.obj"))
+            .unwrap()
+            .fit_size(0.2),
+        _ => Mesh::icosphere(0.1, 3),
+    };
+    let sub: u32 = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(4);
+    let it: u32 = args.get(5).and_then(|s| s.parse().ok()).unwrap_or(4);
+    let hz = 90.0;
+    for m in methods {
+        let spec = MethodSpec::new(m).budget(sub, it);
+        let t0 = std::time::Instant::now();
+        let mut s = match ModelScene::new(kind, &mesh, &spec, 1.0 / hz) {
+            Ok(s) => s,
+            Err(e) => {
+                println!("{}: {e}", m.name());
+                continue;
+            }
+        };
+        let build = t0.elapsed().as_secs_f64() * 1e3;
+        let t0 = std::time::Instant::now();
+        let steps = (kind.duration_s() * hz) as usize;
+        let mut line = String::new();
+        for i in 0..steps {
+            s.step();
+            if i % 9 == 8 {
+                let (rms, _) = s.rest_error_m();
+                let (lo, hi) = softsync_softbody::mesh::bounds(s.model.surface());
+                line += &format!(
+                    "\n  t={:.2} vol={:.3} rest_rms_mm={:.1} ylo={:.3} yhi={:.3} xhi={:.3} sleep={} {}",
+                    s.time_s(),
+                    s.volume_ratio(),
+                    rms * 1e3,
+                    lo.y, hi.y, hi.x,
+                    s.model.is_sleeping(),
+                    s.sanity().verdict()
+                );
+            }
+        }
+        let ms = t0.elapsed().as_secs_f64() * 1e3 / steps as f64;
+        println!(
+            "{} particles={} build_ms={build:.1} step_ms={ms:.3}{line}",
+            s.model.name(),
+            s.model.num_particles()
+        );
+    }
+}

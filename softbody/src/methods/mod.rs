@@ -1,0 +1,27 @@
+//! Speed against accuracy: every soft-body method behind one small trait
+//! ([`DeformableModel`]), so scenarios, metrics, stability sweeps and the automatic choice
+//! treat them alike.
+//!
+//! | module | method |
+//! |---|---|
+//! | [`pbd`] | the XPBD / PBD solver core (ISPC paper Algorithm 1): distance (eq. 1–3), dihedral bending (eq. 4), tet volume, shape-matching clusters, contacts against the rapier world |
+//! | [`ispc`] | internal shape-preserving links (ISPC paper Algorithm 2) |
+//! | [`tets`] | tetrahedral reference: parry's `volume_mesh` cover (Apache-2.0), surface embedded |
+//! | [`builders`] | one constructor per method and resolution ([`MethodSpec`]) |
+//! | [`particle`] | the thesis's particle method ([`crate::SoftBodySet`]) as a model |
+//! | [`native`] | rapier 0.36's own soft bodies as a model |
+//! | [`scene`] | rest / drop / squeeze / poke / impact scenarios for any model |
+//! | [`choice`] | cheapest method meeting an error and frame budget, from measured curves |
+
+pub mod builders;
+pub mod choice;
+pub mod ispc;
+pub mod model;
+pub mod native;
+pub mod particle;
+pub mod pbd;
+pub mod scene;
+pub mod tets;
+
+pub use builders::{build_model, MethodKind, MethodSpec};
+pub use model::{step_models, DeformableModel};

@@ -1,0 +1,332 @@
+//! The scenarios of [`crate::scenario`] for any [`DeformableModel`]: drop on a floor, squeeze
+//! between two plates, poke with a ball, rest; and a throw against a thin wall for the
+//! stability maps. Props move the same way as in [`crate::scenario::Scenario`]; plates and
+//! ball keep the model's contact thickness so every method's *surface* reaches the same depth.
+//!
+//! Holding the body: the particle method runs in local mode (fixed center), the others are
+//! weightless in squeeze and poke, and in poke the far (−x) tenth of the body is pinned.
+
+use glam::{Quat, Vec3};
+use rapier3d::prelude::{ColliderBuilder, PhysicsWorld, RigidBodyBuilder, RigidBodyHandle};
+
+use crate::methods::builders::{build_model, MethodSpec};
+use crate::methods::model::DeformableModel;
+use crate::metrics::rigid_fit_error;
+use crate::scenario::ScenarioKind;
+use crate::{Mesh, SoftBodyError};
+
+/// Whether a run stayed sane (the stability maps' criteria).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Sanity {
+    /// A surface vertex became NaN or infinite.
+    pub non_finite: bool,
+    /// A vertex went further than twice the body's size from the centroid, or a particle
+    /// faster than 100 m/s.
+    pub exploded: bool,
+    /// Some tets were inside out at the end.
+    pub inverted: bool,
+    /// Part of the surface ended on the far side of the thin wall.
+    pub tunnelled: bool,
+}
+
+impl Sanity {
+    /// True if nothing failed.
+    pub fn ok(&self) -> bool {
+        !(self.non_finite || self.exploded || self.inverted || self.tunnelled)
+    }
+
+    /// The first failure's name, or "ok".
+    pub fn verdict(&self) -> &'static str {
+        if self.non_finite {
+            "nan"
+        } else if self.exploded {
+            "exploded"
+        } else if self.inverted {
+            "inverted"
+        } else if self.tunnelled {
+            "tunnelled"
+        } else {
+            "ok"
+        }
+    }
+}
+
+/// A world with one model and the props acting on it.
+pub struct ModelScene {
+    /// The rapier world (props; rapier-based models' bodies).
+    pub world: PhysicsWorld,
+    /// The model.
+    pub model: Box<dyn DeformableModel>,
+    kind: ScenarioKind,
+    dt_s: f32,
+    steps: u64,
+    half_height_m: f32,
+    size_m: f32,
+    lo: Vec3,
+    hi: Vec3,
+    thickness_m: f32,
+    top_plate: Option<RigidBodyHandle>,
+    bottom_plate: Option<RigidBodyHandle>,
+    poker: Option<RigidBodyHandle>,
+    wall_far_x: Option<f32>,
+    rest_surface: Vec<Vec3>,
+    rest_volume_m3: f32,
+}
+
+impl ModelScene {
+    /// Sets up `kind` (rest, drop, squeeze or poke; pull is not supported) for `mesh`
+    /// (re-centred at the origin) with the method `spec`, stepping at `dt_s`.
+    pub fn new(
+        kind: ScenarioKind,
+        mesh: &Mesh,
+        spec: &MethodSpec,
+        dt_s: f32,
+    ) -> Result<Self, SoftBodyError> {
+        Self::setup(kind, mesh, spec, dt_s, kind != ScenarioKind::Drop)
+    }
+
+    fn setup(
+        kind: ScenarioKind,
+        mesh: &Mesh,
+        spec: &MethodSpec,
+        dt_s: f32,
+        anchored: bool,
+    ) -> Result<Self, SoftBodyError> {
+        if !(dt_s.is_finite() && dt_s > 0.0 && dt_s <= 0.1) {
+            return Err(SoftBodyError::Config(format!(
+                "dt_s = {dt_s} must be in (0, 0.1]"
+            )));
+        }
+        if kind == ScenarioKind::Pull {
+            return Err(SoftBodyError::Config(
+                "pull is a particle-method scenario".into(),
+            ));
+        }
+        let mut mesh = mesh.clone();
+        mesh.recenter();
+        let (lo, hi) = crate::mesh::bounds(&mesh.positions);
+        let size_m = (hi - lo).max_element();
+        let mut world = PhysicsWorld::new();
+        world.integration_parameters.dt = dt_s;
+        if kind != ScenarioKind::Drop {
+            world.gravity = Vec3::ZERO;
+        }
+        let plate_half = Vec3::new(size_m * 2.0, 0.05f32.max(0.5 * size_m), size_m * 2.0);
+        let (mut top_plate, mut bottom_plate, mut poker) = (None, None, None);
+        match kind {
+            ScenarioKind::Drop => {
+                let floor = world
+                    .insert_body(RigidBodyBuilder::fixed().translation(Vec3::new(0.0, -0.5, 0.0)));
+                world.insert_collider(
+                    ColliderBuilder::cuboid(50.0, 0.5, 50.0).friction(0.8),
+                    Some(floor),
+                );
+                let lift = 0.5 - lo.y;
+                for p in &mut mesh.positions {
+                    p.y += lift;
+                }
+            }
+            ScenarioKind::Squeeze => {
+                for slot in [&mut top_plate, &mut bottom_plate] {
+                    // Placed clear of everything; moved to their start in the first step.
+                    let b = world.insert_body(
+                        RigidBodyBuilder::kinematic_position_based().translation(Vec3::new(
+                            0.0,
+                            10.0 * size_m,
+                            0.0,
+                        )),
+                    );
+                    world.insert_collider(
+                        ColliderBuilder::cuboid(plate_half.x, plate_half.y, plate_half.z),
+                        Some(b),
+                    );
+                    *slot = Some(b);
+                }
+            }
+            ScenarioKind::Poke => {
+                let b = world.insert_body(
+                    RigidBodyBuilder::kinematic_position_based().translation(Vec3::new(
+                        10.0 * size_m,
+                        0.0,
+                        0.0,
+                    )),
+                );
+                world.insert_collider(ColliderBuilder::ball(0.1 * size_m), Some(b));
+                poker = Some(b);
+            }
+            ScenarioKind::Rest | ScenarioKind::Pull => {}
+        }
+        let mut model = build_model(spec, &mesh, &mut world, anchored)?;
+        if kind == ScenarioKind::Poke {
+            model.pin_region(
+                &mut world,
+                Vec3::splat(-1e3),
+                Vec3::new(lo.x + 0.1 * size_m, 1e3, 1e3),
+            );
+        }
+        let thickness_m = model.contact_thickness_m();
+        let rest_surface = model.surface().to_vec();
+        let rest_volume_m3 = crate::mesh::enclosed_volume(&rest_surface, model.triangles());
+        let mut s = ModelScene {
+            world,
+            model,
+            kind,
+            dt_s,
+            steps: 0,
+            half_height_m: (hi.y - lo.y) * 0.5,
+            size_m,
+            lo,
+            hi,
+            thickness_m,
+            top_plate,
+            bottom_plate,
+            poker,
+            wall_far_x: None,
+            rest_surface,
+            rest_volume_m3,
+        };
+        s.place_props(true);
+        Ok(s)
+    }
+
+    /// A throw: the body (weightless) flies along +x at `speed_mps` into a fixed wall 1 cm
+    /// thick whose near face is 2 cm beyond the body.
+    pub fn impact(
+        mesh: &Mesh,
+        spec: &MethodSpec,
+        dt_s: f32,
+        speed_mps: f32,
+    ) -> Result<Self, SoftBodyError> {
+        let mut s = Self::setup(ScenarioKind::Rest, mesh, spec, dt_s, false)?;
+        s.world.gravity = Vec3::ZERO;
+        let half_t = 0.005;
+        let near = s.hi.x + 0.02;
+        let wall = s
+            .world
+            .insert_body(RigidBodyBuilder::fixed().translation(Vec3::new(near + half_t, 0.0, 0.0)));
+        s.world.insert_collider(
+            ColliderBuilder::cuboid(half_t, 2.0 * s.size_m, 2.0 * s.size_m).friction(0.5),
+            Some(wall),
+        );
+        s.wall_far_x = Some(near + 2.0 * half_t);
+        s.model.set_velocity(&mut s.world, Vec3::X * speed_mps);
+        Ok(s)
+    }
+
+    fn place_props(&mut self, teleport: bool) {
+        let t = self.time_s();
+        let ramp = |t: f32, start: f32, len: f32| ((t - start) / len).clamp(0.0, 1.0);
+        let release = self.kind.release_s();
+        let th = self.thickness_m + 0.01 * self.size_m;
+        let plate_half_y = 0.05f32.max(0.5 * self.size_m);
+        match self.kind {
+            ScenarioKind::Squeeze => {
+                // Close over 0.8 s until the surfaces are at 30 % of the height, hold, open.
+                let close = ramp(t, 0.0, 0.8) - ramp(t, release, 0.3);
+                let full = self.half_height_m * 0.7 + 0.01 * self.size_m;
+                for (h, sign) in [(self.top_plate, 1.0f32), (self.bottom_plate, -1.0)] {
+                    if let Some(b) = h.and_then(|h| self.world.bodies.get_mut(h)) {
+                        let open = if sign > 0.0 { self.hi.y } else { self.lo.y } + sign * th;
+                        let y = open - sign * close * full + sign * plate_half_y;
+                        let p = Vec3::new(0.0, y, 0.0);
+                        if teleport {
+                            b.set_translation(p, false);
+                        } else {
+                            b.set_next_kinematic_translation(p);
+                        }
+                    }
+                }
+            }
+            ScenarioKind::Poke => {
+                let depth = (ramp(t, 0.0, 0.5) - ramp(t, release, 0.5)) * 0.3 * self.size_m;
+                if let Some(b) = self.poker.and_then(|h| self.world.bodies.get_mut(h)) {
+                    let r = 0.1 * self.size_m;
+                    let p = Vec3::new(self.hi.x + r + th - depth, 0.0, 0.0);
+                    if teleport {
+                        b.set_translation(p, false);
+                    } else {
+                        b.set_next_kinematic_translation(p);
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// Simulated time, seconds.
+    pub fn time_s(&self) -> f32 {
+        self.steps as f32 * self.dt_s
+    }
+
+    /// The scenario kind.
+    pub fn kind(&self) -> ScenarioKind {
+        self.kind
+    }
+
+    /// Largest extent of the body at rest, metres.
+    pub fn size_m(&self) -> f32 {
+        self.size_m
+    }
+
+    /// Moves the props for the current time and steps the world and the model once.
+    pub fn step(&mut self) {
+        self.place_props(false);
+        crate::methods::model::step_models(
+            &mut self.world,
+            std::slice::from_mut(&mut self.model),
+            self.dt_s,
+        );
+        self.steps += 1;
+    }
+
+    /// Runs until `t_s`.
+    pub fn run_until(&mut self, t_s: f32) {
+        while self.time_s() + 0.5 * self.dt_s < t_s {
+            self.step();
+        }
+    }
+
+    /// Enclosed volume of the surface / its rest volume.
+    pub fn volume_ratio(&self) -> f32 {
+        crate::mesh::enclosed_volume(self.model.surface(), self.model.triangles())
+            / self.rest_volume_m3
+    }
+
+    /// RMS and max distance of the surface to its rest shape after the best rigid fit, metres.
+    pub fn rest_error_m(&self) -> (f32, f32) {
+        rigid_fit_error(self.model.surface(), &self.rest_surface, Quat::IDENTITY)
+    }
+
+    /// The stability criteria now.
+    pub fn sanity(&self) -> Sanity {
+        let s = self.model.surface();
+        let non_finite = s.iter().any(|p| !p.is_finite());
+        let c = s.iter().copied().sum::<Vec3>() / s.len().max(1) as f32;
+        let far = s.iter().map(|p| p.distance(c)).fold(0.0f32, f32::max);
+        let exploded =
+            !non_finite && (far > 2.0 * self.size_m || self.model.max_speed_mps() > 100.0);
+        let tunnelled = self.wall_far_x.is_some_and(|x| s.iter().any(|p| p.x > x));
+        Sanity {
+            non_finite,
+            exploded,
+            inverted: self.model.inverted_elements() > 0,
+            tunnelled,
+        }
+    }
+}
+
+/// RMS and max distance between two surfaces with the same vertices, metres.
+pub fn surface_distance_m(a: &[Vec3], b: &[Vec3]) -> (f32, f32) {
+    let n = a.len().min(b.len());
+    if n == 0 {
+        return (0.0, 0.0);
+    }
+    let mut sum = 0.0f64;
+    let mut max = 0.0f32;
+    for (p, q) in a.iter().zip(b) {
+        let d = p.distance(*q);
+        sum += (d as f64).powi(2);
+        max = max.max(d);
+    }
+    (((sum / n as f64).sqrt()) as f32, max)
+}
