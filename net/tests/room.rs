@@ -98,10 +98,10 @@ fn converges_under_20_percent_loss_low_latency() {
     converge_under(ConditionerConfig::rough(3, 5, 10, 0.20));
 }
 
-/// The replicated value must actually follow motion (not only the final pose).
-#[test]
-fn remote_follows_motion_within_threshold_plus_interpolation() {
-    let mut h = room(2, ConditionerConfig::rough(5, 30, 5, 0.0));
+/// The replicated value must actually follow motion (not only the final pose), and the
+/// interpolation delay must grow with jitter.
+fn follow(jitter_ms: u64) -> (f32, std::time::Duration) {
+    let mut h = room(2, ConditionerConfig::rough(5, 30, jitter_ms, 0.0));
     let now = h.now;
     let (id, _) = h
         .session(0)
@@ -109,6 +109,7 @@ fn remote_follows_motion_within_threshold_plus_interpolation() {
         .unwrap();
     h.advance(ms(500));
     let mut worst: f32 = 0.0;
+    let mut delay = std::time::Duration::ZERO;
     let traj = |s: f32| Vec3::new(s.sin() * 0.5, 1.0, 0.0);
     let start = t(&h);
     h.run_frames(ms(3000), ms(11), |h| {
@@ -121,9 +122,29 @@ fn remote_follows_motion_within_threshold_plus_interpolation() {
             let d = h.session(1).display_state(now, id).unwrap();
             let truth = traj(d.source_time.as_secs_f64() as f32 - start);
             worst = worst.max(d.state.pos.distance(truth));
+            delay = d.delay;
         }
     });
-    assert!(worst < 0.012, "remote error while moving {worst} m");
+    (worst, delay)
+}
+
+#[test]
+fn remote_follows_motion_and_delay_adapts_to_jitter() {
+    let (calm_err, calm_delay) = follow(2);
+    let (rough_err, rough_delay) = follow(60);
+    assert!(calm_err < 0.005, "remote error while moving {calm_err} m");
+    assert!(
+        rough_err < 0.010,
+        "remote error under 60 ms jitter {rough_err} m"
+    );
+    assert!(
+        rough_delay > calm_delay + ms(20),
+        "{calm_delay:?} vs {rough_delay:?}"
+    );
+    assert!(
+        calm_delay >= ms(100) && calm_delay <= ms(130),
+        "{calm_delay:?}"
+    );
 }
 
 #[test]
