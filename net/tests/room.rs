@@ -753,3 +753,54 @@ fn stats_report_traffic_rtt_loss_and_classes() {
         host.links.values().map(|l| l.up.bytes).sum::<u64>()
     );
 }
+
+/// Thesis 5.4.1: a center-only soft body sends no particle data; its center still converges.
+#[test]
+fn center_only_mode_replicates_the_center_only() {
+    let run = |mode: softsync_net::SoftBodyMode| {
+        let mut cfg = config();
+        cfg.classes[1].soft_body_mode = mode;
+        let mut h = Harness::new(2, cfg, ConditionerConfig::default());
+        h.advance(ms(500));
+        let now = h.now;
+        let (id, _) = h
+            .session(0)
+            .spawn(now, SOFT, soft_state(Vec3::Y, Quat::IDENTITY, 0.0))
+            .unwrap();
+        let start = t(&h);
+        h.run_frames(ms(2000), ms(11), |h| {
+            let s = (t(h) - start).min(1.5);
+            let now = h.now;
+            h.session(0)
+                .publish_state(
+                    now,
+                    id,
+                    &soft_state(Vec3::Y + Vec3::Z * s, Quat::IDENTITY, 0.3 * s),
+                )
+                .unwrap();
+        });
+        h.advance(ms(1000));
+        let truth = h.session(0).latest_state(id).unwrap();
+        let got = h.session(1).latest_state(id).unwrap();
+        let bytes = h.peers[0]
+            .session
+            .stats()
+            .class_up_bytes
+            .get("soft")
+            .copied()
+            .unwrap_or(0.0);
+        (truth, got, bytes)
+    };
+    let (truth, got, center_bytes) = run(softsync_net::SoftBodyMode::CenterOnly);
+    assert!(truth.pos.distance(got.pos) < 0.0015);
+    assert!(
+        got.particles.is_empty(),
+        "center-only replicas carry no particles"
+    );
+    let (truth, got, particle_bytes) = run(softsync_net::SoftBodyMode::Particles);
+    assert!(max_particle_error(&truth, &got) < 0.0015);
+    assert!(
+        particle_bytes > 3.0 * center_bytes,
+        "{particle_bytes} vs {center_bytes}"
+    );
+}
