@@ -216,7 +216,12 @@ fn stability_sweep() {
     for &k in &[0.1f32, 1.0, 10.0, 100.0] {
         for &hz in &[60.0f32, 90.0, 144.0] {
             for &mass in &[0.01f32, 1.0, 10.0] {
-                for kind in [ScenarioKind::Poke, ScenarioKind::Pull, ScenarioKind::Rest] {
+                for kind in [
+                    ScenarioKind::Poke,
+                    ScenarioKind::Pull,
+                    ScenarioKind::Rest,
+                    ScenarioKind::Drop,
+                ] {
                     let cfg = SoftBodyConfig {
                         stiffness: k,
                         particle_mass_kg: mass,
@@ -242,7 +247,21 @@ fn stability_sweep() {
                         kind.name()
                     );
                     // Recovery time constant is 1/k: after ≥ 2 s, k ≥ 10 has recovered fully.
-                    if k >= 10.0 {
+                    if kind == ScenarioKind::Drop {
+                        // Resting on the floor: never through it, settled.
+                        let (lo, _) = bounds(s.soft_body().vertices());
+                        assert!(
+                            lo.y > -0.02,
+                            "k={k} hz={hz} m={mass} drop: {} m below the floor",
+                            -lo.y
+                        );
+                        let (c, _) = s.soft_body().center_pose(&s.world);
+                        assert!(
+                            c.y < 0.2,
+                            "k={k} hz={hz} m={mass} drop: did not fall ({})",
+                            c.y
+                        );
+                    } else if k >= 10.0 {
                         assert!(
                             m.rest_rms_m < 1e-3,
                             "k={k} hz={hz} m={mass} {}: rms {}",
