@@ -541,10 +541,13 @@ impl PbdBody {
             self.generate_contacts(&near, h);
             // Lines 12–14: Gauss–Seidel projection, contacts with the other constraints.
             self.reset_multipliers();
-            for _ in 0..self.params.iterations.max(1) {
-                self.project_distances(h);
-                self.project_bending(h);
-                self.project_volumes(h);
+            // Symmetric Gauss–Seidel: odd iterations sweep backwards, so a load travels the
+            // whole body both ways within one substep instead of one element per iteration.
+            for it in 0..self.params.iterations.max(1) {
+                let rev = it % 2 == 1;
+                self.project_distances(h, rev);
+                self.project_bending(h, rev);
+                self.project_volumes(h, rev);
                 self.project_contacts();
             }
             self.match_shapes(h);
@@ -589,11 +592,14 @@ impl PbdBody {
     }
 
     /// ISPC paper eq. 1–3 (XPBD form when `solver` is XPBD).
-    fn project_distances(&mut self, h: f32) {
+    fn project_distances(&mut self, h: f32, reverse: bool) {
         let xpbd = self.params.solver == SolverKind::Xpbd;
         let inv_h2 = 1.0 / (h * h);
         for g in &mut self.distance {
-            for (k, &[a, b]) in g.pairs.iter().enumerate() {
+            let n = g.pairs.len();
+            for kk in 0..n {
+                let k = if reverse { n - 1 - kk } else { kk };
+                let [a, b] = g.pairs[k];
                 let (a, b) = (a as usize, b as usize);
                 let (wa, wb) = (self.inv_mass[a], self.inv_mass[b]);
                 let wsum = wa + wb;
@@ -623,11 +629,14 @@ impl PbdBody {
 
     /// ISPC paper eq. 4: dihedral angle of adjacent triangles (gradients after Bridson et al.
     /// 2003, as in Müller et al. 2007 Appendix A).
-    fn project_bending(&mut self, h: f32) {
+    fn project_bending(&mut self, h: f32, reverse: bool) {
         let xpbd = self.params.solver == SolverKind::Xpbd;
         let inv_h2 = 1.0 / (h * h);
         let Some(g) = &mut self.bending else { return };
-        for (k, q) in g.quads.iter().enumerate() {
+        let n = g.quads.len();
+        for kk in 0..n {
+            let k = if reverse { n - 1 - kk } else { kk };
+            let q = &g.quads[k];
             let w = q.map(|i| self.inv_mass[i as usize]);
             let p = q.map(|i| self.x[i as usize]);
             let Some((phi, grads, wsum)) = dihedral(p, w) else {
@@ -648,11 +657,14 @@ impl PbdBody {
         }
     }
 
-    fn project_volumes(&mut self, h: f32) {
+    fn project_volumes(&mut self, h: f32, reverse: bool) {
         let xpbd = self.params.solver == SolverKind::Xpbd;
         let inv_h2 = 1.0 / (h * h);
         let Some(g) = &mut self.volume else { return };
-        for (k, t) in g.tets.iter().enumerate() {
+        let n = g.tets.len();
+        for kk in 0..n {
+            let k = if reverse { n - 1 - kk } else { kk };
+            let t = &g.tets[k];
             let p = t.map(|i| self.x[i as usize]);
             let w = t.map(|i| self.inv_mass[i as usize]);
             let (e1, e2, e3) = (p[1] - p[0], p[2] - p[0], p[3] - p[0]);
