@@ -70,6 +70,16 @@ impl Harness {
 
     /// Add a peer with its own config, joining whoever `join_via` says is host.
     pub fn add_peer_with(&mut self, cfg: SessionConfig, join_via: usize) -> usize {
+        let host = self
+            .peers
+            .get(join_via)
+            .and_then(|p| p.session.host_id())
+            .unwrap_or(Harness::id(0));
+        self.add_peer_contacting(cfg, host)
+    }
+
+    /// Add a peer that sends its join request to `contact` (which may redirect it).
+    pub fn add_peer_contacting(&mut self, cfg: SessionConfig, contact: PeerId) -> usize {
         let i = self.peers.len();
         let id = Harness::id(i);
         let mut link = self.link.clone();
@@ -78,12 +88,7 @@ impl Harness {
         let session = if i == 0 {
             Session::host(id, cfg, self.now)
         } else {
-            let host = self
-                .peers
-                .get(join_via)
-                .and_then(|p| p.session.host_id())
-                .unwrap_or(Harness::id(0));
-            Session::join(id, host, cfg, self.now)
+            Session::join(id, contact, cfg, self.now)
         };
         self.peers.push(HarnessPeer {
             session,

@@ -363,12 +363,77 @@ fn late_join_after_migration_gets_everything() {
 
 #[test]
 fn late_joiner_redirected_from_non_host() {
-    let mut h = room(2, ConditionerConfig::default());
-    let n = h.add_peer_with(common::config(), 1);
-    // peer 1's host is peer 0, so the harness asks peer 0 directly; force a non-host contact
-    let _ = n;
-    h.advance(ms(500));
-    assert!(h.peers[2].session.is_connected());
+    let mut h = room(3, ConditionerConfig::rough(2, 10, 5, 0.05));
+    let ids = spawn_some(&mut h);
+    h.advance(ms(300));
+    // contact peer 2, a client: it redirects to the host
+    let n = h.add_peer_contacting(common::config(), Harness::id(2));
+    h.advance(ms(2000));
+    let s = &h.peers[n].session;
+    assert!(s.is_connected());
+    assert_eq!(s.host_id(), Some(Harness::id(0)));
+    assert_eq!(s.object_ids(), ids);
+    assert!(h.peers[0].session.members().contains_key(&Harness::id(n)));
+}
+
+/// Eight peers, everyone moving something, then the host dies: all converge on the new host.
+#[test]
+fn eight_peers_converge_and_survive_host_death() {
+    let mut h = room(8, ConditionerConfig::rough(31, 30, 10, 0.05));
+    let mut reqs = Vec::new();
+    for i in 1..8 {
+        let now = h.now;
+        let (_, r) = h
+            .session(i)
+            .spawn(
+                now,
+                RIGID,
+                ObjectState::rigid(Vec3::X * i as f32, Quat::IDENTITY),
+            )
+            .unwrap();
+        reqs.push((i, r));
+    }
+    h.advance(ms(2000));
+    let owned: Vec<(usize, softsync_net::NetId)> = reqs
+        .iter()
+        .map(|(i, r)| (*i, spawned_id(&h, *i, *r).unwrap()))
+        .collect();
+    let heir = h.earliest_live_joiner(0).unwrap();
+    let start = t(&h);
+    let mut killed = false;
+    h.run_frames(ms(4000), ms(11), |h| {
+        let s = t(h) - start;
+        if s > 1.0 && !killed {
+            h.kill(0);
+            killed = true;
+        }
+        let now = h.now;
+        let settle = s.min(3.0);
+        for (i, id) in &owned {
+            let p = Vec3::new(
+                *i as f32,
+                (settle * 2.0 + *i as f32).sin() * 0.2,
+                settle * 0.1,
+            );
+            let _ = h
+                .session(*i)
+                .publish_state(now, *id, &ObjectState::rigid(p, Quat::IDENTITY));
+        }
+    });
+    h.advance(ms(3000));
+    let ids: Vec<softsync_net::NetId> = owned.iter().map(|(_, id)| *id).collect();
+    assert_single_owner_everywhere(&h, &ids);
+    for i in 1..8 {
+        assert_eq!(h.peers[i].session.host_id(), Some(Harness::id(heir)));
+        for (owner, id) in &owned {
+            let truth = h.peers[*owner].session.latest_state(*id).unwrap().pos;
+            let got = h.peers[i].session.latest_state(*id).unwrap().pos;
+            assert!(
+                truth.distance(got) < 0.0015,
+                "peer {i} sees {id:?} at {got}, owner {truth}"
+            );
+        }
+    }
 }
 
 #[test]
