@@ -152,7 +152,26 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
     sorted[i.min(sorted.len() - 1)]
 }
 
+fn lan() -> ConditionerConfig {
+    ConditionerConfig {
+        seed: 42,
+        latency: Duration::from_millis(20),
+        jitter: Duration::from_millis(5),
+        ..ConditionerConfig::default()
+    }
+}
+
 fn run(scenario: Scenario, rate_hz: f32, threshold_m: f32, secs: f32) -> Row {
+    run_on(scenario, rate_hz, threshold_m, secs, lan())
+}
+
+fn run_on(
+    scenario: Scenario,
+    rate_hz: f32,
+    threshold_m: f32,
+    secs: f32,
+    link: ConditionerConfig,
+) -> Row {
     let send = SendPolicy {
         rate_hz,
         position_threshold_m: threshold_m,
@@ -173,13 +192,7 @@ fn run(scenario: Scenario, rate_hz: f32, threshold_m: f32, secs: f32) -> Row {
         classes: vec![class],
         ..SessionConfig::default()
     };
-    // two users as in the thesis: peer 1 interacts, peer 0 (host) observes; LAN-like link
-    let link = ConditionerConfig {
-        seed: 42,
-        latency: Duration::from_millis(20),
-        jitter: Duration::from_millis(5),
-        ..ConditionerConfig::default()
-    };
+    // two users as in the thesis: peer 1 interacts, peer 0 (host) observes
     let mut h = Harness::new(2, cfg, link);
     h.advance(Duration::from_millis(1000));
     let rest = rest_offsets();
@@ -206,23 +219,26 @@ fn run(scenario: Scenario, rate_hz: f32, threshold_m: f32, secs: f32) -> Row {
         }
     }
     h.advance(Duration::from_millis(500));
-    let ids: Vec<NetId> = reqs
-        .iter()
-        .map(|r| {
-            h.peers[1]
-                .events
-                .iter()
-                .find_map(|e| match e {
-                    softsync_net::Event::Spawned {
-                        id,
-                        request: Some(x),
-                        ..
-                    } if x == r => Some(*id),
-                    _ => None,
-                })
-                .unwrap()
+    let find = |h: &Harness, r: &u32| {
+        h.peers[1].events.iter().find_map(|e| match e {
+            softsync_net::Event::Spawned {
+                id,
+                request: Some(x),
+                ..
+            } if x == r => Some(*id),
+            _ => None,
         })
-        .collect();
+    };
+    // on lossy links the spawn round trip may need retransmissions
+    for _ in 0..100 {
+        if reqs.iter().all(|r| find(&h, r).is_some()) {
+            break;
+        }
+        h.advance(Duration::from_millis(100));
+    }
+    let ids: Vec<NetId> = reqs.iter().map(|r| find(&h, r).unwrap()).collect();
+    // let the first keyframes arrive before measuring
+    h.advance(Duration::from_millis(500));
     let t0 = h.now;
     let state_at = |t: Instant, i: usize| -> ObjectState {
         let s = (t.as_secs_f64() - t0.as_secs_f64()).max(0.0) as f32;
@@ -544,6 +560,34 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         mig_max
     );
 
+    outln!("\n### Link sensitivity at 20 Hz, threshold 0.005 m (seeded conditioner: bursty loss, 2 % duplication, 3 % reordering)\n");
+    outln!("| scenario | link | bytes/s | p50 mm | p95 mm | max mm | delay ms |");
+    outln!("|---|---|---:|---:|---:|---:|---:|");
+    let mut lcsv = String::from(
+        "scenario,latency_ms,jitter_ms,loss,bytes_per_s,p50_mm,p95_mm,max_mm,interp_delay_ms\n",
+    );
+    for scenario in [Scenario::Avatar, Scenario::SoftBody] {
+        for (lat, jit, loss) in [(20u64, 5u64, 0.0f64), (50, 20, 0.05), (150, 30, 0.20)] {
+            let link = ConditionerConfig::rough(42, lat, jit, loss);
+            let r = run_on(scenario, 20.0, 0.005, secs, link);
+            outln!(
+                "| {} | {lat} ms ± {jit} ms, {:.0} % loss | {:.0} | {:.2} | {:.2} | {:.2} | {:.0} |",
+                r.scenario,
+                loss * 100.0,
+                r.bytes_per_s,
+                r.p50_mm,
+                r.p95_mm,
+                r.max_mm,
+                r.delay_ms
+            );
+            writeln!(
+                lcsv,
+                "{},{lat},{jit},{loss},{:.1},{:.3},{:.3},{:.3},{:.1}",
+                r.scenario, r.bytes_per_s, r.p50_mm, r.p95_mm, r.max_mm, r.delay_ms
+            )?;
+        }
+    }
+    std::fs::write(out_dir.join("link.csv"), &lcsv)?;
     std::fs::write(out_dir.join("tables.md"), &report)?;
     let sb = rows
         .iter()
