@@ -26,6 +26,7 @@ fn main() {
         Some("bunny") => Mesh::load(concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/bunny.obj"))
             .unwrap()
             .fit_size(0.2),
+        Some("box") => Mesh::cuboid(glam::Vec3::new(0.08, 0.05, 0.06), 6),
         _ => Mesh::icosphere(0.1, 3),
     };
     let sub: u32 = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(4);
@@ -47,11 +48,12 @@ fn main() {
         let mut line = String::new();
         for i in 0..steps {
             s.step();
-            if i % 9 == 8 {
+            if i % 27 == 26 {
                 let (rms, _) = s.rest_error_m();
                 let (lo, hi) = softsync_softbody::mesh::bounds(s.model.surface());
                 line += &format!(
-                    "\n  t={:.2} vol={:.3} rest_rms_mm={:.1} ylo={:.3} yhi={:.3} xhi={:.3} sleep={} {}",
+                    "\n  v={:.4} t={:.2} vol={:.3} rest_rms_mm={:.1} ylo={:.3} yhi={:.3} xhi={:.3} sleep={} {}",
+                    s.model.max_speed_mps(),
                     s.time_s(),
                     s.volume_ratio(),
                     rms * 1e3,

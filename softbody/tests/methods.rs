@@ -7,10 +7,8 @@ use glam::Vec3;
 use softsync_softbody::methods::builders::{build_pbd, build_pbd_welded, plain_pbd};
 use softsync_softbody::methods::choice::{choose, Candidate, ObjectNeeds};
 use softsync_softbody::methods::ispc::{ispc_links, punch_holes};
-use softsync_softbody::methods::pbd::{
-    DistanceGroup, PbdBody, PbdParams, SolverKind, SurfaceMap, VolumeGroup,
-};
-use softsync_softbody::methods::scene::{surface_distance_m, ModelScene};
+use softsync_softbody::methods::pbd::SolverKind;
+use softsync_softbody::methods::scene::{cantilever_sag_m, surface_distance_m, ModelScene};
 use softsync_softbody::methods::{MethodKind, MethodSpec};
 use softsync_softbody::rapier3d::prelude::PhysicsWorld;
 use softsync_softbody::scenario::ScenarioKind;
@@ -22,95 +20,8 @@ fn bunny() -> Mesh {
         .fit_size(0.2)
 }
 
-/// A cantilever: a 0.4 × 0.1 × 0.1 m tet beam, clamped at x = 0, sagging under gravity.
-fn beam(solver: SolverKind, substeps: u32, iterations: u32) -> PbdBody {
-    let (nx, ny, nz) = (8usize, 2usize, 2usize);
-    let h = 0.05f32;
-    let id = |i: usize, j: usize, k: usize| (i * (ny + 1) * (nz + 1) + j * (nz + 1) + k) as u32;
-    let mut x = Vec::new();
-    for i in 0..=nx {
-        for j in 0..=ny {
-            for k in 0..=nz {
-                x.push(Vec3::new(i as f32, j as f32, k as f32) * h);
-            }
-        }
-    }
-    let mut tets = Vec::new();
-    for i in 0..nx {
-        for j in 0..ny {
-            for k in 0..nz {
-                let c = [
-                    id(i, j, k),
-                    id(i + 1, j, k),
-                    id(i, j + 1, k),
-                    id(i + 1, j + 1, k),
-                    id(i, j, k + 1),
-                    id(i + 1, j, k + 1),
-                    id(i, j + 1, k + 1),
-                    id(i + 1, j + 1, k + 1),
-                ];
-                // Six tets around the 0–7 diagonal.
-                for t in [
-                    [0, 1, 3, 7],
-                    [0, 1, 7, 5],
-                    [0, 5, 7, 4],
-                    [0, 3, 2, 7],
-                    [0, 2, 6, 7],
-                    [0, 6, 4, 7],
-                ] {
-                    let mut tet = t.map(|q| c[q]);
-                    let p = tet.map(|q| x[q as usize]);
-                    if softsync_softbody::methods::pbd::tet_volume(p) < 0.0 {
-                        tet.swap(2, 3);
-                    }
-                    tets.push(tet);
-                }
-            }
-        }
-    }
-    let volume = 0.4 * 0.1 * 0.1;
-    let mass = vec![1000.0 * volume / x.len() as f32; x.len()];
-    let params = PbdParams {
-        solver,
-        substeps,
-        iterations,
-        damping_per_s: 4.0,
-        sleep_after_s: 0.0,
-        ..Default::default()
-    };
-    let mut b = PbdBody::new(
-        "beam",
-        params,
-        x.clone(),
-        &mass,
-        SurfaceMap::Direct,
-        Vec::new(),
-    );
-    b.distance.push(DistanceGroup::new(
-        "tet_edges",
-        softsync_softbody::methods::tets::tet_edges(&tets),
-        &x,
-        2.0e5,
-        volume,
-        0.3,
-    ));
-    b.volume = Some(VolumeGroup::new(tets, &x, 2.0e5, 0.3));
-    b.pin_box(Vec3::splat(-1.0), Vec3::new(1e-4, 1.0, 1.0));
-    b
-}
-
 fn tip_sag_m(solver: SolverKind, substeps: u32, iterations: u32) -> f32 {
-    let mut world = PhysicsWorld::new();
-    let mut b = beam(solver, substeps, iterations);
-    for _ in 0..240 {
-        b.step(&world, 1.0 / 60.0);
-    }
-    world.step();
-    // The last 3 × 3 nodes are the free end.
-    let n = b.positions().len();
-    let tip: Vec<f32> = b.positions()[n - 9..].iter().map(|p| p.y).collect();
-    let start = 0.05; // mean rest height of the tip nodes
-    start - tip.iter().sum::<f32>() / tip.len() as f32
+    cantilever_sag_m(solver, substeps, iterations, 2.0e5)
 }
 
 /// XPBD's promise holds where the solver converges: at this stiffness (tip sag ≈ 0.3 m) one

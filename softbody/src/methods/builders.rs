@@ -323,10 +323,14 @@ pub fn build_model(
             let welded = mesh.weld(1e-6);
             let (lo, hi) = crate::mesh::bounds(&welded.positions);
             let size = (hi - lo).max_element().max(1e-6);
+            // The material's stiffness relative to the default scales the restoring rate.
+            let stiffness =
+                (20.0 * spec.material.young_pa / Material::default().young_pa).clamp(0.1, 1e4);
             let cfg = SoftBodyConfig {
                 cluster: ClusterMethod::Distance {
                     radius_m: spec.cell_frac * size,
                 },
+                stiffness,
                 space: if anchored {
                     SimulationSpace::Local
                 } else {

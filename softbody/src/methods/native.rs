@@ -3,6 +3,7 @@
 //! embedded in its cells so every method reports the same vertices.
 
 use glam::Vec3;
+use rapier3d::dynamics::{SoftBodyMaterial, SpringCoefficients};
 use rapier3d::prelude::{PhysicsWorld, SoftBodyBuilder, SoftBodyHandle};
 
 use crate::methods::builders::MethodSpec;
@@ -42,9 +43,21 @@ impl NativeModel {
                 ))
             })?;
         let volume = crate::mesh::enclosed_volume(&welded.positions, &welded.triangles).abs();
+        // The material's stiffness relative to the default scales the springs' frequency.
+        let f = (spec.material.young_pa / crate::methods::builders::Material::default().young_pa)
+            .max(1e-4)
+            .sqrt();
+        let d = SoftBodyMaterial::default();
+        let material = SoftBodyMaterial {
+            edge_softness: SpringCoefficients::new(30.0 * f, 1.0),
+            volume_softness: SpringCoefficients::new(30.0 * f, 1.0),
+            young_modulus: d.young_modulus * f * f,
+            ..d
+        };
         let handle = world.insert_soft_body(
             builder
                 .mass(spec.material.density_kg_m3 * volume)
+                .material(material)
                 .can_sleep(true),
         );
         let body = world

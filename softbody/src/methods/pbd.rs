@@ -44,7 +44,8 @@ pub struct PbdParams {
     pub contact_radius_m: f32,
     /// Coulomb friction against colliders.
     pub friction: f32,
-    /// Below this speed for [`Self::sleep_after_s`] (and with nothing moving near) the body sleeps.
+    /// Below this RMS particle speed for [`Self::sleep_after_s`] (and with nothing moving near)
+    /// the body sleeps.
     pub sleep_speed_mps: f32,
     /// Seconds of stillness before sleeping; 0 disables sleeping.
     pub sleep_after_s: f32,
@@ -567,7 +568,15 @@ impl PbdBody {
         self.constraint_solves += self.solves_per_step();
         self.update_surface();
         self.max_speed = self.v.iter().map(|v| v.length()).fold(0.0, f32::max);
-        if self.params.sleep_after_s > 0.0 && self.max_speed < self.params.sleep_speed_mps {
+        // Sleep on the RMS speed: a resting body's contact jitter moves a few particles a little
+        // every substep, which a maximum would never forgive.
+        let rms_speed = (self.v.iter().map(|v| v.length_squared()).sum::<f32>()
+            / self.v.len().max(1) as f32)
+            .sqrt();
+        // A resting body under gravity is re-accelerated by g·dt every step and stopped again
+        // by its contacts: that much residual speed is rest, not motion.
+        let threshold = self.params.sleep_speed_mps + gravity.length() * dt;
+        if self.params.sleep_after_s > 0.0 && rms_speed < threshold {
             self.still_s += dt;
             if self.still_s >= self.params.sleep_after_s && !self.intruder(world, dt) {
                 self.sleeping = true;
