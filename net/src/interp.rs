@@ -19,6 +19,8 @@ pub struct Snapshot {
     pub rot: Quat,
     /// Particle offsets in the center's local frame.
     pub offsets: Vec<Vec3>,
+    /// The owner marked the object at rest (never extrapolate past it).
+    pub rest: bool,
 }
 
 /// Interpolation settings.
@@ -107,9 +109,11 @@ impl SnapshotBuffer {
                 return Some(lerp(a, b, f, t));
             }
         }
-        // past the newest: bounded extrapolation from the last two samples
+        // past the newest: bounded extrapolation from the last two samples, only just past
+        // it (a late datagram); long after it the object has most likely stopped
         let last = self.samples.back()?;
-        if n >= 2 {
+        let behind = t - last.time;
+        if n >= 2 && !last.rest && behind <= cfg.max_extrapolation * 2 {
             if let Some(prev) = self.samples.get(n - 2) {
                 let span = (last.time - prev.time).as_secs_f32();
                 let ahead = (t - last.time).min(cfg.max_extrapolation).as_secs_f32();
@@ -150,5 +154,6 @@ fn lerp(a: &Snapshot, b: &Snapshot, f: f32, t: Instant) -> Snapshot {
         pos: a.pos.lerp(b.pos, f),
         rot: if rot.is_finite() { rot } else { b.rot },
         offsets,
+        rest: b.rest && f >= 1.0,
     }
 }

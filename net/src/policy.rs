@@ -40,7 +40,8 @@ pub struct SendPolicy {
     pub particle_threshold_m: f32,
     /// An object unchanged for this long is at rest: its exact pose is sent (rest sync).
     pub rest_after: Duration,
-    /// Full keyframe at least this often while moving (loss recovery); `None` disables.
+    /// Full keyframe at least this often while moving; `None` (default): deltas are relative
+    /// to acknowledged state, so loss needs no keyframes.
     pub keyframe_interval: Option<Duration>,
     /// A change smaller than the threshold is still sent once the last send is this many
     /// send intervals old (bounds how long slow motion stays wrong); `None`: thesis behaviour.
@@ -58,7 +59,7 @@ impl Default for SendPolicy {
             rotation_threshold_rad: 0.5_f32.to_radians(),
             particle_threshold_m: 0.005,
             rest_after: Duration::from_millis(150),
-            keyframe_interval: Some(Duration::from_secs(3)),
+            keyframe_interval: None,
             stale_after_intervals: Some(4.0),
             piggyback_fraction: 0.4,
         }

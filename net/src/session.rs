@@ -21,7 +21,8 @@ use crate::time::{min_opt, Instant};
 use crate::wire::{
     self, decode_packet, decode_refusal, decode_state_block, encode_refusal, entry_id_bits,
     reliable_len, write_entry_id, write_reliable, ChunkEnc, Control, DenyReason, EntryLayout,
-    PacketHeader, PartBody, PosEnc, Section, SpawnInfo, StateEntry, PROTOCOL_VERSION,
+    PacketHeader, PartBody, PosEnc, Section, SpawnInfo, StateEntry, ENTRY_SEQ_MOD,
+    PROTOCOL_VERSION,
 };
 
 /// An object's state as the application sees it: center transform and world-space particles.
@@ -151,8 +152,12 @@ enum PartQ {
 
 #[derive(Clone, Debug)]
 struct SendPart {
-    last: PartQ,
+    /// Last entry sequence used.
     seq: u8,
+    /// Newest acknowledged entry and the state the peer holds after it.
+    acked: Option<(u8, PartQ)>,
+    /// Sent, not yet acknowledged: (entry seq, state after it, send time).
+    unacked: VecDeque<(u8, PartQ, Instant)>,
     last_key_at: Instant,
     /// When each field was last sent (transform: position, rotation; chunk: per particle).
     sent_at: Vec<Instant>,
@@ -160,17 +165,14 @@ struct SendPart {
 
 #[derive(Clone, Debug)]
 struct RecvPart {
-    seq: u8,
-    valid: bool,
-    base: PartQ,
+    /// State after each recently received entry, by sequence (delta bases).
+    ring: Vec<Option<(u8, PartQ)>>,
+    /// Sequence of the entry whose state is shown.
+    latest: Option<u8>,
 }
 
-#[derive(Clone, Copy, Debug)]
-struct RestRepeat {
-    at: Instant,
-    gap: Duration,
-    left: u32,
-}
+/// (object, part, entry sequence) of an entry carried by a datagram.
+type EntryRef = (NetId, u32, u8);
 
 #[derive(Clone, Debug, Default)]
 struct LinkClock {
@@ -199,7 +201,12 @@ struct Link {
     pong_due: Option<u32>,
     ping_due: bool,
     clock: LinkClock,
-    rest_repeat: BTreeMap<NetId, RestRepeat>,
+    /// Datagrams that carried state entries: (datagram seq, [(object, part, entry seq)]).
+    inflight: VecDeque<(u8, Vec<EntryRef>)>,
+    /// State datagrams received from the peer: newest seq and the 32 before it.
+    state_rx: Option<(u8, u32)>,
+    /// We owe the peer a state ack.
+    state_ack_pending: bool,
     srtt: Option<Duration>,
 }
 
@@ -217,10 +224,58 @@ struct Object {
     source: Option<PeerId>,
 }
 
-/// Seq `a` is newer than `b` in 4-bit wrapping order.
-fn seq4_newer(a: u8, b: u8) -> bool {
-    let d = a.wrapping_sub(b) & 0xF;
-    (1..8).contains(&d)
+/// Book-keep one outgoing entry of a part: a new sequence number, the state the peer will
+/// hold once it applies it, per-field send times. Returns `None` (send nothing) when the
+/// same state is already in flight and its acknowledgement is not overdue.
+#[allow(clippy::too_many_arguments)]
+fn emit(
+    link: &mut Link,
+    key: (NetId, u32),
+    after: PartQ,
+    is_key: bool,
+    force: bool,
+    base: u8,
+    now: Instant,
+    ack_wait: Duration,
+    fields: &[usize],
+    field_count: usize,
+) -> Option<u8> {
+    let sp = link.send.entry(key).or_insert_with(|| SendPart {
+        seq: ENTRY_SEQ_MOD - 1,
+        acked: None,
+        unacked: VecDeque::new(),
+        last_key_at: now,
+        sent_at: vec![now; field_count],
+    });
+    if !force {
+        if let Some((_, st, at)) = sp.unacked.back() {
+            if *st == after && now < *at + ack_wait {
+                return None;
+            }
+        }
+    }
+    sp.seq = (sp.seq + 1) % ENTRY_SEQ_MOD;
+    let _ = base;
+    sp.unacked.push_back((sp.seq, after, now));
+    while sp.unacked.len() > usize::from(ENTRY_SEQ_MOD) - 8 {
+        sp.unacked.pop_front();
+    }
+    if is_key {
+        sp.last_key_at = now;
+    }
+    sp.sent_at.resize(field_count, now);
+    for f in fields {
+        if let Some(t) = sp.sent_at.get_mut(*f) {
+            *t = now;
+        }
+    }
+    Some(sp.seq)
+}
+
+/// Seq `a` is newer than `b` in wrapping entry-sequence order.
+fn seq_newer(a: u8, b: u8) -> bool {
+    let d = a.wrapping_sub(b) % ENTRY_SEQ_MOD;
+    (1..ENTRY_SEQ_MOD / 2).contains(&d)
 }
 
 /// One peer's view of the room.
@@ -640,12 +695,7 @@ impl Session {
             o.rot = rot;
             o.particles = particles;
             o.last_change = now;
-            if o.rest {
-                o.rest = false;
-                for l in self.links.values_mut() {
-                    l.rest_repeat.remove(&id);
-                }
-            }
+            o.rest = false;
         }
         o.published = Some(state.clone());
         o.published_at = now;
@@ -676,9 +726,6 @@ impl Session {
         }
         for (p, l) in &self.links {
             t = min_opt(t, l.reliable.next_deadline());
-            for r in l.rest_repeat.values() {
-                t = min_opt(t, Some(r.at));
-            }
             if self.members.contains_key(p) && *p != self.local {
                 if let Some(h) = l.last_heard {
                     t = min_opt(t, Some(h + self.cfg.peer_timeout));
@@ -712,6 +759,7 @@ impl Session {
             || link.ping_due
             || !link.keyreq_out.is_empty()
             || !link.pending.is_empty()
+            || link.state_ack_pending
             || link.reliable.has_due(now);
         if !has_work {
             return None;
@@ -727,6 +775,14 @@ impl Session {
             out.push(wire::tag::ACK);
             out.extend_from_slice(&link.reliable.next_expected().to_le_bytes());
             link.reliable.ack_pending = false;
+        }
+        if link.state_ack_pending {
+            if let Some((latest, mask)) = link.state_rx {
+                out.push(wire::tag::STATE_ACK);
+                out.push(latest);
+                out.extend_from_slice(&mask.to_le_bytes());
+            }
+            link.state_ack_pending = false;
         }
         if let Some(t) = link.pong_due.take() {
             out.push(wire::tag::PONG);
@@ -770,7 +826,8 @@ impl Session {
             let mut w = BitWriter::new();
             let mut prev: Option<NetId> = None;
             let mut taken = 0usize;
-            let mut oversize = Vec::new();
+            let mut oversize = 0u64;
+            let mut carried: Vec<EntryRef> = Vec::new();
             let mut class_bits: BTreeMap<u16, usize> = BTreeMap::new();
             for (i, e) in link.pending.iter().enumerate() {
                 let Some(o) = self.objects.get(&e.id) else {
@@ -790,7 +847,7 @@ impl Session {
                 let bits = entry_id_bits(prev, e.id) + body.bit_len();
                 if w.bit_len() + bits > budget_bits {
                     if w.bit_len() == 0 {
-                        oversize.push(i);
+                        oversize += 1;
                         taken = i + 1;
                         continue;
                     }
@@ -799,11 +856,18 @@ impl Session {
                 write_entry_id(&mut w, prev, e.id);
                 w.append(&body);
                 *class_bits.entry(o.info.class.0).or_default() += bits;
+                carried.push((e.id, e.part(), e.seq));
                 prev = Some(e.id);
                 taken = i + 1;
             }
-            let count = taken - oversize.len();
-            self.stats.oversize_dropped += oversize.len() as u64;
+            let count = carried.len();
+            self.stats.oversize_dropped += oversize;
+            if !carried.is_empty() {
+                link.inflight.push_back((link.out_seq, carried));
+                while link.inflight.len() > 64 {
+                    link.inflight.pop_front();
+                }
+            }
             link.pending.drain(..taken);
             if link.pending.is_empty() {
                 if let Some(ts) = link.pending_sample.take() {
@@ -896,30 +960,6 @@ impl Session {
                     }
                 }
                 self.owner_tick(now, c as u16);
-            }
-        }
-        // rest sync repeats
-        let mut due = Vec::new();
-        for (p, l) in &self.links {
-            for (id, r) in &l.rest_repeat {
-                if r.at <= now {
-                    due.push((*p, *id));
-                }
-            }
-        }
-        for (p, id) in due {
-            let entries = self.build_entries(now, p, id, false, true);
-            if let Some(l) = self.links.get_mut(&p) {
-                l.pending.extend(entries);
-                if let Some(r) = l.rest_repeat.get_mut(&id) {
-                    if r.left <= 1 {
-                        l.rest_repeat.remove(&id);
-                    } else {
-                        r.left -= 1;
-                        r.at = now + r.gap;
-                        r.gap *= 2;
-                    }
-                }
             }
         }
     }
@@ -1078,58 +1118,56 @@ impl Session {
             return;
         };
         let rest_after = class.send.rest_after;
-        let interval = class.send.interval();
-        let owned: Vec<NetId> = self
+        let of_class: Vec<(NetId, PeerId)> = self
             .objects
             .values()
-            .filter(|o| o.info.class.0 == c && o.info.owner == self.local)
-            .map(|o| o.info.id)
+            .filter(|o| o.info.class.0 == c)
+            .map(|o| (o.info.id, o.info.owner))
             .collect();
-        let targets: Vec<PeerId> = match self.role {
-            Role::Host => self
-                .members
-                .keys()
-                .copied()
-                .filter(|p| *p != self.local)
-                .collect(),
-            Role::Client => self.host.into_iter().collect(),
-            _ => Vec::new(),
-        };
-        for id in owned {
-            let mut became_rest = false;
-            if let Some(o) = self.objects.get_mut(&id) {
-                if !o.rest && now.saturating_since(o.last_change) >= rest_after {
-                    o.rest = true;
-                    became_rest = true;
+        let members: Vec<PeerId> = self
+            .members
+            .keys()
+            .copied()
+            .filter(|p| *p != self.local)
+            .collect();
+        for (id, owner) in of_class {
+            let mine = owner == self.local;
+            let targets: Vec<PeerId> = match (self.role, mine) {
+                (Role::Host, true) => members.clone(),
+                // relay tick: repeat what a client's peers have not acknowledged yet
+                (Role::Host, false) => members.iter().copied().filter(|p| *p != owner).collect(),
+                (Role::Client, true) => self.host.into_iter().collect(),
+                _ => Vec::new(),
+            };
+            if mine {
+                if let Some(o) = self.objects.get_mut(&id) {
+                    // rest sync: an object unchanged for `rest_after` drops its thresholds,
+                    // so its exact pose goes out (and is repeated until acknowledged)
+                    if !o.rest && now.saturating_since(o.last_change) >= rest_after {
+                        o.rest = true;
+                    }
                 }
             }
             let sampled = self.objects.get(&id).map_or(now, |o| o.published_at);
             for &p in &targets {
-                let entries = self.build_entries(now, p, id, true, false);
+                let entries = self.build_entries(now, p, id, mine, false);
                 if let Some(l) = self.links.get_mut(&p) {
-                    if !entries.is_empty() {
+                    if mine && !entries.is_empty() {
                         l.pending_sample =
                             Some(l.pending_sample.map_or(sampled, |t| t.max(sampled)));
                     }
                     l.pending.extend(entries);
-                    if became_rest {
-                        l.rest_repeat.insert(
-                            id,
-                            RestRepeat {
-                                at: now + interval * 2,
-                                gap: interval * 4,
-                                left: 4,
-                            },
-                        );
-                    }
                 }
             }
         }
     }
 
     /// Entries that bring link `to`'s view of `id` up to date.
-    /// `owner_thresholds`: apply the class's send thresholds (we own it and it moves);
-    /// otherwise send any grid change (relay, rest sync).
+    ///
+    /// Deltas are relative to the newest state the peer acknowledged (so a lost datagram
+    /// costs nothing but itself); everything differing from that base by more than the
+    /// threshold goes out until acknowledged. `owner_thresholds`: apply the class's send
+    /// thresholds (we own it and it moves); otherwise send any grid change (relay, rest sync).
     fn build_entries(
         &mut self,
         now: Instant,
@@ -1151,6 +1189,9 @@ impl Session {
         if link.spawn_pending.contains_key(&id) {
             return out; // the peer does not know the object yet
         }
+        let srtt = link.srtt.unwrap_or(Duration::from_millis(200));
+        // an unacknowledged entry is repeated only once its ack is overdue
+        let ack_wait = srtt * 3 / 2 + Duration::from_millis(30);
         let use_thr = owner_thresholds && !o.rest;
         let interval = class.send.interval();
         let max_stale = class
@@ -1171,104 +1212,110 @@ impl Session {
         } else {
             (0.0, 0.0, 0.0)
         };
-        let key_due = |sp: &SendPart| {
-            !o.rest
-                && class
-                    .send
-                    .keyframe_interval
-                    .is_some_and(|k| now >= sp.last_key_at + k)
-        };
+        let key_interval = class.send.keyframe_interval;
+        let rest = o.rest;
         let tag = o.info.epoch.tag();
         let bits = class.rot_bits();
+        // the newest acknowledged state, unless too old for the peer's history ring
+        let base_of = |sp: Option<&SendPart>| -> Option<(u8, PartQ)> {
+            let sp = sp?;
+            let (seq, st) = sp.acked.as_ref()?;
+            let age = sp.seq.wrapping_sub(*seq) % ENTRY_SEQ_MOD;
+            (age < ENTRY_SEQ_MOD - 8).then(|| (*seq, st.clone()))
+        };
+        let key_due = |sp: Option<&SendPart>| {
+            !rest && key_interval.is_some_and(|k| sp.is_some_and(|sp| now >= sp.last_key_at + k))
+        };
         // particle chunks (thesis 5.4.2), skipped in center-only mode (5.4.1)
         if class.soft_body_mode == SoftBodyMode::Particles && !o.particles.is_empty() {
             let per = class.chunk_len();
             for (ci, chunk) in o.particles.chunks(per).enumerate() {
                 let part = ci as u32 + 1;
                 let sp = link.send.get(&(id, part));
-                let key = force_key || sp.is_none_or(key_due);
-                let values = if key {
-                    Some(ChunkEnc::Abs(chunk.to_vec()))
-                } else if let Some(SendPart {
-                    last: PartQ::Chunk(prev),
-                    sent_at,
-                    ..
-                }) = sp
-                {
-                    let dist: Vec<f32> = chunk
-                        .iter()
-                        .zip(prev.iter())
-                        .map(|(c, p)| VecQuantizer::step_distance(*c, *p))
-                        .collect();
-                    let over = |i: usize| {
-                        dist.get(i).is_some_and(|d| *d > part_thr)
-                            || sent_at.get(i).is_some_and(|t| stale(*t))
-                    };
-                    let triggered =
-                        (0..chunk.len()).any(|i| chunk.get(i) != prev.get(i) && over(i));
-                    // when the chunk goes out anyway, particles past a fraction of the
-                    // threshold ride along (fewer particles left stale at up to the threshold)
-                    let list: Vec<(u32, [i32; 3])> = chunk
-                        .iter()
-                        .zip(prev.iter())
-                        .enumerate()
-                        .filter(|(i, (c, p))| {
-                            c != p
-                                && (over(*i)
-                                    || (triggered
-                                        && dist.get(*i).is_some_and(|d| *d > part_thr * piggy)))
-                        })
-                        .map(|(i, (c, p))| (i as u32, [0, 1, 2].map(|k| c[k] as i32 - p[k] as i32)))
-                        .collect();
-                    (!list.is_empty()).then_some(ChunkEnc::Delta(list))
-                } else {
-                    None
-                };
-                let Some(values) = values else { continue };
-                let prev = link.send.get(&(id, part));
-                let seq = prev.map_or(0, |sp| sp.seq.wrapping_add(1) & 0xF);
-                let mut last = match prev.map(|sp| &sp.last) {
-                    Some(PartQ::Chunk(v)) if v.len() == chunk.len() => v.clone(),
-                    _ => chunk.to_vec(),
-                };
-                let mut sent_at = prev.map_or(vec![now; chunk.len()], |sp| sp.sent_at.clone());
-                sent_at.resize(chunk.len(), now);
-                match &values {
-                    ChunkEnc::Abs(_) => {
-                        last = chunk.to_vec();
-                        sent_at.iter_mut().for_each(|t| *t = now);
-                    }
-                    ChunkEnc::Delta(list) => {
-                        for (i, _) in list {
-                            let i = *i as usize;
-                            if let (Some(dst), Some(src)) = (last.get_mut(i), chunk.get(i)) {
-                                *dst = *src;
+                let base = base_of(sp);
+                let key = force_key || base.is_none() || key_due(sp);
+                let planned = match (&base, key) {
+                    (Some((b, PartQ::Chunk(bv))), false) if bv.len() == chunk.len() => {
+                        let sent_at = sp.map(|s| s.sent_at.as_slice()).unwrap_or_default();
+                        let dist: Vec<f32> = chunk
+                            .iter()
+                            .zip(bv.iter())
+                            .map(|(c, p)| VecQuantizer::step_distance(*c, *p))
+                            .collect();
+                        let over = |i: usize| {
+                            dist.get(i).is_some_and(|d| *d > part_thr)
+                                || sent_at.get(i).is_some_and(|t| stale(*t))
+                        };
+                        let differs = |i: usize| chunk.get(i) != bv.get(i);
+                        let triggered = (0..chunk.len()).any(|i| differs(i) && over(i));
+                        // when the chunk goes out anyway, particles past a fraction of the
+                        // threshold ride along (fewer particles left stale at the threshold)
+                        let list: Vec<(u32, [i32; 3])> = (0..chunk.len())
+                            .filter(|&i| {
+                                differs(i)
+                                    && (over(i)
+                                        || (triggered
+                                            && dist.get(i).is_some_and(|d| *d > part_thr * piggy)))
+                            })
+                            .filter_map(|i| {
+                                let (c, p) = (chunk.get(i)?, bv.get(i)?);
+                                Some((i as u32, [0, 1, 2].map(|k| c[k] as i32 - p[k] as i32)))
+                            })
+                            .collect();
+                        if list.is_empty() {
+                            None
+                        } else {
+                            let mut after = bv.clone();
+                            for (i, _) in &list {
+                                if let (Some(d), Some(c)) =
+                                    (after.get_mut(*i as usize), chunk.get(*i as usize))
+                                {
+                                    *d = *c;
+                                }
                             }
-                            if let Some(t) = sent_at.get_mut(i) {
-                                *t = now;
-                            }
+                            let fields: Vec<usize> =
+                                list.iter().map(|(i, _)| *i as usize).collect();
+                            Some((
+                                false,
+                                *b,
+                                PartQ::Chunk(after),
+                                ChunkEnc::Delta(list),
+                                fields,
+                            ))
                         }
                     }
-                }
-                let last_key_at = match prev {
-                    Some(sp) if !key => sp.last_key_at,
-                    _ => now,
+                    _ => Some((
+                        true,
+                        0,
+                        PartQ::Chunk(chunk.to_vec()),
+                        ChunkEnc::Abs(chunk.to_vec()),
+                        (0..chunk.len()).collect(),
+                    )),
                 };
-                link.send.insert(
+                let Some((key, base_seq, after, values, fields)) = planned else {
+                    continue;
+                };
+                let Some(seq) = emit(
+                    link,
                     (id, part),
-                    SendPart {
-                        last: PartQ::Chunk(last),
-                        seq,
-                        last_key_at,
-                        sent_at,
-                    },
-                );
+                    after,
+                    key,
+                    force_key,
+                    base_seq,
+                    now,
+                    ack_wait,
+                    &fields,
+                    chunk.len(),
+                ) else {
+                    continue;
+                };
                 out.push(StateEntry {
                     id,
                     epoch_tag: tag,
                     seq,
                     key,
-                    rest: o.rest,
+                    base: base_seq,
+                    rest,
                     body: PartBody::Chunk {
                         chunk: ci as u32,
                         values,
@@ -1284,69 +1331,69 @@ impl Session {
         } else {
             (pos_thr, rot_thr)
         };
-        {
-            let sp = link.send.get(&(id, 0));
-            let key = force_key || sp.is_none_or(key_due);
-            let (body, sent_pos, sent_rot) = if key {
-                let body = PartBody::Transform {
-                    pos: Some(PosEnc::Abs(o.pos)),
-                    rot: Some(o.rot),
-                };
-                (Some(body), true, true)
-            } else if let Some(SendPart {
-                last: PartQ::Transform { pos, rot },
-                sent_at,
-                ..
-            }) = sp
-            {
+        let sp = link.send.get(&(id, 0));
+        let base = base_of(sp);
+        let key = force_key || base.is_none() || key_due(sp);
+        let planned = match (&base, key) {
+            (Some((b, PartQ::Transform { pos, rot })), false) => {
+                let sent_at = sp.map(|s| s.sent_at.as_slice()).unwrap_or_default();
                 let dpos = VecQuantizer::step_distance(*pos, o.pos);
                 let ang = angle_between(dequantize_quat(*rot, bits), dequantize_quat(o.rot, bits));
-                let pos_at = sent_at.first().copied().unwrap_or(now);
-                let rot_at = sent_at.get(1).copied().unwrap_or(now);
-                let pos_over = dpos > pos_thr || stale(pos_at);
-                let rot_over = ang > rot_thr || stale(rot_at);
+                let pos_over = dpos > pos_thr || sent_at.first().is_some_and(|t| stale(*t));
+                let rot_over = ang > rot_thr || sent_at.get(1).is_some_and(|t| stale(*t));
                 // once an entry is paid for, smaller changes of the other field ride along
                 let send_pos = *pos != o.pos && (pos_over || (rot_over && dpos > pos_thr * piggy));
                 let send_rot = *rot != o.rot && (rot_over || (pos_over && ang > rot_thr * piggy));
-                let body = (send_pos || send_rot).then(|| PartBody::Transform {
-                    pos: send_pos
-                        .then(|| PosEnc::Delta([0, 1, 2].map(|i| o.pos[i] as i32 - pos[i] as i32))),
-                    rot: send_rot.then_some(o.rot),
-                });
-                (body, send_pos, send_rot)
-            } else {
-                (None, false, false)
-            };
-            if let Some(body) = body {
-                let prev = link.send.get(&(id, 0));
-                let seq = prev.map_or(0, |sp| sp.seq.wrapping_add(1) & 0xF);
-                let (mut lp, mut lr) = match prev.map(|sp| &sp.last) {
-                    Some(PartQ::Transform { pos, rot }) => (*pos, *rot),
-                    _ => (o.pos, o.rot),
-                };
-                let mut sent_at = prev.map_or(vec![now; 2], |sp| sp.sent_at.clone());
-                sent_at.resize(2, now);
-                if sent_pos {
-                    lp = o.pos;
-                    sent_at[0] = now;
+                if send_pos || send_rot {
+                    let after = PartQ::Transform {
+                        pos: if send_pos { o.pos } else { *pos },
+                        rot: if send_rot { o.rot } else { *rot },
+                    };
+                    let body = PartBody::Transform {
+                        pos: send_pos.then(|| {
+                            PosEnc::Delta([0, 1, 2].map(|i| o.pos[i] as i32 - pos[i] as i32))
+                        }),
+                        rot: send_rot.then_some(o.rot),
+                    };
+                    let mut fields = Vec::new();
+                    if send_pos {
+                        fields.push(0);
+                    }
+                    if send_rot {
+                        fields.push(1);
+                    }
+                    Some((false, *b, after, body, fields))
+                } else {
+                    None
                 }
-                if sent_rot {
-                    lr = o.rot;
-                    sent_at[1] = now;
-                }
-                let last_key_at = match prev {
-                    Some(sp) if !key => sp.last_key_at,
-                    _ => now,
-                };
-                link.send.insert(
-                    (id, 0),
-                    SendPart {
-                        last: PartQ::Transform { pos: lp, rot: lr },
-                        seq,
-                        last_key_at,
-                        sent_at,
-                    },
-                );
+            }
+            _ => Some((
+                true,
+                0,
+                PartQ::Transform {
+                    pos: o.pos,
+                    rot: o.rot,
+                },
+                PartBody::Transform {
+                    pos: Some(PosEnc::Abs(o.pos)),
+                    rot: Some(o.rot),
+                },
+                vec![0, 1],
+            )),
+        };
+        if let Some((key, base_seq, after, body, fields)) = planned {
+            if let Some(seq) = emit(
+                link,
+                (id, 0),
+                after,
+                key,
+                force_key,
+                base_seq,
+                now,
+                ack_wait,
+                &fields,
+                2,
+            ) {
                 out.insert(
                     0,
                     StateEntry {
@@ -1354,7 +1401,8 @@ impl Session {
                         epoch_tag: tag,
                         seq,
                         key,
-                        rest: o.rest,
+                        base: base_seq,
+                        rest,
                         body,
                     },
                 );
@@ -1514,6 +1562,7 @@ impl Session {
                     }
                 }
                 Section::State { count, bits } => states.push((count, bits)),
+                Section::StateAck { latest, mask } => self.on_state_ack(from, latest, mask),
             }
         }
         for c in controls {
@@ -1523,6 +1572,8 @@ impl Session {
             return; // state only from members
         }
         let mut touched = BTreeSet::new();
+        let carried_state = !states.is_empty();
+        let mut complete = true;
         for (count, bits) in states {
             let cfg = &self.cfg;
             let objects = &self.objects;
@@ -1534,9 +1585,13 @@ impl Session {
                 })
             });
             let entries = match parsed {
-                Ok((e, _)) => e,
+                Ok((e, all)) => {
+                    complete &= all;
+                    e
+                }
                 Err(_) => {
                     self.stats.decode_errors += 1;
+                    complete = false;
                     continue;
                 }
             };
@@ -1560,8 +1615,72 @@ impl Session {
                 self.apply_entry(now, from, e, &mut touched);
             }
         }
+        // acknowledge the datagram (its entries become delta bases at the sender) unless
+        // we could not read all of it
+        if carried_state && complete {
+            if let Some(l) = self.links.get_mut(&from) {
+                let s = header.seq;
+                l.state_rx = Some(match l.state_rx {
+                    None => (s, 0),
+                    Some((latest, mask)) => {
+                        let d = s.wrapping_sub(latest);
+                        if d == 0 {
+                            (latest, mask)
+                        } else if d < 128 {
+                            let shifted = if d >= 32 {
+                                0
+                            } else {
+                                (mask << d) | (1 << (d - 1))
+                            };
+                            let shifted = if d == 32 { 1 << 31 } else { shifted };
+                            (s, shifted)
+                        } else {
+                            let back = latest.wrapping_sub(s);
+                            let bit = if (1..=32).contains(&back) {
+                                1u32 << (back - 1)
+                            } else {
+                                0
+                            };
+                            (latest, mask | bit)
+                        }
+                    }
+                });
+                l.state_ack_pending = true;
+            }
+        }
         for id in touched {
             self.after_update(now, from, id, sample_time);
+        }
+    }
+
+    fn on_state_ack(&mut self, from: PeerId, latest: u8, mask: u32) {
+        let Some(l) = self.links.get_mut(&from) else {
+            return;
+        };
+        let acked = |s: u8| {
+            let back = latest.wrapping_sub(s);
+            back == 0 || ((1..=32).contains(&back) && mask & (1 << (back - 1)) != 0)
+        };
+        let mut done = Vec::new();
+        l.inflight.retain(|(ds, entries)| {
+            if acked(*ds) {
+                done.extend(entries.iter().copied());
+                false
+            } else {
+                true
+            }
+        });
+        for (id, part, eseq) in done {
+            let Some(sp) = l.send.get_mut(&(id, part)) else {
+                continue;
+            };
+            let Some((q, st, _)) = sp.unacked.iter().find(|(q, _, _)| *q == eseq).cloned() else {
+                continue;
+            };
+            if sp.acked.as_ref().is_none_or(|(a, _)| seq_newer(q, *a)) {
+                sp.acked = Some((q, st));
+                sp.unacked.retain(|(x, _, _)| seq_newer(*x, q));
+            }
         }
     }
 
@@ -1600,14 +1719,12 @@ impl Session {
         let Some(link) = self.links.get_mut(&from) else {
             return false;
         };
-        let rp = link.recv.get(&(e.id, part));
-        let in_chain = rp.is_some_and(|r| r.valid);
-        if let Some(r) = rp {
-            if r.valid && !seq4_newer(e.seq, r.seq) {
-                return false; // duplicate or reordered-old
-            }
-        }
-        let new_base = if e.key {
+        let rp = link.recv.entry((e.id, part)).or_insert_with(|| RecvPart {
+            ring: vec![None; usize::from(ENTRY_SEQ_MOD)],
+            latest: None,
+        });
+        let slot = |s: u8| usize::from(s % ENTRY_SEQ_MOD);
+        let state = if e.key {
             match &e.body {
                 PartBody::Transform {
                     pos: Some(PosEnc::Abs(p)),
@@ -1622,8 +1739,13 @@ impl Session {
                 } => Some(PartQ::Chunk(v.clone())),
                 _ => None,
             }
-        } else if in_chain && rp.is_some_and(|r| e.seq == (r.seq.wrapping_add(1) & 0xF)) {
-            let base = rp.map(|r| r.base.clone());
+        } else {
+            let base = rp
+                .ring
+                .get(slot(e.base))
+                .and_then(|x| x.as_ref())
+                .filter(|(s, _)| *s == e.base)
+                .map(|(_, st)| st.clone());
             match (&e.body, base) {
                 (PartBody::Transform { pos, rot }, Some(PartQ::Transform { pos: bp, rot: br })) => {
                     let np = match pos {
@@ -1653,44 +1775,41 @@ impl Session {
                     }
                     Some(PartQ::Chunk(v))
                 }
+                (_, None) => {
+                    // the base is unknown (history reset): ask for a keyframe, rate-limited
+                    self.stats.chain_breaks += 1;
+                    let limit = link
+                        .srtt
+                        .unwrap_or(Duration::from_millis(100))
+                        .max(Duration::from_millis(50));
+                    if link
+                        .keyreq_sent
+                        .get(&e.id)
+                        .is_none_or(|t| now >= *t + limit)
+                    {
+                        link.keyreq_sent.insert(e.id, now);
+                        link.keyreq_out.insert(e.id);
+                    }
+                    return false;
+                }
                 _ => None,
             }
-        } else {
-            // a delta without its base: ask for a keyframe (rate-limited)
-            self.stats.chain_breaks += 1;
-            if let Some(r) = link.recv.get_mut(&(e.id, part)) {
-                r.valid = false;
-            }
-            let limit = link
-                .srtt
-                .unwrap_or(Duration::from_millis(100))
-                .max(Duration::from_millis(50));
-            if link
-                .keyreq_sent
-                .get(&e.id)
-                .is_none_or(|t| now >= *t + limit)
-            {
-                link.keyreq_sent.insert(e.id, now);
-                link.keyreq_out.insert(e.id);
-            }
+        };
+        let Some(state) = state else {
             return false;
         };
-        let Some(base) = new_base else {
-            return false;
-        };
-        link.recv.insert(
-            (e.id, part),
-            RecvPart {
-                seq: e.seq,
-                valid: true,
-                base: base.clone(),
-            },
-        );
+        if let Some(x) = rp.ring.get_mut(slot(e.seq)) {
+            *x = Some((e.seq, state.clone()));
+        }
+        if rp.latest.is_some_and(|l| !seq_newer(e.seq, l)) {
+            return false; // older than what we show (reordered); kept only as a base
+        }
+        rp.latest = Some(e.seq);
         let chunk_len = class.chunk_len();
         let Some(o) = self.objects.get_mut(&e.id) else {
             return false;
         };
-        match base {
+        match state {
             PartQ::Transform { pos, rot } => {
                 o.pos = pos;
                 o.rot = rot;
@@ -1728,7 +1847,6 @@ impl Session {
         let pq = class.particle_quantizer();
         let offsets = o.particles.iter().map(|q| pq.dequantize(*q)).collect();
         let rest = o.rest;
-        let interval = class.send.interval();
         if let Some(o) = self.objects.get_mut(&id) {
             o.buffer.push(
                 Snapshot {
@@ -1736,6 +1854,7 @@ impl Session {
                     pos,
                     rot,
                     offsets,
+                    rest,
                 },
                 &interp,
             );
@@ -1755,18 +1874,6 @@ impl Session {
                 }
                 if let Some(l) = self.links.get_mut(&p) {
                     l.pending.extend(entries);
-                    if rest && !l.rest_repeat.contains_key(&id) {
-                        l.rest_repeat.insert(
-                            id,
-                            RestRepeat {
-                                at: now + interval * 2,
-                                gap: interval * 4,
-                                left: 4,
-                            },
-                        );
-                    } else if !rest {
-                        l.rest_repeat.remove(&id);
-                    }
                 }
             }
         }
@@ -1869,7 +1976,8 @@ impl Session {
                     l.send.clear();
                     l.recv.clear();
                     l.pending.clear();
-                    l.rest_repeat.clear();
+                    l.inflight.clear();
+                    l.state_rx = None;
                     l.spawn_pending.clear();
                 }
                 // tell the new host what we own, so an in-flight handoff is not lost
@@ -2084,9 +2192,11 @@ impl Session {
         if owner != local {
             o.published = None;
         }
-        if was_mine && owner != local {
+        if changed && (was_mine || owner == local) && self.role != Role::Host {
+            // a client's chains toward the host restart with keyframes (the host dropped its
+            // side of them when it granted)
             for l in self.links.values_mut() {
-                l.rest_repeat.remove(&id);
+                l.send.retain(|(o, _), _| *o != id);
             }
         }
         if changed {
@@ -2196,7 +2306,6 @@ impl Session {
             for l in self.links.values_mut() {
                 l.spawn_pending.remove(&id);
                 l.pending.retain(|e| e.id != id);
-                l.rest_repeat.remove(&id);
                 l.send.retain(|(o, _), _| *o != id);
                 l.recv.retain(|(o, _), _| *o != id);
             }
@@ -2208,7 +2317,6 @@ impl Session {
         self.members.remove(&p);
         if let Some(l) = self.links.get_mut(&p) {
             l.pending.clear();
-            l.rest_repeat.clear();
         }
         self.links.remove(&p);
         self.events.push_back(Event::PeerLeft(p));

@@ -36,7 +36,14 @@ pub mod tag {
     pub const KEYFRAME_REQUEST: u8 = 5;
     /// Bit-packed object state.
     pub const STATE: u8 = 6;
+    /// Which datagrams carrying state arrived (newest sequence + 32-bit history).
+    pub const STATE_ACK: u8 = 7;
 }
+
+/// Bits of the per-(link, object, part) entry sequence number.
+pub const ENTRY_SEQ_BITS: u32 = 5;
+/// Entry sequence numbers wrap at this value.
+pub const ENTRY_SEQ_MOD: u8 = 1 << ENTRY_SEQ_BITS;
 
 /// Fixed datagram header.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -337,10 +344,12 @@ pub struct StateEntry {
     pub id: NetId,
     /// Low bits of the authority epoch.
     pub epoch_tag: u8,
-    /// 4-bit per-(link, object, part) sequence for the delta chain.
+    /// Per-(link, object, part) entry sequence ([`ENTRY_SEQ_BITS`] bits).
     pub seq: u8,
-    /// Keyframe: everything absolute, starts a chain.
+    /// Keyframe: everything absolute.
     pub key: bool,
+    /// Delta entries: the acknowledged entry this one is relative to.
+    pub base: u8,
     /// The object is at rest (rest sync).
     pub rest: bool,
     /// Payload.
@@ -381,9 +390,12 @@ impl StateEntry {
     pub fn encode_body(&self, layout: &EntryLayout, w: &mut BitWriter) {
         w.write(u32::from(self.epoch_tag & 0xF), 4);
         w.write_exp_golomb(self.part());
-        w.write(u32::from(self.seq & 0xF), 4);
+        w.write(u32::from(self.seq % ENTRY_SEQ_MOD), ENTRY_SEQ_BITS);
         w.write_bool(self.key);
         w.write_bool(self.rest);
+        if !self.key {
+            w.write(u32::from(self.base % ENTRY_SEQ_MOD), ENTRY_SEQ_BITS);
+        }
         let pq = layout.class.position_quantizer();
         let bits = layout.class.rot_bits();
         match &self.body {
@@ -466,9 +478,14 @@ impl StateEntry {
     ) -> Result<StateEntry, NetError> {
         let epoch_tag = r.read(4)? as u8;
         let part = r.read_exp_golomb()?;
-        let seq = r.read(4)? as u8;
+        let seq = r.read(ENTRY_SEQ_BITS)? as u8;
         let key = r.read_bool()?;
         let rest = r.read_bool()?;
+        let base = if key {
+            0
+        } else {
+            r.read(ENTRY_SEQ_BITS)? as u8
+        };
         let pq = layout.class.position_quantizer();
         let bits = layout.class.rot_bits();
         let body = if part == 0 {
@@ -550,6 +567,7 @@ impl StateEntry {
             epoch_tag,
             seq,
             key,
+            base,
             rest,
             body,
         })
@@ -635,6 +653,13 @@ pub enum Section<'a> {
         /// Objects.
         ids: Vec<NetId>,
     },
+    /// Datagrams with state received: `latest` and the 32 before it (bit i = latest-1-i).
+    StateAck {
+        /// Newest datagram sequence received.
+        latest: u8,
+        /// History bits.
+        mask: u32,
+    },
     /// Bit-packed state entries (parsed later with the object layouts).
     State {
         /// Entry count.
@@ -698,6 +723,16 @@ pub fn decode_packet(bytes: &[u8]) -> Result<(PacketHeader, Vec<Section<'_>>), N
                     ids.push(NetId(r.varint_u32()?));
                 }
                 Section::KeyframeRequest { ids }
+            }
+            tag::STATE_ACK => {
+                let latest = r.u8()?;
+                let b = r.take(4)?;
+                let mut m = [0u8; 4];
+                m.copy_from_slice(b);
+                Section::StateAck {
+                    latest,
+                    mask: u32::from_le_bytes(m),
+                }
             }
             tag::STATE => {
                 let count = r.varint_u32()?;
@@ -795,6 +830,7 @@ mod tests {
                 epoch_tag: 3,
                 seq: 9,
                 key: false,
+                base: 30,
                 rest: false,
                 body: PartBody::Chunk {
                     chunk: 0,

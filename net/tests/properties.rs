@@ -52,7 +52,8 @@ prop_compose! {
     fn arb_entry(particles: u32)(
         id in 0u32..5000,
         tag in 0u8..16,
-        seq in 0u8..16,
+        seq in 0u8..32,
+        base in 0u8..32,
         rest in any::<bool>(),
         kind in 0u8..4,
         pos in arb_grid(soft_class().position_quantizer().bits()),
@@ -85,7 +86,8 @@ prop_compose! {
                 (false, PartBody::Chunk { chunk: 0, values: ChunkEnc::Delta(list) })
             }
         };
-        StateEntry { id: NetId(id), epoch_tag: tag, seq, key, rest, body }
+        let base = if key { 0 } else { base };
+        StateEntry { id: NetId(id), epoch_tag: tag, seq, key, base, rest, body }
     }
 }
 

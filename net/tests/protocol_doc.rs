@@ -172,6 +172,7 @@ fn render() -> String {
         epoch_tag: 0,
         seq: 0,
         key: true,
+        base: 0,
         rest: false,
         body: PartBody::Transform {
             pos: Some(PosEnc::Abs(pq.quantize(Vec3::new(0.2, 1.6, 0.1)))),
@@ -181,6 +182,7 @@ fn render() -> String {
     let delta = StateEntry {
         seq: 1,
         key: false,
+        base: 0,
         body: PartBody::Transform {
             pos: Some(PosEnc::Delta([12, -3, 40])),
             rot: None,
@@ -212,6 +214,7 @@ fn render() -> String {
         epoch_tag: 0,
         seq: 2,
         key: false,
+        base: 1,
         rest: false,
         body: PartBody::Chunk {
             chunk: 0,
@@ -410,6 +413,7 @@ fn render() -> String {
                 wire::Section::Pong { .. } => "pong",
                 wire::Section::KeyframeRequest { .. } => "keyframe request",
                 wire::Section::State { .. } => "state",
+                wire::Section::StateAck { .. } => "state ack",
             })
             .collect();
         writeln!(
