@@ -137,23 +137,30 @@ fn render() -> String {
     .unwrap();
     writeln!(
         w,
-        "| {} | state | `varint` entry count, `varint` byte length, bit-packed entries |\n",
+        "| {} | state | `varint` entry count, `varint` byte length, bit-packed entries |",
         tag::STATE
     )
     .unwrap();
+    writeln!(w, "| {} | state ack | `u8` newest datagram sequence with state received, `u32` bits for the 32 before it (bit i = newest − 1 − i) |\n", tag::STATE_ACK).unwrap();
     writeln!(w, "Unknown tags, truncated fields, lengths beyond the datagram, over-long varints or entry counts that cannot fit the block are decode errors; the datagram is dropped and counted.\n").unwrap();
 
     writeln!(w, "## State entries (bit-packed)\n").unwrap();
-    writeln!(w, "Entries are sorted by object id; each is one *part* of an object: part 0 is the center transform, part k ≥ 1 is particle chunk k-1 (`particles_per_chunk` particles, default {}). Each (link, object, part) is a delta chain: a keyframe carries absolute values and starts a chain; a delta applies only on top of the previous sequence number, otherwise the receiver drops it and sends a keyframe request.\n", rigid.particles_per_chunk).unwrap();
+    writeln!(w, "Entries are sorted by object id; each is one *part* of an object: part 0 is the center transform, part k ≥ 1 is particle chunk k-1 (`particles_per_chunk` particles, default {}). Entries of each (link, object, part) carry a {}-bit sequence number. A keyframe carries absolute values. A delta names a *base*: the newest entry of that part the receiver has acknowledged (state-ack section, sent at once by the receiver of any state datagram it could fully read). The delta holds every field that differs from the base by more than the send threshold (or has been stale too long, or rides along); fields it omits equal the base. Sender and receiver therefore agree on the state after every entry, a lost datagram costs only itself, and a change keeps being sent until acknowledged (which is also what makes rest sync reliable). The receiver keeps the states after its last {} entries per part; a delta whose base it no longer has is dropped and answered with a keyframe request.\n", rigid.particles_per_chunk, wire::ENTRY_SEQ_BITS, wire::ENTRY_SEQ_MOD).unwrap();
     writeln!(w, "| bits | field |\n|---|---|").unwrap();
     writeln!(w, "| eg | id − previous id in this block (first: id − 0) |").unwrap();
     writeln!(w, "| 4 | authority epoch tag (`(grant + 7·term) mod 16`); a mismatch drops the entry (stale owner) |").unwrap();
     writeln!(w, "| eg | part |").unwrap();
-    writeln!(w, "| 4 | chain sequence mod 16 |").unwrap();
+    writeln!(w, "| {} | entry sequence |", wire::ENTRY_SEQ_BITS).unwrap();
     writeln!(w, "| 1 | keyframe |").unwrap();
     writeln!(
         w,
-        "| 1 | at rest (rest sync: the exact final pose follows, repeated with backoff) |\n"
+        "| 1 | at rest (rest sync: thresholds are off, the exact pose goes out until acknowledged) |"
+    )
+    .unwrap();
+    writeln!(
+        w,
+        "| {} | base entry sequence (deltas only) |\n",
+        wire::ENTRY_SEQ_BITS
     )
     .unwrap();
     writeln!(w, "**Transform part.** Delta: 1 bit position present, 1 bit rotation present. Position keyframe: {} bits (x {}, y {}, z {}) on a {} m grid inside the class bounds {:?}–{:?}. Position delta: 5 bits width w−1, then 3 × w-bit two's-complement grid steps. Rotation (always absolute): smallest-three, 2 bits index of the dropped largest component + 3 × {} bits over [−1/√2, 1/√2].\n",
