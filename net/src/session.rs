@@ -234,7 +234,6 @@ fn emit(
     after: PartQ,
     is_key: bool,
     force: bool,
-    base: u8,
     now: Instant,
     ack_wait: Duration,
     fields: &[usize],
@@ -255,7 +254,6 @@ fn emit(
         }
     }
     sp.seq = (sp.seq + 1) % ENTRY_SEQ_MOD;
-    let _ = base;
     sp.unacked.push_back((sp.seq, after, now));
     while sp.unacked.len() > usize::from(ENTRY_SEQ_MOD) - 8 {
         sp.unacked.pop_front();
@@ -1301,7 +1299,6 @@ impl Session {
                     after,
                     key,
                     force_key,
-                    base_seq,
                     now,
                     ack_wait,
                     &fields,
@@ -1388,7 +1385,6 @@ impl Session {
                 after,
                 key,
                 force_key,
-                base_seq,
                 now,
                 ack_wait,
                 &fields,
