@@ -15,7 +15,7 @@ use crate::methods::pbd::{
     VolumeGroup,
 };
 use crate::methods::tets::{tet_edges, tetrahedralize};
-use crate::{ClusterMethod, Mesh, SimulationSpace, SoftBodyConfig, SoftBodyError};
+use crate::{ClusterMethod, Mesh, SimulationSpace, SoftBodyConfig, SoftBodyError, SoftRegion};
 
 /// The methods compared.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, PartialOrd, Ord)]
@@ -107,6 +107,10 @@ pub struct MethodSpec {
     pub params: PbdParams,
     /// Material.
     pub material: Material,
+    /// Only this region (world coordinates of the mesh given to [`build_model`]) is soft; the
+    /// rest follows rigidly (thesis 3.5.2). Particle method only; `None` = all soft.
+    #[serde(default)]
+    pub soft_region: Option<SoftRegion>,
 }
 
 impl MethodSpec {
@@ -120,6 +124,7 @@ impl MethodSpec {
             },
             params: PbdParams::default(),
             material: Material::default(),
+            soft_region: None,
         }
     }
 
@@ -136,15 +141,26 @@ impl MethodSpec {
         self
     }
 
+    /// With a restricted soft region (particle method).
+    pub fn region(mut self, region: Option<SoftRegion>) -> Self {
+        self.soft_region = region;
+        self
+    }
+
     /// A label such as `tet c0.08 s4i8`.
     pub fn label(&self) -> String {
         let p = &self.params;
+        let region = if self.soft_region.is_some() {
+            " region"
+        } else {
+            ""
+        };
         match self.kind {
             MethodKind::Surface | MethodKind::Ispc => {
                 format!("{} s{}i{}", self.kind.name(), p.substeps, p.iterations)
             }
             MethodKind::Particle | MethodKind::RapierNative => {
-                format!("{} c{:.3}", self.kind.name(), self.cell_frac)
+                format!("{} c{:.3}{region}", self.kind.name(), self.cell_frac)
             }
             _ => format!(
                 "{} c{:.3} s{}i{}",
@@ -248,6 +264,9 @@ pub fn build_pbd_welded(
                 .iter()
                 .map(|t| crate::methods::pbd::tet_volume(t.map(|i| tm.nodes[i as usize])))
                 .sum();
+            // The cover contains the surface, so it is larger: keep the body's own mass.
+            let scale = volume / cover_volume.max(1e-12);
+            masses.iter_mut().for_each(|m| *m *= scale);
             let edges = tet_edges(&tm.tets);
             let mut body = PbdBody::new(
                 name,
@@ -331,6 +350,7 @@ pub fn build_model(
                     radius_m: spec.cell_frac * size,
                 },
                 stiffness,
+                soft_region: spec.soft_region,
                 space: if anchored {
                     SimulationSpace::Local
                 } else {
