@@ -146,6 +146,120 @@ fn soft_state(t: f32, rest: &[Vec3]) -> ObjectState {
     }
 }
 
+/// A recorded soft-body trace (`assets/traces/softbody60.sstr`, written by
+/// `cargo run --release -p softsync-softbody --example trace`): magic `SSTR`, u32 version 1,
+/// u32 frames, u32 particles, f32 dt_s, then per frame center position (3 × f32), rotation
+/// xyzw (4 × f32) and world particle positions (3 × f32 each), little endian.
+struct Trace {
+    dt_s: f32,
+    frames: Vec<ObjectState>,
+    /// Per frame: the body is being interacted with (thesis: only that time was measured).
+    active: Vec<bool>,
+}
+
+impl Trace {
+    fn load(path: &Path) -> Option<Trace> {
+        let b = std::fs::read(path).ok()?;
+        let u32_at = |o: usize| -> Option<u32> {
+            Some(u32::from_le_bytes(b.get(o..o + 4)?.try_into().ok()?))
+        };
+        let f32_at = |o: usize| -> Option<f32> {
+            Some(f32::from_le_bytes(b.get(o..o + 4)?.try_into().ok()?))
+        };
+        if b.get(0..4)? != b"SSTR" || u32_at(4)? != 1 {
+            return None;
+        }
+        let frames = u32_at(8)? as usize;
+        let n = u32_at(12)? as usize;
+        let dt_s = f32_at(16)?;
+        let stride = (7 + 3 * n) * 4;
+        if frames == 0
+            || n > 100_000
+            || b.len() != 20 + frames.checked_mul(stride)?
+            || !dt_s.is_finite()
+            || dt_s <= 0.0
+        {
+            return None;
+        }
+        let mut out = Vec::with_capacity(frames);
+        for f in 0..frames {
+            let o = 20 + f * stride;
+            let v = |k: usize| f32_at(o + 4 * k);
+            let pos = Vec3::new(v(0)?, v(1)?, v(2)?);
+            let rot = Quat::from_xyzw(v(3)?, v(4)?, v(5)?, v(6)?).normalize();
+            let particles = (0..n)
+                .map(|i| Some(Vec3::new(v(7 + 3 * i)?, v(8 + 3 * i)?, v(9 + 3 * i)?)))
+                .collect::<Option<Vec<_>>>()?;
+            let st = ObjectState {
+                pos,
+                rot,
+                particles,
+            };
+            if !(st.pos.is_finite()
+                && st.rot.is_finite()
+                && st.particles.iter().all(|p| p.is_finite()))
+            {
+                return None;
+            }
+            out.push(st);
+        }
+        // interaction = some particle moves faster than 1 cm/s, dilated by 0.2 s
+        let moving: Vec<bool> = (0..out.len())
+            .map(|f| {
+                f > 0
+                    && out[f]
+                        .particles
+                        .iter()
+                        .zip(&out[f - 1].particles)
+                        .any(|(a, b)| a.distance(*b) / dt_s > 0.01)
+            })
+            .collect();
+        let pad = (0.2 / dt_s).ceil() as usize;
+        let active = (0..out.len())
+            .map(|f| (f.saturating_sub(pad)..(f + pad + 1).min(out.len())).any(|g| moving[g]))
+            .collect();
+        Some(Trace {
+            dt_s,
+            frames: out,
+            active,
+        })
+    }
+
+    /// Is someone interacting with the body at `t` (looped)?
+    fn active(&self, t: f32) -> bool {
+        let x = (t.rem_euclid(self.duration_s())) / self.dt_s;
+        let i = (x.floor() as usize).min(self.frames.len() - 1);
+        self.active[i]
+    }
+
+    fn active_fraction(&self) -> f32 {
+        self.active.iter().filter(|a| **a).count() as f32 / self.active.len().max(1) as f32
+    }
+
+    fn duration_s(&self) -> f32 {
+        self.dt_s * self.frames.len() as f32
+    }
+
+    /// State at `t` seconds, looping (the trace starts and ends at rest), interpolated.
+    fn state(&self, t: f32) -> ObjectState {
+        let x = (t.rem_euclid(self.duration_s())) / self.dt_s;
+        let i = (x.floor() as usize).min(self.frames.len() - 1);
+        let j = (i + 1) % self.frames.len();
+        let f = (x - i as f32).clamp(0.0, 1.0);
+        let (a, b) = (&self.frames[i], &self.frames[j]);
+        ObjectState {
+            pos: a.pos.lerp(b.pos, f),
+            rot: a.rot.slerp(b.rot, f),
+            particles: a
+                .particles
+                .iter()
+                .zip(&b.particles)
+                .map(|(p, q)| p.lerp(*q, f))
+                .collect(),
+        }
+    }
+}
+
 fn percentile(sorted: &[f64], p: f64) -> f64 {
     if sorted.is_empty() {
         return 0.0;
@@ -163,8 +277,14 @@ fn lan() -> ConditionerConfig {
     }
 }
 
-fn run(scenario: Scenario, rate_hz: f32, threshold_m: f32, secs: f32) -> Row {
-    run_on(scenario, rate_hz, threshold_m, secs, lan())
+fn run(
+    scenario: Scenario,
+    rate_hz: f32,
+    threshold_m: f32,
+    secs: f32,
+    trace: Option<&Trace>,
+) -> Row {
+    run_on(scenario, rate_hz, threshold_m, secs, lan(), trace)
 }
 
 fn run_on(
@@ -173,6 +293,7 @@ fn run_on(
     threshold_m: f32,
     secs: f32,
     link: ConditionerConfig,
+    trace: Option<&Trace>,
 ) -> Row {
     let send = SendPolicy {
         rate_hz,
@@ -214,7 +335,11 @@ fn run_on(
         Scenario::SoftBody => {
             reqs.push(
                 h.session(1)
-                    .spawn(now, ClassId(0), soft_state(0.0, &rest))
+                    .spawn(
+                        now,
+                        ClassId(0),
+                        trace.map_or_else(|| soft_state(0.0, &rest), |tr| tr.state(0.0)),
+                    )
                     .unwrap()
                     .1,
             );
@@ -249,13 +374,24 @@ fn run_on(
                 let (p, q) = avatar_pose(s)[i];
                 ObjectState::rigid(p, q)
             }
-            Scenario::SoftBody => soft_state(s, &rest),
+            Scenario::SoftBody => match trace {
+                Some(tr) => tr.state(s),
+                None => soft_state(s, &rest),
+            },
         }
     };
     let warmup = 1.0;
     let mut errors: Vec<f64> = Vec::new();
     let mut delays: Vec<f64> = Vec::new();
     let mut up0 = None;
+    // with a trace, only interaction time counts (as in the thesis's Table 11)
+    let counts = |t: Instant| match (scenario, trace) {
+        (Scenario::SoftBody, Some(tr)) => tr.active((t.as_secs_f64() - t0.as_secs_f64()) as f32),
+        _ => true,
+    };
+    let mut active_bytes = 0u64;
+    let mut active_time = 0.0f64;
+    let mut last_up: Option<u64> = None;
     // largest 1-second window (thesis Table 9 "max bandwidth")
     let mut window: Option<(Instant, u64)> = None;
     let mut max_window = 0.0f64;
@@ -290,8 +426,18 @@ fn run_on(
                 let l = st.links.get(&Harness::id(0)).cloned().unwrap_or_default();
                 up0 = Some((now, l.up, l.down, st.mtu_fill_sum, st.up.packets));
             }
+            if let Some(prev) = last_up {
+                if counts(now) {
+                    active_bytes += up_now - prev;
+                    active_time += FRAME.as_secs_f64();
+                }
+            }
+            last_up = Some(up_now);
             for (i, id) in ids.iter().enumerate() {
                 let d = h.session(0).display_state(now, *id).unwrap();
+                if !counts(d.source_time) {
+                    continue;
+                }
                 let truth = state_at(d.source_time, i);
                 errors.push(f64::from(d.state.pos.distance(truth.pos)));
                 for (a, b) in d.state.particles.iter().zip(&truth.particles) {
@@ -314,7 +460,11 @@ fn run_on(
         },
         rate_hz,
         threshold_m,
-        bytes_per_s: (l.up.bytes - up_start.bytes) as f64 / dt,
+        bytes_per_s: if active_time > 0.0 {
+            active_bytes as f64 / active_time
+        } else {
+            (l.up.bytes - up_start.bytes) as f64 / dt
+        },
         packets_per_s: packets / dt,
         down_bytes_per_s: (l.down.bytes - down_start.bytes) as f64 / dt,
         p50_mm: percentile(&errors, 0.5) * 1000.0,
@@ -455,6 +605,23 @@ fn chart(rows: &[Row], path: &Path) -> Result<(), Box<dyn std::error::Error>> {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let quick = std::env::args().any(|a| a == "--quick");
+    let trace_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/traces/softbody60.sstr");
+    let trace = if std::env::args().any(|a| a == "--synthetic") {
+        None
+    } else {
+        Trace::load(&trace_path)
+    };
+    let source = match &trace {
+        Some(t) => format!(
+            "the soft-body crate's recorded squeeze/poke/pull trace (`assets/traces/softbody60.sstr`, {} frames, {:.1} s, looped)",
+            t.frames.len(),
+            t.duration_s()
+        ) + &format!(
+            "; as in the thesis only interaction time counts (some particle faster than 1 cm/s, ±0.2 s: {:.0} % of the trace)",
+            t.active_fraction() * 100.0
+        ),
+        None => "a synthetic squeeze/release deformation (no trace found or `--synthetic`)".to_string(),
+    };
     let secs = if quick { 8.0 } else { 24.0 };
     let out_dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/results/net");
     std::fs::create_dir_all(&out_dir)?;
@@ -468,7 +635,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for scenario in [Scenario::Avatar, Scenario::SoftBody] {
         for &rate in &RATES {
             for &thr in &THRESHOLDS {
-                rows.push(run(scenario, rate, thr, secs));
+                rows.push(run(scenario, rate, thr, secs, trace.as_ref()));
             }
         }
     }
@@ -509,7 +676,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }};
     }
     outln!(
-        "# softsync-net bandwidth/accuracy bench\n\nGenerated by `cargo run --release -p softsync-net --example bench{}`. Two peers (the client interacts, the host observes), link 20 ms ± 5 ms without loss, 90 Hz frames, {secs} s measured per cell after 1 s warm-up. Bytes are every byte of our datagrams sent by the interacting peer (header and all messages, heartbeats included), without transport headers. Error: distance between what the observer displays and the owner's state at the displayed time, over every object (avatar) or every particle and the center (soft body). Rotation threshold = position threshold / 0.2 m.",
+        "# softsync-net bandwidth/accuracy bench\n\nGenerated by `cargo run --release -p softsync-net --example bench{}`. Two peers (the client interacts, the host observes), link 20 ms ± 5 ms without loss, 90 Hz frames, {secs} s measured per cell after 1 s warm-up. Bytes are every byte of our datagrams sent by the interacting peer (header and all messages, heartbeats included), without transport headers. Error: distance between what the observer displays and the owner's state at the displayed time, over every object (avatar) or every particle and the center (soft body). Rotation threshold = position threshold / 0.2 m. Soft body: {source}.",
         if quick { " -- --quick" } else { "" }
     );
     outln!("\n### Table 9 — VR avatar, threshold 0.005 m: max (1 s window) and average bytes/s\n");
@@ -607,7 +774,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for scenario in [Scenario::Avatar, Scenario::SoftBody] {
         for (lat, jit, loss) in [(20u64, 5u64, 0.0f64), (50, 20, 0.05), (150, 30, 0.20)] {
             let link = ConditionerConfig::rough(42, lat, jit, loss);
-            let r = run_on(scenario, 20.0, 0.005, secs, link);
+            let r = run_on(scenario, 20.0, 0.005, secs, link, trace.as_ref());
             outln!(
                 "| {} | {lat} ms ± {jit} ms, {:.0} % loss | {:.0} | {:.2} | {:.2} | {:.2} | {:.0} |",
                 r.scenario,
@@ -626,6 +793,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     std::fs::write(out_dir.join("link.csv"), &lcsv)?;
+    // continuous deformation for comparison (the trace has pauses between its scenarios)
+    let synth = run(Scenario::SoftBody, 20.0, 0.005, secs, None);
+    outln!(
+        "\nSynthetic continuous squeeze/release (60 particles, 20 Hz, 0.005 m): {:.0} B/s, p50 {:.2} mm, p95 {:.2} mm, max {:.2} mm, delay {:.0} ms",
+        synth.bytes_per_s,
+        synth.p50_mm,
+        synth.p95_mm,
+        synth.max_mm,
+        synth.delay_ms
+    );
     std::fs::write(out_dir.join("tables.md"), &report)?;
     let sb = rows
         .iter()
@@ -642,6 +819,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!(
         "RESULT net.avatar hz=20 bytes_per_s={:.0} p95_mm={:.2}",
         av.bytes_per_s, av.p95_mm
+    );
+    println!(
+        "RESULT net.softbody60_synthetic hz=20 bytes_per_s={:.0} p95_mm={:.2} delay_ms={:.0}",
+        synth.bytes_per_s, synth.p95_mm, synth.delay_ms
     );
     println!("RESULT net.migration resume_ms={mig_max:.0}");
     Ok(())
