@@ -15,6 +15,7 @@ use glam::{Quat, Vec3};
 use plotters::prelude::*;
 use softsync_net::harness::Harness;
 use softsync_net::stats::TRANSPORT_OVERHEAD_BYTES;
+use softsync_net::trace::Trace;
 use softsync_net::{
     ClassConfig, ClassId, ConditionerConfig, Instant, NetId, ObjectState, SendPolicy,
     SessionConfig, SoftBodyMode,
@@ -143,120 +144,6 @@ fn soft_state(t: f32, rest: &[Vec3]) -> ObjectState {
         pos: center,
         rot,
         particles,
-    }
-}
-
-/// A recorded soft-body trace (`assets/traces/softbody60.sstr`, written by
-/// `cargo run --release -p softsync-softbody --example trace`): magic `SSTR`, u32 version 1,
-/// u32 frames, u32 particles, f32 dt_s, then per frame center position (3 × f32), rotation
-/// xyzw (4 × f32) and world particle positions (3 × f32 each), little endian.
-struct Trace {
-    dt_s: f32,
-    frames: Vec<ObjectState>,
-    /// Per frame: the body is being interacted with (thesis: only that time was measured).
-    active: Vec<bool>,
-}
-
-impl Trace {
-    fn load(path: &Path) -> Option<Trace> {
-        let b = std::fs::read(path).ok()?;
-        let u32_at = |o: usize| -> Option<u32> {
-            Some(u32::from_le_bytes(b.get(o..o + 4)?.try_into().ok()?))
-        };
-        let f32_at = |o: usize| -> Option<f32> {
-            Some(f32::from_le_bytes(b.get(o..o + 4)?.try_into().ok()?))
-        };
-        if b.get(0..4)? != b"SSTR" || u32_at(4)? != 1 {
-            return None;
-        }
-        let frames = u32_at(8)? as usize;
-        let n = u32_at(12)? as usize;
-        let dt_s = f32_at(16)?;
-        let stride = (7 + 3 * n) * 4;
-        if frames == 0
-            || n > 100_000
-            || b.len() != 20 + frames.checked_mul(stride)?
-            || !dt_s.is_finite()
-            || dt_s <= 0.0
-        {
-            return None;
-        }
-        let mut out = Vec::with_capacity(frames);
-        for f in 0..frames {
-            let o = 20 + f * stride;
-            let v = |k: usize| f32_at(o + 4 * k);
-            let pos = Vec3::new(v(0)?, v(1)?, v(2)?);
-            let rot = Quat::from_xyzw(v(3)?, v(4)?, v(5)?, v(6)?).normalize();
-            let particles = (0..n)
-                .map(|i| Some(Vec3::new(v(7 + 3 * i)?, v(8 + 3 * i)?, v(9 + 3 * i)?)))
-                .collect::<Option<Vec<_>>>()?;
-            let st = ObjectState {
-                pos,
-                rot,
-                particles,
-            };
-            if !(st.pos.is_finite()
-                && st.rot.is_finite()
-                && st.particles.iter().all(|p| p.is_finite()))
-            {
-                return None;
-            }
-            out.push(st);
-        }
-        // interaction = some particle moves faster than 1 cm/s, dilated by 0.2 s
-        let moving: Vec<bool> = (0..out.len())
-            .map(|f| {
-                f > 0
-                    && out[f]
-                        .particles
-                        .iter()
-                        .zip(&out[f - 1].particles)
-                        .any(|(a, b)| a.distance(*b) / dt_s > 0.01)
-            })
-            .collect();
-        let pad = (0.2 / dt_s).ceil() as usize;
-        let active = (0..out.len())
-            .map(|f| (f.saturating_sub(pad)..(f + pad + 1).min(out.len())).any(|g| moving[g]))
-            .collect();
-        Some(Trace {
-            dt_s,
-            frames: out,
-            active,
-        })
-    }
-
-    /// Is someone interacting with the body at `t` (looped)?
-    fn active(&self, t: f32) -> bool {
-        let x = (t.rem_euclid(self.duration_s())) / self.dt_s;
-        let i = (x.floor() as usize).min(self.frames.len() - 1);
-        self.active[i]
-    }
-
-    fn active_fraction(&self) -> f32 {
-        self.active.iter().filter(|a| **a).count() as f32 / self.active.len().max(1) as f32
-    }
-
-    fn duration_s(&self) -> f32 {
-        self.dt_s * self.frames.len() as f32
-    }
-
-    /// State at `t` seconds, looping (the trace starts and ends at rest), interpolated.
-    fn state(&self, t: f32) -> ObjectState {
-        let x = (t.rem_euclid(self.duration_s())) / self.dt_s;
-        let i = (x.floor() as usize).min(self.frames.len() - 1);
-        let j = (i + 1) % self.frames.len();
-        let f = (x - i as f32).clamp(0.0, 1.0);
-        let (a, b) = (&self.frames[i], &self.frames[j]);
-        ObjectState {
-            pos: a.pos.lerp(b.pos, f),
-            rot: a.rot.slerp(b.rot, f),
-            particles: a
-                .particles
-                .iter()
-                .zip(&b.particles)
-                .map(|(p, q)| p.lerp(*q, f))
-                .collect(),
-        }
     }
 }
 
@@ -609,7 +496,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let trace = if std::env::args().any(|a| a == "--synthetic") {
         None
     } else {
-        Trace::load(&trace_path)
+        std::fs::read(&trace_path)
+            .ok()
+            .and_then(|b| Trace::parse(&b))
     };
     let source = match &trace {
         Some(t) => format!(

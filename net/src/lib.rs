@@ -22,6 +22,7 @@ pub mod rng;
 pub mod session;
 pub mod stats;
 pub mod time;
+pub mod trace;
 pub mod transport;
 pub mod wire;
 
