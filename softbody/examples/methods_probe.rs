@@ -32,6 +32,31 @@ fn main() {
     let sub: u32 = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(4);
     let it: u32 = args.get(5).and_then(|s| s.parse().ok()).unwrap_or(4);
     let hz = 90.0;
+    if args.get(1).map(String::as_str) == Some("impact") {
+        // impact <method> <speed> <hz>: the stability map's throw at a thin wall.
+        let speed: f32 = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(5.0);
+        let hz: f32 = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(60.0);
+        let sub: u32 = args.get(5).and_then(|s| s.parse().ok()).unwrap_or(2);
+        let it: u32 = args.get(6).and_then(|s| s.parse().ok()).unwrap_or(4);
+        for m in methods {
+            let spec = MethodSpec::new(m).budget(sub, it);
+            let mut s =
+                ModelScene::impact(&Mesh::icosphere(0.1, 2), &spec, 1.0 / hz, speed).unwrap();
+            let mut worst = 0;
+            for _ in 0..hz as usize {
+                s.step();
+                worst = worst.max(s.model.inverted_elements());
+            }
+            let (_, max_rest) = s.rest_error_m();
+            println!(
+                "{} {speed} m/s {hz} Hz: max inverted {worst}, end rest max {:.1} mm {:?}",
+                s.model.name(),
+                max_rest * 1e3,
+                s.sanity()
+            );
+        }
+        return;
+    }
     for m in methods {
         let spec = MethodSpec::new(m).budget(sub, it);
         let t0 = std::time::Instant::now();

@@ -215,6 +215,8 @@ pub struct VolumeGroup {
     pub compliance: Vec<f32>,
     /// Plain-PBD stiffness per iteration.
     pub pbd_stiffness: f32,
+    /// Volume fraction below which a tet is pushed back hard (0 disables the floor).
+    pub min_fraction: f32,
     lambda: Vec<f32>,
 }
 
@@ -242,6 +244,7 @@ impl VolumeGroup {
             rest_m3,
             compliance,
             pbd_stiffness,
+            min_fraction: 0.25,
             lambda: vec![0.0; n],
         }
     }
@@ -686,8 +689,14 @@ impl PbdBody {
             if wsum < 1e-30 {
                 continue;
             }
-            let c = e1.dot(e2.cross(e3)) / 6.0 - g.rest_m3[k];
-            let dl = if xpbd {
+            let v = e1.dot(e2.cross(e3)) / 6.0;
+            let c = v - g.rest_m3[k];
+            let floor = g.min_fraction * g.rest_m3[k];
+            let dl = if v < floor {
+                // Below the floor the constraint is hard (an inequality): a tet crushed by a
+                // contact is pushed back before it can turn inside out.
+                (floor - v) / wsum
+            } else if xpbd {
                 let alpha = g.compliance[k] * inv_h2;
                 let dl = (-c - alpha * g.lambda[k]) / (wsum + alpha);
                 g.lambda[k] += dl;
@@ -779,18 +788,47 @@ impl PbdBody {
         }
     }
 
+    /// Points that collide: the surface points, and for an embedded surface also the tet
+    /// nodes (thickness 0): nodes of the cover outside the surface would otherwise run into a
+    /// wall the surface stopped at, and crush their tets inside out.
+    fn contact_len(&self) -> usize {
+        match &self.surface_map {
+            SurfaceMap::Direct => self.x.len(),
+            SurfaceMap::Embedded(e) => e.nodes.len() + self.x.len(),
+        }
+    }
+
+    /// Contact point `c`: (position, previous position, thickness).
+    fn contact_point(&self, c: usize) -> (Vec3, Vec3, f32) {
+        let s = self.surface_len();
+        if c < s {
+            let (p, p0) = self.surface_point(c);
+            (p, p0, self.params.contact_radius_m)
+        } else {
+            (self.x[c - s], self.prev[c - s], 0.0)
+        }
+    }
+
+    fn move_contact_point(&mut self, c: usize, delta: Vec3) {
+        let s = self.surface_len();
+        if c < s {
+            self.move_surface_point(c, delta);
+        } else if self.inv_mass[c - s] > 0.0 {
+            self.x[c - s] += delta;
+        }
+    }
+
     fn generate_contacts(&mut self, near: &[NearCollider], h: f32) {
         self.contacts.clear();
         if near.is_empty() {
             return;
         }
-        let r = self.params.contact_radius_m;
-        for s in 0..self.surface_len() {
-            let (p, p0) = self.surface_point(s);
+        for c in 0..self.contact_len() {
+            let (p, p0, r) = self.contact_point(c);
             if let Some(target) = resolve_point(near, p0, p, r, h) {
                 let n = (target - p).normalize_or_zero();
                 if n != Vec3::ZERO {
-                    self.contacts.push((s as u32, n, target));
+                    self.contacts.push((c as u32, n, target));
                 }
             }
         }
@@ -798,55 +836,26 @@ impl PbdBody {
 
     fn project_contacts(&mut self) {
         for k in 0..self.contacts.len() {
-            let (s, n, q) = self.contacts[k];
-            let (p, _) = self.surface_point(s as usize);
+            let (i, n, q) = self.contacts[k];
+            let (p, _, _) = self.contact_point(i as usize);
             let c = n.dot(p - q);
             if c < 0.0 {
-                self.move_surface_point(s as usize, -n * c);
+                self.move_contact_point(i as usize, -n * c);
             }
         }
     }
 
-    /// Contacts: each surface point is swept from its previous position (a ray, so no wall is
-    /// crossed within a substep) and pushed out of every collider to the contact thickness,
+    /// Contacts: each contact point is swept from its previous position (a ray, so no wall is
+    /// crossed within a substep) and pushed out of every collider to its contact thickness,
     /// with Coulomb friction relative to the collider's motion.
     fn collide(&mut self, near: &[NearCollider], h: f32) {
         if near.is_empty() {
             return;
         }
-        let r = self.params.contact_radius_m;
-        match &self.surface_map {
-            SurfaceMap::Direct => {
-                for i in 0..self.x.len() {
-                    if self.inv_mass[i] == 0.0 {
-                        continue;
-                    }
-                    if let Some(p) = resolve_point(near, self.prev[i], self.x[i], r, h) {
-                        self.x[i] = p;
-                    }
-                }
-            }
-            SurfaceMap::Embedded(e) => {
-                for (nodes, w) in e.nodes.iter().zip(&e.weights) {
-                    let p: Vec3 = (0..4).map(|k| self.x[nodes[k] as usize] * w[k]).sum();
-                    let p0: Vec3 = (0..4).map(|k| self.prev[nodes[k] as usize] * w[k]).sum();
-                    let Some(target) = resolve_point(near, p0, p, r, h) else {
-                        continue;
-                    };
-                    // Move the tet's nodes so the embedded point moves by exactly `delta`,
-                    // each in proportion to its weight and inverse mass.
-                    let delta = target - p;
-                    let denom: f32 = (0..4)
-                        .map(|k| self.inv_mass[nodes[k] as usize] * w[k] * w[k])
-                        .sum();
-                    if denom < 1e-12 {
-                        continue;
-                    }
-                    for k in 0..4 {
-                        let n = nodes[k] as usize;
-                        self.x[n] += delta * (self.inv_mass[n] * w[k] / denom);
-                    }
-                }
+        for c in 0..self.contact_len() {
+            let (p, p0, r) = self.contact_point(c);
+            if let Some(target) = resolve_point(near, p0, p, r, h) {
+                self.move_contact_point(c, target - p);
             }
         }
     }
