@@ -269,3 +269,28 @@ fn automatic_choice_meets_its_budgets_on_the_test_scene() {
     strict[0].error_budget_mm = 0.5 * lo;
     assert!(!choose(&strict, frame_budget).meets_budgets());
 }
+
+#[test]
+fn hostile_specs_and_meshes_are_rejected_not_panicked_on() {
+    let mesh = Mesh::icosphere(0.1, 1);
+    let mut world = PhysicsWorld::new();
+    let mut nan = MethodSpec::new(MethodKind::Tet);
+    nan.cell_frac = f32::NAN;
+    let mut huge = MethodSpec::new(MethodKind::Ispc);
+    huge.params.substeps = 1_000_000;
+    let mut soft = MethodSpec::new(MethodKind::Surface);
+    soft.material.young_pa = -1.0;
+    for spec in [nan, huge, soft] {
+        assert!(softsync_softbody::methods::build_model(&spec, &mesh, &mut world, false).is_err());
+    }
+    // Out-of-range indices are an error; an open mesh given to the tetrahedralizer (which
+    // needs a closed one) may fail or fill something, but must not panic.
+    let spec = MethodSpec::new(MethodKind::Ispc);
+    assert!(build_pbd_welded(&spec, &[Vec3::ZERO; 3], &[[0, 1, 7]]).is_err());
+    let w = mesh.weld(1e-6);
+    let (p, t) = punch_holes(&w.positions, &w.triangles, &[w.positions[0]], 0.05);
+    if let Ok(mut body) = build_pbd_welded(&MethodSpec::new(MethodKind::Tet), &p, &t) {
+        body.step(&world, 1.0 / 60.0);
+        assert!(body.positions().iter().all(|x| x.is_finite()));
+    }
+}

@@ -141,6 +141,45 @@ impl MethodSpec {
         self
     }
 
+    /// Rejects values outside their range (a spec may come from a file): resolution in
+    /// [0.005, 1] of the size, 1–256 substeps and iterations, a finite positive material.
+    pub fn validate(&self) -> Result<(), SoftBodyError> {
+        let bad = |what: &str| Err(SoftBodyError::Config(format!("{}: {what}", self.label())));
+        if !(self.cell_frac.is_finite() && (0.005..=1.0).contains(&self.cell_frac)) {
+            return bad("cell_frac must be in [0.005, 1]");
+        }
+        let p = &self.params;
+        if !(1..=256).contains(&p.substeps) || !(1..=256).contains(&p.iterations) {
+            return bad("substeps and iterations must be in 1..=256");
+        }
+        let m = &self.material;
+        let positive = [
+            m.young_pa,
+            m.bulk_pa,
+            m.density_kg_m3,
+            m.pbd_stiffness,
+            m.shape_rate_per_s,
+            m.link_scale,
+        ];
+        if positive.iter().any(|v| !(v.is_finite() && *v > 0.0))
+            || !(m.bend_ratio.is_finite() && m.bend_ratio >= 0.0)
+            || m.pbd_stiffness > 1.0
+        {
+            return bad("material values must be finite and positive (pbd_stiffness ≤ 1)");
+        }
+        let nonneg = [
+            p.damping_per_s,
+            p.contact_radius_m,
+            p.friction,
+            p.sleep_speed_mps,
+            p.sleep_after_s,
+        ];
+        if nonneg.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+            return bad("solver values must be finite and non-negative");
+        }
+        Ok(())
+    }
+
     /// With a restricted soft region (particle method).
     pub fn region(mut self, region: Option<SoftRegion>) -> Self {
         self.soft_region = region;
@@ -187,6 +226,13 @@ pub fn build_pbd_welded(
     positions: &[Vec3],
     triangles: &[[u32; 3]],
 ) -> Result<PbdBody, SoftBodyError> {
+    spec.validate()?;
+    Mesh {
+        positions: positions.to_vec(),
+        normals: None,
+        triangles: triangles.to_vec(),
+    }
+    .validate("<method mesh>")?;
     let m = &spec.material;
     let (lo, hi) = crate::mesh::bounds(positions);
     let size = (hi - lo).max_element().max(1e-6);
@@ -337,6 +383,7 @@ pub fn build_model(
     world: &mut PhysicsWorld,
     anchored: bool,
 ) -> Result<Box<dyn DeformableModel>, SoftBodyError> {
+    spec.validate()?;
     match spec.kind {
         MethodKind::Particle => {
             let welded = mesh.weld(1e-6);
