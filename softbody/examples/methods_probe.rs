@@ -58,7 +58,11 @@ fn main() {
         return;
     }
     for m in methods {
-        let spec = MethodSpec::new(m).budget(sub, it);
+        let cell: f32 = args
+            .get(6)
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(spec_default_cell(m));
+        let spec = MethodSpec::new(m).budget(sub, it).cell(cell);
         let t0 = std::time::Instant::now();
         let mut s = match ModelScene::new(kind, &mesh, &spec, 1.0 / hz) {
             Ok(s) => s,
@@ -71,8 +75,10 @@ fn main() {
         let t0 = std::time::Instant::now();
         let steps = (kind.duration_s() * hz) as usize;
         let mut line = String::new();
+        let mut worst = 0; // MAXINV
         for i in 0..steps {
             s.step();
+            worst = worst.max(s.model.inverted_elements());
             if i % 27 == 26 {
                 let (rms, _) = s.rest_error_m();
                 let (lo, hi) = softsync_softbody::mesh::bounds(s.model.surface());
@@ -90,9 +96,13 @@ fn main() {
         }
         let ms = t0.elapsed().as_secs_f64() * 1e3 / steps as f64;
         println!(
-            "{} particles={} build_ms={build:.1} step_ms={ms:.3}{line}",
+            "{} particles={} build_ms={build:.1} step_ms={ms:.3} max_inverted={worst}{line}",
             s.model.name(),
             s.model.num_particles()
         );
     }
+}
+
+fn spec_default_cell(m: MethodKind) -> f32 {
+    MethodSpec::new(m).cell_frac
 }
