@@ -399,7 +399,31 @@ fn main() {
                 p.min_volume
             ));
         }
-        writeln!(md).unwrap();
+        let front = pareto_front(
+            &points
+                .iter()
+                .map(|p| Candidate {
+                    spec: p.spec,
+                    cost_ms: p.ms as f32,
+                    error_mm: p.rms_mm,
+                })
+                .collect::<Vec<_>>(),
+        );
+        writeln!(
+            md,
+            "\nPareto front (nothing else is both cheaper and more accurate): {}.\n",
+            front
+                .iter()
+                .map(|c| format!(
+                    "`{}` {:.2} ms / {:.1} mm",
+                    c.spec.label(),
+                    c.cost_ms,
+                    c.error_mm
+                ))
+                .collect::<Vec<_>>()
+                .join(" → ")
+        )
+        .unwrap();
         chart(
             &out.join(format!("{}.svg", kind.name())),
             &format!(

@@ -1041,3 +1041,35 @@ impl DeformableModel for PbdBody {
         self.set_all_velocities(v_mps);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The bending gradients are those of the dihedral angle: a finite-difference check.
+    #[test]
+    fn dihedral_gradients_match_finite_differences() {
+        let p = [
+            Vec3::new(0.3, 1.0, 0.2),
+            Vec3::new(-0.2, -0.9, 0.5),
+            Vec3::new(-1.0, 0.1, 0.0),
+            Vec3::new(1.0, -0.1, 0.1),
+        ];
+        let Some((phi, grads, _)) = dihedral(p, [1.0; 4]) else {
+            panic!("degenerate test quad");
+        };
+        let eps = 1e-3;
+        for j in 0..4 {
+            for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
+                let mut q = p;
+                q[j] += axis * eps;
+                let Some((phi2, _, _)) = dihedral(q, [1.0; 4]) else {
+                    panic!("degenerate");
+                };
+                let fd = (phi2 - phi) / eps;
+                let an = grads[j].dot(axis);
+                assert!((fd - an).abs() < 2e-2, "node {j} {axis:?}: fd {fd} vs {an}");
+            }
+        }
+    }
+}
