@@ -1,5 +1,6 @@
 //! Cost of one hand per step with 1, 10 and 100 hovered candidates, and while holding a soft
 //! body by a particle. `cargo run --release -p softsync-interaction --example bench -- [--quick]`
+//! Writes `docs/results/interaction/step.csv`.
 #![allow(
     clippy::disallowed_methods,
     clippy::unwrap_used,
@@ -113,6 +114,21 @@ fn main() {
     let body_us = median(step_times);
     println!("| holding a soft-body particle | {us:.2} µs (body step {body_us:.0} µs) |");
     lines.push(format!("RESULT interaction.step held=soft_particle us={us:.2} soft_step_us={body_us:.0} frame_share_90hz={:.5}", us / 11_111.0));
+    let out =
+        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../docs/results/interaction");
+    std::fs::create_dir_all(&out).unwrap();
+    let mut csv = String::from("case,us_per_hand_step\n");
+    for l in &lines {
+        // "RESULT interaction.step hovered=N us=X ..." → "hovered=N,X"
+        let mut parts = l.split_whitespace().skip(2);
+        let case = parts.next().unwrap_or("");
+        let us = parts
+            .next()
+            .and_then(|p| p.strip_prefix("us="))
+            .unwrap_or("");
+        csv.push_str(&format!("{case},{us}\n"));
+    }
+    std::fs::write(out.join("step.csv"), csv).unwrap();
     for l in lines {
         println!("{l}");
     }
