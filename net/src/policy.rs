@@ -170,6 +170,13 @@ pub struct SessionConfig {
     pub mtu: usize,
     /// Minimum retransmission timeout of reliable control messages.
     pub min_rto: Duration,
+    /// The host refuses joins beyond this many members (itself included).
+    #[serde(default = "default_max_members")]
+    pub max_members: usize,
+}
+
+fn default_max_members() -> usize {
+    64
 }
 
 impl Default for SessionConfig {
@@ -180,6 +187,7 @@ impl Default for SessionConfig {
             heartbeat_interval: Duration::from_millis(200),
             mtu: 1200,
             min_rto: Duration::from_millis(60),
+            max_members: default_max_members(),
         }
     }
 }

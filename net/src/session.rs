@@ -25,6 +25,9 @@ use crate::wire::{
     PROTOCOL_VERSION,
 };
 
+/// Non-member peers (joiners, unknown senders) we keep link state for at once.
+pub const MAX_STRANGERS: usize = 32;
+
 /// An object's state as the application sees it: center transform and world-space particles.
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct ObjectState {
@@ -943,6 +946,7 @@ impl Session {
             self.next_heartbeat = now + self.cfg.heartbeat_interval;
         }
         self.check_liveness(now);
+        self.forget_silent_strangers(now);
         for c in 0..self.next_tick.len() {
             let due = self.next_tick.get(c).is_some_and(|t| now >= *t);
             if due {
@@ -959,6 +963,34 @@ impl Session {
                 }
                 self.owner_tick(now, c as u16);
             }
+        }
+    }
+
+    /// Peers we keep link state for that are neither members nor our host.
+    fn stranger_count(&self) -> usize {
+        self.links
+            .keys()
+            .filter(|p| !self.members.contains_key(p) && Some(**p) != self.host)
+            .count()
+    }
+
+    /// Drops the state of non-members silent for `peer_timeout` (a joiner that gave up, a
+    /// refused or spoofed sender), with whatever was still queued for them.
+    fn forget_silent_strangers(&mut self, now: Instant) {
+        let timeout = self.cfg.peer_timeout;
+        let gone: Vec<PeerId> = self
+            .links
+            .iter()
+            .filter(|(p, l)| {
+                !self.members.contains_key(p)
+                    && Some(**p) != self.host
+                    && l.last_heard.is_some_and(|h| now >= h + timeout)
+            })
+            .map(|(p, _)| *p)
+            .collect();
+        for p in gone {
+            self.links.remove(&p);
+            self.stats.links.remove(&p);
         }
     }
 
@@ -1411,7 +1443,21 @@ impl Session {
 
     /// Feed a datagram received from `from`.
     pub fn handle_packet(&mut self, now: Instant, from: PeerId, bytes: &[u8]) {
-        self.stats.on_recv(from, bytes.len());
+        // State is kept for members and at most MAX_STRANGERS others (joiners, peers we have
+        // not heard of yet): a flood of datagrams from made-up ids costs no memory.
+        let known = self.links.contains_key(&from)
+            || self.members.contains_key(&from)
+            || Some(from) == self.host;
+        if known {
+            self.stats.on_recv(from, bytes.len());
+        } else {
+            // Per-peer statistics start once the sender has link state (below).
+            self.stats.down.add(bytes.len());
+            if self.stranger_count() >= MAX_STRANGERS {
+                self.stats.dropped_strangers += 1;
+                return;
+            }
+        }
         if let Some((_, reason)) = decode_refusal(bytes) {
             if self.role == Role::Joining && Some(from) == self.host {
                 self.role = Role::Refused;
@@ -1449,6 +1495,9 @@ impl Session {
         link.last_heard = Some(now);
         // loss statistics from the datagram sequence
         let ls = self.stats.links.entry(from).or_default();
+        if !known {
+            ls.down.add(bytes.len());
+        }
         match link.in_seq {
             Some(prev) => {
                 let gap = header.seq.wrapping_sub(prev);
@@ -2082,6 +2131,11 @@ impl Session {
         }
         if digest != self.cfg.digest() {
             let reason = "object class configuration differs from the host's".to_string();
+            self.send_control(now, from, &Control::Refused { reason });
+            return;
+        }
+        if self.members.len() >= self.cfg.max_members {
+            let reason = format!("the room is full ({} members)", self.cfg.max_members);
             self.send_control(now, from, &Control::Refused { reason });
             return;
         }

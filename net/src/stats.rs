@@ -24,7 +24,7 @@ impl Traffic {
         )
     }
 
-    fn add(&mut self, bytes: usize) {
+    pub(crate) fn add(&mut self, bytes: usize) {
         self.bytes += bytes as u64;
         self.packets += 1;
     }
@@ -85,6 +85,8 @@ pub struct Stats {
     pub chain_breaks: u64,
     /// Entries too large for any datagram (never sent).
     pub oversize_dropped: u64,
+    /// Datagrams dropped because too many unknown senders already have state.
+    pub dropped_strangers: u64,
 }
 
 impl Stats {
