@@ -24,8 +24,8 @@ pub enum ScenarioKind {
     Squeeze,
     /// Local mode; a 0.2·size ball pushes 30 % of the size into the +x side and leaves.
     Poke,
-    /// Local mode; the particle farthest along +x is pulled out by 30 % of the size for
-    /// 0.75 s, then let go.
+    /// Local mode; the particle farthest along +x is pulled out by 30 % of the size over
+    /// 0.3 s, held until 0.75 s, then let go.
     Pull,
 }
 
@@ -94,7 +94,7 @@ pub struct Scenario {
     top_plate: Option<RigidBodyHandle>,
     bottom_plate: Option<RigidBodyHandle>,
     poker: Option<RigidBodyHandle>,
-    pulled: Option<(usize, Vec3)>,
+    pulled: Option<(usize, Vec3, Vec3)>,
 }
 
 impl Scenario {
@@ -229,7 +229,7 @@ impl Scenario {
                     .max_by(|a, b| a.1.x.total_cmp(&b.1.x))
                     .map(|(i, p)| (i, *p))
                     .unwrap_or((0, Vec3::ZERO));
-                pulled = Some((i, p + Vec3::X * 0.3 * size_m));
+                pulled = Some((i, p, p + Vec3::X * 0.3 * size_m));
             }
         }
         Ok(Scenario {
@@ -313,8 +313,13 @@ impl Scenario {
                 }
             }
             ScenarioKind::Pull => {
-                if let (Some((i, goal)), Some(body)) = (self.pulled, self.set.get_mut(self.body)) {
-                    body.set_particle_drive(i, if t < release { Some(goal) } else { None });
+                // The hand moves out over 0.3 s (a hand does not teleport), holds, lets go.
+                let out = ramp(t, 0.0, 0.3);
+                if let (Some((i, start, goal)), Some(body)) =
+                    (self.pulled, self.set.get_mut(self.body))
+                {
+                    let at = start + (goal - start) * out;
+                    body.set_particle_drive(i, if t < release { Some(at) } else { None });
                 }
             }
             ScenarioKind::Rest | ScenarioKind::Drop => {}
