@@ -437,7 +437,7 @@ impl SoftBody {
             }
         }
         if sleeping > 0 {
-            self.wake_if_approached(world, lo, hi, dt);
+            self.wake_if_approached(world, lo, hi);
         }
         let max_dv = self.config.max_velocity_change_mps;
         let thesis = self.config.restoring == RestoringScheme::Thesis;
@@ -496,9 +496,9 @@ impl SoftBody {
     /// Rapier does not wake a sleeping particle when a kinematic body (a plate, a hand) moves
     /// into it, and a particle that sleeps through the contact ends up on the wrong side. So a
     /// body with sleeping particles checks each step for a moving collider, not its own, in
-    /// its bounds (expanded by the largest particle radius plus one step of that collider's
-    /// travel) and wakes all its particles if there is one.
-    fn wake_if_approached(&mut self, world: &mut PhysicsWorld, lo: Vec3, hi: Vec3, dt: f32) {
+    /// its bounds (expanded by the largest particle radius plus 1 cm) and wakes all its
+    /// particles if there is one. Soft CCD on the particles covers faster approaches.
+    fn wake_if_approached(&mut self, world: &mut PhysicsWorld, lo: Vec3, hi: Vec3) {
         let margin = self
             .particle_radius_m
             .iter()
@@ -523,17 +523,7 @@ impl SoftBody {
             let Some(parent) = co.parent().and_then(|p| world.bodies.get(p)) else {
                 continue;
             };
-            let moving = if parent.is_kinematic() {
-                parent
-                    .next_position()
-                    .translation
-                    .distance_squared(parent.translation())
-                    > 0.0
-                    || parent.next_position().rotation != *parent.rotation()
-                    || parent.linvel().length_squared() * dt * dt > 0.0
-            } else {
-                parent.is_dynamic() && !parent.is_sleeping()
-            };
+            let moving = is_moving(parent);
             if moving {
                 intruder = true;
                 break;
@@ -725,6 +715,20 @@ impl SoftBody {
     /// How many times a non-finite particle state was reset (should stay 0).
     pub fn non_finite_recoveries(&self) -> u64 {
         self.non_finite_recoveries
+    }
+}
+
+/// True for a kinematic body that moves this step or a dynamic body that is awake: what can
+/// push into a sleeping soft body.
+pub(crate) fn is_moving(body: &rapier3d::prelude::RigidBody) -> bool {
+    if body.is_kinematic() {
+        let next = body.next_position();
+        next.translation != body.translation()
+            || next.rotation != *body.rotation()
+            || body.linvel() != Vec3::ZERO
+            || body.angvel() != Vec3::ZERO
+    } else {
+        body.is_dynamic() && !body.is_sleeping()
     }
 }
 

@@ -462,7 +462,7 @@ impl PbdBody {
     }
 
     /// True if a collider of a moving (or awake dynamic) body is within the body's bounds.
-    fn intruder(&self, world: &PhysicsWorld, dt: f32) -> bool {
+    fn intruder(&self, world: &PhysicsWorld) -> bool {
         let (lo, hi) = self.bounds();
         let m = Vec3::splat(self.params.contact_radius_m + 0.01);
         let aabb = Aabb::new(lo - m, hi + m);
@@ -472,17 +472,7 @@ impl PbdBody {
                 let Some(parent) = co.parent().and_then(|p| world.bodies.get(p)) else {
                     return false;
                 };
-                if parent.is_kinematic() {
-                    parent
-                        .next_position()
-                        .translation
-                        .distance_squared(parent.translation())
-                        > 0.0
-                        || parent.next_position().rotation != *parent.rotation()
-                        || parent.linvel().length_squared() * dt * dt > 0.0
-                } else {
-                    parent.is_dynamic() && !parent.is_sleeping()
-                }
+                crate::body::is_moving(parent)
             })
     }
 
@@ -495,7 +485,7 @@ impl PbdBody {
             return;
         };
         if self.sleeping {
-            if self.intruder(world, dt) {
+            if self.intruder(world) {
                 self.sleeping = false;
                 self.still_s = 0.0;
             } else {
@@ -581,7 +571,7 @@ impl PbdBody {
         let threshold = self.params.sleep_speed_mps + gravity.length() * dt;
         if self.params.sleep_after_s > 0.0 && rms_speed < threshold {
             self.still_s += dt;
-            if self.still_s >= self.params.sleep_after_s && !self.intruder(world, dt) {
+            if self.still_s >= self.params.sleep_after_s && !self.intruder(world) {
                 self.sleeping = true;
                 self.v.iter_mut().for_each(|v| *v = Vec3::ZERO);
                 self.max_speed = 0.0;
