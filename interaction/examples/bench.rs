@@ -42,7 +42,7 @@ fn main() {
         world.step();
         let mut soft = SoftBodySet::new();
         let mut hands = Interaction::new();
-        let hand = hands.add_hand(HandConfig::default());
+        let hand = hands.add_hand(HandConfig::default()).unwrap();
         let mut times = Vec::with_capacity(reps);
         for k in 0..reps {
             let input = HandInput {
@@ -84,10 +84,12 @@ fn main() {
         .max_by(|a, b| a.x.total_cmp(&b.x))
         .unwrap();
     let mut hands = Interaction::new();
-    let hand = hands.add_hand(HandConfig {
-        hover_radius_m: 0.01,
-        ..Default::default()
-    });
+    let hand = hands
+        .add_hand(HandConfig {
+            hover_radius_m: 0.01,
+            ..Default::default()
+        })
+        .unwrap();
     let mut times = Vec::new();
     let mut step_times = Vec::new();
     for k in 0..reps.min(900) {

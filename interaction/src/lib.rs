@@ -96,7 +96,7 @@ pub enum SoftGrab {
 
 /// Per-hand settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct HandConfig {
     /// Radius of the hover sphere around the hand, metres. Default 0.06.
     pub hover_radius_m: f32,
@@ -125,6 +125,54 @@ pub struct HandConfig {
     pub rest_speed_mps: f32,
     /// How long it must stay below that speed, seconds. Default 0.5.
     pub rest_time_s: f32,
+}
+
+impl HandConfig {
+    /// Rejects values outside their range with a message naming the field.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let check = |name: &'static str, v: f32, lo: f32, hi: f32| {
+            if v.is_finite() && v >= lo && v <= hi {
+                Ok(())
+            } else {
+                Err(ConfigError {
+                    field: name,
+                    value: v,
+                    min: lo,
+                    max: hi,
+                })
+            }
+        };
+        check("hover_radius_m", self.hover_radius_m, 1e-4, 2.0)?;
+        check("grip_on", self.grip_on, 0.0, 1.0)?;
+        check("grip_off", self.grip_off, 0.0, self.grip_on)?;
+        check("max_linear_speed_mps", self.max_linear_speed_mps, 1e-3, 1e3)?;
+        check(
+            "max_angular_speed_radps",
+            self.max_angular_speed_radps,
+            1e-3,
+            1e4,
+        )?;
+        check("teleport_distance_m", self.teleport_distance_m, 1e-3, 1e4)?;
+        check("controller_radius_m", self.controller_radius_m, 1e-4, 1.0)?;
+        check("controller_mass_kg", self.controller_mass_kg, 1e-4, 1e3)?;
+        check("rest_speed_mps", self.rest_speed_mps, 0.0, 10.0)?;
+        check("rest_time_s", self.rest_time_s, 0.0, 60.0)?;
+        Ok(())
+    }
+}
+
+/// A hand setting out of its range.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("hand config: {field} = {value} is outside [{min}, {max}]")]
+pub struct ConfigError {
+    /// The field.
+    pub field: &'static str,
+    /// Its value.
+    pub value: f32,
+    /// Lowest allowed.
+    pub min: f32,
+    /// Highest allowed.
+    pub max: f32,
 }
 
 impl Default for HandConfig {
@@ -345,8 +393,9 @@ impl Interaction {
         Self::default()
     }
 
-    /// Adds a hand; returns its id.
-    pub fn add_hand(&mut self, config: HandConfig) -> HandId {
+    /// Adds a hand; returns its id, or which setting is out of range.
+    pub fn add_hand(&mut self, config: HandConfig) -> Result<HandId, ConfigError> {
+        config.validate()?;
         self.hands.push(Hand {
             config,
             input: None,
@@ -355,7 +404,7 @@ impl Interaction {
             hovered: Vec::new(),
             grip_down: false,
         });
-        self.hands.len() - 1
+        Ok(self.hands.len() - 1)
     }
 
     /// Feeds a new pose and button state. Non-finite values and samples that are not newer

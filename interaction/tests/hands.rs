@@ -21,7 +21,7 @@ struct Rig {
 impl Rig {
     fn new(config: HandConfig) -> Self {
         let mut hands = Interaction::new();
-        let hand = hands.add_hand(config);
+        let hand = hands.add_hand(config).unwrap();
         Rig {
             world: PhysicsWorld::new(),
             soft: SoftBodySet::new(),
@@ -563,4 +563,38 @@ fn center_grab_carries_a_world_mode_soft_body() {
         "carried body deformed by {} m",
         m.rest_rms_m
     );
+}
+
+#[test]
+fn bad_hand_settings_are_refused_with_the_field_name() {
+    let mut hands = Interaction::new();
+    for (cfg, field) in [
+        (
+            HandConfig {
+                hover_radius_m: f32::NAN,
+                ..Default::default()
+            },
+            "hover_radius_m",
+        ),
+        (
+            HandConfig {
+                grip_off: 0.9,
+                grip_on: 0.5,
+                ..Default::default()
+            },
+            "grip_off",
+        ),
+        (
+            HandConfig {
+                max_linear_speed_mps: -1.0,
+                ..Default::default()
+            },
+            "max_linear_speed_mps",
+        ),
+    ] {
+        let e = hands.add_hand(cfg).unwrap_err();
+        assert_eq!(e.field, field);
+        assert!(e.to_string().contains(field));
+    }
+    assert!(hands.add_hand(HandConfig::default()).is_ok());
 }

@@ -102,7 +102,7 @@ impl SoftRegion {
 
 /// Every option of the thesis's soft-body component, plus the stability knobs this crate adds.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct SoftBodyConfig {
     /// Particle grouping method and its distances (items 1, 6, 7, 9).
     pub cluster: ClusterMethod,

@@ -434,3 +434,23 @@ fn regression_sleeping_particles_wake_when_a_kinematic_plate_arrives() {
         "particles left caught on the plate: {m:?}"
     );
 }
+
+#[test]
+fn configs_from_json_refuse_unknown_fields_and_bad_values() {
+    let ok: SoftBodyConfig = serde_json::from_str(
+        r#"{"cluster": {"method": "weighted_distance", "radius_m": 0.01, "soft_radius_m": 0.02}, "stiffness": 30, "space": "local"}"#,
+    )
+    .unwrap();
+    assert_eq!(ok.stiffness, 30.0);
+    assert!(ok.validate().is_ok());
+    let typo = serde_json::from_str::<SoftBodyConfig>(r#"{"stifness": 30}"#)
+        .unwrap_err()
+        .to_string();
+    assert!(typo.contains("stifness"), "{typo}");
+    let bad: SoftBodyConfig = serde_json::from_str(r#"{"stiffness": -5}"#).unwrap();
+    assert!(bad
+        .validate()
+        .unwrap_err()
+        .to_string()
+        .contains("stiffness"));
+}
