@@ -598,3 +598,41 @@ fn bad_hand_settings_are_refused_with_the_field_name() {
     }
     assert!(hands.add_hand(HandConfig::default()).is_ok());
 }
+
+#[test]
+fn physical_controller_dents_a_soft_body() {
+    let mut r = Rig::new(HandConfig::default());
+    let cfg = SoftBodyConfig {
+        cluster: ClusterMethod::Distance { radius_m: 0.012 },
+        space: SimulationSpace::Local,
+        ..Default::default()
+    };
+    let h = r
+        .soft
+        .insert(&Mesh::icosphere(0.1, 3), cfg, &mut r.world)
+        .unwrap();
+    r.world.step();
+    // Grip in empty air beside the body, then push the 4 cm ball until its surface is 4 cm
+    // inside the body's +x side (ball center from x = 0.25 to 0.10).
+    let start = Vec3::new(0.25, 0.0, 0.0);
+    r.step(start, 1.0, &AllLocal);
+    assert!(r.hands.controller_body(r.hand).is_some());
+    for i in 1..=60 {
+        let x = 0.25 - 0.15 * i as f32 / 60.0;
+        r.step(Vec3::new(x, 0.0, 0.0), 1.0, &AllLocal);
+    }
+    let dent =
+        softsync_softbody::metrics::measure(r.soft.get(h).unwrap(), &r.world).max_displacement_m;
+    assert!(
+        dent > 0.01,
+        "the controller did not dent the body ({dent} m)"
+    );
+    // Let go: the controller disappears and the body springs back.
+    r.step(start, 0.0, &AllLocal);
+    for _ in 0..180 {
+        r.step(start, 0.0, &AllLocal);
+    }
+    let after =
+        softsync_softbody::metrics::measure(r.soft.get(h).unwrap(), &r.world).max_displacement_m;
+    assert!(after < 1e-3, "did not recover: {after} m");
+}
