@@ -356,6 +356,7 @@ fn main() {
     .unwrap();
     let mut native_shell = f64::NAN;
     let (ip, it) = welded(&ico);
+    let (bp, bt) = welded(&bunny);
     let natives: Vec<(&str, Option<SoftBodyBuilder>)> = vec![
         (
             "sphere_shell_ico4",
@@ -364,6 +365,16 @@ fn main() {
         (
             "volumetric_skinned_ico4",
             SoftBodyBuilder::volumetric_skinned(&ip, &it, 0.03)
+                .map(|b| b.translated(Vec3::new(0.0, 0.3, 0.0))),
+        ),
+        (
+            "trimesh_bunny",
+            SoftBodyBuilder::trimesh(bp.clone(), bt.clone())
+                .map(|b| b.translated(Vec3::new(0.0, 0.3, 0.0))),
+        ),
+        (
+            "volumetric_skinned_bunny",
+            SoftBodyBuilder::volumetric_skinned(&bp, &bt, 0.03)
                 .map(|b| b.translated(Vec3::new(0.0, 0.3, 0.0))),
         ),
     ];
