@@ -171,7 +171,7 @@ impl ParticleMap {
 /// A uniform grid over points for radius and nearest queries.
 struct PointGrid {
     inv_cell: f32,
-    cells: HashMap<[i32; 3], Vec<u32>>,
+    cells: HashMap<[i64; 3], Vec<u32>>,
 }
 
 impl PointGrid {
@@ -187,9 +187,9 @@ impl PointGrid {
         g
     }
 
-    fn key(&self, p: Vec3) -> [i32; 3] {
+    fn key(&self, p: Vec3) -> [i64; 3] {
         let q = (p * self.inv_cell).floor();
-        [q.x as i32, q.y as i32, q.z as i32]
+        [q.x as i64, q.y as i64, q.z as i64]
     }
 
     fn remove(&mut self, points: &[Vec3], i: u32) {
@@ -222,45 +222,62 @@ impl PointGrid {
         }
     }
 
-    /// The `k` nearest points to `p` (ties broken by index), by expanding shells of cells.
+    /// The `k` nearest points to `p` (ties broken by index), by expanding shells of cells;
+    /// after `MAX_SHELLS` shells (far-apart parts of a mesh) every remaining point is tried,
+    /// so the cost stays bounded whatever the geometry.
     fn nearest(&self, points: &[Vec3], p: Vec3, k: usize, total: usize, out: &mut Vec<(f32, u32)>) {
+        const MAX_SHELLS: i64 = 8;
         out.clear();
         if k == 0 {
             return;
         }
         let c = self.key(p);
         let cell = 1.0 / self.inv_cell;
-        let mut shell = 0i32;
         let mut seen = 0usize;
-        loop {
+        let by_distance = |a: &(f32, u32), b: &(f32, u32)| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1));
+        for shell in 0..=MAX_SHELLS {
+            // Only the surface of the (2·shell+1)³ cube is new.
             for x in -shell..=shell {
                 for y in -shell..=shell {
-                    for z in -shell..=shell {
-                        if x.abs().max(y.abs()).max(z.abs()) != shell {
-                            continue;
-                        }
+                    let rim = x.abs() == shell || y.abs() == shell;
+                    let mut visit = |z: i64| {
                         if let Some(list) = self.cells.get(&[c[0] + x, c[1] + y, c[2] + z]) {
                             for &i in list {
                                 seen += 1;
                                 out.push((points[i as usize].distance(p), i));
                             }
                         }
+                    };
+                    if rim {
+                        (-shell..=shell).for_each(&mut visit);
+                    } else {
+                        visit(-shell);
+                        if shell != 0 {
+                            visit(shell);
+                        }
                     }
                 }
             }
             // Every point within `shell * cell` of p has been seen.
             if out.len() >= k {
-                out.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                out.sort_unstable_by(by_distance);
                 if out[k - 1].0 <= shell as f32 * cell || seen >= total {
                     out.truncate(k);
                     return;
                 }
             } else if seen >= total {
-                out.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                out.sort_unstable_by(by_distance);
                 return;
             }
-            shell += 1;
         }
+        out.clear();
+        for list in self.cells.values() {
+            for &i in list {
+                out.push((points[i as usize].distance(p), i));
+            }
+        }
+        out.sort_unstable_by(by_distance);
+        out.truncate(k);
     }
 }
 

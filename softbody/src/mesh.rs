@@ -13,6 +13,10 @@ use crate::SoftBodyError;
 /// becomes an allocation larger than this.
 pub const MAX_MESH_ELEMENTS: usize = 4_000_000;
 
+/// Largest coordinate accepted, metres: beyond it grid keys and f32 precision stop meaning
+/// anything for a hand-sized simulation.
+pub const MAX_COORDINATE_M: f32 = 1e5;
+
 /// A triangle mesh as a renderer sees it: render vertices (possibly duplicated along UV or
 /// normal seams) and triangles indexing them.
 #[derive(Clone, Debug, PartialEq)]
@@ -280,23 +284,34 @@ impl Mesh {
             triangles: Vec::new(),
         };
         let scene = gltf.default_scene().or_else(|| gltf.scenes().next());
-        let mut stack: Vec<(gltf::Node, glam::Mat4)> = match scene {
-            Some(s) => s.nodes().map(|n| (n, glam::Mat4::IDENTITY)).collect(),
+        // (node, parent transform, depth). glTF node graphs must be trees, but nothing in the
+        // parser stops a cycle or a node listed as a child many times: depth and the total
+        // number of visits are bounded before anything is pushed.
+        const MAX_DEPTH: usize = 64;
+        const MAX_VISITS: usize = 100_000;
+        let mut stack: Vec<(gltf::Node, glam::Mat4, usize)> = match scene {
+            Some(s) => s.nodes().map(|n| (n, glam::Mat4::IDENTITY, 0)).collect(),
             None => Vec::new(),
         };
-        let mut depth_guard = 0usize;
-        while let Some((node, parent)) = stack.pop() {
-            depth_guard += 1;
-            if depth_guard > 100_000 {
+        let mut visits = stack.len();
+        while let Some((node, parent, depth)) = stack.pop() {
+            if depth > MAX_DEPTH {
                 return Err(SoftBodyError::malformed(
                     src,
-                    "glTF node graph is too large or cyclic",
+                    format!("glTF node graph is deeper than {MAX_DEPTH} (cyclic?)"),
                 ));
             }
             let local = glam::Mat4::from_cols_array_2d(&node.transform().matrix());
             let world = parent * local;
             for child in node.children() {
-                stack.push((child, world));
+                visits += 1;
+                if visits > MAX_VISITS {
+                    return Err(SoftBodyError::malformed(
+                        src,
+                        format!("glTF node graph has more than {MAX_VISITS} node visits (cyclic?)"),
+                    ));
+                }
+                stack.push((child, world, depth + 1));
             }
             let Some(mesh) = node.mesh() else { continue };
             let normal_m = glam::Mat3::from_mat4(world).inverse().transpose();
@@ -311,6 +326,44 @@ impl Mesh {
                         ),
                     ));
                 }
+                // The gltf reader trusts accessors (stride, type, count) and panics on bad ones:
+                // check every accessor it will read against its buffer first.
+                let position = prim.get(&gltf::Semantic::Positions).ok_or_else(|| {
+                    SoftBodyError::malformed(
+                        src,
+                        format!("glTF mesh {} has no POSITION", mesh.index()),
+                    )
+                })?;
+                check_accessor(
+                    &position,
+                    &buffers,
+                    &[gltf::accessor::DataType::F32],
+                    gltf::accessor::Dimensions::Vec3,
+                    src,
+                )?;
+                let has_normals = match prim.get(&gltf::Semantic::Normals) {
+                    Some(a) if a.count() == position.count() => {
+                        check_accessor(
+                            &a,
+                            &buffers,
+                            &[gltf::accessor::DataType::F32],
+                            gltf::accessor::Dimensions::Vec3,
+                            src,
+                        )?;
+                        true
+                    }
+                    _ => false,
+                };
+                if let Some(a) = prim.indices() {
+                    use gltf::accessor::DataType::{U16, U32, U8};
+                    check_accessor(
+                        &a,
+                        &buffers,
+                        &[U8, U16, U32],
+                        gltf::accessor::Dimensions::Scalar,
+                        src,
+                    )?;
+                }
                 let reader = prim.reader(|b| buffers.get(b.index()).map(|d| d.as_slice()));
                 let pos: Vec<Vec3> = reader
                     .read_positions()
@@ -324,7 +377,7 @@ impl Mesh {
                     .collect();
                 let base = out.positions.len() as u32;
                 let n = pos.len() as u32;
-                match reader.read_normals() {
+                match reader.read_normals().filter(|_| has_normals) {
                     Some(ns) if ns.len() == pos.len() => {
                         if let Some(v) = out.normals.as_mut() {
                             v.extend(
@@ -377,6 +430,19 @@ impl Mesh {
         }
         if self.triangles.is_empty() {
             return Err(SoftBodyError::malformed(src, "mesh has no triangles"));
+        }
+        if let Some(i) = self
+            .positions
+            .iter()
+            .position(|p| p.is_finite() && p.abs().max_element() > MAX_COORDINATE_M)
+        {
+            return Err(SoftBodyError::malformed(
+                src,
+                format!(
+                    "vertex {i} lies {:.3e} m from the origin, beyond {MAX_COORDINATE_M} m",
+                    self.positions[i].abs().max_element()
+                ),
+            ));
         }
         if let Some(i) = self.positions.iter().position(|p| !p.is_finite()) {
             return Err(SoftBodyError::malformed(
@@ -504,7 +570,13 @@ impl Mesh {
         let mut render_to_slot = Vec::with_capacity(self.positions.len());
         let mut slot_count = 0u32;
         for (r, &w) in map.iter().enumerate() {
-            let n = self.normals.as_ref().map(|ns| ns[r]).unwrap_or(Vec3::ZERO);
+            // `get`: a hand-built mesh may carry fewer normals than positions.
+            let n = self
+                .normals
+                .as_ref()
+                .and_then(|ns| ns.get(r))
+                .copied()
+                .unwrap_or(Vec3::ZERO);
             let slots = &mut slots_of_welded[w as usize];
             let hit = slots
                 .iter()
@@ -710,6 +782,59 @@ pub fn bounds(points: &[Vec3]) -> (Vec3, Vec3) {
         (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
         |(lo, hi), p| (lo.min(*p), hi.max(*p)),
     )
+}
+
+/// Checks that an accessor the gltf reader will iterate is of the expected type and lies
+/// inside its buffer view and buffer (checked arithmetic throughout).
+fn check_accessor(
+    a: &gltf::Accessor,
+    buffers: &[Vec<u8>],
+    types: &[gltf::accessor::DataType],
+    dims: gltf::accessor::Dimensions,
+    src: &Path,
+) -> Result<(), SoftBodyError> {
+    let bad = |what: String| {
+        SoftBodyError::malformed(src, format!("glTF accessor {}: {what}", a.index()))
+    };
+    if a.sparse().is_some() {
+        return Err(bad("sparse accessors are not supported".into()));
+    }
+    if a.dimensions() != dims || !types.contains(&a.data_type()) {
+        return Err(bad(format!(
+            "is {:?} {:?}, expected {dims:?} of {types:?}",
+            a.dimensions(),
+            a.data_type()
+        )));
+    }
+    if a.count() == 0 {
+        return Err(bad("has no elements".into()));
+    }
+    if a.count() > MAX_MESH_ELEMENTS {
+        return Err(bad(format!(
+            "has {} elements, more than {MAX_MESH_ELEMENTS}",
+            a.count()
+        )));
+    }
+    let view = a.view().ok_or_else(|| bad("has no buffer view".into()))?;
+    let size = a.size();
+    let stride = view.stride().unwrap_or(size);
+    if stride < size {
+        return Err(bad(format!(
+            "stride {stride} is smaller than its element ({size} bytes)"
+        )));
+    }
+    let buffer_len = buffers.get(view.buffer().index()).map_or(0, Vec::len);
+    let view_end = view.offset().checked_add(view.length());
+    let last = stride
+        .checked_mul(a.count() - 1)
+        .and_then(|x| x.checked_add(a.offset()))
+        .and_then(|x| x.checked_add(size));
+    match (view_end, last) {
+        (Some(end), Some(last)) if end <= buffer_len && last <= view.length() => Ok(()),
+        _ => Err(bad(
+            "reaches past the end of its buffer view or buffer".into()
+        )),
+    }
 }
 
 fn resolve_obj_index(

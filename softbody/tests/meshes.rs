@@ -204,3 +204,113 @@ fn gltf_buffer_uris_cannot_escape_the_folder() {
         .to_string();
     assert!(e.contains("leaves the file's folder"), "{e}");
 }
+
+fn gltf_with(accessor: &str, extra_nodes: &str) -> String {
+    let pos: [f32; 9] = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+    let bytes: Vec<u8> = pos.iter().flat_map(|f| f.to_le_bytes()).collect();
+    let b64 = base64(&bytes);
+    format!(
+        r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0]}}],
+        "nodes":[{{"mesh":0{extra_nodes}}}],
+        "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}}}}]}}],
+        "accessors":[{accessor}],
+        "bufferViews":[{{"buffer":0,"byteLength":36{stride}}}],
+        "buffers":[{{"byteLength":36,"uri":"data:application/octet-stream;base64,{b64}"}}]}}"#,
+        stride = if accessor.contains("STRIDE4") {
+            r#","byteStride":4"#
+        } else {
+            ""
+        }
+    )
+    .replace("STRIDE4", "")
+}
+
+/// Regressions from review: the gltf reader panics on accessors it trusts; every one of these
+/// must be a typed error naming the file.
+#[test]
+fn hostile_gltf_accessors_and_node_graphs_are_errors_not_panics() {
+    let ok = r#"{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}"#;
+    assert!(Mesh::load(tmp("ok.gltf", gltf_with(ok, "").as_bytes())).is_ok());
+    for (name, acc, nodes, expect) in [
+        (
+            "stride.gltf",
+            r#"{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}STRIDE4"#,
+            "",
+            "stride",
+        ),
+        (
+            "count0.gltf",
+            r#"{"bufferView":0,"componentType":5126,"count":0,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}"#,
+            "",
+            "no elements",
+        ),
+        (
+            "vec2.gltf",
+            r#"{"bufferView":0,"componentType":5126,"count":3,"type":"VEC2","min":[0,0],"max":[1,1]}"#,
+            "",
+            "glTF",
+        ),
+        (
+            "u8.gltf",
+            r#"{"bufferView":0,"componentType":5121,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}"#,
+            "",
+            "glTF",
+        ),
+        (
+            "long.gltf",
+            r#"{"bufferView":0,"componentType":5126,"count":4,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}"#,
+            "",
+            "past the end",
+        ),
+        (
+            "cycle.gltf",
+            ok,
+            &format!(r#","children":[{}]"#, vec!["0"; 2000].join(",")),
+            "cyclic",
+        ),
+    ] {
+        let e = Mesh::load(tmp(name, gltf_with(acc, nodes).as_bytes()))
+            .map(|_| ())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(name) && e.contains(expect), "{name}: {e}");
+    }
+}
+
+#[test]
+fn coordinates_beyond_100_km_are_refused() {
+    let e = err_of("far.obj", "v 1e13 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    assert!(e.contains("beyond"), "{e}");
+}
+
+/// Regression from review: closest-N's kNN grew shells without bound between far-apart parts.
+#[test]
+fn clustering_a_mesh_with_a_far_away_part_stays_fast() {
+    use softsync_softbody::{build_particle_map, ClusterMethod};
+    let mut m = Mesh::icosphere(0.05, 3);
+    let n = m.positions.len() as u32;
+    m.positions.extend([
+        Vec3::new(100.0, 0.0, 0.0),
+        Vec3::new(100.01, 0.0, 0.0),
+        Vec3::new(100.0, 0.01, 0.0),
+    ]);
+    m.triangles.push([n, n + 1, n + 2]);
+    let w = m.weld(1e-6);
+    for method in [
+        ClusterMethod::ClosestN {
+            vertices_per_particle: 8,
+        },
+        ClusterMethod::Distance { radius_m: 0.01 },
+    ] {
+        // Before the fix this took hours; it must now finish like any other mesh.
+        let map = build_particle_map(
+            &w.positions,
+            &w.triangles,
+            &vec![true; w.positions.len()],
+            method,
+            0.03,
+        )
+        .unwrap();
+        assert!(map.len() > 10);
+    }
+}
