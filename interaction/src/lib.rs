@@ -640,7 +640,16 @@ impl Interaction {
                 HandState::Holding {
                     target, offset_m, ..
                 } => {
-                    let v = if cfg.hold_mode == HoldMode::Velocity && offset_m.is_finite() {
+                    // Another hand still on the same body (two hands on one object, or on two
+                    // particles of one soft body): no throw of a shared body, no rest watch.
+                    let object = target.object();
+                    let other_holds_object = self.other_hand_on(i, object);
+                    let other_holds_body = self.hands.iter().enumerate().any(|(k, h)| {
+                        k != i && matches!(h.state, HandState::Holding { target: t, .. } if t == target)
+                    });
+                    let v = if other_holds_body {
+                        Vec3::ZERO
+                    } else if cfg.hold_mode == HoldMode::Velocity && offset_m.is_finite() {
                         let history: Vec<HandSample> =
                             self.hands[i].history.iter().copied().collect();
                         let (lin, ang) = throw_velocity(&history);
@@ -657,10 +666,11 @@ impl Interaction {
                         target,
                         velocity_mps: v,
                     });
-                    let object = target.object();
                     self.resting.retain(|r| r.0 != object);
-                    self.resting
-                        .push((object, 0.0, cfg.rest_time_s, cfg.rest_speed_mps));
+                    if !other_holds_object {
+                        self.resting
+                            .push((object, 0.0, cfg.rest_time_s, cfg.rest_speed_mps));
+                    }
                 }
                 HandState::Waiting { target } => {
                     self.events.push_back(InteractionEvent::GrabCancelled {
@@ -720,7 +730,28 @@ impl Interaction {
         }
     }
 
+    /// True if a hand other than `hand` holds or waits for any part of `object`.
+    fn other_hand_on(&self, hand: HandId, object: ObjectRef) -> bool {
+        self.hands.iter().enumerate().any(|(k, h)| {
+            k != hand
+                && match h.state {
+                    HandState::Holding { target, .. } | HandState::Waiting { target } => {
+                        target.object() == object
+                    }
+                    _ => false,
+                }
+        })
+    }
+
     fn watch_rest(&mut self, world: &PhysicsWorld, soft: &SoftBodySet, dt: f32) {
+        // A watched object that a hand has taken again is no longer resting.
+        let held: Vec<ObjectRef> = self
+            .resting
+            .iter()
+            .map(|r| r.0)
+            .filter(|o| self.other_hand_on(usize::MAX, *o))
+            .collect();
+        self.resting.retain(|r| !held.contains(&r.0));
         let mut done = Vec::new();
         for (k, (object, timer, need, speed)) in self.resting.iter_mut().enumerate() {
             let max_speed = match *object {

@@ -636,3 +636,97 @@ fn physical_controller_dents_a_soft_body() {
         softsync_softbody::metrics::measure(r.soft.get(h).unwrap(), &r.world).max_displacement_m;
     assert!(after < 1e-3, "did not recover: {after} m");
 }
+
+/// Regression from review: with two hands on one box, letting go with one threw the box out of
+/// the other hand and reported it at rest while still held.
+#[test]
+fn two_hands_on_one_object_release_one_at_a_time() {
+    let mut r = Rig::new(HandConfig::default());
+    r.world.gravity = Vec3::ZERO;
+    let other = r.hands.add_hand(HandConfig::default()).unwrap();
+    let b = r.boxed(Vec3::ZERO, 0.03, 100.0);
+    r.world.step();
+    let mut t = 0.0f64;
+    let mut step = |r: &mut Rig, a: (Vec3, f32), o: (Vec3, f32)| {
+        t += DT as f64;
+        for (hand, (p, grip)) in [(r.hand, a), (other, o)] {
+            let input = HandInput {
+                sample: HandSample {
+                    position_m: p,
+                    rotation: Quat::IDENTITY,
+                    time_s: t,
+                },
+                grip,
+                trigger: 0.0,
+            };
+            r.hands.set_input(hand, input).unwrap();
+        }
+        r.hands.update(&mut r.world, &mut r.soft, &AllLocal, DT);
+        r.soft.step(&mut r.world, DT);
+    };
+    step(&mut r, (Vec3::ZERO, 1.0), (Vec3::new(0.01, 0.0, 0.0), 1.0));
+    assert_eq!(r.hands.held(r.hand), Some(Target::Rigid(b)));
+    assert_eq!(r.hands.held(other), Some(Target::Rigid(b)));
+    // Hand A swings away fast and lets go; hand B holds still.
+    for i in 1..=5 {
+        step(
+            &mut r,
+            (Vec3::X * 0.05 * i as f32, 1.0),
+            (Vec3::new(0.01, 0.0, 0.0), 1.0),
+        );
+    }
+    step(
+        &mut r,
+        (Vec3::X * 0.3, 0.0),
+        (Vec3::new(0.01, 0.0, 0.0), 1.0),
+    );
+    let released: Vec<Vec3> = r
+        .events()
+        .into_iter()
+        .filter_map(|e| match e {
+            InteractionEvent::Released { velocity_mps, .. } => Some(velocity_mps),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        released,
+        vec![Vec3::ZERO],
+        "the box was thrown out of the other hand"
+    );
+    for _ in 0..90 {
+        step(
+            &mut r,
+            (Vec3::X * 0.3, 0.0),
+            (Vec3::new(0.01, 0.0, 0.0), 1.0),
+        );
+        assert!(
+            !r.events()
+                .iter()
+                .any(|e| matches!(e, InteractionEvent::CameToRest { .. })),
+            "at rest while held"
+        );
+    }
+    assert!(
+        r.x(b).distance(Vec3::new(0.01, 0.0, 0.0)) < 0.02,
+        "box left hand B: {}",
+        r.x(b)
+    );
+    // B lets go too: now it is watched and comes to rest.
+    step(
+        &mut r,
+        (Vec3::X * 0.3, 0.0),
+        (Vec3::new(0.01, 0.0, 0.0), 0.0),
+    );
+    let mut rested = false;
+    for _ in 0..120 {
+        step(
+            &mut r,
+            (Vec3::X * 0.3, 0.0),
+            (Vec3::new(0.01, 0.0, 0.0), 0.0),
+        );
+        rested |= r.events().contains(&InteractionEvent::CameToRest {
+            object: ObjectRef::Rigid(b),
+        });
+    }
+    assert!(rested);
+}
