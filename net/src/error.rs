@@ -36,6 +36,9 @@ pub enum NetError {
     /// The class id is not configured.
     #[error("unknown class {0}")]
     UnknownClass(u16),
+    /// The room's object id space is used up.
+    #[error("no object ids left in this room")]
+    IdsExhausted,
 }
 
 /// Shorthand for a decode error.

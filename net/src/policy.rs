@@ -173,10 +173,26 @@ pub struct SessionConfig {
     /// The host refuses joins beyond this many members (itself included).
     #[serde(default = "default_max_members")]
     pub max_members: usize,
+    /// The host creates no more objects (spawn requests, post-migration claims) for a peer
+    /// that already owns this many.
+    #[serde(default = "default_max_objects_per_peer")]
+    pub max_objects_per_peer: usize,
+    /// The host creates no object for a peer whose owned objects would then hold more
+    /// particles than this in total.
+    #[serde(default = "default_max_particles_per_peer")]
+    pub max_particles_per_peer: usize,
 }
 
 fn default_max_members() -> usize {
     64
+}
+
+fn default_max_objects_per_peer() -> usize {
+    256
+}
+
+fn default_max_particles_per_peer() -> usize {
+    1 << 18
 }
 
 impl Default for SessionConfig {
@@ -188,6 +204,8 @@ impl Default for SessionConfig {
             mtu: 1200,
             min_rto: Duration::from_millis(60),
             max_members: default_max_members(),
+            max_objects_per_peer: default_max_objects_per_peer(),
+            max_particles_per_peer: default_max_particles_per_peer(),
         }
     }
 }

@@ -28,6 +28,11 @@ use crate::wire::{
 /// Non-member peers (joiners, unknown senders) we keep link state for at once.
 pub const MAX_STRANGERS: usize = 32;
 
+/// Object ids a new host skips past the highest id it knows. They cover objects the old host
+/// spawned whose `Spawn` never reached the heir: a `Resync` claim can create an unknown
+/// object only inside this range.
+pub const LOST_ID_WINDOW: u32 = 1024;
+
 /// An object's state as the application sees it: center transform and world-space particles.
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct ObjectState {
@@ -302,6 +307,10 @@ pub struct Session {
     next_heartbeat: Instant,
     stats: Stats,
     last_relay_at: Option<Instant>,
+    /// After we took over as host: `Resync` claims are accepted until then.
+    resync_until: Option<Instant>,
+    /// After we took over as host: ids `lo..hi` the old host may have spawned unseen by us.
+    lost_ids: Option<(u32, u32)>,
 }
 
 impl Session {
@@ -328,6 +337,8 @@ impl Session {
             next_heartbeat: now,
             stats: Stats::default(),
             last_relay_at: None,
+            resync_until: None,
+            lost_ids: None,
         }
     }
 
@@ -543,11 +554,10 @@ impl Session {
             return Err(NetError::InvalidState("too many particles"));
         }
         let request = self.next_request;
-        self.next_request += 1;
+        self.next_request = self.next_request.wrapping_add(1);
         match self.role {
             Role::Host => {
-                let id = NetId(self.next_net_id);
-                self.next_net_id += 1;
+                let id = self.alloc_id().ok_or(NetError::IdsExhausted)?;
                 let info = SpawnInfo {
                     id,
                     class,
@@ -701,6 +711,12 @@ impl Session {
         o.published = Some(state.clone());
         o.published_at = now;
         Ok(())
+    }
+
+    /// Queue any control message to `to` on the reliable channel, exactly as a modified
+    /// client could. For tests and fuzzing of the receiving side; applications never need it.
+    pub fn send_raw_control(&mut self, now: Instant, to: PeerId, msg: &Control) {
+        self.send_control(now, to, msg);
     }
 
     // ---------------------------------------------------------------- outputs
@@ -1038,7 +1054,10 @@ impl Session {
     }
 
     fn become_host(&mut self, now: Instant, old_host: PeerId) {
-        self.term = Term(self.term.0 + 1);
+        let Some(next_term) = self.term.0.checked_add(1) else {
+            return; // the term space is used up: nobody can take over
+        };
+        self.term = Term(next_term);
         self.role = Role::Host;
         self.host = Some(self.local);
         let term = self.term;
@@ -1054,8 +1073,21 @@ impl Session {
                 l.pending.clear();
             }
         }
-        self.next_join_seq = self.members.values().max().map_or(1, |m| m + 1);
-        self.next_net_id = self.objects.keys().max().map_or(1, |m| m.0 + 1);
+        self.next_join_seq = self
+            .members
+            .values()
+            .max()
+            .map_or(1, |m| m.saturating_add(1));
+        // ids the old host may have spawned without our hearing of it are reserved for claims
+        let lo = self
+            .objects
+            .keys()
+            .max()
+            .map_or(1, |m| m.0.saturating_add(1));
+        let hi = lo.saturating_add(LOST_ID_WINDOW);
+        self.next_net_id = self.next_net_id.max(hi);
+        self.lost_ids = Some((lo, hi));
+        self.resync_until = Some(now + self.cfg.peer_timeout * 2);
         let me = self.local;
         let mut changed = Vec::new();
         for o in self.objects.values_mut() {
@@ -2053,8 +2085,14 @@ impl Session {
             } if self.is_member_client(from) => {
                 let Some(c) = self.class(class) else { return };
                 let policy = c.authority;
-                let id = NetId(self.next_net_id);
-                self.next_net_id += 1;
+                if !self.may_create_for(from, particles) {
+                    self.stats.refused_controls += 1;
+                    return;
+                }
+                let Some(id) = self.alloc_id() else {
+                    self.stats.refused_controls += 1;
+                    return;
+                };
                 let info = SpawnInfo {
                     id,
                     class,
@@ -2097,9 +2135,14 @@ impl Session {
             Control::AuthorityRelease { id } if self.is_member_client(from) => {
                 self.host_release(now, from, id);
             }
+            // claims are answers to our NewHost: only shortly after we took over
             Control::Resync { claims } if self.is_member_client(from) => {
-                for c in claims {
-                    self.host_merge_claim(now, from, c);
+                if self.resync_until.is_some_and(|t| now < t) {
+                    for c in claims {
+                        self.host_merge_claim(now, from, c);
+                    }
+                } else {
+                    self.stats.refused_controls += 1;
                 }
             }
             _ => {}
@@ -2140,7 +2183,7 @@ impl Session {
             return;
         }
         let join_seq = self.next_join_seq;
-        self.next_join_seq += 1;
+        self.next_join_seq = self.next_join_seq.saturating_add(1);
         self.members.insert(from, join_seq);
         let members: Vec<(PeerId, u32)> = self.members.iter().map(|(p, s)| (*p, *s)).collect();
         let welcome = Control::Welcome {
@@ -2387,47 +2430,119 @@ impl Session {
         }
     }
 
+    /// A fresh object id (never 0), or `None` once the id space is used up.
+    fn alloc_id(&mut self) -> Option<NetId> {
+        let id = self.next_net_id.max(1);
+        self.next_net_id = id.checked_add(1)?;
+        Some(NetId(id))
+    }
+
+    /// May the host create one more object of `particles` particles owned by `p`?
+    fn may_create_for(&self, p: PeerId, particles: u32) -> bool {
+        let (count, total) = self
+            .objects
+            .values()
+            .filter(|o| o.info.owner == p)
+            .fold((0usize, 0usize), |(n, t), o| {
+                (n + 1, t.saturating_add(o.info.particles as usize))
+            });
+        count < self.cfg.max_objects_per_peer
+            && total.saturating_add(particles as usize) <= self.cfg.max_particles_per_peer
+    }
+
+    /// A member's claim after our takeover (`Resync`): what it owns according to its replica.
+    ///
+    /// Only what the claimant can know is believed: an epoch of an older term (every grant of
+    /// our term is ours), at most one grant ahead of our record; an unknown object only
+    /// with an id the old host may have spawned unseen by us ([`LOST_ID_WINDOW`]) and within
+    /// the per-peer limits. An implausible claim on an object we know is answered by
+    /// re-granting it to its recorded owner in our term, so every replica converges.
     fn host_merge_claim(&mut self, now: Instant, from: PeerId, claim: SpawnInfo) {
-        if claim.owner != from {
+        if claim.owner != from || claim.epoch.term >= self.term.0 {
+            self.stats.refused_controls += 1;
             return;
         }
-        match self.objects.get(&claim.id) {
-            None => {
-                if self.class(claim.class).is_none() {
-                    return;
-                }
-                let info = claim.clone();
-                self.insert_object(now, info.clone(), None);
-                self.next_net_id = self.next_net_id.max(claim.id.0 + 1);
-                self.broadcast(now, &Control::Spawn(info), Some(from));
+        let Some(class_policy) = self.class(claim.class).map(|c| c.authority) else {
+            self.stats.refused_controls += 1;
+            return;
+        };
+        let Some(o) = self.objects.get(&claim.id) else {
+            let lost = self
+                .lost_ids
+                .is_some_and(|(lo, hi)| (lo..hi).contains(&claim.id.0));
+            if !lost || !self.may_create_for(from, claim.particles) {
+                self.stats.refused_controls += 1;
+                return;
             }
-            Some(o) => {
-                if claim.epoch > o.info.epoch {
-                    self.set_owner(claim.id, from, claim.epoch, claim.held);
-                    self.broadcast(
-                        now,
-                        &Control::OwnerChanged {
-                            id: claim.id,
-                            owner: from,
-                            epoch: claim.epoch,
-                            held: claim.held,
-                        },
-                        None,
-                    );
-                } else if o.info.owner != from {
-                    let (owner, epoch, held) = (o.info.owner, o.info.epoch, o.info.held);
-                    self.send_control(
-                        now,
-                        from,
-                        &Control::OwnerChanged {
-                            id: claim.id,
-                            owner,
-                            epoch,
-                            held,
-                        },
-                    );
-                }
+            let info = SpawnInfo {
+                policy: class_policy,
+                ..claim
+            };
+            let id = info.id;
+            self.insert_object(now, info.clone(), None);
+            if let Some(o) = self.objects.get_mut(&id) {
+                o.source = Some(from);
             }
+            self.broadcast(now, &Control::Spawn(info), Some(from));
+            return;
+        };
+        let (owner, epoch, held, policy) = (o.info.owner, o.info.epoch, o.info.held, o.info.policy);
+        let same_object = o.info.class == claim.class && o.info.particles == claim.particles;
+        if claim.epoch <= epoch && same_object {
+            if owner != from {
+                // the claimant missed a later grant: tell it
+                self.send_control(
+                    now,
+                    from,
+                    &Control::OwnerChanged {
+                        id: claim.id,
+                        owner,
+                        epoch,
+                        held,
+                    },
+                );
+            }
+            return;
+        }
+        // at most one grant we did not hear of: the first of a later term, or the next one
+        let next = if claim.epoch.term == epoch.term {
+            claim.epoch.grant <= epoch.grant.saturating_add(1)
+        } else {
+            claim.epoch.grant == 0
+        };
+        let plausible = same_object && next && (policy != AuthorityPolicy::Locked || owner == from);
+        if plausible {
+            self.set_owner(claim.id, from, claim.epoch, claim.held);
+            for l in self.links.values_mut() {
+                l.recv.retain(|(oid, _), _| *oid != claim.id);
+            }
+            self.broadcast(
+                now,
+                &Control::OwnerChanged {
+                    id: claim.id,
+                    owner: from,
+                    epoch: claim.epoch,
+                    held: claim.held,
+                },
+                None,
+            );
+            return;
+        }
+        self.stats.refused_controls += 1;
+        if epoch.term < self.term.0 {
+            // replicas may hold epochs newer than our record: a grant of our term beats them
+            self.host_grant(now, claim.id, owner, held);
+        } else if owner != from {
+            self.send_control(
+                now,
+                from,
+                &Control::OwnerChanged {
+                    id: claim.id,
+                    owner,
+                    epoch,
+                    held,
+                },
+            );
         }
     }
 }

@@ -87,6 +87,10 @@ pub struct Stats {
     pub oversize_dropped: u64,
     /// Datagrams dropped because too many unknown senders already have state.
     pub dropped_strangers: u64,
+    /// Control messages or claims refused: out of place (e.g. a `Resync` outside the window
+    /// after a migration), implausible (an epoch or id the sender cannot know) or over a
+    /// per-peer limit.
+    pub refused_controls: u64,
 }
 
 impl Stats {

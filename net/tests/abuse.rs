@@ -1,10 +1,18 @@
 //! Hostile senders: state kept for unknown peers is bounded and forgotten; a full room refuses.
 #![allow(clippy::unwrap_used, missing_docs)]
 
+mod common;
+
 use std::time::Duration;
 
+use glam::{Quat, Vec3};
+use softsync_net::harness::Harness;
 use softsync_net::session::MAX_STRANGERS;
-use softsync_net::{ClassConfig, Event, Instant, PeerId, SendPolicy, Session, SessionConfig};
+use softsync_net::wire::{Control, SpawnInfo};
+use softsync_net::{
+    AuthorityEpoch, AuthorityPolicy, ClassConfig, ClassId, ConditionerConfig, Event, Instant,
+    NetId, ObjectState, PeerId, SendPolicy, Session, SessionConfig,
+};
 
 /// Delivers everything queued between `a` and the sessions in `bs` until quiet.
 fn pump(now: Instant, a: &mut Session, bs: &mut [&mut Session]) {
@@ -104,4 +112,128 @@ fn a_full_room_refuses_with_a_reason() {
         "{refused:?}"
     );
     assert_eq!(host.members().len(), 2);
+}
+
+/// Sum of particles of the objects `owner` owns, as the host `s` sees them.
+fn owned_by(s: &Session, owner: PeerId) -> (usize, usize) {
+    let ids: Vec<_> = s
+        .object_ids()
+        .into_iter()
+        .filter(|id| s.owner(*id) == Some(owner))
+        .collect();
+    let particles = ids
+        .iter()
+        .map(|id| s.latest_state(*id).map_or(0, |st| st.particles.len()))
+        .sum();
+    (ids.len(), particles)
+}
+
+fn claim(id: u32, owner: PeerId, term: u32, grant: u32, particles: u32) -> SpawnInfo {
+    SpawnInfo {
+        id: NetId(id),
+        class: ClassId(0),
+        owner,
+        epoch: AuthorityEpoch { term, grant },
+        held: true,
+        policy: AuthorityPolicy::Free,
+        particles,
+        pos: [0.0; 3],
+        rot: [0.0, 0.0, 0.0, 1.0],
+    }
+}
+
+/// A member sends `Resync` claims with impossible epochs and made-up ids, to the original
+/// host (never migrated: no window) and right after a migration: it takes nothing, creates at
+/// most its per-peer allowance, and nothing overflows.
+#[test]
+fn hostile_resync_claims_take_nothing_and_create_boundedly() {
+    let mut h = common::room(4, ConditionerConfig::default());
+    let now = h.now;
+    let a = h
+        .session(0)
+        .spawn(now, ClassId(0), ObjectState::rigid(Vec3::X, Quat::IDENTITY))
+        .unwrap()
+        .0;
+    let c = h
+        .session(0)
+        .spawn(now, ClassId(0), ObjectState::rigid(Vec3::Y, Quat::IDENTITY))
+        .unwrap()
+        .0;
+    h.advance(Duration::from_millis(300));
+    // peer 1 (the heir) holds c
+    let now = h.now;
+    h.session(1).request_authority(now, c).unwrap();
+    h.advance(Duration::from_millis(300));
+    assert_eq!(h.peers[0].session.owner(c), Some(Harness::id(1)));
+    let bad = Harness::id(3);
+    let hostile = |h: &mut Harness, to: usize| {
+        let now = h.now;
+        let mut claims = vec![
+            claim(a.0, bad, u32::MAX, u32::MAX, 0),
+            claim(c.0, bad, 1, 1000, 0),
+            claim(u32::MAX, bad, 1, 0, 0),
+            claim(5000, bad, 1, 0, 65_536),
+        ];
+        let s = h.session(3);
+        for chunk in claims.chunks(4) {
+            let msg = Control::Resync {
+                claims: chunk.to_vec(),
+            };
+            s.send_raw_control(now, Harness::id(to), &msg);
+        }
+        // a flood of claims of unknown ids right after the highest known id
+        claims.clear();
+        for k in 0..600u32 {
+            let particles = if k < 8 { 65_536 } else { 0 };
+            claims.push(claim(c.0 + 1 + k, bad, 1, 0, particles));
+        }
+        for chunk in claims.chunks(16) {
+            let msg = Control::Resync {
+                claims: chunk.to_vec(),
+            };
+            s.send_raw_control(now, Harness::id(to), &msg);
+        }
+    };
+    // 1. the original host never sent NewHost: every claim is refused
+    hostile(&mut h, 0);
+    h.advance(Duration::from_millis(500));
+    for i in 0..4 {
+        let s = &h.peers[i].session;
+        assert_eq!(s.object_ids(), vec![a, c], "peer {i}");
+        assert_eq!(s.owner(a), Some(Harness::id(0)), "peer {i}");
+        assert_eq!(s.owner(c), Some(Harness::id(1)), "peer {i}");
+    }
+    assert!(h.peers[0].session.stats().refused_controls > 0);
+    // 2. the host dies; right after peer 1 takes over, the hostile member claims again
+    h.kill(0);
+    while !h.peers[1].session.is_host() {
+        h.advance(Duration::from_millis(5));
+    }
+    let term = h.peers[1].session.term();
+    hostile(&mut h, 1);
+    h.advance(Duration::from_millis(1500));
+    let cfg = h.peers[1].session.config().clone();
+    for i in 1..4 {
+        let s = &h.peers[i].session;
+        assert_eq!(s.owner(a), Some(Harness::id(1)), "peer {i}: a");
+        assert_eq!(s.owner(c), Some(Harness::id(1)), "peer {i}: c");
+        assert!(s.epoch(a).unwrap().term <= term.0, "peer {i}");
+        assert!(s.epoch(c).unwrap().term <= term.0, "peer {i}");
+        assert!(!s.object_ids().contains(&NetId(u32::MAX)));
+    }
+    let host = &h.peers[1].session;
+    let (n, particles) = owned_by(host, bad);
+    assert!(n <= cfg.max_objects_per_peer, "{n} objects created");
+    assert!(
+        particles <= cfg.max_particles_per_peer,
+        "{particles} particles"
+    );
+    assert!(host.object_ids().len() <= 2 + cfg.max_objects_per_peer);
+    // 3. after the window nothing is accepted any more
+    h.advance(Duration::from_millis(1500));
+    let before = h.peers[1].session.object_ids();
+    hostile(&mut h, 1);
+    h.advance(Duration::from_millis(500));
+    assert_eq!(h.peers[1].session.object_ids(), before);
+    assert_eq!(h.peers[1].session.owner(a), Some(Harness::id(1)));
 }
