@@ -33,6 +33,10 @@ pub const MAX_STRANGERS: usize = 32;
 /// object only inside this range.
 pub const LOST_ID_WINDOW: u32 = 1024;
 
+/// A datagram this many or more datagrams older than the newest one received from its
+/// sender is too late for its state entries to be used (their 5-bit sequences may alias).
+const MAX_STATE_LATENESS: u8 = 16;
+
 /// An object's state as the application sees it: center transform and world-space particles.
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct ObjectState {
@@ -160,12 +164,12 @@ enum PartQ {
 
 #[derive(Clone, Debug)]
 struct SendPart {
-    /// Last entry sequence used.
-    seq: u8,
-    /// Newest acknowledged entry and the state the peer holds after it.
-    acked: Option<(u8, PartQ)>,
-    /// Sent, not yet acknowledged: (entry seq, state after it, send time).
-    unacked: VecDeque<(u8, PartQ, Instant)>,
+    /// Last entry number used (never wraps; the wire carries it mod [`ENTRY_SEQ_MOD`]).
+    seq: u64,
+    /// Newest acknowledged entry (number) and the state the peer holds after it.
+    acked: Option<(u64, PartQ)>,
+    /// Sent, not yet acknowledged: (entry number, state after it, send time).
+    unacked: VecDeque<(u64, PartQ, Instant)>,
     last_key_at: Instant,
     /// When each field was last sent (transform: position, rotation; chunk: per particle).
     sent_at: Vec<Instant>,
@@ -179,8 +183,13 @@ struct RecvPart {
     latest: Option<u8>,
 }
 
-/// (object, part, entry sequence) of an entry carried by a datagram.
-type EntryRef = (NetId, u32, u8);
+/// (object, part, entry number) of an entry carried by a datagram.
+type EntryRef = (NetId, u32, u64);
+
+/// Wire sequence of an entry number.
+fn wire_seq(n: u64) -> u8 {
+    (n % u64::from(ENTRY_SEQ_MOD)) as u8
+}
 
 #[derive(Clone, Debug, Default)]
 struct LinkClock {
@@ -209,7 +218,7 @@ struct Link {
     pong_due: Option<u32>,
     ping_due: bool,
     clock: LinkClock,
-    /// Datagrams that carried state entries: (datagram seq, [(object, part, entry seq)]).
+    /// Datagrams that carried state entries: (datagram seq, [(object, part, entry number)]).
     inflight: VecDeque<(u8, Vec<EntryRef>)>,
     /// State datagrams received from the peer: newest seq and the 32 before it.
     state_rx: Option<(u8, u32)>,
@@ -248,7 +257,7 @@ fn emit(
     field_count: usize,
 ) -> Option<u8> {
     let sp = link.send.entry(key).or_insert_with(|| SendPart {
-        seq: ENTRY_SEQ_MOD - 1,
+        seq: u64::from(ENTRY_SEQ_MOD) - 1,
         acked: None,
         unacked: VecDeque::new(),
         last_key_at: now,
@@ -261,7 +270,7 @@ fn emit(
             }
         }
     }
-    sp.seq = (sp.seq + 1) % ENTRY_SEQ_MOD;
+    sp.seq = sp.seq.wrapping_add(1);
     sp.unacked.push_back((sp.seq, after, now));
     while sp.unacked.len() > usize::from(ENTRY_SEQ_MOD) - 8 {
         sp.unacked.pop_front();
@@ -275,7 +284,7 @@ fn emit(
             *t = now;
         }
     }
-    Some(sp.seq)
+    Some(wire_seq(sp.seq))
 }
 
 /// Seq `a` is newer than `b` in wrapping entry-sequence order.
@@ -845,6 +854,7 @@ impl Session {
             let mut taken = 0usize;
             let mut oversize = 0u64;
             let mut carried: Vec<EntryRef> = Vec::new();
+            let mut count = 0usize;
             let mut class_bits: BTreeMap<u16, usize> = BTreeMap::new();
             for (i, e) in link.pending.iter().enumerate() {
                 let Some(o) = self.objects.get(&e.id) else {
@@ -873,14 +883,30 @@ impl Session {
                 write_entry_id(&mut w, prev, e.id);
                 w.append(&body);
                 *class_bits.entry(o.info.class.0).or_default() += bits;
-                carried.push((e.id, e.part(), e.seq));
+                count += 1;
+                // the entry's number: the unacknowledged one with its wire sequence (unique,
+                // at most 24 are kept)
+                let part = e.part();
+                let number = link.send.get(&(e.id, part)).and_then(|sp| {
+                    sp.unacked
+                        .iter()
+                        .rev()
+                        .find(|(n, _, _)| wire_seq(*n) == e.seq)
+                        .map(|x| x.0)
+                });
+                if let Some(n) = number {
+                    carried.push((e.id, part, n));
+                }
                 prev = Some(e.id);
                 taken = i + 1;
             }
-            let count = carried.len();
             self.stats.oversize_dropped += oversize;
             if !carried.is_empty() {
                 link.inflight.push_back((link.out_seq, carried));
+                // a state ack names 8-bit datagram sequences: forget datagrams old enough
+                // to alias
+                let seq = link.out_seq;
+                link.inflight.retain(|(ds, _)| seq.wrapping_sub(*ds) < 128);
                 while link.inflight.len() > 64 {
                     link.inflight.pop_front();
                 }
@@ -1281,9 +1307,9 @@ impl Session {
         // the newest acknowledged state, unless too old for the peer's history ring
         let base_of = |sp: Option<&SendPart>| -> Option<(u8, PartQ)> {
             let sp = sp?;
-            let (seq, st) = sp.acked.as_ref()?;
-            let age = sp.seq.wrapping_sub(*seq) % ENTRY_SEQ_MOD;
-            (age < ENTRY_SEQ_MOD - 8).then(|| (*seq, st.clone()))
+            let (n, st) = sp.acked.as_ref()?;
+            let age = sp.seq.saturating_sub(*n);
+            (age < u64::from(ENTRY_SEQ_MOD - 8)).then(|| (wire_seq(*n), st.clone()))
         };
         let key_due = |sp: Option<&SendPart>| {
             !rest && key_interval.is_some_and(|k| sp.is_some_and(|sp| now >= sp.last_key_at + k))
@@ -1530,6 +1556,11 @@ impl Session {
         if !known {
             ls.down.add(bytes.len());
         }
+        // the newest datagram from the peer so far: its entries are newer than any received
+        // before (entry sequences alone cannot tell after a gap of 16 or more)
+        let fresh = link
+            .in_seq
+            .is_none_or(|prev| (1..128).contains(&header.seq.wrapping_sub(prev)));
         match link.in_seq {
             Some(prev) => {
                 let gap = header.seq.wrapping_sub(prev);
@@ -1546,6 +1577,12 @@ impl Session {
                 link.in_seq = Some(header.seq);
             }
         }
+        // State entries carry 5-bit sequences: those of a datagram this far behind the newest
+        // from the peer could alias a newer entry's slot in the base ring. Such a datagram's
+        // state is neither applied nor acknowledged (the sender repeats what is unacknowledged).
+        let too_late = link.in_seq.is_some_and(|newest| {
+            (MAX_STATE_LATENESS..128).contains(&newest.wrapping_sub(header.seq))
+        });
         // clock mapping for interpolation timing
         let c = &mut link.clock;
         let full = match c.last_full_ms {
@@ -1650,8 +1687,11 @@ impl Session {
         }
         let mut touched = BTreeSet::new();
         let carried_state = !states.is_empty();
-        let mut complete = true;
+        let mut complete = !too_late;
         for (count, bits) in states {
+            if too_late {
+                break;
+            }
             let cfg = &self.cfg;
             let objects = &self.objects;
             let parsed = decode_state_block(count, bits, |id| {
@@ -1689,7 +1729,7 @@ impl Session {
                             .or_default() += w.bit_len() as f64 / 8.0;
                     }
                 }
-                self.apply_entry(now, from, e, &mut touched);
+                self.apply_entry(now, from, e, fresh, &mut touched);
             }
         }
         // acknowledge the datagram (its entries become delta bases at the sender) unless
@@ -1754,9 +1794,25 @@ impl Session {
             let Some((q, st, _)) = sp.unacked.iter().find(|(q, _, _)| *q == eseq).cloned() else {
                 continue;
             };
-            if sp.acked.as_ref().is_none_or(|(a, _)| seq_newer(q, *a)) {
+            if sp.acked.as_ref().is_none_or(|(a, _)| q > *a) {
                 sp.acked = Some((q, st));
-                sp.unacked.retain(|(x, _, _)| seq_newer(*x, q));
+                sp.unacked.retain(|(x, _, _)| *x > q);
+            }
+        }
+    }
+
+    /// An entry we decoded but did not apply. Its datagram is still acknowledged, so the
+    /// sender takes the entry as a delta base: forget whatever the ring holds in its slot (a
+    /// state 32 entries older), so that a delta naming it breaks the chain and asks for a
+    /// keyframe instead of silently applying to the wrong base.
+    fn forget_entry(&mut self, from: PeerId, id: NetId, part: u32, seq: u8) {
+        if let Some(rp) = self
+            .links
+            .get_mut(&from)
+            .and_then(|l| l.recv.get_mut(&(id, part)))
+        {
+            if let Some(x) = rp.ring.get_mut(usize::from(seq % ENTRY_SEQ_MOD)) {
+                *x = None;
             }
         }
     }
@@ -1766,6 +1822,22 @@ impl Session {
         now: Instant,
         from: PeerId,
         e: StateEntry,
+        fresh: bool,
+        touched: &mut BTreeSet<NetId>,
+    ) {
+        let (id, part, seq) = (e.id, e.part(), e.seq);
+        if !self.try_apply_entry(now, from, e, fresh, touched) {
+            self.forget_entry(from, id, part, seq);
+        }
+    }
+
+    /// Applies one entry; false if it was dropped (true: applied or kept as a delta base).
+    fn try_apply_entry(
+        &mut self,
+        now: Instant,
+        from: PeerId,
+        e: StateEntry,
+        fresh: bool,
         touched: &mut BTreeSet<NetId>,
     ) -> bool {
         let Some(o) = self.objects.get(&e.id) else {
@@ -1878,8 +1950,8 @@ impl Session {
         if let Some(x) = rp.ring.get_mut(slot(e.seq)) {
             *x = Some((e.seq, state.clone()));
         }
-        if rp.latest.is_some_and(|l| !seq_newer(e.seq, l)) {
-            return false; // older than what we show (reordered); kept only as a base
+        if !fresh && rp.latest.is_some_and(|l| !seq_newer(e.seq, l)) {
+            return true; // older than what we show (reordered); kept only as a base
         }
         rp.latest = Some(e.seq);
         let chunk_len = class.chunk_len();

@@ -888,3 +888,82 @@ fn center_only_mode_replicates_the_center_only() {
         "{particle_bytes} vs {center_bytes}"
     );
 }
+
+/// The host hands its moving object to peer 1 while peer 2's `OwnerChanged` is lost (peer 2
+/// is cut off from the host for a while); the host relays peer 1's updates to peer 2 with the
+/// new epoch before the retransmitted `OwnerChanged` arrives, so peer 2 drops them. Peer 2's
+/// base ring is full from the host's own 60+ updates, so a dropped entry must not become a
+/// delta base: after settling peer 2 shows peer 1's position.
+#[test]
+fn observer_missing_owner_change_does_not_diverge() {
+    let mut h = room(3, ConditionerConfig::default());
+    let now = h.now;
+    let (id, _) = h
+        .session(0)
+        .spawn(now, RIGID, ObjectState::rigid(Vec3::ZERO, Quat::IDENTITY))
+        .unwrap();
+    h.advance(ms(300));
+    // the host moves it: well over 32 relayed entries on the host → peer 2 link
+    let start = t(&h);
+    h.run_frames(ms(3000), ms(11), |h| {
+        let s = t(h) - start;
+        let now = h.now;
+        let p = Vec3::new((s * 1.7).sin() * 0.5, 1.0, s * 0.1);
+        h.session(0)
+            .publish_state(now, id, &ObjectState::rigid(p, Quat::IDENTITY))
+            .unwrap();
+    });
+    let before = h.peers[2].session.latest_state(id).unwrap().pos;
+    // peer 2 loses the grant's OwnerChanged (and a few retransmissions) …
+    h.partition(0, 2, true);
+    let now = h.now;
+    h.session(1).request_authority(now, id).unwrap();
+    let start = t(&h);
+    let mut healed = false;
+    let mut caught_up = None;
+    h.run_frames(ms(3000), ms(11), |h| {
+        let s = t(h) - start;
+        if s > 0.6 && !healed {
+            h.partition(0, 2, false); // … while peer 1's updates keep flowing
+            healed = true;
+        }
+        // peer 1's positions have x ≥ 1, the host's were within ±0.5
+        if caught_up.is_none() && h.peers[2].session.latest_state(id).unwrap().pos.x > 0.99 {
+            caught_up = Some(s);
+        }
+        let now = h.now;
+        let x = (s / 2.0).min(1.0);
+        let p = Vec3::new(1.0 + x, 1.5 - x * 0.5, -x);
+        let _ = h
+            .session(1)
+            .publish_state(now, id, &ObjectState::rigid(p, Quat::IDENTITY));
+    });
+    assert_eq!(h.peers[1].session.owner(id), Some(Harness::id(1)));
+    assert!(
+        h.peers[2].session.stats().dropped_stale_epoch > 0,
+        "scenario: peer 2 must drop relayed updates of the new epoch"
+    );
+    // after a gap of more than 16 entries, newer entries are still shown at once
+    let caught_up = caught_up.expect("peer 2 never showed peer 1's updates");
+    assert!(
+        caught_up < 0.6 + 0.4,
+        "peer 2 showed peer 1's updates only at {caught_up} s"
+    );
+    h.advance(ms(2000));
+    let truth = h.peers[1].session.latest_state(id).unwrap().pos;
+    let now = h.now;
+    for i in [0, 2] {
+        assert_eq!(h.peers[i].session.owner(id), Some(Harness::id(1)));
+        let latest = h.session(i).latest_state(id).unwrap().pos;
+        let shown = h.session(i).display_state(now, id).unwrap().state.pos;
+        assert!(
+            latest.distance(truth) < 0.0015,
+            "peer {i}: latest {latest} vs owner {truth}"
+        );
+        assert!(
+            shown.distance(truth) < 0.0015,
+            "peer {i}: shown {shown} vs owner {truth}"
+        );
+    }
+    assert!(truth.distance(before) > 0.5);
+}
