@@ -143,8 +143,12 @@ fn lerp(a: &Snapshot, b: &Snapshot, f: f32, t: Instant) -> Snapshot {
     let rot = if f <= 1.0 {
         a.rot.slerp(b.rot, f)
     } else {
-        // extrapolate rotation: apply the a→b delta scaled by (f - 1)
-        let delta = b.rot * a.rot.inverse();
+        // extrapolate rotation: apply the a→b delta scaled by (f - 1), the short way round
+        // (q and −q are the same rotation; w < 0 would read as an angle near 2π)
+        let mut delta = b.rot * a.rot.inverse();
+        if delta.w < 0.0 {
+            delta = -delta;
+        }
         let (axis, angle) = delta.to_axis_angle();
         let extra = Quat::from_axis_angle(axis, angle * (f - 1.0));
         (extra * b.rot).normalize()
@@ -155,5 +159,35 @@ fn lerp(a: &Snapshot, b: &Snapshot, f: f32, t: Instant) -> Snapshot {
         rot: if rot.is_finite() { rot } else { b.rot },
         offsets,
         rest: b.rest && f >= 1.0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    fn snap(ms: u64, rot: Quat) -> Snapshot {
+        Snapshot {
+            time: Instant::from_millis(ms),
+            pos: Vec3::ZERO,
+            rot,
+            offsets: Vec::new(),
+            rest: false,
+        }
+    }
+
+    /// The newer sample's quaternion has the other sign (same orientation): extrapolation
+    /// must continue the 0.1 rad turn, not spin the other way round.
+    #[test]
+    fn extrapolation_across_a_quaternion_sign_flip_takes_the_short_way() {
+        let cfg = InterpolationConfig::default();
+        let mut b = SnapshotBuffer::default();
+        b.push(snap(0, Quat::IDENTITY), &cfg);
+        b.push(snap(100, -Quat::from_rotation_y(0.1)), &cfg);
+        // 50 ms past the newest sample: f = 1.5
+        let s = b.sample(Instant::from_millis(150), &cfg).unwrap();
+        let err = s.rot.angle_between(Quat::from_rotation_y(0.15));
+        assert!(err < 1e-3, "extrapolated {:?}, {err} rad off", s.rot);
     }
 }
