@@ -308,7 +308,8 @@ pub struct Session {
     next_net_id: u32,
     next_join_seq: u32,
     next_request: u32,
-    pending_spawns: BTreeMap<u32, ObjectState>,
+    /// Our spawn requests not answered yet: (class, initial state).
+    pending_spawns: BTreeMap<u32, (ClassId, ObjectState)>,
     pending_asks: BTreeMap<NetId, BTreeSet<PeerId>>,
     events: VecDeque<Event>,
     raw_out: VecDeque<Transmit>,
@@ -552,10 +553,9 @@ impl Session {
         class: ClassId,
         state: ObjectState,
     ) -> Result<(NetId, u32), NetError> {
-        let c = self
-            .class(class)
-            .ok_or(NetError::UnknownClass(class.0))?
-            .clone();
+        if self.class(class).is_none() {
+            return Err(NetError::UnknownClass(class.0));
+        }
         if !state.is_finite() {
             return Err(NetError::InvalidState("non-finite state"));
         }
@@ -566,29 +566,12 @@ impl Session {
         self.next_request = self.next_request.wrapping_add(1);
         match self.role {
             Role::Host => {
-                let id = self.alloc_id().ok_or(NetError::IdsExhausted)?;
-                let info = SpawnInfo {
-                    id,
-                    class,
-                    owner: self.local,
-                    epoch: AuthorityEpoch {
-                        term: self.term.0,
-                        grant: 0,
-                    },
-                    held: false,
-                    policy: c.authority,
-                    particles: state.particles.len() as u32,
-                    pos: state.pos.to_array(),
-                    rot: state.rot.to_array(),
-                };
-                self.insert_object(now, info.clone(), Some(request));
-                let _ = self.publish_state(now, id, &state);
-                self.broadcast(now, &Control::Spawn(info), None);
+                let id = self.host_spawn_own(now, class, &state, request)?;
                 Ok((id, request))
             }
             Role::Client => {
                 let host = self.host.ok_or(NetError::NotConnected)?;
-                self.pending_spawns.insert(request, state.clone());
+                self.pending_spawns.insert(request, (class, state.clone()));
                 let msg = Control::SpawnRequest {
                     request,
                     class,
@@ -601,6 +584,40 @@ impl Session {
             }
             _ => Err(NetError::NotConnected),
         }
+    }
+
+    /// As host: create an object we own (our spawn request number `request`) and announce it.
+    fn host_spawn_own(
+        &mut self,
+        now: Instant,
+        class: ClassId,
+        state: &ObjectState,
+        request: u32,
+    ) -> Result<NetId, NetError> {
+        let policy = self
+            .class(class)
+            .ok_or(NetError::UnknownClass(class.0))?
+            .authority;
+        let id = self.alloc_id().ok_or(NetError::IdsExhausted)?;
+        let info = SpawnInfo {
+            id,
+            class,
+            owner: self.local,
+            epoch: AuthorityEpoch {
+                term: self.term.0,
+                grant: 0,
+            },
+            held: false,
+            policy,
+            particles: state.particles.len() as u32,
+            pos: state.pos.to_array(),
+            rot: state.rot.to_array(),
+            request: None,
+        };
+        self.insert_object(now, info.clone(), Some(request));
+        let _ = self.publish_state(now, id, state);
+        self.broadcast(now, &Control::Spawn(info), None);
+        Ok(id)
     }
 
     /// Despawn an object we own (or any object, on the host).
@@ -1155,6 +1172,11 @@ impl Session {
             self.send_snapshot(now, p);
         }
         self.events.push_back(Event::HostChanged { host: me, term });
+        // our own spawn requests the old host never answered: we create them now
+        let pending = std::mem::take(&mut self.pending_spawns);
+        for (request, (class, st)) in pending {
+            let _ = self.host_spawn_own(now, class, &st, request);
+        }
         for p in dead {
             if p != me {
                 self.events.push_back(Event::PeerLeft(p));
@@ -2145,6 +2167,23 @@ impl Session {
                         },
                     );
                 }
+                // spawn requests the old host may never have answered go to the new one (it
+                // answers a request it already has with the existing object)
+                let pending: Vec<(u32, ClassId, ObjectState)> = self
+                    .pending_spawns
+                    .iter()
+                    .map(|(r, (c, st))| (*r, *c, st.clone()))
+                    .collect();
+                for (request, class, st) in pending {
+                    let msg = Control::SpawnRequest {
+                        request,
+                        class,
+                        particles: st.particles.len() as u32,
+                        pos: st.pos.to_array(),
+                        rot: st.rot.to_array(),
+                    };
+                    self.send_control(now, host, &msg);
+                }
                 self.events.push_back(Event::HostChanged { host, term });
             }
             // ---- host side
@@ -2157,6 +2196,20 @@ impl Session {
             } if self.is_member_client(from) => {
                 let Some(c) = self.class(class) else { return };
                 let policy = c.authority;
+                // a request repeated after a migration whose object we already have
+                let existing = self
+                    .objects
+                    .values()
+                    .find(|o| o.info.owner == from && o.info.request == Some(request))
+                    .map(|o| o.info.clone());
+                if let Some(info) = existing {
+                    let id = info.id;
+                    let seq = self.send_control(now, from, &Control::Spawn(info));
+                    if let Some(l) = self.links.get_mut(&from) {
+                        l.spawn_pending.insert(id, seq);
+                    }
+                    return;
+                }
                 if !self.may_create_for(from, particles) {
                     self.stats.refused_controls += 1;
                     return;
@@ -2178,14 +2231,11 @@ impl Session {
                     particles,
                     pos,
                     rot,
+                    request: Some(request),
                 };
                 self.insert_object(now, info.clone(), None);
-                // the requester matches the Spawn to its oldest pending request (ordered channel)
-                let _ = request;
-                let mut to_owner = info.clone();
-                to_owner.policy = policy;
-                self.broadcast(now, &Control::Spawn(info), Some(from));
-                let seq = self.send_control(now, from, &Control::Spawn(to_owner));
+                self.broadcast(now, &Control::Spawn(info.clone()), Some(from));
+                let seq = self.send_control(now, from, &Control::Spawn(info));
                 if let Some(l) = self.links.get_mut(&from) {
                     l.spawn_pending.insert(id, seq);
                 }
@@ -2323,13 +2373,15 @@ impl Session {
             }
             self.objects.remove(&info.id);
         }
-        // a spawn we asked for: match the oldest pending request of ours
+        // a spawn we asked for: the host names our request
         let mut request = None;
         let mut published = None;
         if info.owner == self.local {
-            if let Some((&r, _)) = self.pending_spawns.iter().next() {
-                request = Some(r);
-                published = self.pending_spawns.remove(&r);
+            if let Some(r) = info.request {
+                if let Some((_, st)) = self.pending_spawns.remove(&r) {
+                    request = Some(r);
+                    published = Some(st);
+                }
             }
         }
         let id = info.id;

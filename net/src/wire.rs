@@ -238,6 +238,9 @@ pub struct SpawnInfo {
     pub pos: [f32; 3],
     /// Rotation (x, y, z, w).
     pub rot: [f32; 4],
+    /// The `SpawnRequest` number of the client that asked for the object (its first
+    /// owner), if one did: the requester matches its request exactly, also after a migration.
+    pub request: Option<u32>,
 }
 
 fn bincode_config() -> impl bincode::config::Config {

@@ -100,8 +100,9 @@ fn arb_control() -> impl Strategy<Value = Control> {
         any::<bool>(),
         0u32..5000,
         prop::array::uniform3(-100f32..100.0),
+        any::<Option<u32>>(),
     )
-        .prop_map(|(id, c, o, (t, g), held, n, p)| SpawnInfo {
+        .prop_map(|(id, c, o, (t, g), held, n, p, request)| SpawnInfo {
             id: NetId(id),
             class: ClassId(c),
             owner: PeerId(o),
@@ -111,6 +112,7 @@ fn arb_control() -> impl Strategy<Value = Control> {
             particles: n,
             pos: p,
             rot: [0.0, 0.0, 0.0, 1.0],
+            request,
         });
     prop_oneof![
         (any::<u8>(), any::<u64>()).prop_map(|(p, d)| Control::Hello {

@@ -290,6 +290,7 @@ fn render() -> String {
                 particles: 60,
                 pos: [0.0, 1.0, 0.4],
                 rot: [0.0, 0.0, 0.0, 1.0],
+                request: Some(3),
             }),
         ),
         ("Despawn", Control::Despawn { id: NetId(4) }),
