@@ -33,6 +33,9 @@ pub const MAX_STRANGERS: usize = 32;
 /// object only inside this range.
 pub const LOST_ID_WINDOW: u32 = 1024;
 
+/// A `NewHost` may announce a term at most this far ahead of ours (an heir may die too).
+pub const MAX_TERM_JUMP: u32 = 4;
+
 /// A datagram this many or more datagrams older than the newest one received from its
 /// sender is too late for its state entries to be used (their 5-bit sequences may alias).
 const MAX_STATE_LATENESS: u8 = 16;
@@ -183,6 +186,9 @@ struct RecvPart {
     latest: Option<u8>,
 }
 
+/// A `NewHost` kept for later: (received, term, members).
+type PendingNewHost = (Instant, Term, Vec<(PeerId, u32)>);
+
 /// (object, part, entry number) of an entry carried by a datagram.
 type EntryRef = (NetId, u32, u64);
 
@@ -321,6 +327,8 @@ pub struct Session {
     resync_until: Option<Instant>,
     /// After we took over as host: ids `lo..hi` the old host may have spawned unseen by us.
     lost_ids: Option<(u32, u32)>,
+    /// `NewHost` messages not acceptable yet, per sender: (received, term, members).
+    pending_new_hosts: BTreeMap<PeerId, PendingNewHost>,
 }
 
 impl Session {
@@ -349,6 +357,7 @@ impl Session {
             last_relay_at: None,
             resync_until: None,
             lost_ids: None,
+            pending_new_hosts: BTreeMap::new(),
         }
     }
 
@@ -1077,6 +1086,9 @@ impl Session {
                 }
             }
             Role::Client => {
+                if self.retry_new_hosts(now) {
+                    return;
+                }
                 let Some(host) = self.host else { return };
                 if self.alive(host, now) {
                     return;
@@ -2134,57 +2146,8 @@ impl Session {
                 term,
                 host,
                 members,
-            } if term > self.term && host == from => {
-                let was_host = self.role == Role::Host;
-                self.term = term;
-                self.host = Some(host);
-                self.role = Role::Client;
-                self.members = members.into_iter().collect();
-                if was_host {
-                    self.members.entry(self.local).or_insert(u32::MAX);
-                }
-                for l in self.links.values_mut() {
-                    l.send.clear();
-                    l.recv.clear();
-                    l.pending.clear();
-                    l.inflight.clear();
-                    l.state_rx = None;
-                    l.spawn_pending.clear();
-                }
-                // tell the new host what we own, so an in-flight handoff is not lost
-                let claims: Vec<SpawnInfo> = self
-                    .objects
-                    .values()
-                    .filter(|o| o.info.owner == self.local)
-                    .map(|o| o.info.clone())
-                    .collect();
-                for chunk in claims.chunks(16) {
-                    self.send_control(
-                        now,
-                        host,
-                        &Control::Resync {
-                            claims: chunk.to_vec(),
-                        },
-                    );
-                }
-                // spawn requests the old host may never have answered go to the new one (it
-                // answers a request it already has with the existing object)
-                let pending: Vec<(u32, ClassId, ObjectState)> = self
-                    .pending_spawns
-                    .iter()
-                    .map(|(r, (c, st))| (*r, *c, st.clone()))
-                    .collect();
-                for (request, class, st) in pending {
-                    let msg = Control::SpawnRequest {
-                        request,
-                        class,
-                        particles: st.particles.len() as u32,
-                        pos: st.pos.to_array(),
-                        rot: st.rot.to_array(),
-                    };
-                    self.send_control(now, host, &msg);
-                }
-                self.events.push_back(Event::HostChanged { host, term });
+            } if host == from && self.role == Role::Client => {
+                self.on_new_host(now, from, term, members);
             }
             // ---- host side
             Control::SpawnRequest {
@@ -2269,6 +2232,119 @@ impl Session {
             }
             _ => {}
         }
+    }
+
+    /// A `NewHost` from `from`: adopted only from the peer that should take over (the
+    /// lowest-join-order member we believe alive, our host aside), once our host is silent or
+    /// about to be, and for a term at most [`MAX_TERM_JUMP`] ahead. One that is not
+    /// acceptable yet is kept (per sender) and looked at again as time passes.
+    fn on_new_host(&mut self, now: Instant, from: PeerId, term: Term, members: Vec<(PeerId, u32)>) {
+        let ahead = term.0.saturating_sub(self.term.0);
+        if !(1..=MAX_TERM_JUMP).contains(&ahead) || !self.members.contains_key(&from) {
+            self.stats.refused_controls += 1;
+            return;
+        }
+        if self.new_host_acceptable(now, from) {
+            self.adopt_new_host(now, from, term, members);
+        } else {
+            self.pending_new_hosts.insert(from, (now, term, members));
+        }
+    }
+
+    /// Is `from` the peer that takes over from our (silent) host?
+    fn new_host_acceptable(&self, now: Instant, from: PeerId) -> bool {
+        let Some(host) = self.host else {
+            return false;
+        };
+        if from == host || self.role != Role::Client {
+            return false;
+        }
+        // our host is silent, or will be within a heartbeat (timeouts differ a little)
+        let host_failing = !self.alive(host, now + self.cfg.heartbeat_interval);
+        let heir = self
+            .members
+            .iter()
+            .filter(|(p, _)| **p != host && self.alive(**p, now))
+            .min_by_key(|(_, seq)| **seq)
+            .map(|(p, _)| *p);
+        host_failing && heir == Some(from)
+    }
+
+    /// Looks again at `NewHost` messages kept for later; true if one was adopted.
+    fn retry_new_hosts(&mut self, now: Instant) -> bool {
+        let timeout = self.cfg.peer_timeout * 3;
+        self.pending_new_hosts
+            .retain(|_, (at, _, _)| now < *at + timeout);
+        let term = self.term;
+        let ready = self
+            .pending_new_hosts
+            .iter()
+            .find(|(p, (_, t, _))| *t > term && self.new_host_acceptable(now, **p))
+            .map(|(p, _)| *p);
+        let Some(from) = ready else {
+            return false;
+        };
+        let Some((_, term, members)) = self.pending_new_hosts.remove(&from) else {
+            return false;
+        };
+        self.adopt_new_host(now, from, term, members);
+        true
+    }
+
+    fn adopt_new_host(
+        &mut self,
+        now: Instant,
+        host: PeerId,
+        term: Term,
+        members: Vec<(PeerId, u32)>,
+    ) {
+        self.term = term;
+        self.host = Some(host);
+        self.role = Role::Client;
+        self.members = members.into_iter().collect();
+        self.pending_new_hosts.clear();
+        for l in self.links.values_mut() {
+            l.send.clear();
+            l.recv.clear();
+            l.pending.clear();
+            l.inflight.clear();
+            l.state_rx = None;
+            l.spawn_pending.clear();
+        }
+        // tell the new host what we own, so an in-flight handoff is not lost
+        let claims: Vec<SpawnInfo> = self
+            .objects
+            .values()
+            .filter(|o| o.info.owner == self.local)
+            .map(|o| o.info.clone())
+            .collect();
+        for chunk in claims.chunks(16) {
+            self.send_control(
+                now,
+                host,
+                &Control::Resync {
+                    claims: chunk.to_vec(),
+                },
+            );
+        }
+        // spawn requests the old host may never have answered go to the new one (it
+        // answers a request it already has with the existing object)
+        let pending: Vec<(u32, ClassId, ObjectState)> = self
+            .pending_spawns
+            .iter()
+            .map(|(r, (c, st))| (*r, *c, st.clone()))
+            .collect();
+        for (request, class, st) in pending {
+            let msg = Control::SpawnRequest {
+                request,
+                class,
+                particles: st.particles.len() as u32,
+                pos: st.pos.to_array(),
+                rot: st.rot.to_array(),
+            };
+            self.send_control(now, host, &msg);
+        }
+        self.events.push_back(Event::HostChanged { host, term });
     }
 
     fn is_member_client(&self, p: PeerId) -> bool {

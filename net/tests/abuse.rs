@@ -11,7 +11,7 @@ use softsync_net::session::MAX_STRANGERS;
 use softsync_net::wire::{Control, SpawnInfo};
 use softsync_net::{
     AuthorityEpoch, AuthorityPolicy, ClassConfig, ClassId, ConditionerConfig, Event, Instant,
-    NetId, ObjectState, PeerId, SendPolicy, Session, SessionConfig,
+    NetId, ObjectState, PeerId, SendPolicy, Session, SessionConfig, Term,
 };
 
 /// Delivers everything queued between `a` and the sessions in `bs` until quiet.
@@ -237,4 +237,49 @@ fn hostile_resync_claims_take_nothing_and_create_boundedly() {
     h.advance(Duration::from_millis(500));
     assert_eq!(h.peers[1].session.object_ids(), before);
     assert_eq!(h.peers[1].session.owner(a), Some(Harness::id(1)));
+}
+
+/// A member announces itself as the new host (a huge term, then the next term): nobody
+/// follows while the host lives, the real heir takes over when it dies, and nothing
+/// overflows.
+#[test]
+fn hostile_new_host_is_ignored_and_the_real_heir_takes_over() {
+    let mut h = common::room(4, ConditionerConfig::default());
+    let bad = Harness::id(3);
+    let grab = |h: &mut Harness, term: u32| {
+        let now = h.now;
+        let members: Vec<(PeerId, u32)> = vec![(bad, 0), (Harness::id(1), 1), (Harness::id(2), 2)];
+        for to in 0..3 {
+            let msg = Control::NewHost {
+                term: Term(term),
+                host: bad,
+                members: members.clone(),
+            };
+            h.session(3).send_raw_control(now, Harness::id(to), &msg);
+        }
+    };
+    grab(&mut h, u32::MAX);
+    grab(&mut h, 2);
+    h.advance(Duration::from_millis(3000));
+    assert!(h.peers[0].session.is_host());
+    for i in 0..3 {
+        let s = &h.peers[i].session;
+        assert_eq!(s.host_id(), Some(Harness::id(0)), "peer {i}");
+        assert_eq!(s.term(), Term(1), "peer {i}");
+    }
+    assert!(h.peers[1].session.stats().refused_controls > 0);
+    // the host dies: the earliest joiner takes over, everyone (the hostile peer too) follows
+    h.kill(0);
+    h.advance(Duration::from_millis(3000));
+    for i in 1..4 {
+        let s = &h.peers[i].session;
+        assert_eq!(s.host_id(), Some(Harness::id(1)), "peer {i}");
+        assert_eq!(s.term(), Term(2), "peer {i}");
+    }
+    // and cannot be unseated by the member either
+    grab(&mut h, 3);
+    h.advance(Duration::from_millis(3000));
+    assert!(h.peers[1].session.is_host());
+    assert_eq!(h.peers[2].session.host_id(), Some(Harness::id(1)));
+    assert_eq!(h.peers[2].session.term(), Term(2));
 }

@@ -1080,3 +1080,27 @@ fn heirs_own_pending_spawn_is_created_on_takeover() {
         assert!(s.latest_state(got[0]).unwrap().pos.distance(Vec3::Z) < 0.002);
     }
 }
+
+/// The heir dies right after taking over: the next one takes over and every survivor follows
+/// it, although some heard the first heir's `NewHost` and some did not.
+#[test]
+fn heir_dying_right_after_takeover_still_converges() {
+    for (seed, after_us) in [(1u64, 0u64), (2, 10_000), (3, 30_000), (4, 200_000)] {
+        let mut h = room(5, ConditionerConfig::rough(seed, 15, 5, 0.0));
+        let ids = spawn_some(&mut h);
+        h.advance(ms(500));
+        h.kill(0);
+        while !h.peers[1].session.is_host() {
+            h.advance(ms(1));
+        }
+        h.advance(std::time::Duration::from_micros(after_us));
+        h.kill(1);
+        h.advance(ms(5000));
+        for i in 2..5 {
+            let s = &h.peers[i].session;
+            assert_eq!(s.host_id(), Some(Harness::id(2)), "seed {seed}: peer {i}");
+            assert_eq!(s.object_ids(), ids, "seed {seed}: peer {i}");
+        }
+        assert_single_owner_everywhere(&h, &ids);
+    }
+}
