@@ -6,9 +6,14 @@ use glam::{Quat, Vec3};
 
 use crate::session::ObjectState;
 
+/// Shortest frame interval a trace may have (seconds).
+pub const MIN_DT_S: f32 = 1e-4;
+/// Longest frame interval a trace may have (seconds).
+pub const MAX_DT_S: f32 = 10.0;
+
 /// A recorded soft-body trace (`assets/traces/softbody60.sstr`, written by
 /// `cargo run --release -p softsync-softbody --example trace`): magic `SSTR`, u32 version 1,
-/// u32 frames, u32 particles, f32 dt_s, then per frame center position (3 × f32), rotation
+/// u32 frames, u32 particles, f32 dt_s (within [`MIN_DT_S`, `MAX_DT_S`]), then per frame center position (3 × f32), rotation
 /// xyzw (4 × f32) and world particle positions (3 × f32 each), little endian.
 #[derive(Clone, Debug)]
 pub struct Trace {
@@ -39,8 +44,7 @@ impl Trace {
         if frames == 0
             || n > 100_000
             || b.len() != 20 + frames.checked_mul(stride)?
-            || !dt_s.is_finite()
-            || dt_s <= 0.0
+            || !(MIN_DT_S..=MAX_DT_S).contains(&dt_s)
         {
             return None;
         }
@@ -169,5 +173,20 @@ mod tests {
         let at = nan.len() - 4;
         nan[at..].copy_from_slice(&f32::NAN.to_le_bytes());
         assert!(Trace::parse(&nan).is_none());
+    }
+
+    /// A frame interval far outside what a recording can have: refused, no overflow.
+    #[test]
+    fn absurd_frame_intervals_are_refused() {
+        for dt in [1e-30f32, 1e-5, 0.0, -0.01, 11.0, f32::INFINITY, f32::NAN] {
+            let mut b = bytes(3, 4);
+            b[16..20].copy_from_slice(&dt.to_le_bytes());
+            assert!(Trace::parse(&b).is_none(), "dt {dt}");
+        }
+        for dt in [MIN_DT_S, 1.0 / 90.0, MAX_DT_S] {
+            let mut b = bytes(3, 4);
+            b[16..20].copy_from_slice(&dt.to_le_bytes());
+            assert!(Trace::parse(&b).is_some(), "dt {dt}");
+        }
     }
 }
