@@ -186,8 +186,18 @@ struct RecvPart {
     latest: Option<u8>,
 }
 
-/// A `NewHost` kept for later: (received, term, members).
-type PendingNewHost = (Instant, Term, Vec<(PeerId, u32)>);
+/// A `NewHost` kept for later, with the control messages its sender sent after it (the
+/// snapshot, ownership changes), replayed once it is adopted.
+#[derive(Debug)]
+struct PendingNewHost {
+    at: Instant,
+    term: Term,
+    members: Vec<(PeerId, u32)>,
+    later: Vec<Control>,
+}
+
+/// Control messages kept after a `NewHost` not adopted yet (more drop the `NewHost`).
+const MAX_DEFERRED_CONTROLS: usize = 4096;
 
 /// (object, part, entry number) of an entry carried by a datagram.
 type EntryRef = (NetId, u32, u64);
@@ -1714,6 +1724,18 @@ impl Session {
             }
         }
         for c in controls {
+            // after a NewHost we have not adopted yet, its sender's messages wait for it
+            if !matches!(c, Control::NewHost { .. }) {
+                if let Some(p) = self.pending_new_hosts.get_mut(&from) {
+                    if p.later.len() < MAX_DEFERRED_CONTROLS {
+                        p.later.push(c);
+                    } else {
+                        self.pending_new_hosts.remove(&from);
+                        self.stats.refused_controls += 1;
+                    }
+                    continue;
+                }
+            }
             self.handle_control(now, from, c);
         }
         if !self.members.contains_key(&from) && Some(from) != self.host {
@@ -2245,9 +2267,30 @@ impl Session {
             return;
         }
         if self.new_host_acceptable(now, from) {
+            let later = self
+                .pending_new_hosts
+                .remove(&from)
+                .map(|p| p.later)
+                .unwrap_or_default();
             self.adopt_new_host(now, from, term, members);
+            for c in later {
+                self.handle_control(now, from, c);
+            }
         } else {
-            self.pending_new_hosts.insert(from, (now, term, members));
+            let later = self
+                .pending_new_hosts
+                .remove(&from)
+                .map(|p| p.later)
+                .unwrap_or_default();
+            self.pending_new_hosts.insert(
+                from,
+                PendingNewHost {
+                    at: now,
+                    term,
+                    members,
+                    later,
+                },
+            );
         }
     }
 
@@ -2273,21 +2316,23 @@ impl Session {
     /// Looks again at `NewHost` messages kept for later; true if one was adopted.
     fn retry_new_hosts(&mut self, now: Instant) -> bool {
         let timeout = self.cfg.peer_timeout * 3;
-        self.pending_new_hosts
-            .retain(|_, (at, _, _)| now < *at + timeout);
+        self.pending_new_hosts.retain(|_, p| now < p.at + timeout);
         let term = self.term;
         let ready = self
             .pending_new_hosts
             .iter()
-            .find(|(p, (_, t, _))| *t > term && self.new_host_acceptable(now, **p))
+            .find(|(p, n)| n.term > term && self.new_host_acceptable(now, **p))
             .map(|(p, _)| *p);
         let Some(from) = ready else {
             return false;
         };
-        let Some((_, term, members)) = self.pending_new_hosts.remove(&from) else {
+        let Some(p) = self.pending_new_hosts.remove(&from) else {
             return false;
         };
-        self.adopt_new_host(now, from, term, members);
+        self.adopt_new_host(now, from, p.term, p.members);
+        for c in p.later {
+            self.handle_control(now, from, c);
+        }
         true
     }
 
