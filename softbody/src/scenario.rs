@@ -73,6 +73,20 @@ impl ScenarioKind {
     }
 }
 
+/// The drop scenario's setting: a fixed floor whose top is y = 0, and the mesh lifted so its
+/// bottom (`lowest_y`) is 0.5 m above it.
+pub(crate) fn drop_floor(world: &mut PhysicsWorld, mesh: &mut Mesh, lowest_y: f32) {
+    let floor = world.insert_body(RigidBodyBuilder::fixed().translation(Vec3::new(0.0, -0.5, 0.0)));
+    world.insert_collider(
+        ColliderBuilder::cuboid(50.0, 0.5, 50.0).friction(0.8),
+        Some(floor),
+    );
+    let lift = 0.5 - lowest_y;
+    for p in &mut mesh.positions {
+        p.y += lift;
+    }
+}
+
 /// A running scenario: its own rapier world with one soft body and the props that act on it.
 pub struct Scenario {
     /// The rapier world.
@@ -130,19 +144,7 @@ impl Scenario {
         let mut poker = None;
         let plate_half = Vec3::new(size_m * 2.0, 0.05, size_m * 2.0);
         match kind {
-            ScenarioKind::Drop => {
-                // Floor top at y = 0; body bottom 0.5 m above it.
-                let floor = world
-                    .insert_body(RigidBodyBuilder::fixed().translation(Vec3::new(0.0, -0.5, 0.0)));
-                world.insert_collider(
-                    ColliderBuilder::cuboid(50.0, 0.5, 50.0).friction(0.8),
-                    Some(floor),
-                );
-                let lift = 0.5 - lo.y;
-                for p in &mut mesh.positions {
-                    p.y += lift;
-                }
-            }
+            ScenarioKind::Drop => drop_floor(&mut world, &mut mesh, lo.y),
             ScenarioKind::Squeeze => {
                 let gap = 0.01 * size_m;
                 let t = world.insert_body(

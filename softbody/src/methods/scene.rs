@@ -117,18 +117,7 @@ impl ModelScene {
         let plate_half = Vec3::new(size_m * 2.0, 0.05f32.max(0.5 * size_m), size_m * 2.0);
         let (mut top_plate, mut bottom_plate, mut poker) = (None, None, None);
         match kind {
-            ScenarioKind::Drop => {
-                let floor = world
-                    .insert_body(RigidBodyBuilder::fixed().translation(Vec3::new(0.0, -0.5, 0.0)));
-                world.insert_collider(
-                    ColliderBuilder::cuboid(50.0, 0.5, 50.0).friction(0.8),
-                    Some(floor),
-                );
-                let lift = 0.5 - lo.y;
-                for p in &mut mesh.positions {
-                    p.y += lift;
-                }
-            }
+            ScenarioKind::Drop => crate::scenario::drop_floor(&mut world, &mut mesh, lo.y),
             ScenarioKind::Squeeze => {
                 for slot in [&mut top_plate, &mut bottom_plate] {
                     // Placed clear of everything; moved to their start in the first step.
