@@ -47,6 +47,32 @@ impl Default for InterpolationConfig {
     }
 }
 
+impl InterpolationConfig {
+    /// The same settings made usable: the delay factors (`intervals`, `jitter_factor`)
+    /// clamped to [0, 100], a non-finite one replaced by the default; a negative or non-finite
+    /// snap distance replaced by the default.
+    pub fn sanitized(self) -> Self {
+        let d = InterpolationConfig::default();
+        let factor = |v: f32, def: f32| {
+            if v.is_finite() {
+                v.clamp(0.0, 100.0)
+            } else {
+                def
+            }
+        };
+        InterpolationConfig {
+            intervals: factor(self.intervals, d.intervals),
+            jitter_factor: factor(self.jitter_factor, d.jitter_factor),
+            max_extrapolation: self.max_extrapolation,
+            snap_distance_m: if self.snap_distance_m.is_finite() && self.snap_distance_m >= 0.0 {
+                self.snap_distance_m
+            } else {
+                d.snap_distance_m
+            },
+        }
+    }
+}
+
 /// Buffer of recent snapshots of one object.
 #[derive(Clone, Debug, Default)]
 pub struct SnapshotBuffer {

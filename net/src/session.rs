@@ -393,9 +393,15 @@ impl Session {
         s
     }
 
-    /// Override the interpolation settings.
+    /// Override the interpolation settings (made sane first: see
+    /// [`InterpolationConfig::sanitized`]).
     pub fn set_interpolation(&mut self, cfg: InterpolationConfig) {
-        self.interp = cfg;
+        self.interp = cfg.sanitized();
+    }
+
+    /// The interpolation settings in use.
+    pub fn interpolation(&self) -> InterpolationConfig {
+        self.interp
     }
 
     // ---------------------------------------------------------------- queries
@@ -499,7 +505,8 @@ impl Session {
                 let j = interp.jitter_factor * l.clock.jitter_us as f32 * 1e-6;
                 let cap = class.send.interval().as_secs_f32() * 4.0 + 0.1;
                 (
-                    Duration::from_secs_f32((base + j).min(cap)),
+                    Duration::try_from_secs_f32((base + j).min(cap).max(0.0))
+                        .unwrap_or(Duration::ZERO),
                     l.clock.min_offset_us.unwrap_or(0),
                 )
             }

@@ -1104,3 +1104,38 @@ fn heir_dying_right_after_takeover_still_converges() {
         assert_single_owner_everywhere(&h, &ids);
     }
 }
+
+/// Negative or non-finite interpolation settings are made sane: display never panics and the
+/// delay is never negative.
+#[test]
+fn bad_interpolation_settings_are_sanitized() {
+    let mut h = room(2, ConditionerConfig::rough(3, 20, 5, 0.0));
+    let now = h.now;
+    let (id, _) = h
+        .session(0)
+        .spawn(now, RIGID, ObjectState::rigid(Vec3::ZERO, Quat::IDENTITY))
+        .unwrap();
+    let start = t(&h);
+    h.run_frames(ms(1000), ms(11), |h| {
+        let now = h.now;
+        let p = Vec3::X * (t(h) - start);
+        h.session(0)
+            .publish_state(now, id, &ObjectState::rigid(p, Quat::IDENTITY))
+            .unwrap();
+    });
+    for (intervals, jitter_factor) in [(-5.0, -3.0), (f32::NAN, f32::INFINITY), (-0.0, -1e30)] {
+        h.session(1)
+            .set_interpolation(softsync_net::InterpolationConfig {
+                intervals,
+                jitter_factor,
+                snap_distance_m: -1.0,
+                ..Default::default()
+            });
+        let cfg = h.peers[1].session.interpolation();
+        assert!(cfg.intervals >= 0.0 && cfg.jitter_factor >= 0.0 && cfg.snap_distance_m >= 0.0);
+        let now = h.now;
+        let shown = h.session(1).display_state(now, id).unwrap();
+        assert!(shown.state.pos.is_finite());
+        assert!(shown.delay <= ms(300), "{:?}", shown.delay);
+    }
+}
