@@ -64,6 +64,18 @@ impl ObjectState {
     fn is_finite(&self) -> bool {
         self.pos.is_finite() && self.rot.is_finite() && self.particles.iter().all(|p| p.is_finite())
     }
+
+    /// The state's rotation, normalized, if the state is finite and the rotation is a unit
+    /// quaternion up to rounding (|q|² within [0.98, 1.02]; a zero quaternion is refused).
+    fn checked_rotation(&self) -> Result<Quat, NetError> {
+        if !self.is_finite() {
+            return Err(NetError::InvalidState("non-finite state"));
+        }
+        if !(0.98..=1.02).contains(&self.rot.length_squared()) {
+            return Err(NetError::InvalidState("rotation is not a unit quaternion"));
+        }
+        Ok(self.rot.normalize())
+    }
 }
 
 /// What a remote peer displays for an object.
@@ -572,7 +584,8 @@ impl Session {
 
     /// Spawn an object. On the host it exists at once (owned by the host) and its id is
     /// returned; on a client the host is asked and `Event::Spawned { request }` follows,
-    /// with the returned number as `request` (and `NetId(0)` returned here).
+    /// with the returned number as `request` (and `NetId(0)` returned here). The state is
+    /// checked as in [`Session::publish_state`].
     pub fn spawn(
         &mut self,
         now: Instant,
@@ -582,9 +595,10 @@ impl Session {
         if self.class(class).is_none() {
             return Err(NetError::UnknownClass(class.0));
         }
-        if !state.is_finite() {
-            return Err(NetError::InvalidState("non-finite state"));
-        }
+        let state = ObjectState {
+            rot: state.checked_rotation()?,
+            ..state
+        };
         if state.particles.len() > wire::MAX_PARTICLES as usize {
             return Err(NetError::InvalidState("too many particles"));
         }
@@ -719,7 +733,8 @@ impl Session {
     }
 
     /// Publish the current state of an object we own (call every frame; the send policy
-    /// decides what goes on the wire).
+    /// decides what goes on the wire). The rotation must be a unit quaternion up to rounding
+    /// (|q|² within [0.98, 1.02], else [`NetError::InvalidState`]); it is normalized.
     pub fn publish_state(
         &mut self,
         now: Instant,
@@ -731,9 +746,7 @@ impl Session {
         if o.info.owner != local {
             return Err(NetError::NotOwner(id, o.info.owner));
         }
-        if !state.is_finite() {
-            return Err(NetError::InvalidState("non-finite state"));
-        }
+        let unit = state.checked_rotation()?;
         if state.particles.len() != o.info.particles as usize {
             return Err(NetError::InvalidState("particle count differs from spawn"));
         }
@@ -741,9 +754,9 @@ impl Session {
             .class(o.info.class)
             .ok_or(NetError::UnknownClass(o.info.class.0))?;
         let pos = class.position_quantizer().quantize(state.pos);
-        let rot = quantize_quat(state.rot, class.rot_bits());
+        let rot = quantize_quat(unit, class.rot_bits());
         let pq = class.particle_quantizer();
-        let inv = state.rot.inverse();
+        let inv = unit.inverse();
         let particles: Vec<[u32; 3]> = state
             .particles
             .iter()
@@ -760,7 +773,11 @@ impl Session {
             o.last_change = now;
             o.rest = false;
         }
-        o.published = Some(state.clone());
+        o.published = Some(ObjectState {
+            pos: state.pos,
+            rot: unit,
+            particles: state.particles.clone(),
+        });
         o.published_at = now;
         Ok(())
     }

@@ -1139,3 +1139,45 @@ fn bad_interpolation_settings_are_sanitized() {
         assert!(shown.delay <= ms(300), "{:?}", shown.delay);
     }
 }
+
+/// A rotation that is not a unit quaternion is refused (far off, or zero), or normalized
+/// (rounding): particle offsets stay right on remote peers either way.
+#[test]
+fn publish_state_refuses_or_normalizes_non_unit_rotations() {
+    let mut h = room(2, ConditionerConfig::default());
+    let now = h.now;
+    let (id, _) = h
+        .session(0)
+        .spawn(now, SOFT, soft_state(Vec3::Y, Quat::IDENTITY, 0.0))
+        .unwrap();
+    h.advance(ms(300));
+    let q = Quat::from_rotation_y(0.7) * Quat::from_rotation_x(0.3);
+    let now = h.now;
+    for bad in [q * 2.0, q * 0.5, Quat::from_xyzw(0.0, 0.0, 0.0, 0.0)] {
+        let st = soft_state(Vec3::Y, q, 0.2);
+        let err = h
+            .session(0)
+            .publish_state(now, id, &ObjectState { rot: bad, ..st });
+        assert!(
+            matches!(err, Err(softsync_net::NetError::InvalidState(_))),
+            "{bad:?}: {err:?}"
+        );
+    }
+    assert!(h
+        .session(0)
+        .spawn(now, RIGID, ObjectState::rigid(Vec3::ZERO, q * 3.0))
+        .is_err());
+    // 0.9 % off (|q|² = 1.018): accepted and normalized
+    let truth = soft_state(Vec3::Y + Vec3::X * 0.3, q, 0.2);
+    let sloppy = ObjectState {
+        rot: q * 1.009,
+        ..truth.clone()
+    };
+    h.session(0).publish_state(now, id, &sloppy).unwrap();
+    h.advance(ms(1000));
+    let got = h.session(1).latest_state(id).unwrap();
+    let e = max_particle_error(&truth, &got);
+    assert!(e < 0.0015, "particle error {e} m");
+    let own = h.session(0).latest_state(id).unwrap();
+    assert!((own.rot.length() - 1.0).abs() < 1e-5);
+}
