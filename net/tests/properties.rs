@@ -91,11 +91,86 @@ prop_compose! {
     }
 }
 
+/// Object ids: mostly the few a small room has, sometimes anything.
+fn arb_id() -> impl Strategy<Value = u32> + Clone {
+    prop_oneof![3 => 0u32..5, 1 => 0u32..2000, 1 => any::<u32>()]
+}
+
+/// Peer ids: mostly the harness's (100…), sometimes anything.
+fn arb_peer() -> impl Strategy<Value = PeerId> + Clone {
+    prop_oneof![3 => (100u64..104).prop_map(PeerId), 1 => any::<u64>().prop_map(PeerId)]
+}
+
+/// Control messages a member has no business sending (host-only ones, or about objects it
+/// does not own), besides those of `arb_control`.
+fn arb_hostile_control() -> impl Strategy<Value = Control> {
+    // epochs: small ones near the room's, and extremes
+    let small = || prop_oneof![0u32..4, Just(u32::MAX), any::<u32>()];
+    let me = Harness::id(2);
+    // the room's objects: 1 rigid, 2 soft with 60 particles (and made-up ones)
+    let shape = prop_oneof![Just((0u16, 0u32)), Just((1, 60)), (0u16..2, 0u32..100)];
+    let claim = (0u32..6, shape, (small(), small()), any::<bool>()).prop_map(
+        move |(id, (c, particles), (term, grant), held)| SpawnInfo {
+            id: NetId(id),
+            class: ClassId(c),
+            owner: me,
+            epoch: AuthorityEpoch { term, grant },
+            held,
+            policy: AuthorityPolicy::Free,
+            particles,
+            pos: [0.0; 3],
+            rot: [0.0, 0.0, 0.0, 1.0],
+            request: None,
+        },
+    );
+    prop_oneof![
+        arb_control(),
+        // claims and host announcements of its own, about the room's objects and terms
+        prop::collection::vec(claim, 1..8).prop_map(|claims| Control::Resync { claims }),
+        small().prop_map(move |t| Control::NewHost {
+            term: Term(t),
+            host: me,
+            members: vec![(me, 0), (Harness::id(0), 1), (Harness::id(1), 2)],
+        }),
+        (arb_id(), arb_peer(), any::<(u32, u32)>(), any::<bool>()).prop_map(
+            |(id, owner, (t, g), held)| Control::OwnerChanged {
+                id: NetId(id),
+                owner,
+                epoch: AuthorityEpoch { term: t, grant: g },
+                held,
+            }
+        ),
+        arb_id().prop_map(|id| Control::Despawn { id: NetId(id) }),
+        arb_id().prop_map(|id| Control::DespawnRequest { id: NetId(id) }),
+        arb_id().prop_map(|id| Control::AuthorityRelease { id: NetId(id) }),
+        (arb_id(), arb_peer()).prop_map(|(id, by)| Control::AuthorityAsk { id: NetId(id), by }),
+        arb_peer().prop_map(|peer| Control::PeerLeft { peer }),
+        (arb_peer(), any::<u32>())
+            .prop_map(|(peer, join_seq)| Control::PeerJoined { peer, join_seq }),
+        (any::<u32>(), any::<u64>(), any::<u32>()).prop_map(|(t, h, s)| Control::Welcome {
+            term: Term(t),
+            host: PeerId(h),
+            join_seq: s,
+            members: vec![(PeerId(h), 0)],
+        }),
+        arb_peer().prop_map(|host| Control::Redirect { host }),
+        (any::<u32>(), 0u16..3, 0u32..200).prop_map(|(request, c, particles)| {
+            Control::SpawnRequest {
+                request,
+                class: ClassId(c),
+                particles,
+                pos: [0.0, 1.0, 0.0],
+                rot: [0.0, 0.0, 0.0, 1.0],
+            }
+        }),
+    ]
+}
+
 fn arb_control() -> impl Strategy<Value = Control> {
     let info = (
-        0u32..1000,
+        arb_id(),
         0u16..3,
-        any::<u64>(),
+        arb_peer(),
         any::<(u32, u32)>(),
         any::<bool>(),
         0u32..5000,
@@ -105,7 +180,7 @@ fn arb_control() -> impl Strategy<Value = Control> {
         .prop_map(|(id, c, o, (t, g), held, n, p, request)| SpawnInfo {
             id: NetId(id),
             class: ClassId(c),
-            owner: PeerId(o),
+            owner: o,
             epoch: AuthorityEpoch { term: t, grant: g },
             held,
             policy: AuthorityPolicy::OwnerMustAgree,
@@ -132,11 +207,11 @@ fn arb_control() -> impl Strategy<Value = Control> {
                 members: m.into_iter().map(|(p, s)| (PeerId(p), s)).collect()
             }),
         "[a-z ]{0,60}".prop_map(|reason| Control::Refused { reason }),
-        (any::<u32>(), any::<u64>(), any::<bool>()).prop_map(|(i, b, a)| {
+        (arb_id(), arb_peer(), any::<bool>()).prop_map(|(i, by, agree)| {
             Control::AuthorityAnswer {
                 id: NetId(i),
-                by: PeerId(b),
-                agree: a,
+                by,
+                agree,
             }
         }),
     ]
@@ -312,5 +387,59 @@ proptest! {
         }
         let hosts: Vec<usize> = live.iter().copied().filter(|i| h.peers[*i].session.is_host()).collect();
         prop_assert_eq!(hosts.len(), 1);
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+
+    /// A member (peer 2) sends well-framed but arbitrary control messages to the live host and
+    /// to a client: owners and epochs of the objects it does not own stay as they were,
+    /// nobody changes host or term, and whatever it gets created stays within its allowance.
+    #[test]
+    fn hostile_member_controls_change_no_ownership(
+        msgs in prop::collection::vec((arb_hostile_control(), 0usize..2), 1..12),
+    ) {
+        let mut h = room(3, ConditionerConfig::default());
+        let now = h.now;
+        let a = h.session(0).spawn(now, RIGID, ObjectState::rigid(Vec3::X, Quat::IDENTITY)).unwrap().0;
+        let b = h.session(0).spawn(now, SOFT, soft_state(Vec3::Y, Quat::IDENTITY, 0.0)).unwrap().0;
+        h.advance(Duration::from_millis(300));
+        let now = h.now;
+        h.session(1).request_authority(now, b).unwrap();
+        h.advance(Duration::from_millis(300));
+        let expect: Vec<_> = [a, b]
+            .iter()
+            .map(|id| (h.peers[0].session.owner(*id).unwrap(), h.peers[0].session.epoch(*id).unwrap()))
+            .collect();
+        prop_assert_eq!(expect[1].0, Harness::id(1));
+        let now = h.now;
+        for (m, to) in &msgs {
+            h.session(2).send_raw_control(now, Harness::id(*to), m);
+        }
+        // keep the objects moving meanwhile
+        let start = h.now;
+        h.run_frames(Duration::from_millis(1500), Duration::from_millis(11), |h| {
+            let s = (h.now - start).as_secs_f32();
+            let now = h.now;
+            let _ = h.session(0).publish_state(now, a, &ObjectState::rigid(Vec3::X + Vec3::Z * s * 0.1, Quat::IDENTITY));
+            let _ = h.session(1).publish_state(now, b, &soft_state(Vec3::Y + Vec3::X * s * 0.1, Quat::IDENTITY, 0.1));
+        });
+        let cfg = h.peers[0].session.config().clone();
+        for i in 0..3 {
+            let s = &h.peers[i].session;
+            prop_assert_eq!(s.host_id(), Some(Harness::id(0)), "peer {}", i);
+            prop_assert_eq!(s.term(), Term(1), "peer {}", i);
+            for (id, (owner, epoch)) in [a, b].iter().zip(&expect) {
+                prop_assert_eq!(s.owner(*id), Some(*owner), "peer {} object {:?}", i, id);
+                prop_assert_eq!(s.epoch(*id), Some(*epoch), "peer {} object {:?}", i, id);
+            }
+            prop_assert!(s.object_ids().len() <= 2 + cfg.max_objects_per_peer);
+        }
+        prop_assert!(h.peers[0].session.is_host());
+        // the objects still replicate
+        let truth = h.peers[1].session.latest_state(b).unwrap();
+        let seen = h.peers[0].session.latest_state(b).unwrap();
+        prop_assert!(max_particle_error(&truth, &seen) < 0.0015);
     }
 }

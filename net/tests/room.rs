@@ -550,12 +550,41 @@ fn stale_epoch_updates_are_dropped() {
     h.session(1).request_authority(now, id).unwrap();
     h.advance(ms(300));
     assert_eq!(h.peers[0].session.owner(id), Some(Harness::id(1)));
-    let before = h.peers[0].session.stats().dropped_stale_epoch;
+    // in the new epoch it is somewhere else
     let now = h.now;
+    let moved = Vec3::new(-0.4, 0.2, 0.1);
+    h.session(1)
+        .publish_state(now, id, &ObjectState::rigid(moved, Quat::IDENTITY))
+        .unwrap();
+    h.advance(ms(500));
+    let pos = h.peers[0].session.latest_state(id).unwrap().pos;
+    assert!(pos.distance(moved) < 0.002, "{pos}");
+    let before = h.peers[0].session.stats().dropped_stale_epoch;
+    // replay the old datagrams as if they were the newest from peer 1 (datagram sequence
+    // right after the one it sends now), so only the epoch check can stop them
+    let now = h.now + ms(250);
+    h.session(1).handle_timeout(now);
+    let mut seq = None;
+    while let Some(t) = h.session(1).poll_transmit(now) {
+        if t.to == Harness::id(0) {
+            seq = Some(t.payload[2]);
+            h.session(0).handle_packet(now, Harness::id(1), &t.payload);
+        }
+    }
+    let mut seq = seq.expect("peer 1 sends the host something");
     for d in &recorded {
-        h.session(0).handle_packet(now, Harness::id(1), d);
+        let mut d = d.clone();
+        seq = seq.wrapping_add(1);
+        d[2] = seq; // version, term (1 byte), datagram sequence
+        h.session(0).handle_packet(now, Harness::id(1), &d);
     }
     assert!(h.peers[0].session.stats().dropped_stale_epoch > before);
+    // the replayed old-epoch position (0.3, 0, 0) is not shown
+    let pos = h.peers[0].session.latest_state(id).unwrap().pos;
+    assert!(pos.distance(moved) < 0.002, "{pos}");
+    h.advance(ms(300));
+    let pos = h.peers[0].session.latest_state(id).unwrap().pos;
+    assert!(pos.distance(moved) < 0.002, "{pos}");
 }
 
 #[test]
