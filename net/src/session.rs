@@ -40,6 +40,10 @@ pub const MAX_TERM_JUMP: u32 = 4;
 /// sender is too late for its state entries to be used (their 5-bit sequences may alias).
 const MAX_STATE_LATENESS: u8 = 16;
 
+/// A datagram that looks 128 or more behind the newest is taken as the newest when nothing
+/// advanced the datagram sequence for this long (many datagrams were lost, not one delayed).
+const IN_SEQ_RESYNC_AFTER: Duration = Duration::from_millis(250);
+
 /// An object's state as the application sees it: center transform and world-space particles.
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct ObjectState {
@@ -235,6 +239,8 @@ struct Link {
     last_heard: Option<Instant>,
     out_seq: u8,
     in_seq: Option<u8>,
+    /// When `in_seq` last advanced.
+    in_seq_at: Option<Instant>,
     send: BTreeMap<(NetId, u32), SendPart>,
     recv: BTreeMap<(NetId, u32), RecvPart>,
     spawn_pending: BTreeMap<NetId, u16>,
@@ -1626,23 +1632,35 @@ impl Session {
         }
         // the newest datagram from the peer so far: its entries are newer than any received
         // before (entry sequences alone cannot tell after a gap of 16 or more)
-        let fresh = link
-            .in_seq
-            .is_none_or(|prev| (1..128).contains(&header.seq.wrapping_sub(prev)));
+        let mut fresh = true;
         match link.in_seq {
             Some(prev) => {
                 let gap = header.seq.wrapping_sub(prev);
+                // 8-bit sequences: after 128 or more lost datagrams every new one looks late;
+                // once nothing has advanced the sequence for a while, take it as the newest
+                let stuck = link
+                    .in_seq_at
+                    .is_some_and(|t| now >= t + IN_SEQ_RESYNC_AFTER);
                 if (1..128).contains(&gap) {
                     ls.expected += u64::from(gap);
                     ls.lost += u64::from(gap - 1);
                     link.in_seq = Some(header.seq);
-                } else if gap >= 128 && ls.lost > 0 {
-                    ls.lost -= 1; // a late (reordered) datagram
+                    link.in_seq_at = Some(now);
+                } else if gap >= 128 && stuck {
+                    ls.expected += 1;
+                    link.in_seq = Some(header.seq);
+                    link.in_seq_at = Some(now);
+                } else {
+                    fresh = false;
+                    if gap >= 128 && ls.lost > 0 {
+                        ls.lost -= 1; // a late (reordered) datagram
+                    }
                 }
             }
             None => {
                 ls.expected += 1;
                 link.in_seq = Some(header.seq);
+                link.in_seq_at = Some(now);
             }
         }
         // State entries carry 5-bit sequences: those of a datagram this far behind the newest

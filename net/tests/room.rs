@@ -1210,3 +1210,57 @@ fn publish_state_refuses_or_normalizes_non_unit_rotations() {
     let own = h.session(0).latest_state(id).unwrap();
     assert!((own.rot.length() - 1.0).abs() < 1e-5);
 }
+
+/// A long outage (within the peer timeout) loses more datagrams than the 8-bit datagram
+/// sequence can tell from a late one: the receiver still takes the new ones as the newest
+/// and follows again at once.
+#[test]
+fn outage_losing_hundreds_of_datagrams_recovers_at_once() {
+    let cfg = SessionConfig {
+        peer_timeout: ms(20_000),
+        ..common::config()
+    };
+    let mut h = Harness::new(2, cfg, ConditionerConfig::default());
+    h.advance(ms(1500));
+    let now = h.now;
+    let (id, _) = h
+        .session(0)
+        .spawn(now, RIGID, ObjectState::rigid(Vec3::ZERO, Quat::IDENTITY))
+        .unwrap();
+    h.advance(ms(300));
+    let start = t(&h);
+    let pos = |s: f32| Vec3::new((s * 0.9).sin(), 1.0, (s * 0.5).cos());
+    let mut cut_at = None;
+    let mut lag = Vec::new();
+    let mut sent_at_cut = (0, 0);
+    h.run_frames(ms(14_000), ms(11), |h| {
+        let s = t(h) - start;
+        let now = h.now;
+        h.session(0)
+            .publish_state(now, id, &ObjectState::rigid(pos(s), Quat::IDENTITY))
+            .unwrap();
+        let sent = |h: &Harness| h.peers[0].session.stats().links[&Harness::id(1)].up.packets;
+        if s > 2.0 && cut_at.is_none() {
+            h.partition(0, 1, true);
+            cut_at = Some(s);
+            sent_at_cut.0 = sent(h);
+        }
+        if s > 10.0 && cut_at.is_some_and(|c| c < 10.0) {
+            h.partition(0, 1, false);
+            cut_at = Some(s);
+            sent_at_cut.1 = sent(h);
+        }
+        if s > 10.5 {
+            let seen = h.peers[1].session.latest_state(id).unwrap().pos;
+            lag.push((s, seen.distance(pos(s))));
+        }
+    });
+    // the datagrams lost in the outage make the next one look 16–127 datagrams late
+    let lost = sent_at_cut.1 - sent_at_cut.0;
+    assert!((128..240).contains(&(lost % 256)), "{lost} datagrams lost");
+    let worst = lag.iter().map(|(_, e)| *e).fold(0.0, f32::max);
+    assert!(
+        worst < 0.1,
+        "peer 1 lags the host by up to {worst} m after the outage"
+    );
+}
