@@ -34,7 +34,7 @@ pub struct AuthorityEpoch {
 }
 
 impl AuthorityEpoch {
-    /// The next epoch in term `term`.
+    /// The next epoch in term `term` (never lower: the grant counter saturates).
     pub fn bumped(self, term: Term) -> Self {
         if term.0 > self.term {
             AuthorityEpoch {
@@ -44,7 +44,7 @@ impl AuthorityEpoch {
         } else {
             AuthorityEpoch {
                 term: self.term,
-                grant: self.grant.wrapping_add(1),
+                grant: self.grant.saturating_add(1),
             }
         }
     }
@@ -52,5 +52,21 @@ impl AuthorityEpoch {
     /// 4-bit tag carried by every state update (enough to catch in-flight stale updates).
     pub fn tag(self) -> u8 {
         (self.grant.wrapping_add(self.term.wrapping_mul(7)) & 0xF) as u8
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bumped_epochs_never_go_back() {
+        let e = AuthorityEpoch {
+            term: 3,
+            grant: u32::MAX,
+        };
+        assert!(e.bumped(Term(3)) >= e);
+        assert!(e.bumped(Term(4)) > e);
+        assert!(e.bumped(Term(2)) >= e);
     }
 }
