@@ -670,6 +670,49 @@ impl SoftBody {
             .unwrap_or((Vec3::ZERO, Quat::IDENTITY))
     }
 
+    /// Puts the body in a replicated state: center pose and world-space particle positions,
+    /// velocities zeroed, mesh deformed to match. For a peer that shows a body another peer
+    /// simulates, and for the peer that just received authority. Refuses a wrong particle
+    /// count or non-finite values, changing nothing.
+    pub fn apply_state(
+        &mut self,
+        world: &mut PhysicsWorld,
+        center_pos: Vec3,
+        center_rot: Quat,
+        particles: &[Vec3],
+    ) -> Result<(), SoftBodyError> {
+        if particles.len() != self.particles.len() {
+            return Err(SoftBodyError::Config(format!(
+                "state has {} particles, the body {}",
+                particles.len(),
+                self.particles.len()
+            )));
+        }
+        if !(center_pos.is_finite() && center_rot.is_finite() && center_rot.length_squared() > 0.5)
+            || particles.iter().any(|p| !p.is_finite())
+        {
+            return Err(SoftBodyError::Config("state is not finite".into()));
+        }
+        if let Some(c) = world.bodies.get_mut(self.center) {
+            c.set_position(
+                rapier3d::prelude::Pose::from_parts(center_pos, center_rot.normalize()),
+                true,
+            );
+            if c.is_dynamic() {
+                c.set_linvel(Vec3::ZERO, true);
+                c.set_angvel(Vec3::ZERO, true);
+            }
+        }
+        for (&h, &p) in self.particles.iter().zip(particles) {
+            if let Some(b) = world.bodies.get_mut(h) {
+                b.set_translation(p, true);
+                b.set_linvel(Vec3::ZERO, true);
+            }
+        }
+        self.deform(world);
+        Ok(())
+    }
+
     /// Drives particle `i` to `goal` (a grab of one particle, thesis 4.1.2), or releases it.
     pub fn set_particle_drive(&mut self, i: usize, goal: Option<Vec3>) {
         if let Some(d) = self.drives.get_mut(i) {

@@ -454,3 +454,39 @@ fn configs_from_json_refuse_unknown_fields_and_bad_values() {
         .to_string()
         .contains("stiffness"));
 }
+
+#[test]
+fn apply_state_moves_the_body_and_refuses_bad_states() {
+    let mut world = PhysicsWorld::new();
+    let mut set = SoftBodySet::new();
+    let cfg = SoftBodyConfig {
+        space: SimulationSpace::Local,
+        ..distance_cfg()
+    };
+    let h = set.insert(&sphere(), cfg, &mut world).unwrap();
+    let b = set.get_mut(h).unwrap();
+    let (c, q) = b.center_pose(&world);
+    let mut particles = b.particle_positions(&world);
+    let i = (0..particles.len())
+        .max_by(|&a, &z| particles[a].x.total_cmp(&particles[z].x))
+        .unwrap();
+    particles[i] += Vec3::X * 0.03;
+    b.apply_state(&mut world, c, q, &particles).unwrap();
+    assert!(b.particle_positions(&world)[i].distance(particles[i]) < 1e-6);
+    assert!(
+        b.vertices().iter().any(|v| v.x > 0.1 + 0.01),
+        "the mesh did not follow the particle"
+    );
+    let before = b.particle_positions(&world);
+    assert!(b.apply_state(&mut world, c, q, &particles[1..]).is_err());
+    particles[3] = Vec3::NAN;
+    assert!(b.apply_state(&mut world, c, q, &particles).is_err());
+    assert!(b
+        .apply_state(&mut world, c, Quat::from_xyzw(0.0, 0.0, 0.0, 0.0), &before)
+        .is_err());
+    assert_eq!(
+        b.particle_positions(&world),
+        before,
+        "a refused state changed the body"
+    );
+}
