@@ -675,6 +675,19 @@ pub enum Section<'a> {
 /// Largest keyframe-request list.
 pub const MAX_KEYFRAME_REQUEST: usize = 64;
 
+/// Whether a datagram carries reliable control messages (transports with a reliable channel
+/// send these on it), or is a refusal. Other undecodable bytes are `false`.
+pub fn carries_control(bytes: &[u8]) -> bool {
+    if bytes.first() == Some(&REFUSAL_MARKER) {
+        return true;
+    }
+    decode_packet(bytes).is_ok_and(|(_, sections)| {
+        sections
+            .iter()
+            .any(|s| matches!(s, Section::Reliable { .. }))
+    })
+}
+
 /// Parse a datagram into its header and sections (bounded, never panics).
 pub fn decode_packet(bytes: &[u8]) -> Result<(PacketHeader, Vec<Section<'_>>), NetError> {
     let mut r = ByteReader::new(bytes);

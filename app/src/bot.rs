@@ -1,0 +1,498 @@
+//! Bots: a small script language for avatar motion and actions, so that tests and load runs
+//! are reproducible.
+//!
+//! One command per line or separated by `;`, `#` starts a comment. HAND is `left`, `right` or
+//! `head`; times are seconds; positions metres in the room (y up, table top at 0.75 m).
+//!
+//! ```text
+//! wait S                        do nothing for S
+//! move HAND X Y Z [in S]        go to a point (straight line over S, default 0.5)
+//! offset HAND DX DY DZ [in S]   go by an offset
+//! reach HAND TARGET [in S]      go to an object: a kind (bunny, softball, softbox, plate,
+//!                               block, can, ball) or `nearest`; soft bodies are reached at
+//!                               their particle nearest to the hand
+//! grab HAND [timeout S]         close the grip; waits until held (through the authority
+//!                               request if another peer owns it), or gives up (default 3 s)
+//! squeeze HAND DEPTH [in S]     push the held point DEPTH metres toward the body's center
+//! release HAND                  open the grip
+//! wave HAND AMPLITUDE PERIOD S  move sinusoidally (load runs)
+//! loop                          start again from the top (last line)
+//! ```
+//!
+//! Built-in scripts by name: `squeeze` (reach the soft ball, grab, squeeze, release, back),
+//! `idle` (stand still), `wave` (both hands waving, forever).
+
+use glam::{Quat, Vec3};
+use softsync_interaction::{HandInput, HandSample};
+
+use crate::room::Room;
+use crate::scene::Kind;
+
+/// A bot script command.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Cmd {
+    /// Pause.
+    Wait(f64),
+    /// Absolute move.
+    Move(usize, Vec3, f64),
+    /// Relative move.
+    Offset(usize, Vec3, f64),
+    /// Move to an object (None: nearest).
+    Reach(usize, Option<Kind>, f64),
+    /// Close the grip.
+    Grab(usize, f64),
+    /// Push toward the held body's center.
+    Squeeze(usize, f32, f64),
+    /// Open the grip.
+    Release(usize),
+    /// Sinusoidal motion.
+    Wave(usize, f32, f64, f64),
+    /// Restart.
+    Loop,
+}
+
+/// A parse error with its line.
+#[derive(Debug, thiserror::Error)]
+#[error("bot script, command {index} ({text:?}): {msg}")]
+pub struct ScriptError {
+    /// 1-based command number.
+    pub index: usize,
+    /// The command.
+    pub text: String,
+    /// What is wrong.
+    pub msg: String,
+}
+
+/// Built-in scripts.
+pub fn builtin(name: &str) -> Option<&'static str> {
+    match name {
+        "squeeze" => Some(
+            "wait 1; reach right softball in 1; grab right; squeeze right 0.03 in 0.6; wait 0.6; \
+             release right; offset right 0 0.15 0 in 0.5",
+        ),
+        "idle" => Some("wait 1"),
+        "wave" => Some("wave right 0.15 1.2 3; wave left 0.1 0.9 3; loop"),
+        _ => None,
+    }
+}
+
+fn hand(s: &str) -> Result<usize, String> {
+    match s {
+        "head" => Ok(0),
+        "left" => Ok(1),
+        "right" => Ok(2),
+        _ => Err(format!("{s:?} is not a hand: use left, right or head")),
+    }
+}
+
+fn num(s: &str) -> Result<f64, String> {
+    let v: f64 = s.parse().map_err(|_| format!("{s:?} is not a number"))?;
+    if !v.is_finite() || v.abs() > 1e4 {
+        return Err(format!("{s} is out of range"));
+    }
+    Ok(v)
+}
+
+fn dur(w: &[&str], at: usize, default: f64) -> Result<f64, String> {
+    match (w.get(at), w.get(at + 1)) {
+        (None, _) => Ok(default),
+        (Some(&"in"), Some(v)) | (Some(&"timeout"), Some(v)) => {
+            let d = num(v)?;
+            if d < 0.0 {
+                Err("a duration cannot be negative".into())
+            } else {
+                Ok(d)
+            }
+        }
+        _ => Err(format!("unexpected {:?}", w[at..].join(" "))),
+    }
+}
+
+fn vec3(w: &[&str], at: usize) -> Result<Vec3, String> {
+    if w.len() < at + 3 {
+        return Err("expected X Y Z".into());
+    }
+    Ok(Vec3::new(
+        num(w[at])? as f32,
+        num(w[at + 1])? as f32,
+        num(w[at + 2])? as f32,
+    ))
+}
+
+/// Parse a script (inline text or a file's contents).
+pub fn parse(text: &str) -> Result<Vec<Cmd>, ScriptError> {
+    let mut out = Vec::new();
+    let pieces = text
+        .lines()
+        .flat_map(|l| l.split('#').next().unwrap_or("").split(';'))
+        .map(str::trim)
+        .filter(|s| !s.is_empty());
+    for (i, piece) in pieces.enumerate() {
+        let w: Vec<&str> = piece.split_whitespace().collect();
+        let cmd = (|| -> Result<Cmd, String> {
+            let arg = |k: usize| w.get(k).copied().ok_or_else(|| "missing argument".to_string());
+            Ok(match w[0] {
+                "wait" => Cmd::Wait(num(arg(1)?)?.max(0.0)),
+                "move" => Cmd::Move(hand(arg(1)?)?, vec3(&w, 2)?, dur(&w, 5, 0.5)?),
+                "offset" => Cmd::Offset(hand(arg(1)?)?, vec3(&w, 2)?, dur(&w, 5, 0.5)?),
+                "reach" => {
+                    let t = arg(2)?;
+                    let kind = if t == "nearest" {
+                        None
+                    } else {
+                        Some(Kind::from_name(t).filter(|k| !k.is_avatar()).ok_or_else(|| {
+                            format!("unknown object {t:?}: bunny, softball, softbox, plate, block, can, ball or nearest")
+                        })?)
+                    };
+                    Cmd::Reach(hand(arg(1)?)?, kind, dur(&w, 3, 0.5)?)
+                }
+                "grab" => Cmd::Grab(hand(arg(1)?)?, dur(&w, 2, 3.0)?),
+                "squeeze" => Cmd::Squeeze(hand(arg(1)?)?, num(arg(2)?)? as f32, dur(&w, 3, 0.5)?),
+                "release" => Cmd::Release(hand(arg(1)?)?),
+                "wave" => Cmd::Wave(
+                    hand(arg(1)?)?,
+                    num(arg(2)?)? as f32,
+                    num(arg(3)?)?.max(0.05),
+                    num(arg(4)?)?.max(0.0),
+                ),
+                "loop" => Cmd::Loop,
+                other => return Err(format!("unknown command {other:?}")),
+            })
+        })()
+        .map_err(|msg| ScriptError {
+            index: i + 1,
+            text: piece.to_owned(),
+            msg,
+        })?;
+        if matches!(cmd, Cmd::Grab(0, _) | Cmd::Squeeze(0, ..) | Cmd::Release(0)) {
+            return Err(ScriptError {
+                index: i + 1,
+                text: piece.to_owned(),
+                msg: "the head cannot grab".into(),
+            });
+        }
+        out.push(cmd);
+    }
+    Ok(out)
+}
+
+#[derive(Clone, Debug)]
+enum Active {
+    Wait(f64),
+    Motion {
+        part: usize,
+        from: Vec3,
+        to: Vec3,
+        t0: f64,
+        dur: f64,
+    },
+    Wave {
+        part: usize,
+        center: Vec3,
+        amp: f32,
+        period: f64,
+        t0: f64,
+        dur: f64,
+    },
+    Grab {
+        hand: usize,
+        t0: f64,
+        until: f64,
+    },
+}
+
+/// A running bot: drives the avatar (head and hands) and the grips.
+#[derive(Clone, Debug)]
+pub struct Bot {
+    cmds: Vec<Cmd>,
+    pc: usize,
+    active: Option<Active>,
+    /// Head, left, right.
+    pos: [Vec3; 3],
+    rot: Quat,
+    grip: [f32; 3],
+    started: bool,
+    /// Finished the script.
+    pub done: bool,
+    /// Grabs that took hold, with the time from grip to hold (s).
+    pub grabs: Vec<f64>,
+    /// Grabs that gave up.
+    pub failed_grabs: u64,
+}
+
+impl Bot {
+    /// A bot running `cmds`.
+    pub fn new(cmds: Vec<Cmd>) -> Self {
+        Bot {
+            cmds,
+            pc: 0,
+            active: None,
+            pos: [Vec3::ZERO; 3],
+            rot: Quat::IDENTITY,
+            grip: [0.0; 3],
+            started: false,
+            done: false,
+            grabs: Vec::new(),
+            failed_grabs: 0,
+        }
+    }
+
+    fn say(room: &Room, msg: String) {
+        println!("bot peer={} t={:.2} {msg}", room.me().0, room.sim_time());
+    }
+
+    /// Drive one fixed step: set the hands' inputs and the avatar's pose.
+    pub fn step(&mut self, room: &mut Room) {
+        let t = room.sim_time();
+        if !self.started {
+            let (home, rot) = room.home();
+            self.rot = rot;
+            self.pos = [
+                home,
+                home + rot * Vec3::new(-0.2, -0.45, -0.25),
+                home + rot * Vec3::new(0.2, -0.45, -0.25),
+            ];
+            self.started = true;
+        }
+        // Run commands until one takes time.
+        for _ in 0..64 {
+            if self.active.is_none() {
+                if !self.next(room, t) {
+                    break;
+                }
+            }
+            if !self.advance(room, t) {
+                break;
+            }
+        }
+        for part in 0..3 {
+            room.set_avatar_pose(part, self.pos[part], self.rot);
+        }
+        for h in 0..2 {
+            let input = HandInput {
+                sample: HandSample {
+                    position_m: self.pos[h + 1],
+                    rotation: self.rot,
+                    time_s: t,
+                },
+                grip: self.grip[h + 1],
+                trigger: 0.0,
+            };
+            room.set_hand_input(h, input);
+        }
+    }
+
+    /// Start the next command; false when there is none.
+    fn next(&mut self, room: &mut Room, t: f64) -> bool {
+        let Some(cmd) = self.cmds.get(self.pc).cloned() else {
+            if !self.done {
+                self.done = true;
+                Self::say(room, "script done".into());
+            }
+            return false;
+        };
+        self.pc += 1;
+        self.active = match cmd {
+            Cmd::Wait(s) => Some(Active::Wait(t + s)),
+            Cmd::Move(part, to, dur) => Some(Active::Motion {
+                part,
+                from: self.pos[part],
+                to,
+                t0: t,
+                dur,
+            }),
+            Cmd::Offset(part, d, dur) => Some(Active::Motion {
+                part,
+                from: self.pos[part],
+                to: self.pos[part] + d,
+                t0: t,
+                dur,
+            }),
+            Cmd::Reach(part, kind, dur) => match self.target(room, part, kind) {
+                Some((to, name)) => {
+                    Self::say(room, format!("reach {name}"));
+                    Some(Active::Motion {
+                        part,
+                        from: self.pos[part],
+                        to,
+                        t0: t,
+                        dur,
+                    })
+                }
+                None => {
+                    Self::say(room, format!("reach: no {} in the room", kind.map_or("object", Kind::name)));
+                    None
+                }
+            },
+            Cmd::Grab(hand, timeout) => {
+                self.grip[hand] = 1.0;
+                Some(Active::Grab {
+                    hand,
+                    t0: t,
+                    until: t + timeout,
+                })
+            }
+            Cmd::Squeeze(hand, depth, dur) => {
+                let center = room
+                    .held(hand - 1)
+                    .and_then(|(id, _)| room.shown_state(id))
+                    .map(|s| s.pos);
+                match center {
+                    Some(c) => {
+                        let dir = (c - self.pos[hand]).normalize_or_zero();
+                        Some(Active::Motion {
+                            part: hand,
+                            from: self.pos[hand],
+                            to: self.pos[hand] + dir * depth,
+                            t0: t,
+                            dur,
+                        })
+                    }
+                    None => {
+                        Self::say(room, "squeeze: the hand holds nothing".into());
+                        None
+                    }
+                }
+            }
+            Cmd::Release(hand) => {
+                self.grip[hand] = 0.0;
+                if let Some((id, _)) = room.held(hand - 1) {
+                    Self::say(room, format!("release object {}", id.0));
+                }
+                None
+            }
+            Cmd::Wave(part, amp, period, dur) => Some(Active::Wave {
+                part,
+                center: self.pos[part],
+                amp,
+                period,
+                t0: t,
+                dur,
+            }),
+            Cmd::Loop => {
+                self.pc = 0;
+                None
+            }
+        };
+        true
+    }
+
+    /// Progress the active command; true when it finished.
+    fn advance(&mut self, room: &mut Room, t: f64) -> bool {
+        let Some(a) = self.active.clone() else {
+            return true;
+        };
+        let finished = match a {
+            Active::Wait(until) => t >= until,
+            Active::Motion {
+                part,
+                from,
+                to,
+                t0,
+                dur,
+            } => {
+                let f = if dur <= 0.0 {
+                    1.0
+                } else {
+                    ((t - t0) / dur).clamp(0.0, 1.0) as f32
+                };
+                self.pos[part] = from.lerp(to, f);
+                f >= 1.0
+            }
+            Active::Wave {
+                part,
+                center,
+                amp,
+                period,
+                t0,
+                dur,
+            } => {
+                let ph = ((t - t0) / period * std::f64::consts::TAU) as f32;
+                self.pos[part] = center + Vec3::new(ph.sin() * amp, (ph * 2.0).sin() * amp * 0.3, 0.0);
+                if t - t0 >= dur {
+                    self.pos[part] = center;
+                    true
+                } else {
+                    false
+                }
+            }
+            Active::Grab { hand, t0, until } => {
+                if let Some((id, _)) = room.held(hand - 1) {
+                    self.grabs.push(t - t0);
+                    Self::say(
+                        room,
+                        format!("grabbed object {} after {:.0} ms", id.0, (t - t0) * 1e3),
+                    );
+                    true
+                } else if t >= until {
+                    self.failed_grabs += 1;
+                    self.grip[hand] = 0.0;
+                    Self::say(room, "grab: nothing taken".into());
+                    true
+                } else {
+                    false
+                }
+            }
+        };
+        if finished {
+            self.active = None;
+        }
+        finished
+    }
+
+    /// A point to reach: the object's particle nearest to the hand, or its center.
+    fn target(&self, room: &mut Room, part: usize, kind: Option<Kind>) -> Option<(Vec3, String)> {
+        let from = self.pos[part];
+        let ids: Vec<_> = room
+            .objects
+            .iter()
+            .filter(|(_, o)| !o.kind.is_avatar() && kind.is_none_or(|k| o.kind == k))
+            .map(|(id, o)| (*id, o.kind))
+            .collect();
+        let mut best: Option<(f32, Vec3, String)> = None;
+        for (id, k) in ids {
+            let Some(s) = room.shown_state(id) else {
+                continue;
+            };
+            let p = if s.particles.is_empty() {
+                s.pos
+            } else {
+                s.particles
+                    .iter()
+                    .copied()
+                    .min_by(|a, b| a.distance(from).total_cmp(&b.distance(from)))
+                    .unwrap_or(s.pos)
+            };
+            let d = p.distance(from);
+            if best.as_ref().is_none_or(|b| d < b.0) {
+                best = Some((d, p, format!("{} (object {})", k.name(), id.0)));
+            }
+        }
+        best.map(|(_, p, n)| (p, n))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scripts_parse_and_errors_name_the_command() {
+        let c = parse("wait 1; reach right softball in 1\n# comment\ngrab right; squeeze right 0.03 in 0.6; release right; loop").unwrap();
+        assert_eq!(c.len(), 6);
+        assert_eq!(c[1], Cmd::Reach(2, Some(Kind::SoftBall), 1.0));
+        assert_eq!(c[2], Cmd::Grab(2, 3.0));
+        for name in ["squeeze", "idle", "wave"] {
+            parse(builtin(name).unwrap()).unwrap();
+        }
+        let e = parse("wait 1; jump right").unwrap_err();
+        assert_eq!(e.index, 2);
+        assert!(e.to_string().contains("unknown command"), "{e}");
+        assert!(parse("reach right teapot").unwrap_err().msg.contains("unknown object"));
+        assert!(parse("move left 1 2").is_err());
+        assert!(parse("move left 1 2 NaN").is_err());
+        assert!(parse("grab head").is_err());
+        assert!(parse("wait 1 2").is_ok(), "extra words after wait are ignored");
+        assert!(parse("move left 0 1 0 in -1").is_err());
+    }
+}

@@ -1,0 +1,254 @@
+//! `softsync`: signal, host, join, bench. See `softsync help`.
+
+#![allow(clippy::disallowed_methods)] // the app is the I/O layer: clocks, sleeps, processes
+
+mod bench;
+mod bot;
+mod cli;
+mod plugins;
+mod report;
+mod room;
+mod scene;
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Duration;
+
+use bevy::app::{App, AppExit, PluginGroup, ScheduleRunnerPlugin};
+use bevy::time::{Fixed, Time};
+use bevy::MinimalPlugins;
+use softsync_interaction::HandConfig;
+use softsync_net::{LinkConditioner, PeerEvent, SendPolicy, Session, Transport};
+use softsync_net_matchbox::{MatchboxConfig, MatchboxTransport, Role, SignalServer};
+
+use crate::cli::{Command, PeerArgs, UsageError};
+use crate::plugins::{NetPlugin, Peer, ReportPlugin, SimPlugin};
+use crate::room::Room;
+use crate::scene::Scene;
+
+/// A failure with its exit code.
+struct Failure {
+    code: u8,
+    msg: String,
+}
+
+impl Failure {
+    fn usage(msg: impl std::fmt::Display) -> Self {
+        Failure {
+            code: 2,
+            msg: msg.to_string(),
+        }
+    }
+    fn connect(msg: impl std::fmt::Display) -> Self {
+        Failure {
+            code: 3,
+            msg: msg.to_string(),
+        }
+    }
+    fn runtime(msg: impl std::fmt::Display) -> Self {
+        Failure {
+            code: 1,
+            msg: msg.to_string(),
+        }
+    }
+}
+
+impl From<UsageError> for Failure {
+    fn from(e: UsageError) -> Self {
+        Failure::usage(e)
+    }
+}
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    match run(&args) {
+        Ok(code) => code,
+        Err(f) => {
+            eprintln!("error: {}", f.msg);
+            ExitCode::from(f.code)
+        }
+    }
+}
+
+fn run(args: &[String]) -> Result<ExitCode, Failure> {
+    match cli::parse(args)? {
+        Command::Help => {
+            print!("{}", cli::USAGE);
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Signal { bind } => signal(bind),
+        Command::Peer(p) => peer(p),
+        Command::BenchNetLive { out, seconds, quick } => {
+            bench::net_live(&out, seconds, quick).map_err(Failure::runtime)?;
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}
+
+fn signal(bind: std::net::SocketAddr) -> Result<ExitCode, Failure> {
+    let server = SignalServer::start(bind).map_err(Failure::connect)?;
+    println!("signaling on {}", server.url());
+    let mut last = Vec::new();
+    loop {
+        std::thread::sleep(Duration::from_millis(500));
+        let rooms = server.rooms();
+        if rooms != last {
+            let list: Vec<String> = rooms
+                .iter()
+                .map(|r| format!("{}({})", r.name, r.peers))
+                .collect();
+            eprintln!("rooms: {}", if list.is_empty() { "none".into() } else { list.join(" ") });
+            last = rooms;
+        }
+    }
+}
+
+/// The assets folder: `--assets`, `./assets`, or the repository's next to the binary.
+fn assets_dir(given: Option<&Path>) -> PathBuf {
+    if let Some(p) = given {
+        return p.to_owned();
+    }
+    let here = PathBuf::from("assets");
+    if here.join("bunny.obj").exists() {
+        return here;
+    }
+    if let Ok(exe) = std::env::current_exe() {
+        for up in exe.ancestors().skip(1).take(4) {
+            let p = up.join("assets");
+            if p.join("bunny.obj").exists() {
+                return p;
+            }
+        }
+    }
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets")
+}
+
+fn load_bot(src: &str) -> Result<bot::Bot, Failure> {
+    let text = if let Some(b) = bot::builtin(src) {
+        b.to_owned()
+    } else if Path::new(src).is_file() {
+        std::fs::read_to_string(src)
+            .map_err(|e| Failure::usage(format!("bot script {src}: {e}")))?
+    } else if src.contains(' ') || src.contains(';') {
+        src.to_owned()
+    } else {
+        return Err(Failure::usage(format!(
+            "--bot {src:?}: no such file or built-in script (squeeze, idle, wave)"
+        )));
+    };
+    let cmds = bot::parse(&text).map_err(Failure::usage)?;
+    Ok(bot::Bot::new(cmds))
+}
+
+fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
+    // Check every input before opening anything.
+    let scene = Scene::by_name(&a.scene, &assets_dir(a.assets.as_deref())).map_err(Failure::usage)?;
+    let bot = a.bot.as_deref().map(load_bot).transpose()?;
+    let dump = match &a.dump {
+        Some(p) => Some(
+            report::Dump::create(p)
+                .map_err(|e| Failure::usage(format!("--dump {}: {e}", p.display())))?,
+        ),
+        None => None,
+    };
+    let send = SendPolicy {
+        rate_hz: a.send_rate_hz,
+        position_threshold_m: a.threshold_m,
+        particle_threshold_m: a.threshold_m,
+        ..SendPolicy::default()
+    };
+    let cfg = scene::session_config(send.clone(), send.clone(), send);
+
+    // Signaling: embedded in the host unless --signal names a server.
+    let (signal_server, url) = match (&a.signal, a.host) {
+        (Some(u), _) => (None, u.clone()),
+        (None, true) => {
+            let s = SignalServer::start(a.bind).map_err(Failure::connect)?;
+            let url = s.url();
+            println!("signaling on {url}");
+            (Some(s), url)
+        }
+        (None, false) => return Err(Failure::usage("join needs --signal")),
+    };
+    let mut mcfg = MatchboxConfig::new(
+        url.clone(),
+        a.room.clone(),
+        if a.host { Role::Host } else { Role::Join },
+    );
+    mcfg.ice_servers = a.ice.clone();
+    mcfg.connect_timeout = a.connect_timeout.min(Duration::from_secs(30));
+    let started = std::time::Instant::now();
+    let mut transport = MatchboxTransport::connect(&mcfg).map_err(Failure::connect)?;
+    let me = transport.local_id();
+    let now0 = softsync_net::Instant::ZERO;
+    let session = if a.host {
+        Session::host(me, cfg, now0)
+    } else {
+        // Wait for the first data channel: that peer is our contact (a non-host redirects us).
+        let contact = loop {
+            if let Some(PeerEvent::Connected(p)) = transport.poll_peer_event() {
+                break p;
+            }
+            if let Some(why) = transport.closed() {
+                return Err(Failure::connect(format!("signaling lost while joining: {why}")));
+            }
+            if started.elapsed() > a.connect_timeout {
+                return Err(Failure::connect(format!(
+                    "room {:?}: no WebRTC connection to any of its peers within {:?}",
+                    a.room, a.connect_timeout
+                )));
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        };
+        println!(
+            "connected to peer {} after {:.0} ms",
+            contact.0,
+            started.elapsed().as_secs_f64() * 1e3
+        );
+        Session::join(me, contact, cfg, now0)
+    };
+    println!(
+        "{} room={} peer={} signal={url}",
+        if a.host { "hosting" } else { "joining" },
+        a.room,
+        me.0
+    );
+    let transport: Box<dyn Transport> = match a.condition {
+        Some(c) => Box::new(LinkConditioner::new(transport, c)),
+        None => Box::new(transport),
+    };
+    let hand = HandConfig {
+        // Bots reach exactly; a physical hand body would shove what it reaches for.
+        physical_controller: false,
+        hover_radius_m: 0.03,
+        ..HandConfig::default()
+    };
+    let dt = (1.0 / a.sim_hz) as f32;
+    let mut room = Room::new(session, transport, scene, hand, dt).map_err(Failure::usage)?;
+    if a.host {
+        room.open().map_err(Failure::runtime)?;
+    }
+    let peer = Peer::new(
+        room,
+        bot,
+        a.room.clone(),
+        a.duration,
+        a.connect_timeout,
+        dump,
+        a.dump_hz,
+        a.quiet,
+        signal_server,
+    );
+    let exit = App::new()
+        .add_plugins(
+            MinimalPlugins.set(ScheduleRunnerPlugin::run_loop(Duration::from_millis(4))),
+        )
+        .insert_resource(Time::<Fixed>::from_hz(a.sim_hz))
+        .insert_non_send(peer)
+        .add_plugins((NetPlugin, SimPlugin, ReportPlugin))
+        .run();
+    Ok(match exit {
+        AppExit::Success => ExitCode::SUCCESS,
+        AppExit::Error(code) => ExitCode::from(code.get()),
+    })
+}

@@ -1,0 +1,195 @@
+//! The bevy side of a peer: plugins that wrap the network session, the soft-body simulation
+//! and the reports. The headless peer runs on `MinimalPlugins` with the simulation in
+//! `FixedUpdate` at the simulation rate.
+//!
+//! Frame order (every loop iteration, ~250 Hz):
+//! 1. `PreUpdate` — [`NetPlugin`]: datagrams in, session timers and events.
+//! 2. `FixedUpdate` (0..n times, at `--sim-hz`) — [`SimPlugin`]: the bot sets the hands, hands
+//!    update (authority requests), remote objects are shown, soft bodies and rapier step, owned
+//!    objects are published.
+//! 3. `PostUpdate` — [`NetPlugin`]: datagrams out.
+//! 4. `Last` — [`ReportPlugin`]: stats line, dump, the end of `--duration`.
+
+use std::time::Duration;
+
+use bevy::app::{App, AppExit, FixedUpdate, Last, Plugin, PostUpdate, PreUpdate};
+use bevy::ecs::message::MessageWriter;
+use bevy::ecs::system::NonSendMut;
+
+use crate::bot::Bot;
+use crate::report::{snapshot, Dump, StatsLine};
+use crate::room::{Note, Room};
+
+/// Everything one peer owns: the room (session, transport, world) and its drivers.
+pub struct Peer {
+    /// The room.
+    pub room: Room,
+    /// The bot, if any.
+    pub bot: Option<Bot>,
+    /// Room name.
+    pub room_name: String,
+    /// Leave after this long.
+    pub duration: Option<Duration>,
+    /// Give up joining after this long.
+    pub connect_timeout: Duration,
+    /// Dump.
+    pub dump: Option<Dump>,
+    /// Dump period.
+    pub dump_every: Duration,
+    /// No stats lines.
+    pub quiet: bool,
+    /// Kept alive while the peer runs (the host's embedded signaling server).
+    pub signal: Option<softsync_net_matchbox::SignalServer>,
+    stats: StatsLine,
+    next_stats: Duration,
+    next_dump: Duration,
+    exiting: bool,
+}
+
+impl Peer {
+    /// A peer around `room`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        room: Room,
+        bot: Option<Bot>,
+        room_name: String,
+        duration: Option<Duration>,
+        connect_timeout: Duration,
+        dump: Option<Dump>,
+        dump_hz: f64,
+        quiet: bool,
+        signal: Option<softsync_net_matchbox::SignalServer>,
+    ) -> Self {
+        Peer {
+            room,
+            bot,
+            room_name,
+            duration,
+            connect_timeout,
+            dump,
+            dump_every: Duration::from_secs_f64(1.0 / dump_hz.max(0.01)),
+            quiet,
+            signal,
+            stats: StatsLine::default(),
+            next_stats: Duration::from_secs(1),
+            next_dump: Duration::ZERO,
+            exiting: false,
+        }
+    }
+
+    fn write_dump(&mut self) {
+        if self.dump.is_some() {
+            let line = snapshot(&mut self.room);
+            if let Some(d) = &mut self.dump {
+                if let Err(e) = d.write(&line) {
+                    eprintln!("dump: {e}; no more dumps");
+                    self.dump = None;
+                }
+            }
+        }
+    }
+}
+
+fn fail(exit: &mut MessageWriter<AppExit>, peer: &mut Peer, msg: String, code: u8) {
+    eprintln!("error: {msg}");
+    peer.write_dump();
+    peer.exiting = true;
+    exit.write(AppExit::from_code(code));
+}
+
+fn net_in(mut peer: NonSendMut<Peer>, mut exit: MessageWriter<AppExit>) {
+    if peer.exiting {
+        return;
+    }
+    let p = &mut *peer;
+    if let Err(e) = p.room.pump() {
+        fail(&mut exit, p, e.to_string(), 3);
+        return;
+    }
+    if let Err(e) = p.room.join_deadline_passed(&p.room_name, p.connect_timeout) {
+        fail(&mut exit, p, e.to_string(), 3);
+        return;
+    }
+    for n in std::mem::take(&mut p.room.notes) {
+        let line = match n {
+            Note::Joined { host, term } => format!("joined host={} term={}", host.0, term.0),
+            Note::HostChanged { host, term } => format!("host-changed host={} term={}", host.0, term.0),
+            Note::PeerJoined(q) => format!("peer-joined {}", q.0),
+            Note::PeerLeft(q) => format!("peer-left {}", q.0),
+            Note::AuthorityAsked(id) => format!("authority-asked object={}", id.0),
+            Note::AuthorityGained(id) => format!("authority-gained object={}", id.0),
+            Note::AuthorityDenied(id) => format!("authority-denied object={}", id.0),
+            Note::AuthorityReleased(id) => format!("authority-released object={}", id.0),
+        };
+        println!("event peer={} t={:.2} {line}", p.room.me().0, p.room.now().as_secs_f64());
+    }
+}
+
+fn net_out(mut peer: NonSendMut<Peer>) {
+    peer.room.flush();
+}
+
+fn simulate(mut peer: NonSendMut<Peer>) {
+    let p = &mut *peer;
+    if !p.room.joined() || p.exiting {
+        return;
+    }
+    if let Some(bot) = &mut p.bot {
+        bot.step(&mut p.room);
+    }
+    p.room.fixed_step();
+}
+
+fn report(mut peer: NonSendMut<Peer>, mut exit: MessageWriter<AppExit>) {
+    let p = &mut *peer;
+    if p.exiting {
+        return;
+    }
+    let t = Duration::from_micros(p.room.now().as_micros());
+    if t >= p.next_stats {
+        p.next_stats = t + Duration::from_secs(1);
+        let (line, _) = p.stats.line(&p.room);
+        if !p.quiet {
+            eprintln!("{line}");
+        }
+    }
+    if t >= p.next_dump && p.room.joined() {
+        p.next_dump = t + p.dump_every;
+        p.write_dump();
+    }
+    if p.duration.is_some_and(|d| t >= d) {
+        p.write_dump();
+        let (line, _) = p.stats.line(&p.room);
+        println!("final {line}");
+        p.exiting = true;
+        exit.write(AppExit::Success);
+    }
+}
+
+/// Datagrams in and out around the frame.
+pub struct NetPlugin;
+
+impl Plugin for NetPlugin {
+    fn build(&self, app: &mut App) {
+        app.add_systems(PreUpdate, net_in)
+            .add_systems(PostUpdate, net_out);
+    }
+}
+
+/// The fixed-rate simulation: bot, hands, soft bodies, rapier, publishing.
+pub struct SimPlugin;
+
+impl Plugin for SimPlugin {
+    fn build(&self, app: &mut App) {
+        app.add_systems(FixedUpdate, simulate);
+    }
+}
+
+/// Stats line, dump, and leaving at the end of `--duration`.
+pub struct ReportPlugin;
+
+impl Plugin for ReportPlugin {
+    fn build(&self, app: &mut App) {
+        app.add_systems(Last, report);
+    }
+}

@@ -1,0 +1,186 @@
+//! What a peer reports: the JSON-lines dump of the state it shows, and the stats line.
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::Path;
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+use softsync_net::stats::Traffic;
+
+use crate::room::Room;
+
+/// One object in a dump line.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct DumpObject {
+    /// Network id.
+    pub id: u32,
+    /// Kind name.
+    pub kind: String,
+    /// Owner's peer id.
+    pub owner: u64,
+    /// Center position.
+    pub pos: [f32; 3],
+    /// Center rotation (x, y, z, w).
+    pub rot: [f32; 4],
+    /// Particles in world space (soft bodies).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub particles: Vec<[f32; 3]>,
+    /// For objects we do not own: the owner's clock time (s) the shown state stands for.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub src: Option<f64>,
+}
+
+/// One dump line.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct DumpLine {
+    /// This peer's clock (s since it started; the session's clock).
+    pub t: f64,
+    /// Wall clock, ms since the Unix epoch.
+    pub wall_ms: u64,
+    /// This peer's id.
+    pub peer: u64,
+    /// The peer it follows as host.
+    pub host: Option<u64>,
+    /// Room term.
+    pub term: u32,
+    /// Members of the room as this peer knows them.
+    pub members: Vec<u64>,
+    /// Objects.
+    pub objects: Vec<DumpObject>,
+}
+
+/// Take a dump line of what `room` shows now.
+pub fn snapshot(room: &mut Room) -> DumpLine {
+    let now = room.now();
+    let ids: Vec<_> = room.objects.keys().copied().collect();
+    let me = room.me();
+    let mut objects = Vec::with_capacity(ids.len());
+    for id in ids {
+        let Some(kind) = room.objects.get(&id).map(|o| o.kind) else {
+            continue;
+        };
+        let owner = room.session.owner(id);
+        let mine = owner == Some(me);
+        let (state, src) = if mine {
+            (room.shown_state(id), None)
+        } else {
+            match room.session.display_state(now, id) {
+                Some(d) => (Some(d.state), Some(d.source_time.as_secs_f64())),
+                None => (room.session.latest_state(id), None),
+            }
+        };
+        let Some(s) = state else {
+            continue;
+        };
+        objects.push(DumpObject {
+            id: id.0,
+            kind: kind.name().to_owned(),
+            owner: owner.map_or(0, |p| p.0),
+            pos: s.pos.to_array(),
+            rot: s.rot.to_array(),
+            particles: s.particles.iter().map(|p| p.to_array()).collect(),
+            src,
+        });
+    }
+    DumpLine {
+        t: now.as_secs_f64(),
+        wall_ms: std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_millis() as u64),
+        peer: me.0,
+        host: room.session.host_id().map(|h| h.0),
+        term: room.session.term().0,
+        members: room.session.members().keys().map(|p| p.0).collect(),
+        objects,
+    }
+}
+
+/// A dump file, flushed after every line (a killed peer leaves whole lines).
+pub struct Dump {
+    out: BufWriter<File>,
+}
+
+impl Dump {
+    /// Create (truncate) `path`.
+    pub fn create(path: &Path) -> std::io::Result<Dump> {
+        Ok(Dump {
+            out: BufWriter::new(File::create(path)?),
+        })
+    }
+
+    /// Append a line.
+    pub fn write(&mut self, line: &DumpLine) -> std::io::Result<()> {
+        serde_json::to_writer(&mut self.out, line)?;
+        self.out.write_all(b"\n")?;
+        self.out.flush()
+    }
+}
+
+/// Read a dump file (lines that do not parse, such as a torn last line, are skipped).
+pub fn read_dump(path: &Path) -> std::io::Result<Vec<DumpLine>> {
+    let text = std::fs::read_to_string(path)?;
+    Ok(text
+        .lines()
+        .filter_map(|l| serde_json::from_str(l).ok())
+        .collect())
+}
+
+/// Rates between two stats readings.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Rates {
+    /// Bytes/s sent.
+    pub up: f64,
+    /// Bytes/s received.
+    pub down: f64,
+}
+
+/// Remembers the previous reading for rates.
+#[derive(Clone, Debug, Default)]
+pub struct StatsLine {
+    last: Option<(softsync_net::Instant, Traffic, Traffic)>,
+}
+
+impl StatsLine {
+    /// The stats line for now (and the rates it shows).
+    pub fn line(&mut self, room: &Room) -> (String, Rates) {
+        let now = room.now();
+        let st = room.session.stats();
+        let rates = match self.last {
+            Some((t, up, down)) => {
+                let dt = now.saturating_since(t).max(Duration::from_millis(1));
+                Rates {
+                    up: st.up.rate_since(&up, dt).0,
+                    down: st.down.rate_since(&down, dt).0,
+                }
+            }
+            None => Rates::default(),
+        };
+        self.last = Some((now, st.up, st.down));
+        let rtts: Vec<f64> = st
+            .links
+            .values()
+            .filter_map(|l| l.rtt)
+            .map(|r| r.as_secs_f64() * 1e3)
+            .collect();
+        let rtt = if rtts.is_empty() {
+            "-".to_owned()
+        } else {
+            format!("{:.2}ms", rtts.iter().sum::<f64>() / rtts.len() as f64)
+        };
+        let line = format!(
+            "stats t={:.1}s peer={} host={} term={} peers={} up={:.0}B/s down={:.0}B/s rtt={} owned={}/{}",
+            now.as_secs_f64(),
+            room.me().0,
+            room.session.host_id().map_or("-".into(), |h| h.0.to_string()),
+            room.session.term().0,
+            room.session.members().len(),
+            rates.up,
+            rates.down,
+            rtt,
+            room.owned_count(),
+            room.objects.len(),
+        );
+        (line, rates)
+    }
+}

@@ -1,0 +1,217 @@
+//! The room signaling server: matchbox's full-mesh topology plus a room registry that refuses
+//! wrong protocol versions, joins to empty rooms and second hosts.
+
+use std::collections::{BTreeMap, HashMap};
+use std::net::SocketAddr;
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+
+use axum::http::StatusCode;
+use axum::response::{IntoResponse, Response};
+use matchbox_signaling::SignalingServer;
+use matchbox_socket::PeerId as MbPeerId;
+use softsync_net::PROTOCOL_VERSION;
+
+use crate::{valid_room_name, ROLE_PARAM, VERSION_HEADER, VERSION_PARAM};
+
+/// Why the signaling server could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum SignalError {
+    /// The address could not be bound.
+    #[error("cannot listen on {addr}: {source}")]
+    Bind {
+        /// Address asked for.
+        addr: SocketAddr,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// The server's runtime could not start.
+    #[error("cannot start the signaling runtime: {0}")]
+    Runtime(std::io::Error),
+}
+
+/// A room as the signaling server sees it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RoomInfo {
+    /// Name.
+    pub name: String,
+    /// Sockets connected to it.
+    pub peers: usize,
+}
+
+#[derive(Default, Debug)]
+struct Registry {
+    /// Connected (or connecting) sockets per room.
+    rooms: BTreeMap<String, usize>,
+    /// Accepted upgrade requests waiting for their id, by client address.
+    pending: HashMap<SocketAddr, String>,
+    /// Room of every socket that has an id.
+    peers: HashMap<MbPeerId, String>,
+}
+
+fn lock(r: &Mutex<Registry>) -> MutexGuard<'_, Registry> {
+    // A panic in a callback must not take the server down with a poisoned lock.
+    r.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+fn refuse(status: StatusCode, msg: String) -> Response {
+    (
+        status,
+        [(VERSION_HEADER, PROTOCOL_VERSION.to_string())],
+        msg,
+    )
+        .into_response()
+}
+
+/// A running signaling server; stops when dropped (or with [`SignalServer::stop`]).
+#[derive(Debug)]
+pub struct SignalServer {
+    addr: SocketAddr,
+    registry: Arc<Mutex<Registry>>,
+    shutdown: Option<tokio::sync::oneshot::Sender<()>>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl SignalServer {
+    /// Bind `bind` (port 0 picks a free port) and serve on a thread of its own.
+    pub fn start(bind: SocketAddr) -> Result<Self, SignalError> {
+        let registry = Arc::new(Mutex::new(Registry::default()));
+        let (tx, rx) = tokio::sync::oneshot::channel();
+        let (r1, r2, r3) = (registry.clone(), registry.clone(), registry.clone());
+        let mut server = SignalingServer::full_mesh_builder(bind)
+            .on_connection_request(move |meta| {
+                let room = meta.path.clone().unwrap_or_default();
+                let version = meta.query_params.get(VERSION_PARAM).cloned();
+                if version.as_deref() != Some(&PROTOCOL_VERSION.to_string()) {
+                    return Err(refuse(
+                        StatusCode::UPGRADE_REQUIRED,
+                        format!(
+                            "protocol version mismatch: this server speaks softsync protocol {PROTOCOL_VERSION}, the client {}",
+                            version.as_deref().unwrap_or("none")
+                        ),
+                    ));
+                }
+                if !valid_room_name(&room) {
+                    return Err(refuse(
+                        StatusCode::BAD_REQUEST,
+                        format!("invalid room name {room:?}"),
+                    ));
+                }
+                let role = meta.query_params.get(ROLE_PARAM).map(String::as_str);
+                let mut reg = lock(&r1);
+                let present = reg.rooms.get(&room).copied().unwrap_or(0);
+                match role {
+                    Some("host") if present > 0 => {
+                        return Err(refuse(
+                            StatusCode::CONFLICT,
+                            format!("room {room:?} already exists ({present} peers in it)"),
+                        ))
+                    }
+                    Some("join") if present == 0 => {
+                        return Err(refuse(
+                            StatusCode::NOT_FOUND,
+                            format!("room {room:?} not found: nobody is in it"),
+                        ))
+                    }
+                    Some("host") | Some("join") => {}
+                    other => {
+                        return Err(refuse(
+                            StatusCode::BAD_REQUEST,
+                            format!("role must be host or join, not {other:?}"),
+                        ))
+                    }
+                }
+                *reg.rooms.entry(room.clone()).or_insert(0) += 1;
+                reg.pending.insert(meta.origin, room);
+                Ok(true)
+            })
+            .on_id_assignment(move |(origin, peer)| {
+                let mut reg = lock(&r2);
+                if let Some(room) = reg.pending.remove(&origin) {
+                    reg.peers.insert(peer, room);
+                }
+            })
+            .on_peer_disconnected(move |peer| {
+                let mut reg = lock(&r3);
+                if let Some(room) = reg.peers.remove(&peer) {
+                    if let Some(n) = reg.rooms.get_mut(&room) {
+                        *n = n.saturating_sub(1);
+                        if *n == 0 {
+                            reg.rooms.remove(&room);
+                        }
+                    }
+                }
+            })
+            .with_shutdown(rx)
+            .build();
+        let addr = server
+            .bind()
+            .map_err(|e| SignalError::Bind {
+                addr: bind,
+                source: match e {
+                    matchbox_signaling::Error::Bind(io) => io,
+                    other => std::io::Error::other(other.to_string()),
+                },
+            })?;
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .map_err(SignalError::Runtime)?;
+        let thread = std::thread::Builder::new()
+            .name("signaling".into())
+            .spawn(move || {
+                if let Err(e) = runtime.block_on(server.serve()) {
+                    eprintln!("signaling server stopped: {e}");
+                }
+            })
+            .map_err(SignalError::Runtime)?;
+        Ok(SignalServer {
+            addr,
+            registry,
+            shutdown: Some(tx),
+            thread: Some(thread),
+        })
+    }
+
+    /// The bound address.
+    pub fn addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    /// The server's base URL, `ws://ADDR`.
+    pub fn url(&self) -> String {
+        format!("ws://{}", self.addr)
+    }
+
+    /// The rooms that have peers, by name.
+    pub fn rooms(&self) -> Vec<RoomInfo> {
+        lock(&self.registry)
+            .rooms
+            .iter()
+            .map(|(name, peers)| RoomInfo {
+                name: name.clone(),
+                peers: *peers,
+            })
+            .collect()
+    }
+
+    /// Stop serving: close every websocket and wait (a few seconds at most) for the thread.
+    pub fn stop(mut self) {
+        self.shutdown_now();
+    }
+
+    fn shutdown_now(&mut self) {
+        if let Some(tx) = self.shutdown.take() {
+            let _ = tx.send(());
+        }
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+impl Drop for SignalServer {
+    fn drop(&mut self) {
+        self.shutdown_now();
+    }
+}
