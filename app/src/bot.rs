@@ -67,7 +67,7 @@ pub struct ScriptError {
 pub fn builtin(name: &str) -> Option<&'static str> {
     match name {
         "squeeze" => Some(
-            "wait 1; reach right softball in 1; grab right; squeeze right 0.03 in 0.6; wait 0.6; \
+            "wait 1; reach right softbox in 1; grab right; squeeze right 0.02 in 0.6; wait 0.6; \
              release right; offset right 0 0.15 0 in 0.5",
         ),
         "idle" => Some("wait 1"),

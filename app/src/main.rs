@@ -241,7 +241,7 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     );
     let exit = App::new()
         .add_plugins(
-            MinimalPlugins.set(ScheduleRunnerPlugin::run_loop(Duration::from_millis(4))),
+            MinimalPlugins.set(ScheduleRunnerPlugin::run_loop(Duration::from_millis(2))),
         )
         .insert_resource(Time::<Fixed>::from_hz(a.sim_hz))
         .insert_non_send(peer)

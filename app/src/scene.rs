@@ -259,7 +259,8 @@ impl Scene {
         };
         SoftBodyConfig {
             cluster: ClusterMethod::Distance { radius_m },
-            space: SimulationSpace::Local,
+            // A dynamic center with its own collider: the body falls, rests and is thrown.
+            space: SimulationSpace::World,
             ..SoftBodyConfig::default()
         }
     }

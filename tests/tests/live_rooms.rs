@@ -1,0 +1,447 @@
+//! Multi-process rooms on real WebRTC: the `softsync` binary as separate processes (signaling,
+//! host, bots) talking over loopback data channels.
+//!
+//! These open WebRTC, so on the shared machines they must run inside a network namespace:
+//! `scripts/test` runs the whole suite through `scripts/netns-run`, which sets
+//! `SOFTSYNC_IN_NETNS=1`. Outside one they fail and say so (they never skip). Every wait is
+//! bounded and every process is killed by pid when its test ends.
+#![allow(clippy::unwrap_used, clippy::disallowed_methods, missing_docs)]
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+fn binary() -> PathBuf {
+    // target/<profile>/deps/live_rooms-… → target/<profile>/softsync
+    let exe = std::env::current_exe().unwrap();
+    let dir = exe.parent().unwrap().parent().unwrap();
+    let bin = dir.join("softsync");
+    assert!(
+        bin.exists(),
+        "{} is missing: build it first (`cargo build -p softsync`; scripts/test does)",
+        bin.display()
+    );
+    bin
+}
+
+fn require_netns() {
+    assert_eq!(
+        std::env::var("SOFTSYNC_IN_NETNS").as_deref(),
+        Ok("1"),
+        "these tests open WebRTC and must run inside scripts/netns-run (scripts/test does this)"
+    );
+}
+
+fn scratch(test: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("softsync-{test}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// A child process, killed (SIGKILL) when dropped.
+struct Proc {
+    name: String,
+    child: Child,
+    out: PathBuf,
+    err: PathBuf,
+}
+
+impl Proc {
+    fn spawn(dir: &Path, name: &str, args: &[&str]) -> Proc {
+        let out = dir.join(format!("{name}.out"));
+        let err = dir.join(format!("{name}.err"));
+        let child = Command::new(binary())
+            .args(args)
+            .stdout(Stdio::from(std::fs::File::create(&out).unwrap()))
+            .stderr(Stdio::from(std::fs::File::create(&err).unwrap()))
+            .spawn()
+            .unwrap();
+        Proc {
+            name: name.to_owned(),
+            child,
+            out,
+            err,
+        }
+    }
+
+    fn stdout(&self) -> String {
+        std::fs::read_to_string(&self.out).unwrap_or_default()
+    }
+
+    fn logs(&self) -> String {
+        format!(
+            "--- {} stdout\n{}\n--- {} stderr (tail)\n{}",
+            self.name,
+            self.stdout(),
+            self.name,
+            std::fs::read_to_string(&self.err)
+                .unwrap_or_default()
+                .lines()
+                .rev()
+                .take(15)
+                .collect::<Vec<_>>()
+                .into_iter()
+                .rev()
+                .collect::<Vec<_>>()
+                .join("\n")
+        )
+    }
+
+    /// Wait (bounded) until stdout has a line containing `needle`; return that line.
+    fn wait_line(&self, needle: &str, within: Duration) -> String {
+        let start = Instant::now();
+        loop {
+            if let Some(l) = self.stdout().lines().find(|l| l.contains(needle)) {
+                return l.to_owned();
+            }
+            assert!(
+                start.elapsed() < within,
+                "{} printed no {needle:?} within {within:?}\n{}",
+                self.name,
+                self.logs()
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// Wait (bounded) for the process to exit; its exit code.
+    fn wait_exit(&mut self, within: Duration) -> i32 {
+        let start = Instant::now();
+        loop {
+            if let Some(s) = self.child.try_wait().unwrap() {
+                return s.code().unwrap_or(-1);
+            }
+            assert!(
+                start.elapsed() < within,
+                "{} did not exit within {within:?}\n{}",
+                self.name,
+                self.logs()
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    fn kill(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+
+    /// The peer id it printed (`hosting …` / `joining …`).
+    fn peer_id(&self) -> u64 {
+        let l = self.wait_line("peer=", Duration::from_secs(20));
+        field(&l, "peer").parse().unwrap()
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
+fn field<'a>(line: &'a str, key: &str) -> &'a str {
+    line.split_whitespace()
+        .find_map(|w| w.strip_prefix(&format!("{key}=")))
+        .unwrap_or_else(|| panic!("no {key}= in {line:?}"))
+}
+
+/// The signaling URL a process printed.
+fn signal_url(p: &Proc) -> String {
+    let l = p.wait_line("signaling on ", Duration::from_secs(10));
+    l.trim_start_matches("signaling on ").trim().to_owned()
+}
+
+fn read_dump(path: &Path) -> Vec<Value> {
+    std::fs::read_to_string(path)
+        .unwrap_or_default()
+        .lines()
+        .filter_map(|l| serde_json::from_str(l).ok())
+        .collect()
+}
+
+/// The dump line nearest to wall time `wall_ms`.
+fn nearest(lines: &[Value], wall_ms: u64) -> &Value {
+    lines
+        .iter()
+        .min_by_key(|l| l["wall_ms"].as_u64().unwrap().abs_diff(wall_ms))
+        .expect("empty dump")
+}
+
+fn vec3(v: &Value) -> [f64; 3] {
+    let a = v.as_array().unwrap();
+    [a[0].as_f64().unwrap(), a[1].as_f64().unwrap(), a[2].as_f64().unwrap()]
+}
+
+fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+fn angle_deg(a: &Value, b: &Value) -> f64 {
+    let a = a.as_array().unwrap();
+    let b = b.as_array().unwrap();
+    let dot: f64 = (0..4)
+        .map(|i| a[i].as_f64().unwrap() * b[i].as_f64().unwrap())
+        .sum();
+    2.0 * dot.abs().min(1.0).acos().to_degrees()
+}
+
+fn objects(line: &Value) -> BTreeMap<u64, &Value> {
+    line["objects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|o| (o["id"].as_u64().unwrap(), o))
+        .collect()
+}
+
+/// Every object of `a` is in `b` within 1 mm and 0.5°, every particle within 1 mm, same owner.
+fn assert_agree(a: &Value, b: &Value, what: &str) {
+    let (oa, ob) = (objects(a), objects(b));
+    assert_eq!(
+        oa.keys().collect::<Vec<_>>(),
+        ob.keys().collect::<Vec<_>>(),
+        "{what}: different objects"
+    );
+    let mut worst = (0.0f64, 0.0f64, 0.0f64);
+    for (id, x) in &oa {
+        let y = ob[id];
+        assert_eq!(x["owner"], y["owner"], "{what}: object {id} has two owners");
+        let d = dist(vec3(&x["pos"]), vec3(&y["pos"]));
+        let ang = angle_deg(&x["rot"], &y["rot"]);
+        assert!(d < 1e-3, "{what}: object {id} ({}) {d} m apart", x["kind"]);
+        assert!(ang < 0.5, "{what}: object {id} ({}) {ang}° apart", x["kind"]);
+        let (px, py) = (
+            x["particles"].as_array().cloned().unwrap_or_default(),
+            y["particles"].as_array().cloned().unwrap_or_default(),
+        );
+        assert_eq!(px.len(), py.len(), "{what}: object {id} particle count");
+        let dp = px
+            .iter()
+            .zip(&py)
+            .map(|(p, q)| dist(vec3(p), vec3(q)))
+            .fold(0.0, f64::max);
+        assert!(dp < 1e-3, "{what}: object {id} ({}) particles {dp} m apart", x["kind"]);
+        worst = (worst.0.max(d), worst.1.max(ang), worst.2.max(dp));
+    }
+    println!(
+        "{what}: {} objects agree, worst {:.3} mm, {:.3}°, particles {:.3} mm",
+        oa.len(),
+        worst.0 * 1e3,
+        worst.1,
+        worst.2 * 1e3
+    );
+}
+
+const SQUEEZE: &str = "wait 1; reach right softbox in 1; grab right; squeeze right 0.02 in 0.6; \
+                       wait 0.6; release right; offset right 0 0.15 0 in 0.5";
+
+/// Host and one bot; the bot takes the host's soft box through the authority request,
+/// squeezes it, lets go; after rest both peers show the same room.
+fn two_process_sync(test: &str, condition: Option<&str>) {
+    require_netns();
+    let dir = scratch(test);
+    let hd = dir.join("host.jsonl");
+    let jd = dir.join("bot.jsonl");
+    let mut common = vec!["--dump-hz", "10", "--quiet"];
+    if let Some(c) = condition {
+        common.extend(["--net-condition", c]);
+    }
+    let mut host_args = vec!["host", "--room", "sync", "--bind", "127.0.0.1:0", "--duration", "17"];
+    host_args.extend(["--dump", hd.to_str().unwrap()]);
+    host_args.extend(&common);
+    let mut host = Proc::spawn(&dir, "host", &host_args);
+    let url = signal_url(&host);
+    let mut bot_args = vec!["join", "--room", "sync", "--signal", &url, "--bot", SQUEEZE];
+    bot_args.extend(["--duration", "13", "--dump", jd.to_str().unwrap()]);
+    bot_args.extend(&common);
+    let mut bot = Proc::spawn(&dir, "bot", &bot_args);
+    assert_eq!(bot.wait_exit(Duration::from_secs(40)), 0, "{}", bot.logs());
+    let out = bot.stdout();
+    assert!(out.contains("authority-asked"), "{}", bot.logs());
+    assert!(out.contains("grabbed object"), "the bot never held the box\n{}", bot.logs());
+    assert!(
+        out.contains("authority-released"),
+        "authority never went back after rest\n{}",
+        bot.logs()
+    );
+    assert_eq!(host.wait_exit(Duration::from_secs(30)), 0, "{}", host.logs());
+    let (h, j) = (read_dump(&hd), read_dump(&jd));
+    let last = j.last().expect("bot dump empty");
+    let peer_h = nearest(&h, last["wall_ms"].as_u64().unwrap());
+    assert_eq!(last["host"], peer_h["peer"]);
+    assert_agree(peer_h, last, test);
+    // During the squeeze the host showed the box deformed (the bot's simulation arrived).
+    let box_id = objects(last)
+        .iter()
+        .find(|(_, o)| o["kind"] == "softbox")
+        .map(|(id, _)| *id)
+        .unwrap();
+    let rest = objects(&h[0])[&box_id]["particles"].clone();
+    let max_dev = h
+        .iter()
+        .map(|l| {
+            let p = objects(l)[&box_id]["particles"].as_array().unwrap().clone();
+            p.iter()
+                .zip(rest.as_array().unwrap())
+                .map(|(a, b)| dist(vec3(a), vec3(b)))
+                .fold(0.0, f64::max)
+        })
+        .fold(0.0, f64::max);
+    assert!(max_dev > 0.008, "the host never showed the squeeze ({max_dev} m)");
+}
+
+#[test]
+fn a_two_processes_hand_over_a_soft_body_and_agree_after_rest() {
+    two_process_sync("sync", None);
+}
+
+#[test]
+fn d_conditioned_links_still_converge_after_rest() {
+    two_process_sync("conditioned", Some("lat=50ms,jitter=10ms,loss=5%,seed=7"));
+}
+
+/// Standalone signaling, a host and two bots; the host is killed mid-interaction; the earliest
+/// joiner takes over with a higher term; nothing is lost, everything has one owner, and a
+/// fourth peer joining afterwards gets the whole room.
+#[test]
+fn b_host_killed_mid_interaction_earliest_joiner_takes_over() {
+    require_netns();
+    let dir = scratch("kill");
+    let signal = Proc::spawn(&dir, "signal", &["signal", "--bind", "127.0.0.1:0"]);
+    let url = signal_url(&signal);
+    let mut host = Proc::spawn(
+        &dir,
+        "host",
+        &["host", "--room", "mig", "--signal", &url, "--bot", "wave", "--quiet"],
+    );
+    let host_id = host.peer_id();
+    let b1d = dir.join("b1.jsonl");
+    let b1 = Proc::spawn(
+        &dir,
+        "bot1",
+        &[
+            "join", "--room", "mig", "--signal", &url, "--quiet", "--duration", "40", "--dump-hz", "5",
+            "--dump", b1d.to_str().unwrap(), "--bot",
+            "wait 0.5; reach right bunny in 0.5; grab right; squeeze right 0.02 in 0.5; wait 0.3; release right; offset right 0 0.1 0 in 0.3; loop",
+        ],
+    );
+    let b1_id = b1.peer_id();
+    b1.wait_line("joined", Duration::from_secs(20));
+    let b2d = dir.join("b2.jsonl");
+    let b2 = Proc::spawn(
+        &dir,
+        "bot2",
+        &[
+            "join", "--room", "mig", "--signal", &url, "--quiet", "--duration", "40", "--dump-hz", "5",
+            "--dump", b2d.to_str().unwrap(), "--bot", "wave",
+        ],
+    );
+    let b2_id = b2.peer_id();
+    b2.wait_line("joined", Duration::from_secs(20));
+    b1.wait_line("grabbed object", Duration::from_secs(20));
+    std::thread::sleep(Duration::from_millis(700));
+    let killed_at = Instant::now();
+    host.kill();
+    let changed = b1.wait_line(&format!("host-changed host={b1_id}"), Duration::from_secs(10));
+    let took = killed_at.elapsed();
+    println!("host killed; bot1 took over after {took:?}: {changed}");
+    assert!(took < Duration::from_secs(2), "migration took {took:?}");
+    let term: u32 = field(&changed, "term").parse().unwrap();
+    assert!(term >= 2, "term did not rise: {changed}");
+    b2.wait_line(&format!("host-changed host={b1_id}"), Duration::from_secs(5));
+
+    // A fourth peer joins the migrated room.
+    std::thread::sleep(Duration::from_secs(2));
+    let lated = dir.join("late.jsonl");
+    let mut late = Proc::spawn(
+        &dir,
+        "late",
+        &[
+            "join", "--room", "mig", "--signal", &url, "--quiet", "--duration", "5", "--dump-hz", "5",
+            "--dump", lated.to_str().unwrap(),
+        ],
+    );
+    let late_id = late.peer_id();
+    assert_eq!(late.wait_exit(Duration::from_secs(40)), 0, "{}", late.logs());
+    let l = read_dump(&lated);
+    let last = l.last().unwrap();
+    assert_eq!(last["host"].as_u64(), Some(b1_id), "late joiner follows the new host");
+    let views = [
+        ("bot1", nearest(&read_dump(&b1d), last["wall_ms"].as_u64().unwrap()).clone()),
+        ("bot2", nearest(&read_dump(&b2d), last["wall_ms"].as_u64().unwrap()).clone()),
+        ("late", last.clone()),
+    ];
+    let live = [b1_id, b2_id, late_id];
+    for (who, v) in &views {
+        let objs = objects(v);
+        let scene: Vec<_> = objs
+            .values()
+            .filter(|o| !matches!(o["kind"].as_str(), Some("head" | "hand")))
+            .collect();
+        assert_eq!(scene.len(), 7, "{who} lost scene objects: {v}");
+        for o in objs.values() {
+            let owner = o["owner"].as_u64().unwrap();
+            assert!(live.contains(&owner), "{who}: object {} owned by {owner}, not a live peer", o["id"]);
+        }
+        let avatars = objs.values().filter(|o| o["kind"] == "head").count();
+        assert_eq!(avatars, 3, "{who}: one head per live peer (the dead host's is removed)");
+        assert_ne!(v["host"].as_u64(), Some(host_id));
+    }
+    // Every peer names the same owner for every object.
+    let owners = |v: &Value| -> BTreeMap<u64, u64> {
+        objects(v)
+            .iter()
+            .map(|(id, o)| (*id, o["owner"].as_u64().unwrap()))
+            .collect()
+    };
+    assert_eq!(owners(&views[0].1), owners(&views[2].1), "bot1 and the late joiner disagree on owners");
+    assert_eq!(owners(&views[1].1), owners(&views[2].1), "bot2 and the late joiner disagree on owners");
+}
+
+/// A peer that joins after 10 s of interaction gets the same room as the host.
+#[test]
+fn c_late_joiner_after_ten_seconds_gets_the_same_state() {
+    require_netns();
+    let dir = scratch("late");
+    let hd = dir.join("host.jsonl");
+    let mut host = Proc::spawn(
+        &dir,
+        "host",
+        &[
+            "host", "--room", "late", "--bind", "127.0.0.1:0", "--duration", "19", "--quiet",
+            "--dump-hz", "10", "--dump", hd.to_str().unwrap(),
+        ],
+    );
+    let url = signal_url(&host);
+    let _b1 = Proc::spawn(
+        &dir,
+        "bot1",
+        &[
+            "join", "--room", "late", "--signal", &url, "--quiet", "--duration", "18", "--bot",
+            "wait 0.5; reach right bunny in 0.7; grab right; squeeze right 0.02 in 0.5; wait 0.3; release right; \
+             offset right 0 0.12 0 in 0.3; reach left softbox in 0.7; grab left; squeeze left 0.02 in 0.5; \
+             release left; offset left 0 0.12 0 in 0.3; reach right block in 0.7; grab right; offset right 0 0.05 0 in 0.4; \
+             release right; wait 0.5",
+        ],
+    );
+    std::thread::sleep(Duration::from_secs(10));
+    let ld = dir.join("late.jsonl");
+    let mut late = Proc::spawn(
+        &dir,
+        "late",
+        &[
+            "join", "--room", "late", "--signal", &url, "--quiet", "--duration", "6", "--dump-hz", "10",
+            "--dump", ld.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(late.wait_exit(Duration::from_secs(40)), 0, "{}", late.logs());
+    assert_eq!(host.wait_exit(Duration::from_secs(40)), 0, "{}", host.logs());
+    let l = read_dump(&ld);
+    let last = l.last().unwrap();
+    let h = read_dump(&hd);
+    assert_agree(nearest(&h, last["wall_ms"].as_u64().unwrap()), last, "late join");
+}
