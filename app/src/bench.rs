@@ -1,1 +1,3 @@
-pub fn net_live(_o:&std::path::Path,_s:f64,_q:bool)->Result<(),String>{Err("todo".into())}
+pub fn net_live(_o: &std::path::Path, _s: f64, _q: bool) -> Result<(), String> {
+    Err("todo".into())
+}

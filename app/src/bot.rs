@@ -320,7 +320,13 @@ impl Bot {
                     })
                 }
                 None => {
-                    Self::say(room, format!("reach: no {} in the room", kind.map_or("object", Kind::name)));
+                    Self::say(
+                        room,
+                        format!(
+                            "reach: no {} in the room",
+                            kind.map_or("object", Kind::name)
+                        ),
+                    );
                     None
                 }
             },
@@ -408,7 +414,8 @@ impl Bot {
                 dur,
             } => {
                 let ph = ((t - t0) / period * std::f64::consts::TAU) as f32;
-                self.pos[part] = center + Vec3::new(ph.sin() * amp, (ph * 2.0).sin() * amp * 0.3, 0.0);
+                self.pos[part] =
+                    center + Vec3::new(ph.sin() * amp, (ph * 2.0).sin() * amp * 0.3, 0.0);
                 if t - t0 >= dur {
                     self.pos[part] = center;
                     true
@@ -488,11 +495,17 @@ mod tests {
         let e = parse("wait 1; jump right").unwrap_err();
         assert_eq!(e.index, 2);
         assert!(e.to_string().contains("unknown command"), "{e}");
-        assert!(parse("reach right teapot").unwrap_err().msg.contains("unknown object"));
+        assert!(parse("reach right teapot")
+            .unwrap_err()
+            .msg
+            .contains("unknown object"));
         assert!(parse("move left 1 2").is_err());
         assert!(parse("move left 1 2 NaN").is_err());
         assert!(parse("grab head").is_err());
-        assert!(parse("wait 1 2").is_ok(), "extra words after wait are ignored");
+        assert!(
+            parse("wait 1 2").is_ok(),
+            "extra words after wait are ignored"
+        );
         assert!(parse("move left 0 1 0 in -1").is_err());
     }
 }

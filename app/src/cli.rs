@@ -130,8 +130,11 @@ fn positive(flag: &str, v: &str, max: f64) -> Result<f64, UsageError> {
 }
 
 fn addr(flag: &str, v: &str) -> Result<SocketAddr, UsageError> {
-    v.parse()
-        .map_err(|_| UsageError(format!("{flag}: {v:?} is not an address like 127.0.0.1:3536")))
+    v.parse().map_err(|_| {
+        UsageError(format!(
+            "{flag}: {v:?} is not an address like 127.0.0.1:3536"
+        ))
+    })
 }
 
 /// Parse `lat=40ms,jitter=8ms,loss=2%,seed=7`.
@@ -239,7 +242,10 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
         "help" | "--help" | "-h" => Ok(Command::Help),
         "signal" => {
             allowed(&["bind"])?;
-            let bind = addr("--bind", &get("bind").unwrap_or_else(|| "127.0.0.1:3536".into()))?;
+            let bind = addr(
+                "--bind",
+                &get("bind").unwrap_or_else(|| "127.0.0.1:3536".into()),
+            )?;
             Ok(Command::Signal { bind })
         }
         "bench" => {
@@ -283,7 +289,8 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
             if let Some(p) = positional.first() {
                 return err(format!("{cmd}: unexpected argument {p:?}"));
             }
-            let room = get("room").ok_or_else(|| UsageError(format!("{cmd}: --room NAME is required")))?;
+            let room =
+                get("room").ok_or_else(|| UsageError(format!("{cmd}: --room NAME is required")))?;
             if !softsync_net_matchbox::valid_room_name(&room) {
                 return err(format!(
                     "--room: {room:?} is not a room name (1-64 characters of A-Z a-z 0-9 - _ .)"
@@ -305,7 +312,10 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
             Ok(Command::Peer(PeerArgs {
                 host,
                 room,
-                bind: addr("--bind", &get("bind").unwrap_or_else(|| "127.0.0.1:3536".into()))?,
+                bind: addr(
+                    "--bind",
+                    &get("bind").unwrap_or_else(|| "127.0.0.1:3536".into()),
+                )?,
                 signal,
                 scene,
                 bot: get("bot"),
@@ -350,7 +360,9 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
                 quiet: has("quiet"),
             }))
         }
-        other => err(format!("unknown command {other:?}: signal, host, join, bench or help")),
+        other => err(format!(
+            "unknown command {other:?}: signal, host, join, bench or help"
+        )),
     }
 }
 

@@ -78,7 +78,11 @@ fn run(args: &[String]) -> Result<ExitCode, Failure> {
         }
         Command::Signal { bind } => signal(bind),
         Command::Peer(p) => peer(p),
-        Command::BenchNetLive { out, seconds, quick } => {
+        Command::BenchNetLive {
+            out,
+            seconds,
+            quick,
+        } => {
             bench::net_live(&out, seconds, quick).map_err(Failure::runtime)?;
             Ok(ExitCode::SUCCESS)
         }
@@ -97,7 +101,14 @@ fn signal(bind: std::net::SocketAddr) -> Result<ExitCode, Failure> {
                 .iter()
                 .map(|r| format!("{}({})", r.name, r.peers))
                 .collect();
-            eprintln!("rooms: {}", if list.is_empty() { "none".into() } else { list.join(" ") });
+            eprintln!(
+                "rooms: {}",
+                if list.is_empty() {
+                    "none".into()
+                } else {
+                    list.join(" ")
+                }
+            );
             last = rooms;
         }
     }
@@ -142,7 +153,8 @@ fn load_bot(src: &str) -> Result<bot::Bot, Failure> {
 
 fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     // Check every input before opening anything.
-    let scene = Scene::by_name(&a.scene, &assets_dir(a.assets.as_deref())).map_err(Failure::usage)?;
+    let scene =
+        Scene::by_name(&a.scene, &assets_dir(a.assets.as_deref())).map_err(Failure::usage)?;
     let bot = a.bot.as_deref().map(load_bot).transpose()?;
     let dump = match &a.dump {
         Some(p) => Some(
@@ -190,7 +202,9 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
                 break p;
             }
             if let Some(why) = transport.closed() {
-                return Err(Failure::connect(format!("signaling lost while joining: {why}")));
+                return Err(Failure::connect(format!(
+                    "signaling lost while joining: {why}"
+                )));
             }
             if started.elapsed() > a.connect_timeout {
                 return Err(Failure::connect(format!(
@@ -240,9 +254,7 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
         signal_server,
     );
     let exit = App::new()
-        .add_plugins(
-            MinimalPlugins.set(ScheduleRunnerPlugin::run_loop(Duration::from_millis(2))),
-        )
+        .add_plugins(MinimalPlugins.set(ScheduleRunnerPlugin::run_loop(Duration::from_millis(2))))
         .insert_resource(Time::<Fixed>::from_hz(a.sim_hz))
         .insert_non_send(peer)
         .add_plugins((NetPlugin, SimPlugin, ReportPlugin))

@@ -113,7 +113,9 @@ fn net_in(mut peer: NonSendMut<Peer>, mut exit: MessageWriter<AppExit>) {
     for n in std::mem::take(&mut p.room.notes) {
         let line = match n {
             Note::Joined { host, term } => format!("joined host={} term={}", host.0, term.0),
-            Note::HostChanged { host, term } => format!("host-changed host={} term={}", host.0, term.0),
+            Note::HostChanged { host, term } => {
+                format!("host-changed host={} term={}", host.0, term.0)
+            }
             Note::PeerJoined(q) => format!("peer-joined {}", q.0),
             Note::PeerLeft(q) => format!("peer-left {}", q.0),
             Note::AuthorityAsked(id) => format!("authority-asked object={}", id.0),
@@ -121,7 +123,11 @@ fn net_in(mut peer: NonSendMut<Peer>, mut exit: MessageWriter<AppExit>) {
             Note::AuthorityDenied(id) => format!("authority-denied object={}", id.0),
             Note::AuthorityReleased(id) => format!("authority-released object={}", id.0),
         };
-        println!("event peer={} t={:.2} {line}", p.room.me().0, p.room.now().as_secs_f64());
+        println!(
+            "event peer={} t={:.2} {line}",
+            p.room.me().0,
+            p.room.now().as_secs_f64()
+        );
     }
 }
 

@@ -265,7 +265,12 @@ impl Room {
             return Ok(Body::Pose);
         }
         if !kind.is_soft() {
-            return Ok(Body::Rigid(Scene::build_rigid(kind, &mut self.world, pos, rot)));
+            return Ok(Body::Rigid(Scene::build_rigid(
+                kind,
+                &mut self.world,
+                pos,
+                rot,
+            )));
         }
         let mesh = self.scene.soft_mesh(kind).map_err(RoomError::Scene)?;
         let h = self
@@ -320,9 +325,13 @@ impl Room {
     fn spawn_avatar(&mut self) {
         let now = self.now();
         let home = self.home();
-        for (i, off) in [Vec3::ZERO, Vec3::new(-0.2, -0.45, -0.25), Vec3::new(0.2, -0.45, -0.25)]
-            .into_iter()
-            .enumerate()
+        for (i, off) in [
+            Vec3::ZERO,
+            Vec3::new(-0.2, -0.45, -0.25),
+            Vec3::new(0.2, -0.45, -0.25),
+        ]
+        .into_iter()
+        .enumerate()
         {
             if self.avatar[i].is_some() || self.avatar_requests[i].is_some() {
                 continue;

@@ -196,16 +196,27 @@ impl Scene {
 
     /// The floor and the table (fixed bodies on every peer).
     pub fn build_static(&self, world: &mut PhysicsWorld) {
-        let floor = world.insert_body(RigidBodyBuilder::fixed().translation(Vec3::new(0.0, -0.5, 0.0)));
-        world.insert_collider(ColliderBuilder::cuboid(10.0, 0.5, 10.0).friction(0.8), Some(floor));
-        let table = world.insert_body(
-            RigidBodyBuilder::fixed().translation(Vec3::new(0.0, TABLE_TOP_Y - 0.02, 0.0)),
+        let floor =
+            world.insert_body(RigidBodyBuilder::fixed().translation(Vec3::new(0.0, -0.5, 0.0)));
+        world.insert_collider(
+            ColliderBuilder::cuboid(10.0, 0.5, 10.0).friction(0.8),
+            Some(floor),
         );
-        world.insert_collider(ColliderBuilder::cuboid(0.6, 0.02, 0.4).friction(0.8), Some(table));
+        let table = world.insert_body(RigidBodyBuilder::fixed().translation(Vec3::new(
+            0.0,
+            TABLE_TOP_Y - 0.02,
+            0.0,
+        )));
+        world.insert_collider(
+            ColliderBuilder::cuboid(0.6, 0.02, 0.4).friction(0.8),
+            Some(table),
+        );
         for (x, z) in [(-0.55, -0.35), (0.55, -0.35), (-0.55, 0.35), (0.55, 0.35)] {
-            let leg = world.insert_body(
-                RigidBodyBuilder::fixed().translation(Vec3::new(x, (TABLE_TOP_Y - 0.04) / 2.0, z)),
-            );
+            let leg = world.insert_body(RigidBodyBuilder::fixed().translation(Vec3::new(
+                x,
+                (TABLE_TOP_Y - 0.04) / 2.0,
+                z,
+            )));
             world.insert_collider(
                 ColliderBuilder::cuboid(0.03, (TABLE_TOP_Y - 0.04) / 2.0, 0.03),
                 Some(leg),
@@ -214,7 +225,12 @@ impl Scene {
     }
 
     /// A rigid prop's body and collider at `pos`, `rot`.
-    pub fn build_rigid(kind: Kind, world: &mut PhysicsWorld, pos: Vec3, rot: Quat) -> RigidBodyHandle {
+    pub fn build_rigid(
+        kind: Kind,
+        world: &mut PhysicsWorld,
+        pos: Vec3,
+        rot: Quat,
+    ) -> RigidBodyHandle {
         let body = world.insert_body(
             RigidBodyBuilder::dynamic()
                 .pose(Pose::from_parts(pos, rot))
@@ -237,9 +253,8 @@ impl Scene {
         match kind {
             Kind::Bunny => {
                 let path = self.assets.join("bunny.obj");
-                let mesh = Mesh::load(&path).map_err(|e| {
-                    format!("cannot load the bunny for scene {}: {e}", self.name)
-                })?;
+                let mesh = Mesh::load(&path)
+                    .map_err(|e| format!("cannot load the bunny for scene {}: {e}", self.name))?;
                 let mut mesh = mesh.fit_size(0.16);
                 mesh.recenter();
                 Ok(mesh)

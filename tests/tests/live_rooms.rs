@@ -173,7 +173,11 @@ fn nearest(lines: &[Value], wall_ms: u64) -> &Value {
 
 fn vec3(v: &Value) -> [f64; 3] {
     let a = v.as_array().unwrap();
-    [a[0].as_f64().unwrap(), a[1].as_f64().unwrap(), a[2].as_f64().unwrap()]
+    [
+        a[0].as_f64().unwrap(),
+        a[1].as_f64().unwrap(),
+        a[2].as_f64().unwrap(),
+    ]
 }
 
 fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
@@ -213,7 +217,11 @@ fn assert_agree(a: &Value, b: &Value, what: &str) {
         let d = dist(vec3(&x["pos"]), vec3(&y["pos"]));
         let ang = angle_deg(&x["rot"], &y["rot"]);
         assert!(d < 1e-3, "{what}: object {id} ({}) {d} m apart", x["kind"]);
-        assert!(ang < 0.5, "{what}: object {id} ({}) {ang}° apart", x["kind"]);
+        assert!(
+            ang < 0.5,
+            "{what}: object {id} ({}) {ang}° apart",
+            x["kind"]
+        );
         let (px, py) = (
             x["particles"].as_array().cloned().unwrap_or_default(),
             y["particles"].as_array().cloned().unwrap_or_default(),
@@ -224,7 +232,11 @@ fn assert_agree(a: &Value, b: &Value, what: &str) {
             .zip(&py)
             .map(|(p, q)| dist(vec3(p), vec3(q)))
             .fold(0.0, f64::max);
-        assert!(dp < 1e-3, "{what}: object {id} ({}) particles {dp} m apart", x["kind"]);
+        assert!(
+            dp < 1e-3,
+            "{what}: object {id} ({}) particles {dp} m apart",
+            x["kind"]
+        );
         worst = (worst.0.max(d), worst.1.max(ang), worst.2.max(dp));
     }
     println!(
@@ -250,7 +262,15 @@ fn two_process_sync(test: &str, condition: Option<&str>) {
     if let Some(c) = condition {
         common.extend(["--net-condition", c]);
     }
-    let mut host_args = vec!["host", "--room", "sync", "--bind", "127.0.0.1:0", "--duration", "17"];
+    let mut host_args = vec![
+        "host",
+        "--room",
+        "sync",
+        "--bind",
+        "127.0.0.1:0",
+        "--duration",
+        "17",
+    ];
     host_args.extend(["--dump", hd.to_str().unwrap()]);
     host_args.extend(&common);
     let mut host = Proc::spawn(&dir, "host", &host_args);
@@ -262,13 +282,22 @@ fn two_process_sync(test: &str, condition: Option<&str>) {
     assert_eq!(bot.wait_exit(Duration::from_secs(40)), 0, "{}", bot.logs());
     let out = bot.stdout();
     assert!(out.contains("authority-asked"), "{}", bot.logs());
-    assert!(out.contains("grabbed object"), "the bot never held the box\n{}", bot.logs());
+    assert!(
+        out.contains("grabbed object"),
+        "the bot never held the box\n{}",
+        bot.logs()
+    );
     assert!(
         out.contains("authority-released"),
         "authority never went back after rest\n{}",
         bot.logs()
     );
-    assert_eq!(host.wait_exit(Duration::from_secs(30)), 0, "{}", host.logs());
+    assert_eq!(
+        host.wait_exit(Duration::from_secs(30)),
+        0,
+        "{}",
+        host.logs()
+    );
     let (h, j) = (read_dump(&hd), read_dump(&jd));
     let last = j.last().expect("bot dump empty");
     let peer_h = nearest(&h, last["wall_ms"].as_u64().unwrap());
@@ -291,7 +320,10 @@ fn two_process_sync(test: &str, condition: Option<&str>) {
                 .fold(0.0, f64::max)
         })
         .fold(0.0, f64::max);
-    assert!(max_dev > 0.008, "the host never showed the squeeze ({max_dev} m)");
+    assert!(
+        max_dev > 0.008,
+        "the host never showed the squeeze ({max_dev} m)"
+    );
 }
 
 #[test]
@@ -316,7 +348,9 @@ fn b_host_killed_mid_interaction_earliest_joiner_takes_over() {
     let mut host = Proc::spawn(
         &dir,
         "host",
-        &["host", "--room", "mig", "--signal", &url, "--bot", "wave", "--quiet"],
+        &[
+            "host", "--room", "mig", "--signal", &url, "--bot", "wave", "--quiet",
+        ],
     );
     let host_id = host.peer_id();
     let b1d = dir.join("b1.jsonl");
@@ -336,8 +370,20 @@ fn b_host_killed_mid_interaction_earliest_joiner_takes_over() {
         &dir,
         "bot2",
         &[
-            "join", "--room", "mig", "--signal", &url, "--quiet", "--duration", "40", "--dump-hz", "5",
-            "--dump", b2d.to_str().unwrap(), "--bot", "wave",
+            "join",
+            "--room",
+            "mig",
+            "--signal",
+            &url,
+            "--quiet",
+            "--duration",
+            "40",
+            "--dump-hz",
+            "5",
+            "--dump",
+            b2d.to_str().unwrap(),
+            "--bot",
+            "wave",
         ],
     );
     let b2_id = b2.peer_id();
@@ -346,13 +392,19 @@ fn b_host_killed_mid_interaction_earliest_joiner_takes_over() {
     std::thread::sleep(Duration::from_millis(700));
     let killed_at = Instant::now();
     host.kill();
-    let changed = b1.wait_line(&format!("host-changed host={b1_id}"), Duration::from_secs(10));
+    let changed = b1.wait_line(
+        &format!("host-changed host={b1_id}"),
+        Duration::from_secs(10),
+    );
     let took = killed_at.elapsed();
     println!("host killed; bot1 took over after {took:?}: {changed}");
     assert!(took < Duration::from_secs(2), "migration took {took:?}");
     let term: u32 = field(&changed, "term").parse().unwrap();
     assert!(term >= 2, "term did not rise: {changed}");
-    b2.wait_line(&format!("host-changed host={b1_id}"), Duration::from_secs(5));
+    b2.wait_line(
+        &format!("host-changed host={b1_id}"),
+        Duration::from_secs(5),
+    );
 
     // A fourth peer joins the migrated room.
     std::thread::sleep(Duration::from_secs(2));
@@ -361,18 +413,43 @@ fn b_host_killed_mid_interaction_earliest_joiner_takes_over() {
         &dir,
         "late",
         &[
-            "join", "--room", "mig", "--signal", &url, "--quiet", "--duration", "5", "--dump-hz", "5",
-            "--dump", lated.to_str().unwrap(),
+            "join",
+            "--room",
+            "mig",
+            "--signal",
+            &url,
+            "--quiet",
+            "--duration",
+            "5",
+            "--dump-hz",
+            "5",
+            "--dump",
+            lated.to_str().unwrap(),
         ],
     );
     let late_id = late.peer_id();
-    assert_eq!(late.wait_exit(Duration::from_secs(40)), 0, "{}", late.logs());
+    assert_eq!(
+        late.wait_exit(Duration::from_secs(40)),
+        0,
+        "{}",
+        late.logs()
+    );
     let l = read_dump(&lated);
     let last = l.last().unwrap();
-    assert_eq!(last["host"].as_u64(), Some(b1_id), "late joiner follows the new host");
+    assert_eq!(
+        last["host"].as_u64(),
+        Some(b1_id),
+        "late joiner follows the new host"
+    );
     let views = [
-        ("bot1", nearest(&read_dump(&b1d), last["wall_ms"].as_u64().unwrap()).clone()),
-        ("bot2", nearest(&read_dump(&b2d), last["wall_ms"].as_u64().unwrap()).clone()),
+        (
+            "bot1",
+            nearest(&read_dump(&b1d), last["wall_ms"].as_u64().unwrap()).clone(),
+        ),
+        (
+            "bot2",
+            nearest(&read_dump(&b2d), last["wall_ms"].as_u64().unwrap()).clone(),
+        ),
         ("late", last.clone()),
     ];
     let live = [b1_id, b2_id, late_id];
@@ -385,10 +462,17 @@ fn b_host_killed_mid_interaction_earliest_joiner_takes_over() {
         assert_eq!(scene.len(), 7, "{who} lost scene objects: {v}");
         for o in objs.values() {
             let owner = o["owner"].as_u64().unwrap();
-            assert!(live.contains(&owner), "{who}: object {} owned by {owner}, not a live peer", o["id"]);
+            assert!(
+                live.contains(&owner),
+                "{who}: object {} owned by {owner}, not a live peer",
+                o["id"]
+            );
         }
         let avatars = objs.values().filter(|o| o["kind"] == "head").count();
-        assert_eq!(avatars, 3, "{who}: one head per live peer (the dead host's is removed)");
+        assert_eq!(
+            avatars, 3,
+            "{who}: one head per live peer (the dead host's is removed)"
+        );
         assert_ne!(v["host"].as_u64(), Some(host_id));
     }
     // Every peer names the same owner for every object.
@@ -398,8 +482,16 @@ fn b_host_killed_mid_interaction_earliest_joiner_takes_over() {
             .map(|(id, o)| (*id, o["owner"].as_u64().unwrap()))
             .collect()
     };
-    assert_eq!(owners(&views[0].1), owners(&views[2].1), "bot1 and the late joiner disagree on owners");
-    assert_eq!(owners(&views[1].1), owners(&views[2].1), "bot2 and the late joiner disagree on owners");
+    assert_eq!(
+        owners(&views[0].1),
+        owners(&views[2].1),
+        "bot1 and the late joiner disagree on owners"
+    );
+    assert_eq!(
+        owners(&views[1].1),
+        owners(&views[2].1),
+        "bot2 and the late joiner disagree on owners"
+    );
 }
 
 /// A peer that joins after 10 s of interaction gets the same room as the host.
@@ -412,8 +504,18 @@ fn c_late_joiner_after_ten_seconds_gets_the_same_state() {
         &dir,
         "host",
         &[
-            "host", "--room", "late", "--bind", "127.0.0.1:0", "--duration", "19", "--quiet",
-            "--dump-hz", "10", "--dump", hd.to_str().unwrap(),
+            "host",
+            "--room",
+            "late",
+            "--bind",
+            "127.0.0.1:0",
+            "--duration",
+            "19",
+            "--quiet",
+            "--dump-hz",
+            "10",
+            "--dump",
+            hd.to_str().unwrap(),
         ],
     );
     let url = signal_url(&host);
@@ -434,14 +536,114 @@ fn c_late_joiner_after_ten_seconds_gets_the_same_state() {
         &dir,
         "late",
         &[
-            "join", "--room", "late", "--signal", &url, "--quiet", "--duration", "6", "--dump-hz", "10",
-            "--dump", ld.to_str().unwrap(),
+            "join",
+            "--room",
+            "late",
+            "--signal",
+            &url,
+            "--quiet",
+            "--duration",
+            "6",
+            "--dump-hz",
+            "10",
+            "--dump",
+            ld.to_str().unwrap(),
         ],
     );
-    assert_eq!(late.wait_exit(Duration::from_secs(40)), 0, "{}", late.logs());
-    assert_eq!(host.wait_exit(Duration::from_secs(40)), 0, "{}", host.logs());
+    assert_eq!(
+        late.wait_exit(Duration::from_secs(40)),
+        0,
+        "{}",
+        late.logs()
+    );
+    assert_eq!(
+        host.wait_exit(Duration::from_secs(40)),
+        0,
+        "{}",
+        host.logs()
+    );
     let l = read_dump(&ld);
     let last = l.last().unwrap();
     let h = read_dump(&hd);
-    assert_agree(nearest(&h, last["wall_ms"].as_u64().unwrap()), last, "late join");
+    assert_agree(
+        nearest(&h, last["wall_ms"].as_u64().unwrap()),
+        last,
+        "late join",
+    );
+}
+
+/// Mistakes a person makes get a sentence and a non-zero exit code, before anything opens.
+#[test]
+fn e_errors_are_clear_and_exit_non_zero() {
+    require_netns();
+    let dir = scratch("errors");
+    let run = |name: &str, args: &[&str]| -> (i32, String) {
+        let mut p = Proc::spawn(&dir, name, args);
+        let code = p.wait_exit(Duration::from_secs(30));
+        (code, std::fs::read_to_string(&p.err).unwrap_or_default())
+    };
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let dead = format!("ws://127.0.0.1:{port}");
+    let (code, err) = run("unreachable", &["join", "--room", "x", "--signal", &dead]);
+    assert_eq!(code, 3, "{err}");
+    assert!(err.contains("unreachable"), "{err}");
+
+    let signal = Proc::spawn(&dir, "signal", &["signal", "--bind", "127.0.0.1:0"]);
+    let url = signal_url(&signal);
+    let (code, err) = run("noroom", &["join", "--room", "nobody", "--signal", &url]);
+    assert_eq!(code, 3, "{err}");
+    assert!(err.contains("room \"nobody\" not found"), "{err}");
+
+    let (code, err) = run(
+        "scene",
+        &["host", "--room", "x", "--signal", &url, "--scene", "moon"],
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("unknown scene \"moon\""), "{err}");
+
+    let bot = dir.join("bad.bot");
+    std::fs::write(&bot, "wait 1\nfly right 3\n").unwrap();
+    let (code, err) = run(
+        "bot",
+        &[
+            "join",
+            "--room",
+            "x",
+            "--signal",
+            &url,
+            "--bot",
+            bot.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("command 2") && err.contains("unknown command \"fly\""),
+        "{err}"
+    );
+
+    let (code, err) = run(
+        "bad-assets",
+        &[
+            "host",
+            "--room",
+            "x",
+            "--signal",
+            &url,
+            "--assets",
+            "/nonexistent",
+        ],
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("cannot load the bunny"), "{err}");
+
+    let (code, err) = run(
+        "flag",
+        &["host", "--room", "x", "--net-condition", "loss=150%"],
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("0-100%"), "{err}");
 }

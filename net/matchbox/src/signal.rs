@@ -144,15 +144,13 @@ impl SignalServer {
             })
             .with_shutdown(rx)
             .build();
-        let addr = server
-            .bind()
-            .map_err(|e| SignalError::Bind {
-                addr: bind,
-                source: match e {
-                    matchbox_signaling::Error::Bind(io) => io,
-                    other => std::io::Error::other(other.to_string()),
-                },
-            })?;
+        let addr = server.bind().map_err(|e| SignalError::Bind {
+            addr: bind,
+            source: match e {
+                matchbox_signaling::Error::Bind(io) => io,
+                other => std::io::Error::other(other.to_string()),
+            },
+        })?;
         let runtime = tokio::runtime::Builder::new_current_thread()
             .enable_all()
             .build()

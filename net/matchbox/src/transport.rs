@@ -5,8 +5,7 @@ use std::sync::mpsc;
 use std::time::Duration;
 
 use matchbox_socket::{
-    ChannelConfig, PeerId as MbPeerId, PeerState, RtcIceServerConfig, SignalingError,
-    WebRtcSocket,
+    ChannelConfig, PeerId as MbPeerId, PeerState, RtcIceServerConfig, SignalingError, WebRtcSocket,
 };
 use softsync_net::{Instant, PeerEvent, PeerId, Transport, PROTOCOL_VERSION};
 
@@ -46,6 +45,9 @@ pub struct MatchboxConfig {
     pub connect_timeout: Duration,
     /// Largest datagram sent (bigger ones are dropped and counted).
     pub mtu: usize,
+    /// The protocol version announced to the signaling server (the build's own by default;
+    /// tests set another to see the refusal).
+    pub protocol_version: u8,
 }
 
 impl MatchboxConfig {
@@ -60,6 +62,7 @@ impl MatchboxConfig {
             ice_credential: None,
             connect_timeout: Duration::from_secs(10),
             mtu: DEFAULT_MTU,
+            protocol_version: PROTOCOL_VERSION,
         }
     }
 
@@ -70,9 +73,10 @@ impl MatchboxConfig {
             Role::Join => "join",
         };
         format!(
-            "{}/{}?{VERSION_PARAM}={PROTOCOL_VERSION}&{ROLE_PARAM}={role}",
+            "{}/{}?{VERSION_PARAM}={}&{ROLE_PARAM}={role}",
             self.signal_url.trim_end_matches('/'),
-            self.room
+            self.room,
+            self.protocol_version
         )
     }
 }
@@ -221,7 +225,7 @@ fn classify(err: &matchbox_socket::Error, cfg: &MatchboxConfig) -> ConnectError 
                     url,
                 },
                 426 => ConnectError::VersionMismatch {
-                    ours: PROTOCOL_VERSION,
+                    ours: cfg.protocol_version,
                     theirs: theirs.unwrap_or_else(|| "an unknown version".into()),
                     url,
                 },

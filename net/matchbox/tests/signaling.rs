@@ -1,0 +1,96 @@
+//! The signaling server's refusals, as a client sees them (websocket on loopback only: no
+//! peer connections are made, so no WebRTC traffic).
+#![allow(clippy::unwrap_used, missing_docs)]
+
+use std::time::Duration;
+
+use softsync_net::{Transport, PROTOCOL_VERSION};
+use softsync_net_matchbox::{ConnectError, MatchboxConfig, MatchboxTransport, Role, SignalServer};
+
+fn cfg(url: &str, room: &str, role: Role) -> MatchboxConfig {
+    let mut c = MatchboxConfig::new(url, room, role);
+    c.connect_timeout = Duration::from_secs(10);
+    c
+}
+
+#[test]
+fn refusals_are_typed_errors_with_clear_messages() {
+    let server = SignalServer::start("127.0.0.1:0".parse().unwrap()).unwrap();
+    let url = server.url();
+
+    // Joining a room nobody is in.
+    let e = MatchboxTransport::connect(&cfg(&url, "empty", Role::Join)).unwrap_err();
+    assert!(matches!(e, ConnectError::RoomNotFound { .. }), "{e:?}");
+    assert!(e.to_string().contains("room \"empty\" not found"), "{e}");
+
+    // Another protocol version.
+    let mut old = cfg(&url, "lab", Role::Host);
+    old.protocol_version = PROTOCOL_VERSION.wrapping_add(7);
+    let e = MatchboxTransport::connect(&old).unwrap_err();
+    match &e {
+        ConnectError::VersionMismatch { ours, theirs, .. } => {
+            assert_eq!(*ours, PROTOCOL_VERSION.wrapping_add(7));
+            assert_eq!(theirs, &PROTOCOL_VERSION.to_string());
+        }
+        other => panic!("{other:?}"),
+    }
+    assert!(e.to_string().contains("protocol version mismatch"), "{e}");
+
+    // A host creates the room; the registry counts it; a second host is refused.
+    let host = MatchboxTransport::connect(&cfg(&url, "lab", Role::Host)).unwrap();
+    assert_ne!(host.local_id().0, 0);
+    let mut seen = false;
+    for _ in 0..200 {
+        if server
+            .rooms()
+            .iter()
+            .any(|r| r.name == "lab" && r.peers == 1)
+        {
+            seen = true;
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert!(seen, "room not registered: {:?}", server.rooms());
+    let e = MatchboxTransport::connect(&cfg(&url, "lab", Role::Host)).unwrap_err();
+    assert!(matches!(e, ConnectError::RoomExists { .. }), "{e:?}");
+
+    // The room disappears when its last socket leaves.
+    drop(host);
+    let mut gone = false;
+    for _ in 0..300 {
+        if server.rooms().is_empty() {
+            gone = true;
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert!(gone, "room still listed: {:?}", server.rooms());
+
+    // Bad input never reaches the network.
+    let e = MatchboxTransport::connect(&cfg(&url, "a/b", Role::Host)).unwrap_err();
+    assert!(matches!(e, ConnectError::BadRoom(_)), "{e:?}");
+    let e = MatchboxTransport::connect(&cfg("http://x", "lab", Role::Host)).unwrap_err();
+    assert!(matches!(e, ConnectError::BadUrl(_)), "{e:?}");
+}
+
+#[test]
+fn an_unreachable_server_is_reported_as_such() {
+    // Bind and drop to get a port nothing listens on.
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let e = MatchboxTransport::connect(&cfg(&format!("ws://127.0.0.1:{port}"), "lab", Role::Join))
+        .unwrap_err();
+    assert!(matches!(e, ConnectError::Unreachable { .. }), "{e:?}");
+    assert!(e.to_string().contains("unreachable"), "{e}");
+}
+
+#[test]
+fn a_busy_port_is_a_bind_error() {
+    let s = SignalServer::start("127.0.0.1:0".parse().unwrap()).unwrap();
+    let e = SignalServer::start(s.addr()).unwrap_err();
+    assert!(e.to_string().contains("cannot listen on"), "{e}");
+}
