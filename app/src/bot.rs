@@ -15,7 +15,8 @@
 //!                               request if another peer owns it), or gives up (default 3 s)
 //! squeeze HAND DEPTH [in S]     push the held point DEPTH metres toward the body's center
 //! release HAND                  open the grip
-//! wave HAND AMPLITUDE PERIOD S  move sinusoidally (load runs)
+//! wave HAND AMPLITUDE PERIOD S  move sinusoidally (load runs); HAND may be `all` (head
+//!                               and both hands at once, out of phase)
 //! loop                          start again from the top (last line)
 //! ```
 //!
@@ -71,7 +72,7 @@ pub fn builtin(name: &str) -> Option<&'static str> {
              release right; offset right 0 0.15 0 in 0.5",
         ),
         "idle" => Some("wait 1"),
-        "wave" => Some("wave right 0.15 1.2 3; wave left 0.1 0.9 3; loop"),
+        "wave" => Some("wave all 0.15 1.2 6; loop"),
         _ => None,
     }
 }
@@ -150,7 +151,7 @@ pub fn parse(text: &str) -> Result<Vec<Cmd>, ScriptError> {
                 "squeeze" => Cmd::Squeeze(hand(arg(1)?)?, num(arg(2)?)? as f32, dur(&w, 3, 0.5)?),
                 "release" => Cmd::Release(hand(arg(1)?)?),
                 "wave" => Cmd::Wave(
-                    hand(arg(1)?)?,
+                    if arg(1)? == "all" { 3 } else { hand(arg(1)?)? },
                     num(arg(2)?)? as f32,
                     num(arg(3)?)?.max(0.05),
                     num(arg(4)?)?.max(0.0),
@@ -188,7 +189,7 @@ enum Active {
     },
     Wave {
         part: usize,
-        center: Vec3,
+        center: [Vec3; 3],
         amp: f32,
         period: f64,
         t0: f64,
@@ -256,10 +257,8 @@ impl Bot {
         }
         // Run commands until one takes time.
         for _ in 0..64 {
-            if self.active.is_none() {
-                if !self.next(room, t) {
-                    break;
-                }
+            if self.active.is_none() && !self.next(room, t) {
+                break;
             }
             if !self.advance(room, t) {
                 break;
@@ -369,7 +368,7 @@ impl Bot {
             }
             Cmd::Wave(part, amp, period, dur) => Some(Active::Wave {
                 part,
-                center: self.pos[part],
+                center: self.pos,
                 amp,
                 period,
                 t0: t,
@@ -414,10 +413,21 @@ impl Bot {
                 dur,
             } => {
                 let ph = ((t - t0) / period * std::f64::consts::TAU) as f32;
-                self.pos[part] =
-                    center + Vec3::new(ph.sin() * amp, (ph * 2.0).sin() * amp * 0.3, 0.0);
+                let parts = if part == 3 { 0..3 } else { part..part + 1 };
+                for p in parts.clone() {
+                    let (a, shift) = if p == 0 {
+                        (amp * 0.4, 0.0)
+                    } else {
+                        (amp, p as f32 * 1.3)
+                    };
+                    let q = ph + shift;
+                    self.pos[p] = center[p]
+                        + Vec3::new(q.sin() * a, (q * 2.0).sin() * a * 0.3, q.cos() * a * 0.5);
+                }
                 if t - t0 >= dur {
-                    self.pos[part] = center;
+                    for p in parts {
+                        self.pos[p] = center[p];
+                    }
                     true
                 } else {
                     false
@@ -480,6 +490,7 @@ impl Bot {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 

@@ -38,6 +38,7 @@ PEER OPTIONS:
   --ice URL             an ICE server (stun:/turn:), repeatable; default none (LAN/loopback)
   --connect-timeout S   give up joining after S seconds (default 15)
   --quiet               no stats lines
+  --no-avatar           spawn no avatar (to measure one object's traffic)
 
 Every peer prints a stats line per second on stderr: peers, host, term, bytes/s up and down,
 RTT, objects owned. Exit codes: 0 done, 1 runtime failure, 2 usage or input error, 3 cannot
@@ -62,7 +63,7 @@ pub enum Command {
         bind: SocketAddr,
     },
     /// A peer.
-    Peer(PeerArgs),
+    Peer(Box<PeerArgs>),
     /// The live network benchmark.
     BenchNetLive {
         /// Output directory.
@@ -113,11 +114,13 @@ pub struct PeerArgs {
     pub connect_timeout: Duration,
     /// No stats lines.
     pub quiet: bool,
+    /// Spawn no avatar.
+    pub no_avatar: bool,
 }
 
 fn secs(flag: &str, v: &str) -> Result<f64, UsageError> {
     match v.parse::<f64>() {
-        Ok(s) if s.is_finite() && s >= 0.0 && s < 1e7 => Ok(s),
+        Ok(s) if s.is_finite() && (0.0..1e7).contains(&s) => Ok(s),
         _ => err(format!("{flag}: {v:?} is not a number of seconds")),
     }
 }
@@ -205,7 +208,7 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
     while i < rest.len() {
         let a = &rest[i];
         if let Some(name) = a.strip_prefix("--") {
-            let takes_value = !matches!(name, "quiet" | "quick" | "help");
+            let takes_value = !matches!(name, "quiet" | "quick" | "help" | "no-avatar");
             if let Some((n, v)) = name.split_once('=') {
                 flags.push((n.to_owned(), Some(v.to_owned())));
             } else if takes_value {
@@ -281,6 +284,7 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
                 "ice",
                 "connect-timeout",
                 "quiet",
+                "no-avatar",
             ];
             if host {
                 ok.extend(["bind", "scene"]);
@@ -309,7 +313,7 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
                 }
             }
             let scene = get("scene").unwrap_or_else(|| "thesis-room".into());
-            Ok(Command::Peer(PeerArgs {
+            Ok(Command::Peer(Box::new(PeerArgs {
                 host,
                 room,
                 bind: addr(
@@ -358,7 +362,8 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
                     None => Duration::from_secs(15),
                 },
                 quiet: has("quiet"),
-            }))
+                no_avatar: has("no-avatar"),
+            })))
         }
         other => err(format!(
             "unknown command {other:?}: signal, host, join, bench or help"
@@ -367,6 +372,7 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 

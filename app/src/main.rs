@@ -77,7 +77,7 @@ fn run(args: &[String]) -> Result<ExitCode, Failure> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Signal { bind } => signal(bind),
-        Command::Peer(p) => peer(p),
+        Command::Peer(p) => peer(*p),
         Command::BenchNetLive {
             out,
             seconds,
@@ -239,6 +239,7 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     };
     let dt = (1.0 / a.sim_hz) as f32;
     let mut room = Room::new(session, transport, scene, hand, dt).map_err(Failure::usage)?;
+    room.no_avatar = a.no_avatar;
     if a.host {
         room.open().map_err(Failure::runtime)?;
     }

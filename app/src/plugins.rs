@@ -38,7 +38,9 @@ pub struct Peer {
     pub dump_every: Duration,
     /// No stats lines.
     pub quiet: bool,
-    /// Kept alive while the peer runs (the host's embedded signaling server).
+    /// Kept alive while the peer runs (the host's embedded signaling server): held, never
+    /// read; dropping it stops the server.
+    #[allow(dead_code)]
     pub signal: Option<softsync_net_matchbox::SignalServer>,
     stats: StatsLine,
     next_stats: Duration,

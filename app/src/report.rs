@@ -46,6 +46,10 @@ pub struct DumpLine {
     pub term: u32,
     /// Members of the room as this peer knows them.
     pub members: Vec<u64>,
+    /// Bytes of datagrams this peer's session has sent so far.
+    pub up_bytes: u64,
+    /// Bytes of datagrams it has received so far.
+    pub down_bytes: u64,
     /// Objects.
     pub objects: Vec<DumpObject>,
 }
@@ -92,6 +96,8 @@ pub fn snapshot(room: &mut Room) -> DumpLine {
         host: room.session.host_id().map(|h| h.0),
         term: room.session.term().0,
         members: room.session.members().keys().map(|p| p.0).collect(),
+        up_bytes: room.session.stats().up.bytes,
+        down_bytes: room.session.stats().down.bytes,
         objects,
     }
 }

@@ -13,9 +13,7 @@ use glam::{Quat, Vec3};
 use softsync_interaction::{
     HandConfig, HandId, HandInput, Interaction, InteractionEvent, ObjectRef, Ownership, Target,
 };
-use softsync_net::{
-    Event, Instant, NetId, ObjectState, PeerId, Session, SessionConfig, Term, Transport,
-};
+use softsync_net::{Event, Instant, NetId, ObjectState, PeerId, Session, Term, Transport};
 use softsync_softbody::rapier3d::prelude::*;
 use softsync_softbody::{SoftBodyHandle, SoftBodySet};
 
@@ -142,6 +140,8 @@ pub struct Room {
     sim_time: f64,
     /// Fixed steps run.
     pub steps: u64,
+    /// Spawn no avatar (measurements of one object's traffic).
+    pub no_avatar: bool,
 }
 
 struct SessionOwnership<'a> {
@@ -198,6 +198,7 @@ impl Room {
             dt,
             sim_time: 0.0,
             steps: 0,
+            no_avatar: false,
         })
     }
 
@@ -323,6 +324,9 @@ impl Room {
     }
 
     fn spawn_avatar(&mut self) {
+        if self.no_avatar {
+            return;
+        }
         let now = self.now();
         let home = self.home();
         for (i, off) in [
@@ -699,13 +703,6 @@ impl Room {
         Some((*self.by_ref.get(&t.object())?, t))
     }
 
-    /// Whether a hand waits for authority.
-    pub fn waiting(&self, hand: usize) -> bool {
-        self.hand_ids
-            .get(hand)
-            .is_some_and(|h| self.hands.is_waiting(*h))
-    }
-
     /// Objects we own.
     pub fn owned_count(&self) -> usize {
         let me = self.me();
@@ -713,10 +710,5 @@ impl Room {
             .keys()
             .filter(|id| self.session.owner(**id) == Some(me))
             .count()
-    }
-
-    /// Session config.
-    pub fn config(&self) -> &SessionConfig {
-        self.session.config()
     }
 }

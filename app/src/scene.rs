@@ -259,24 +259,67 @@ impl Scene {
                 mesh.recenter();
                 Ok(mesh)
             }
-            Kind::SoftBall => Ok(Mesh::icosphere(0.06, 2)),
+            Kind::SoftBall => Ok(Mesh::icosphere(0.06, 3)),
             Kind::SoftBox => Ok(Mesh::cuboid(Vec3::splat(0.045), 2)),
             other => Err(format!("{} is not a soft body", other.name())),
         }
     }
 
-    /// A soft body's configuration (the thesis's defaults, particles about 2.5 cm apart).
+    /// A soft body's configuration (the thesis's defaults, particles 2-3 cm apart).
     pub fn soft_config(kind: Kind) -> SoftBodyConfig {
-        let radius_m = match kind {
-            Kind::Bunny => 0.03,
-            Kind::SoftBox => 0.025,
-            _ => 0.022,
+        let cluster = match kind {
+            Kind::Bunny => ClusterMethod::Distance { radius_m: 0.03 },
+            Kind::SoftBox => ClusterMethod::Distance { radius_m: 0.025 },
+            // The thesis's 60-particle ball (Tables 9-11): Poisson-disk clusters, 60 exactly.
+            _ => ClusterMethod::PoissonDisk {
+                radius_m: 0.0215,
+                seed: 1,
+            },
         };
         SoftBodyConfig {
-            cluster: ClusterMethod::Distance { radius_m },
+            cluster,
             // A dynamic center with its own collider: the body falls, rests and is thrown.
             space: SimulationSpace::World,
             ..SoftBodyConfig::default()
         }
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_soft_ball_is_the_thesis_60_particle_body_and_every_kind_builds() {
+        let scene = Scene::by_name(
+            "thesis-room",
+            Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../assets")),
+        )
+        .unwrap();
+        let mut world = PhysicsWorld::new();
+        let mut set = softsync_softbody::SoftBodySet::new();
+        for k in [Kind::SoftBall, Kind::Bunny, Kind::SoftBox] {
+            let h = set
+                .insert(
+                    &scene.soft_mesh(k).unwrap(),
+                    Scene::soft_config(k),
+                    &mut world,
+                )
+                .unwrap();
+            let n = set.get(h).unwrap().num_particles();
+            if k == Kind::SoftBall {
+                assert_eq!(n, 60);
+            }
+            assert!((20..=80).contains(&n), "{} has {n} particles", k.name());
+        }
+        for k in Kind::ALL {
+            assert_eq!(Kind::of_class(k.class()), Some(k));
+            assert_eq!(Kind::from_name(k.name()), Some(k));
+        }
+        assert!(Scene::by_name("moon", Path::new(".")).is_err());
+        assert!(Scene::by_name("thesis-room", Path::new("/nonexistent"))
+            .unwrap_err()
+            .contains("bunny"));
     }
 }

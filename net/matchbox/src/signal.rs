@@ -79,7 +79,8 @@ impl SignalServer {
         let (tx, rx) = tokio::sync::oneshot::channel();
         let (r1, r2, r3) = (registry.clone(), registry.clone(), registry.clone());
         let mut server = SignalingServer::full_mesh_builder(bind)
-            .on_connection_request(move |meta| {
+            // matchbox fixes the callback type (its Err is an axum Response).
+            .on_connection_request(#[allow(clippy::result_large_err)] move |meta| {
                 let room = meta.path.clone().unwrap_or_default();
                 let version = meta.query_params.get(VERSION_PARAM).cloned();
                 if version.as_deref() != Some(&PROTOCOL_VERSION.to_string()) {
