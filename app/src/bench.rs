@@ -1,3 +1,539 @@
-pub fn net_live(_o: &std::path::Path, _s: f64, _q: bool) -> Result<(), String> {
-    Err("todo".into())
+//! `softsync bench net-live`: the thesis's Tables 9-11 on real WebRTC between real processes.
+//!
+//! For each send rate × ignore threshold, a host opens the `bench-ball` room and a bot joins:
+//! - avatar: the bot waves its head and both hands (it owns its avatar);
+//! - softbody60: the bot (no avatar) takes the host's 60-particle ball through the authority
+//!   request and squeezes and pulls it without pause.
+//!
+//! Bytes/s: every byte of the bot's datagrams (header, messages, heartbeats, acks; without
+//! IP/UDP/DTLS/SCTP) over the measured window, from the cumulative counter in its dump. Remote
+//! error: for each line of the host's dump (30 Hz) and each object the bot owns, the distance
+//! between what the host shows and the bot's own state at the time the shown state stands for
+//! (the bot's dump at 60 Hz, interpolated), for the center and every particle.
+//!
+//! Also: connect time (signaling to first data channel) and migration time (host SIGKILLed,
+//! earliest joiner announces itself). Must run where WebRTC may run: on the shared machines
+//! inside `scripts/netns-run` (`scripts/bench-net-live` does it).
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use plotters::prelude::*;
+
+use crate::report::{read_dump, DumpLine};
+
+struct Proc {
+    child: Child,
+    out: PathBuf,
+}
+
+impl Proc {
+    fn spawn(dir: &Path, name: &str, args: &[String]) -> Result<Proc, String> {
+        let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+        let out = dir.join(format!("{name}.out"));
+        let file = std::fs::File::create(&out).map_err(|e| e.to_string())?;
+        let err =
+            std::fs::File::create(dir.join(format!("{name}.err"))).map_err(|e| e.to_string())?;
+        let child = Command::new(exe)
+            .args(args)
+            .stdout(Stdio::from(file))
+            .stderr(Stdio::from(err))
+            .spawn()
+            .map_err(|e| format!("cannot start {name}: {e}"))?;
+        Ok(Proc { child, out })
+    }
+
+    fn line(&self, needle: &str, within: Duration) -> Result<String, String> {
+        let start = Instant::now();
+        loop {
+            let text = std::fs::read_to_string(&self.out).unwrap_or_default();
+            if let Some(l) = text.lines().find(|l| l.contains(needle)) {
+                return Ok(l.to_owned());
+            }
+            if start.elapsed() > within {
+                return Err(format!(
+                    "{} printed no {needle:?} within {within:?}:\n{text}",
+                    self.out.display()
+                ));
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
+    fn wait(&mut self, within: Duration) -> Result<(), String> {
+        let start = Instant::now();
+        loop {
+            if let Ok(Some(s)) = self.child.try_wait() {
+                return if s.success() {
+                    Ok(())
+                } else {
+                    Err(format!("{} exited with {s}", self.out.display()))
+                };
+            }
+            if start.elapsed() > within {
+                return Err(format!(
+                    "{} still running after {within:?}",
+                    self.out.display()
+                ));
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn field(line: &str, key: &str) -> Option<String> {
+    line.split_whitespace()
+        .find_map(|w| w.strip_prefix(&format!("{key}=")))
+        .map(str::to_owned)
+}
+
+/// One measured configuration.
+#[derive(Clone, Debug)]
+struct Row {
+    scenario: &'static str,
+    rate_hz: f32,
+    threshold_m: f32,
+    bytes_per_s: f64,
+    p50_mm: f64,
+    p95_mm: f64,
+    max_mm: f64,
+    samples: usize,
+}
+
+fn percentile(v: &mut [f64], q: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * q).round() as usize]
+}
+
+/// The owner's state of one object at time `t` (its clock), interpolated between dump lines.
+fn truth_at(track: &[(f64, Vec<[f32; 3]>)], t: f64) -> Option<Vec<[f32; 3]>> {
+    let i = track.partition_point(|(ti, _)| *ti <= t);
+    if i == 0 || i >= track.len() {
+        return None;
+    }
+    let (t0, a) = &track[i - 1];
+    let (t1, b) = &track[i];
+    let f = if t1 > t0 {
+        ((t - t0) / (t1 - t0)) as f32
+    } else {
+        0.0
+    };
+    Some(
+        a.iter()
+            .zip(b)
+            .map(|(p, q)| {
+                [
+                    p[0] + (q[0] - p[0]) * f,
+                    p[1] + (q[1] - p[1]) * f,
+                    p[2] + (q[2] - p[2]) * f,
+                ]
+            })
+            .collect(),
+    )
+}
+
+fn points(o: &crate::report::DumpObject) -> Vec<[f32; 3]> {
+    let mut v = vec![o.pos];
+    v.extend(o.particles.iter().copied());
+    v
+}
+
+fn measure(host: &[DumpLine], bot: &[DumpLine], from_t: f64) -> Result<(f64, Vec<f64>), String> {
+    let me = bot.first().ok_or("empty bot dump")?.peer;
+    let to_t = bot.last().map_or(0.0, |l| l.t) - 0.3;
+    // The bot's own objects over time.
+    let mut tracks: BTreeMap<u32, Vec<(f64, Vec<[f32; 3]>)>> = BTreeMap::new();
+    for l in bot {
+        for o in l.objects.iter().filter(|o| o.owner == me) {
+            let track = tracks.entry(o.id).or_default();
+            // Several dump lines can show the same step: keep the first.
+            if track.last().is_none_or(|(t, _)| *t < l.state_t) {
+                track.push((l.state_t, points(o)));
+            }
+        }
+    }
+    let mut errors = Vec::new();
+    for l in host {
+        for o in l.objects.iter().filter(|o| o.owner == me) {
+            let Some(src) = o.src else { continue };
+            if src < from_t || src > to_t {
+                continue;
+            }
+            let Some(truth) = tracks.get(&o.id).and_then(|t| truth_at(t, src)) else {
+                continue;
+            };
+            let shown = points(o);
+            if shown.len() != truth.len() {
+                continue;
+            }
+            for (p, q) in shown.iter().zip(&truth) {
+                let d =
+                    ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt();
+                errors.push(f64::from(d) * 1e3);
+            }
+        }
+    }
+    let at = |t: f64| {
+        bot.iter()
+            .min_by(|a, b| (a.t - t).abs().total_cmp(&(b.t - t).abs()))
+    };
+    let (a, b) = (at(from_t).ok_or("no dump")?, at(to_t).ok_or("no dump")?);
+    let bytes_per_s = (b.up_bytes.saturating_sub(a.up_bytes)) as f64 / (b.t - a.t).max(0.1);
+    Ok((bytes_per_s, errors))
+}
+
+fn softbody_script() -> String {
+    let mut s = String::from("wait 0.5; reach right softball in 1; grab right");
+    for _ in 0..200 {
+        s.push_str("; squeeze right 0.025 in 0.4; squeeze right -0.025 in 0.4");
+    }
+    s
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run_one(
+    dir: &Path,
+    n: usize,
+    scenario: &'static str,
+    rate_hz: f32,
+    threshold_m: f32,
+    seconds: f64,
+    connects: &mut Vec<f64>,
+) -> Result<Row, String> {
+    let room = format!("bench{n}");
+    let warm = if scenario == "avatar" { 1.5 } else { 2.5 };
+    let common = |dump: &Path, hz: &str| -> Vec<String> {
+        [
+            "--send-rate",
+            &rate_hz.to_string(),
+            "--threshold-mm",
+            &(threshold_m * 1000.0).to_string(),
+            "--dump",
+            &dump.display().to_string(),
+            "--dump-hz",
+            hz,
+            "--quiet",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect()
+    };
+    let hd = dir.join(format!("{room}-host.jsonl"));
+    let bd = dir.join(format!("{room}-bot.jsonl"));
+    let mut args: Vec<String> = [
+        "host",
+        "--room",
+        &room,
+        "--bind",
+        "127.0.0.1:0",
+        "--scene",
+        "bench-ball",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    args.extend(["--duration".into(), format!("{}", seconds + warm + 6.0)]);
+    args.extend(common(&hd, "30"));
+    let mut host = Proc::spawn(dir, &format!("{room}-host"), &args)?;
+    let url = host
+        .line("signaling on ", Duration::from_secs(10))?
+        .trim_start_matches("signaling on ")
+        .trim()
+        .to_owned();
+    let script = if scenario == "avatar" {
+        "wave all 0.15 1.2 1000".to_owned()
+    } else {
+        softbody_script()
+    };
+    let mut args: Vec<String> = ["join", "--room", &room, "--signal", &url, "--bot", &script]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    args.extend(["--duration".into(), format!("{}", seconds + warm + 0.5)]);
+    if scenario != "avatar" {
+        args.push("--no-avatar".into());
+    }
+    args.extend(common(&bd, "60"));
+    let mut bot = Proc::spawn(dir, &format!("{room}-bot"), &args)?;
+    if let Some(ms) = bot
+        .line("connected to peer", Duration::from_secs(20))
+        .ok()
+        .and_then(|l| {
+            l.split_whitespace()
+                .rev()
+                .nth(1)
+                .and_then(|v| v.parse::<f64>().ok())
+        })
+    {
+        connects.push(ms);
+    }
+    bot.wait(Duration::from_secs_f64(seconds + warm + 40.0))?;
+    drop(host.child.kill());
+    let _ = host.child.wait();
+    let (h, b) = (
+        read_dump(&hd).map_err(|e| e.to_string())?,
+        read_dump(&bd).map_err(|e| e.to_string())?,
+    );
+    let (bytes_per_s, mut errors) = measure(&h, &b, warm)?;
+    if errors.is_empty() {
+        return Err(format!(
+            "{scenario} {rate_hz} Hz: no error samples (see {})",
+            dir.display()
+        ));
+    }
+    Ok(Row {
+        scenario,
+        rate_hz,
+        threshold_m,
+        bytes_per_s,
+        p50_mm: percentile(&mut errors, 0.5),
+        p95_mm: percentile(&mut errors, 0.95),
+        max_mm: percentile(&mut errors, 1.0),
+        samples: errors.len(),
+    })
+}
+
+/// Host killed with SIGKILL under two bots: ms until the earliest joiner says it is host.
+fn migration(dir: &Path, n: usize) -> Result<f64, String> {
+    let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>();
+    let signal = Proc::spawn(
+        dir,
+        &format!("mig{n}-signal"),
+        &s(&["signal", "--bind", "127.0.0.1:0"]),
+    )?;
+    let url = signal
+        .line("signaling on ", Duration::from_secs(10))?
+        .trim_start_matches("signaling on ")
+        .trim()
+        .to_owned();
+    let room = format!("mig{n}");
+    let mut host = Proc::spawn(
+        dir,
+        &format!("{room}-host"),
+        &s(&["host", "--room", &room, "--signal", &url, "--quiet"]),
+    )?;
+    host.line("hosting", Duration::from_secs(20))?;
+    let b1 = Proc::spawn(
+        dir,
+        &format!("{room}-b1"),
+        &s(&[
+            "join",
+            "--room",
+            &room,
+            "--signal",
+            &url,
+            "--quiet",
+            "--bot",
+            "wave",
+            "--duration",
+            "30",
+        ]),
+    )?;
+    let id = field(&b1.line("joining", Duration::from_secs(20))?, "peer").ok_or("no peer id")?;
+    b1.line("joined", Duration::from_secs(20))?;
+    let b2 = Proc::spawn(
+        dir,
+        &format!("{room}-b2"),
+        &s(&[
+            "join",
+            "--room",
+            &room,
+            "--signal",
+            &url,
+            "--quiet",
+            "--bot",
+            "wave",
+            "--duration",
+            "30",
+        ]),
+    )?;
+    b2.line("joined", Duration::from_secs(20))?;
+    std::thread::sleep(Duration::from_secs(2));
+    let t = Instant::now();
+    let _ = host.child.kill();
+    b1.line(&format!("host-changed host={id}"), Duration::from_secs(15))?;
+    Ok(t.elapsed().as_secs_f64() * 1e3)
+}
+
+fn chart(rows: &[Row], path: &Path, thresholds: &[f32]) -> Result<(), Box<dyn std::error::Error>> {
+    let root = SVGBackend::new(path, (1100, 480)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let (left, right) = root.split_horizontally(550);
+    for (area, scen, title) in [
+        (left, "avatar", "live: VR avatar (head + 2 hands)"),
+        (right, "softbody60", "live: 60-particle soft body, squeezed"),
+    ] {
+        let rs: Vec<&Row> = rows.iter().filter(|r| r.scenario == scen).collect();
+        let xmax = rs.iter().map(|r| r.bytes_per_s).fold(10.0, f64::max) * 1.1;
+        let ymax = rs
+            .iter()
+            .map(|r| r.p95_mm)
+            .filter(|v| v.is_finite())
+            .fold(1.0, f64::max)
+            * 1.15;
+        let mut c = ChartBuilder::on(&area)
+            .caption(title, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(50)
+            .build_cartesian_2d(0.0..xmax, 0.0..ymax)?;
+        c.configure_mesh()
+            .x_desc("bytes/s (our datagrams, WebRTC)")
+            .y_desc("p95 remote error (mm)")
+            .draw()?;
+        for (k, thr) in thresholds.iter().enumerate() {
+            let color = Palette99::pick(k).to_rgba();
+            let pts: Vec<(f64, f64)> = rs
+                .iter()
+                .filter(|r| (r.threshold_m - thr).abs() < 1e-6)
+                .map(|r| (r.bytes_per_s, r.p95_mm))
+                .collect();
+            c.draw_series(LineSeries::new(pts.clone(), color))?
+                .label(format!("threshold {thr} m"))
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
+            c.draw_series(pts.iter().map(|p| Circle::new(*p, 3, color.filled())))?;
+        }
+        c.configure_series_labels()
+            .border_style(BLACK)
+            .background_style(WHITE.mix(0.8))
+            .draw()?;
+    }
+    root.present()?;
+    Ok(())
+}
+
+/// Run the benchmark; write CSV, chart and tables under `out`.
+pub fn net_live(out: &Path, seconds: f64, quick: bool) -> Result<(), String> {
+    let (rates, thresholds): (&[f32], &[f32]) = if quick {
+        (&[10.0, 20.0], &[0.005])
+    } else {
+        (&[5.0, 10.0, 15.0, 20.0, 25.0], &[0.005, 0.015, 0.025])
+    };
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let scratch = std::env::temp_dir().join(format!("softsync-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&scratch).map_err(|e| e.to_string())?;
+    let mut rows = Vec::new();
+    let mut connects = Vec::new();
+    let mut n = 0;
+    for scenario in ["avatar", "softbody60"] {
+        for &hz in rates {
+            for &thr in thresholds {
+                n += 1;
+                let r = run_one(&scratch, n, scenario, hz, thr, seconds, &mut connects)?;
+                eprintln!(
+                    "{scenario} {hz} Hz thr {thr} m: {:.0} B/s, p50 {:.2} mm, p95 {:.2} mm, max {:.2} mm ({} samples)",
+                    r.bytes_per_s, r.p50_mm, r.p95_mm, r.max_mm, r.samples
+                );
+                rows.push(r);
+            }
+        }
+    }
+    let mut migs = Vec::new();
+    for i in 0..if quick { 1 } else { 3 } {
+        migs.push(migration(&scratch, i)?);
+    }
+    let mut csv =
+        String::from("scenario,rate_hz,threshold_m,bytes_per_s,p50_mm,p95_mm,max_mm,samples\n");
+    for r in &rows {
+        let _ = writeln!(
+            csv,
+            "{},{},{},{:.1},{:.3},{:.3},{:.3},{}",
+            r.scenario,
+            r.rate_hz,
+            r.threshold_m,
+            r.bytes_per_s,
+            r.p50_mm,
+            r.p95_mm,
+            r.max_mm,
+            r.samples
+        );
+    }
+    std::fs::write(out.join("live.csv"), csv).map_err(|e| e.to_string())?;
+    chart(&rows, &out.join("live.svg"), thresholds).map_err(|e| e.to_string())?;
+    let mut md = format!(
+        "# softsync live network bench\n\nGenerated by `scripts/bench-net-live{}` (= `softsync bench net-live` inside a network namespace): real processes on real WebRTC data channels over loopback, {seconds} s measured per cell. Bytes: every byte of the interacting bot's datagrams (no IP/UDP/DTLS/SCTP). Error: host's shown state vs the bot's own state at the shown time, center and every particle.\n\n",
+        if quick { " --quick" } else { "" }
+    );
+    for (scen, title) in [
+        ("avatar", "Table 10 (live) — VR avatar"),
+        ("softbody60", "Table 11 (live) — 60-particle soft body"),
+    ] {
+        let _ = writeln!(md, "### {title}: bytes/s (p95 remote error mm)\n");
+        let _ = write!(md, "| Hz |");
+        for t in thresholds {
+            let _ = write!(md, " {t} m |");
+        }
+        let _ = write!(md, "\n|---:|");
+        for _ in thresholds {
+            md.push_str("---:|");
+        }
+        md.push('\n');
+        for &hz in rates {
+            let _ = write!(md, "| {hz} |");
+            for &t in thresholds {
+                if let Some(r) = rows
+                    .iter()
+                    .find(|r| r.scenario == scen && r.rate_hz == hz && r.threshold_m == t)
+                {
+                    let _ = write!(md, " {:.0} ({:.2}) |", r.bytes_per_s, r.p95_mm);
+                }
+            }
+            md.push('\n');
+        }
+        md.push('\n');
+    }
+    let mut c = connects.clone();
+    let mut m = migs.clone();
+    let _ = writeln!(
+        md,
+        "Connect (signaling → first data channel, {} joins): median {:.0} ms. Migration (host SIGKILLed, earliest joiner announces itself; heartbeat timeout 1 s; {} runs): median {:.0} ms.",
+        c.len(),
+        percentile(&mut c, 0.5),
+        m.len(),
+        percentile(&mut m, 0.5)
+    );
+    std::fs::write(out.join("tables.md"), &md).map_err(|e| e.to_string())?;
+    print!("{md}");
+    let pick = |scen: &str| {
+        rows.iter().find(|r| {
+            r.scenario == scen && r.rate_hz == 20.0 && (r.threshold_m - 0.005).abs() < 1e-6
+        })
+    };
+    if let Some(r) = pick("softbody60") {
+        println!(
+            "RESULT live.softbody60 hz=20 bytes_per_s={:.0} p95_mm={:.2}",
+            r.bytes_per_s, r.p95_mm
+        );
+    }
+    if let Some(r) = pick("avatar") {
+        println!(
+            "RESULT live.avatar hz=20 bytes_per_s={:.0} p95_mm={:.2}",
+            r.bytes_per_s, r.p95_mm
+        );
+    }
+    println!(
+        "RESULT live.connect median_ms={:.0} joins={}",
+        percentile(&mut c, 0.5),
+        c.len()
+    );
+    println!(
+        "RESULT live.migration median_ms={:.0} runs={}",
+        percentile(&mut m, 0.5),
+        m.len()
+    );
+    let _ = std::fs::remove_dir_all(&scratch);
+    Ok(())
 }

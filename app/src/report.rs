@@ -36,6 +36,9 @@ pub struct DumpObject {
 pub struct DumpLine {
     /// This peer's clock (s since it started; the session's clock).
     pub t: f64,
+    /// The time (same clock) of the last simulation step: the time the states of the objects
+    /// this peer owns stand for (the shown states of others carry their own `src`).
+    pub state_t: f64,
     /// Wall clock, ms since the Unix epoch.
     pub wall_ms: u64,
     /// This peer's id.
@@ -89,6 +92,7 @@ pub fn snapshot(room: &mut Room) -> DumpLine {
     }
     DumpLine {
         t: now.as_secs_f64(),
+        state_t: room.last_step_at.as_secs_f64(),
         wall_ms: std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_millis() as u64),

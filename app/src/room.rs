@@ -142,6 +142,8 @@ pub struct Room {
     pub steps: u64,
     /// Spawn no avatar (measurements of one object's traffic).
     pub no_avatar: bool,
+    /// The session time of the last fixed step: the time our published states stand for.
+    pub last_step_at: Instant,
 }
 
 struct SessionOwnership<'a> {
@@ -199,6 +201,7 @@ impl Room {
             sim_time: 0.0,
             steps: 0,
             no_avatar: false,
+            last_step_at: Instant::ZERO,
         })
     }
 
@@ -615,6 +618,7 @@ impl Room {
         let me = self.me();
         self.sim_time += self.dt as f64;
         self.steps += 1;
+        self.last_step_at = now;
         // Show what others simulate (before the step, so our bodies collide with it).
         let remote: Vec<NetId> = self
             .objects
