@@ -239,7 +239,11 @@ impl Bot {
     }
 
     fn say(room: &Room, msg: String) {
-        println!("bot peer={} t={:.2} {msg}", room.me().0, room.sim_time());
+        println!(
+            "bot peer={} t={:.2} {msg}",
+            room.me().0,
+            room.now().as_secs_f64()
+        );
     }
 
     /// Drive one fixed step: set the hands' inputs and the avatar's pose.

@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Duration;
 
-use bevy::app::{App, AppExit, PluginGroup, ScheduleRunnerPlugin};
+use bevy::app::{App, AppExit, PluginGroup, ScheduleRunnerPlugin, TerminalCtrlCHandlerPlugin};
 use bevy::time::{Fixed, Time};
 use bevy::MinimalPlugins;
 use softsync_interaction::HandConfig;
@@ -256,6 +256,7 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     );
     let exit = App::new()
         .add_plugins(MinimalPlugins.set(ScheduleRunnerPlugin::run_loop(Duration::from_millis(2))))
+        .add_plugins(TerminalCtrlCHandlerPlugin)
         .insert_resource(Time::<Fixed>::from_hz(a.sim_hz))
         .insert_non_send(peer)
         .add_plugins((NetPlugin, SimPlugin, ReportPlugin))

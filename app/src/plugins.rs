@@ -13,7 +13,8 @@
 use std::time::Duration;
 
 use bevy::app::{App, AppExit, FixedUpdate, Last, Plugin, PostUpdate, PreUpdate};
-use bevy::ecs::message::MessageWriter;
+use bevy::ecs::message::{MessageReader, MessageWriter};
+use bevy::ecs::schedule::IntoScheduleConfigs;
 use bevy::ecs::system::NonSendMut;
 
 use crate::bot::Bot;
@@ -166,11 +167,25 @@ fn report(mut peer: NonSendMut<Peer>, mut exit: MessageWriter<AppExit>) {
         p.write_dump();
     }
     if p.duration.is_some_and(|d| t >= d) {
+        exit.write(AppExit::Success);
+    }
+}
+
+/// Whoever asked to exit (`--duration`, Ctrl-C, an error): a last dump and stats line, and a
+/// `Leave` to the room so the others act at once (a host is replaced, authority returns).
+fn on_exit(mut peer: NonSendMut<Peer>, mut exits: MessageReader<AppExit>) {
+    if exits.read().next().is_none() {
+        return;
+    }
+    let p = &mut *peer;
+    if !p.exiting {
         p.write_dump();
         let (line, _) = p.stats.line(&p.room);
         println!("final {line}");
         p.exiting = true;
-        exit.write(AppExit::Success);
+    }
+    if p.room.joined() {
+        p.room.leave();
     }
 }
 
@@ -198,6 +213,6 @@ pub struct ReportPlugin;
 
 impl Plugin for ReportPlugin {
     fn build(&self, app: &mut App) {
-        app.add_systems(Last, report);
+        app.add_systems(Last, (report, on_exit).chain());
     }
 }

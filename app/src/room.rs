@@ -399,6 +399,15 @@ impl Room {
         Ok(())
     }
 
+    /// Say goodbye: the others drop us at once instead of after the peer timeout. Waits a
+    /// moment so the WebRTC thread sends it before the process ends.
+    pub fn leave(&mut self) {
+        let now = self.now();
+        self.session.leave(now);
+        self.flush();
+        std::thread::sleep(Duration::from_millis(100));
+    }
+
     /// Network out.
     pub fn flush(&mut self) {
         let now = self.now();
@@ -660,6 +669,8 @@ impl Room {
             .filter(|id| self.session.owner(*id) == Some(me))
             .collect();
         for id in owned {
+            // Ours since a grant or a migration: simulate it (idempotent).
+            self.set_simulated(id, true);
             let Some(o) = self.objects.get(&id) else {
                 continue;
             };

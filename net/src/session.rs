@@ -44,6 +44,10 @@ const MAX_STATE_LATENESS: u8 = 16;
 /// advanced the datagram sequence for this long (many datagrams were lost, not one delayed).
 const IN_SEQ_RESYNC_AFTER: Duration = Duration::from_millis(250);
 
+/// Departed peers remembered (their in-flight datagrams are ignored); the set is cleared when
+/// full (peers that left long ago send nothing).
+const MAX_DEPARTED: usize = 256;
+
 /// An object's state as the application sees it: center transform and world-space particles.
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct ObjectState {
@@ -357,6 +361,8 @@ pub struct Session {
     lost_ids: Option<(u32, u32)>,
     /// `NewHost` messages not acceptable yet, per sender: (received, term, members).
     pending_new_hosts: BTreeMap<PeerId, PendingNewHost>,
+    /// Peers that said `Leave`: their datagrams still in flight are ignored (bounded).
+    departed: BTreeSet<PeerId>,
 }
 
 impl Session {
@@ -386,6 +392,7 @@ impl Session {
             resync_until: None,
             lost_ids: None,
             pending_new_hosts: BTreeMap::new(),
+            departed: BTreeSet::new(),
         }
     }
 
@@ -587,6 +594,22 @@ impl Session {
     }
 
     // ---------------------------------------------------------------- local commands
+
+    /// Leave the room: tell every member (and the host) that we are gone, so that they act
+    /// at once instead of after `peer_timeout`. Send what `poll_transmit` gives afterwards;
+    /// the session is not meant to be used after that.
+    pub fn leave(&mut self, now: Instant) {
+        let peers: BTreeSet<PeerId> = self
+            .members
+            .keys()
+            .copied()
+            .chain(self.host)
+            .filter(|p| *p != self.local)
+            .collect();
+        for p in peers {
+            self.send_control(now, p, &Control::Leave);
+        }
+    }
 
     /// Spawn an object. On the host it exists at once (owned by the host) and its id is
     /// returned; on a client the host is asked and `Event::Spawned { request }` follows,
@@ -1575,6 +1598,9 @@ impl Session {
 
     /// Feed a datagram received from `from`.
     pub fn handle_packet(&mut self, now: Instant, from: PeerId, bytes: &[u8]) {
+        if self.departed.contains(&from) {
+            return;
+        }
         // State is kept for members and at most MAX_STRANGERS others (joiners, peers we have
         // not heard of yet): a flood of datagrams from made-up ids costs no memory.
         let known = self.links.contains_key(&from)
@@ -2185,6 +2211,21 @@ impl Session {
                 self.members.insert(peer, join_seq);
                 self.links.entry(peer).or_default();
                 self.events.push_back(Event::PeerJoined(peer));
+            }
+            Control::Leave
+                if from != self.local
+                    && (self.members.contains_key(&from) || Some(from) == self.host) =>
+            {
+                if self.departed.len() >= MAX_DEPARTED {
+                    self.departed.clear();
+                }
+                self.departed.insert(from);
+                if let Some(l) = self.links.get_mut(&from) {
+                    l.last_heard = None;
+                }
+                // Gone now, not after the timeout: the host drops the member (authority
+                // returns); if the host left, the earliest joiner takes over.
+                self.check_liveness(now);
             }
             Control::PeerLeft { peer } if from_host => {
                 self.members.remove(&peer);

@@ -202,6 +202,9 @@ pub enum Control {
         /// Claims.
         claims: Vec<SpawnInfo>,
     },
+    /// Any member → the others: I am leaving now. The receivers treat the sender as gone at
+    /// once instead of after `peer_timeout` (authority returns, a host is replaced).
+    Leave,
 }
 
 /// Why authority was denied.

@@ -353,6 +353,7 @@ fn render() -> String {
             },
         ),
         ("Resync", Control::Resync { claims: vec![] }),
+        ("Leave", Control::Leave),
     ];
     writeln!(
         w,

@@ -1264,3 +1264,55 @@ fn outage_losing_hundreds_of_datagrams_recovers_at_once() {
         "peer 1 lags the host by up to {worst} m after the outage"
     );
 }
+
+/// A peer that says `Leave` is gone at once, not after the 1 s timeout: a leaving client's
+/// objects go back to the host, a leaving host is replaced by the earliest joiner.
+#[test]
+fn leaving_peers_are_handled_at_once() {
+    let mut h = room(4, ConditionerConfig::rough(4, 20, 5, 0.0));
+    let ids = spawn_some(&mut h);
+    h.advance(ms(500));
+    let now = h.now;
+    h.session(3).request_authority(now, ids[0]).unwrap();
+    h.advance(ms(300));
+    assert_eq!(h.peers[1].session.owner(ids[0]), Some(Harness::id(3)));
+
+    // A client leaves: within 200 ms (5x shorter than the timeout) it is out, its object back.
+    let now = h.now;
+    h.session(3).leave(now);
+    // The leaver's own link delays what it sends by 20-25 ms: let that go out, then it is gone.
+    h.advance(ms(40));
+    h.kill(3);
+    h.advance(ms(160));
+    for i in 0..3 {
+        let s = &h.peers[i].session;
+        assert!(
+            !s.members().contains_key(&Harness::id(3)),
+            "peer {i} still lists the leaver"
+        );
+        assert_eq!(
+            s.owner(ids[0]),
+            Some(Harness::id(0)),
+            "peer {i}: authority not back"
+        );
+    }
+
+    // The host leaves: the earliest joiner takes over within 200 ms, with a higher term.
+    let term = h.peers[1].session.term();
+    let now = h.now;
+    h.session(0).leave(now);
+    h.advance(ms(40));
+    h.kill(0);
+    h.advance(ms(160));
+    for i in 1..3 {
+        let s = &h.peers[i].session;
+        assert_eq!(
+            s.host_id(),
+            Some(Harness::id(1)),
+            "peer {i} follows the earliest joiner"
+        );
+        assert!(s.term() > term);
+        assert_eq!(s.object_ids(), ids, "nothing lost on peer {i}");
+    }
+    assert_single_owner_everywhere(&h, &ids);
+}

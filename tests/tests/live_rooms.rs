@@ -163,12 +163,14 @@ fn read_dump(path: &Path) -> Vec<Value> {
         .collect()
 }
 
-/// The dump line nearest to wall time `wall_ms`.
+/// The last dump line at or before wall time `wall_ms` (a peer's final line is written just
+/// before it says `Leave`; lines of others after that no longer show its avatar).
 fn nearest(lines: &[Value], wall_ms: u64) -> &Value {
     lines
         .iter()
-        .min_by_key(|l| l["wall_ms"].as_u64().unwrap().abs_diff(wall_ms))
-        .expect("empty dump")
+        .filter(|l| l["wall_ms"].as_u64().unwrap() <= wall_ms)
+        .max_by_key(|l| l["wall_ms"].as_u64().unwrap())
+        .expect("no dump line before that time")
 }
 
 fn vec3(v: &Value) -> [f64; 3] {
@@ -646,4 +648,64 @@ fn e_errors_are_clear_and_exit_non_zero() {
     );
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("0-100%"), "{err}");
+}
+
+/// A host that leaves on purpose (end of `--duration`, Ctrl-C) says so: the earliest joiner
+/// takes over at once instead of after the 1 s heartbeat timeout.
+#[test]
+fn f_a_host_that_leaves_is_replaced_at_once() {
+    require_netns();
+    let dir = scratch("leave");
+    let signal = Proc::spawn(&dir, "signal", &["signal", "--bind", "127.0.0.1:0"]);
+    let url = signal_url(&signal);
+    let mut host = Proc::spawn(
+        &dir,
+        "host",
+        &[
+            "host",
+            "--room",
+            "bye",
+            "--signal",
+            &url,
+            "--quiet",
+            "--duration",
+            "6",
+        ],
+    );
+    host.peer_id();
+    let bot = Proc::spawn(
+        &dir,
+        "bot",
+        &[
+            "join",
+            "--room",
+            "bye",
+            "--signal",
+            &url,
+            "--quiet",
+            "--duration",
+            "12",
+            "--bot",
+            "wave",
+        ],
+    );
+    let bot_id = bot.peer_id();
+    bot.wait_line("joined", Duration::from_secs(20));
+    assert_eq!(
+        host.wait_exit(Duration::from_secs(20)),
+        0,
+        "{}",
+        host.logs()
+    );
+    let left = Instant::now();
+    let line = bot.wait_line(
+        &format!("host-changed host={bot_id}"),
+        Duration::from_secs(5),
+    );
+    let took = left.elapsed();
+    println!("host left; the bot took over {took:?} after the host process ended: {line}");
+    assert!(
+        took < Duration::from_millis(600),
+        "took {took:?}: the Leave was not acted on (the timeout is 1 s)"
+    );
 }
