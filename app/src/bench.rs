@@ -1,9 +1,9 @@
 //! `softsync bench net-live`: the thesis's Tables 9-11 on real WebRTC between real processes.
 //!
 //! For each send rate × ignore threshold, a host opens the `bench-ball` room and a bot joins:
-//! - avatar: the bot waves its head and both hands (it owns its avatar);
-//! - softbody60: the bot (no avatar) takes the host's 60-particle ball through the authority
-//!   request and squeezes and pulls it without pause.
+//! - avatar: the bot sways its head and both hands, with pauses (it owns its avatar);
+//! - softbody60: the bot (no avatar) takes the host's 60-particle ball by one particle through
+//!   the authority request and drags it around, deforming it, without pause.
 //!
 //! Bytes/s: every byte of the bot's datagrams (header, messages, heartbeats, acks; without
 //! IP/UDP/DTLS/SCTP) over the measured window, from the cumulative counter in its dump. Remote
@@ -22,6 +22,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use plotters::prelude::*;
+use softsync_net::thesis;
 
 use crate::report::{read_dump, DumpLine};
 
@@ -104,6 +105,7 @@ struct Row {
     rate_hz: f32,
     threshold_m: f32,
     bytes_per_s: f64,
+    max_1s_bytes_per_s: f64,
     p50_mm: f64,
     p95_mm: f64,
     max_mm: f64,
@@ -151,7 +153,12 @@ fn points(o: &crate::report::DumpObject) -> Vec<[f32; 3]> {
     v
 }
 
-fn measure(host: &[DumpLine], bot: &[DumpLine], from_t: f64) -> Result<(f64, Vec<f64>), String> {
+/// Bytes/s over the window, the largest over any 1 s inside it, and the error samples (mm).
+fn measure(
+    host: &[DumpLine],
+    bot: &[DumpLine],
+    from_t: f64,
+) -> Result<(f64, f64, Vec<f64>), String> {
     let me = bot.first().ok_or("empty bot dump")?.peer;
     let to_t = bot.last().map_or(0.0, |l| l.t) - 0.3;
     // The bot's own objects over time.
@@ -192,16 +199,26 @@ fn measure(host: &[DumpLine], bot: &[DumpLine], from_t: f64) -> Result<(f64, Vec
     };
     let (a, b) = (at(from_t).ok_or("no dump")?, at(to_t).ok_or("no dump")?);
     let bytes_per_s = (b.up_bytes.saturating_sub(a.up_bytes)) as f64 / (b.t - a.t).max(0.1);
-    Ok((bytes_per_s, errors))
+    let window: Vec<&DumpLine> = bot
+        .iter()
+        .filter(|l| l.t >= from_t && l.t <= to_t)
+        .collect();
+    let mut max_1s = 0.0f64;
+    for (i, x) in window.iter().enumerate() {
+        if let Some(y) = window[i..].iter().find(|y| y.t >= x.t + 1.0) {
+            max_1s = max_1s.max(y.up_bytes.saturating_sub(x.up_bytes) as f64 / (y.t - x.t));
+        }
+    }
+    Ok((bytes_per_s, max_1s, errors))
 }
 
-fn softbody_script() -> String {
-    let mut s = String::from("wait 0.5; reach right softball in 1; grab right");
-    for _ in 0..200 {
-        s.push_str("; squeeze right 0.025 in 0.4; squeeze right -0.025 in 0.4");
-    }
-    s
-}
+/// The bot takes the ball by one particle and drags it around in an ellipse (6 cm, 1.6 s):
+/// the whole body moves and deforms, like the thesis's squeeze/pull interaction.
+const SOFTBODY_SCRIPT: &str =
+    "wait 0.5; reach right softball in 1; grab right; wave right 0.06 1.6 1000";
+
+/// Head and hands sway at walking-around speeds (up to 0.25 m/s), with pauses.
+const AVATAR_SCRIPT: &str = "wave all 0.1 2.5 3; wait 0.7; loop";
 
 #[allow(clippy::too_many_arguments)]
 fn run_one(
@@ -254,9 +271,9 @@ fn run_one(
         .trim()
         .to_owned();
     let script = if scenario == "avatar" {
-        "wave all 0.15 1.2 1000".to_owned()
+        AVATAR_SCRIPT
     } else {
-        softbody_script()
+        SOFTBODY_SCRIPT
     };
     let mut args: Vec<String> = ["join", "--room", &room, "--signal", &url, "--bot", &script]
         .iter()
@@ -287,7 +304,7 @@ fn run_one(
         read_dump(&hd).map_err(|e| e.to_string())?,
         read_dump(&bd).map_err(|e| e.to_string())?,
     );
-    let (bytes_per_s, mut errors) = measure(&h, &b, warm)?;
+    let (bytes_per_s, max_1s_bytes_per_s, mut errors) = measure(&h, &b, warm)?;
     if errors.is_empty() {
         return Err(format!(
             "{scenario} {rate_hz} Hz: no error samples (see {})",
@@ -299,6 +316,7 @@ fn run_one(
         rate_hz,
         threshold_m,
         bytes_per_s,
+        max_1s_bytes_per_s,
         p50_mm: percentile(&mut errors, 0.5),
         p95_mm: percentile(&mut errors, 0.95),
         max_mm: percentile(&mut errors, 1.0),
@@ -326,10 +344,10 @@ fn migration(dir: &Path, n: usize) -> Result<f64, String> {
         &s(&["host", "--room", &room, "--signal", &url, "--quiet"]),
     )?;
     host.line("hosting", Duration::from_secs(20))?;
-    let b1 = Proc::spawn(
-        dir,
-        &format!("{room}-b1"),
-        &s(&[
+    let mut bots = Vec::new();
+    let mut heir = None;
+    for k in ["b1", "b2"] {
+        let args = [
             "join",
             "--room",
             &room,
@@ -340,31 +358,18 @@ fn migration(dir: &Path, n: usize) -> Result<f64, String> {
             "wave",
             "--duration",
             "30",
-        ]),
-    )?;
-    let id = field(&b1.line("joining", Duration::from_secs(20))?, "peer").ok_or("no peer id")?;
-    b1.line("joined", Duration::from_secs(20))?;
-    let b2 = Proc::spawn(
-        dir,
-        &format!("{room}-b2"),
-        &s(&[
-            "join",
-            "--room",
-            &room,
-            "--signal",
-            &url,
-            "--quiet",
-            "--bot",
-            "wave",
-            "--duration",
-            "30",
-        ]),
-    )?;
-    b2.line("joined", Duration::from_secs(20))?;
+        ];
+        let b = Proc::spawn(dir, &format!("{room}-{k}"), &s(&args))?;
+        let id = field(&b.line("joining", Duration::from_secs(20))?, "peer").ok_or("no peer id")?;
+        b.line("joined", Duration::from_secs(20))?;
+        heir.get_or_insert(id);
+        bots.push(b);
+    }
+    let id = heir.ok_or("no bots")?;
     std::thread::sleep(Duration::from_secs(2));
     let t = Instant::now();
     let _ = host.child.kill();
-    b1.line(&format!("host-changed host={id}"), Duration::from_secs(15))?;
+    bots[0].line(&format!("host-changed host={id}"), Duration::from_secs(15))?;
     Ok(t.elapsed().as_secs_f64() * 1e3)
 }
 
@@ -420,7 +425,7 @@ pub fn net_live(out: &Path, seconds: f64, quick: bool) -> Result<(), String> {
     let (rates, thresholds): (&[f32], &[f32]) = if quick {
         (&[10.0, 20.0], &[0.005])
     } else {
-        (&[5.0, 10.0, 15.0, 20.0, 25.0], &[0.005, 0.015, 0.025])
+        (&thesis::RATES_HZ, &thesis::THRESHOLDS_M)
     };
     std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
     let scratch = std::env::temp_dir().join(format!("softsync-bench-{}", std::process::id()));
@@ -445,16 +450,18 @@ pub fn net_live(out: &Path, seconds: f64, quick: bool) -> Result<(), String> {
     for i in 0..if quick { 1 } else { 3 } {
         migs.push(migration(&scratch, i)?);
     }
-    let mut csv =
-        String::from("scenario,rate_hz,threshold_m,bytes_per_s,p50_mm,p95_mm,max_mm,samples\n");
+    let mut csv = String::from(
+        "scenario,rate_hz,threshold_m,bytes_per_s,max_1s_bytes_per_s,p50_mm,p95_mm,max_mm,samples\n",
+    );
     for r in &rows {
         let _ = writeln!(
             csv,
-            "{},{},{},{:.1},{:.3},{:.3},{:.3},{}",
+            "{},{},{},{:.1},{:.1},{:.3},{:.3},{:.3},{}",
             r.scenario,
             r.rate_hz,
             r.threshold_m,
             r.bytes_per_s,
+            r.max_1s_bytes_per_s,
             r.p50_mm,
             r.p95_mm,
             r.max_mm,
@@ -467,11 +474,38 @@ pub fn net_live(out: &Path, seconds: f64, quick: bool) -> Result<(), String> {
         "# softsync live network bench\n\nGenerated by `scripts/bench-net-live{}` (= `softsync bench net-live` inside a network namespace): real processes on real WebRTC data channels over loopback, {seconds} s measured per cell. Bytes: every byte of the interacting bot's datagrams (no IP/UDP/DTLS/SCTP). Error: host's shown state vs the bot's own state at the shown time, center and every particle.\n\n",
         if quick { " --quick" } else { "" }
     );
+    // Table 9: the avatar at the smallest threshold, largest 1 s and average.
+    let _ = writeln!(
+        md,
+        "### Table 9 (live) — VR avatar, threshold {} m: max (1 s window) and average bytes/s [thesis]\n\n| Hz | max B/s | avg B/s | thesis max | thesis avg |\n|---:|---:|---:|---:|---:|",
+        thresholds[0]
+    );
+    for &hz in rates {
+        if let Some(r) = rows
+            .iter()
+            .find(|r| r.scenario == "avatar" && r.rate_hz == hz && r.threshold_m == thresholds[0])
+        {
+            let k = thesis::RATES_HZ.iter().position(|x| *x == hz);
+            let th = |v: Option<u32>| v.map_or("—".to_owned(), |v| v.to_string());
+            let _ = writeln!(
+                md,
+                "| {hz} | {:.0} | {:.0} | {} | {} |",
+                r.max_1s_bytes_per_s,
+                r.bytes_per_s,
+                th(k.and_then(|k| thesis::TABLE9_MAX.get(k).copied())),
+                th(thesis::bytes_per_s("avatar", hz, thresholds[0]))
+            );
+        }
+    }
+    md.push('\n');
     for (scen, title) in [
         ("avatar", "Table 10 (live) — VR avatar"),
         ("softbody60", "Table 11 (live) — 60-particle soft body"),
     ] {
-        let _ = writeln!(md, "### {title}: bytes/s (p95 remote error mm)\n");
+        let _ = writeln!(
+            md,
+            "### {title}: bytes/s (p95 remote error mm) [thesis bytes/s]\n"
+        );
         let _ = write!(md, "| Hz |");
         for t in thresholds {
             let _ = write!(md, " {t} m |");
@@ -488,7 +522,9 @@ pub fn net_live(out: &Path, seconds: f64, quick: bool) -> Result<(), String> {
                     .iter()
                     .find(|r| r.scenario == scen && r.rate_hz == hz && r.threshold_m == t)
                 {
-                    let _ = write!(md, " {:.0} ({:.2}) |", r.bytes_per_s, r.p95_mm);
+                    let th = thesis::bytes_per_s(scen, hz, t)
+                        .map_or("—".to_owned(), |v| v.to_string());
+                    let _ = write!(md, " {:.0} ({:.2}) [{th}] |", r.bytes_per_s, r.p95_mm);
                 }
             }
             md.push('\n');

@@ -416,22 +416,21 @@ impl Bot {
                 t0,
                 dur,
             } => {
-                let ph = ((t - t0) / period * std::f64::consts::TAU) as f32;
+                // Continuous: starts where the part is, and stays where it ends.
+                let ph = ((t.min(t0 + dur) - t0) / period * std::f64::consts::TAU) as f32;
                 let parts = if part == 3 { 0..3 } else { part..part + 1 };
-                for p in parts.clone() {
+                for p in parts {
                     let (a, shift) = if p == 0 {
                         (amp * 0.4, 0.0)
                     } else {
                         (amp, p as f32 * 1.3)
                     };
-                    let q = ph + shift;
-                    self.pos[p] = center[p]
-                        + Vec3::new(q.sin() * a, (q * 2.0).sin() * a * 0.3, q.cos() * a * 0.5);
+                    let f = |q: f32| {
+                        Vec3::new(q.sin() * a, (q * 2.0).sin() * a * 0.3, q.cos() * a * 0.5)
+                    };
+                    self.pos[p] = center[p] + f(ph + shift) - f(shift);
                 }
                 if t - t0 >= dur {
-                    for p in parts {
-                        self.pos[p] = center[p];
-                    }
                     true
                 } else {
                     false

@@ -21,23 +21,10 @@ use softsync_net::{
     SessionConfig, SoftBodyMode,
 };
 
-const RATES: [f32; 5] = [5.0, 10.0, 15.0, 20.0, 25.0];
-const THRESHOLDS: [f32; 3] = [0.005, 0.015, 0.025];
-/// Thesis Table 10 (avatar, bytes/s) and Table 11 (60-particle soft body; no 25 Hz row).
-const THESIS_AVATAR: [[u32; 3]; 5] = [
-    [762, 662, 596],
-    [1419, 1222, 971],
-    [2071, 1560, 1196],
-    [2312, 1951, 1425],
-    [2455, 2015, 1537],
-];
-const THESIS_T9_MAX: [u32; 5] = [824, 1582, 2436, 3217, 3978];
-const THESIS_SOFT: [[u32; 3]; 4] = [
-    [3974, 3155, 2785],
-    [7567, 5785, 4917],
-    [11459, 7687, 6813],
-    [14895, 10984, 8773],
-];
+use softsync_net::thesis::{
+    RATES_HZ as RATES, TABLE10_AVATAR as THESIS_AVATAR, TABLE11_SOFT as THESIS_SOFT,
+    TABLE9_MAX as THESIS_T9_MAX, THRESHOLDS_M as THRESHOLDS,
+};
 const FRAME: Duration = Duration::from_micros(11_111); // 90 Hz VR frame
 
 #[derive(Clone, Copy, PartialEq)]

@@ -149,6 +149,13 @@ fn field<'a>(line: &'a str, key: &str) -> &'a str {
         .unwrap_or_else(|| panic!("no {key}= in {line:?}"))
 }
 
+/// A standalone signaling server on a free port, and its URL.
+fn standalone_signal(dir: &Path) -> (Proc, String) {
+    let p = Proc::spawn(dir, "signal", &["signal", "--bind", "127.0.0.1:0"]);
+    let url = signal_url(&p);
+    (p, url)
+}
+
 /// The signaling URL a process printed.
 fn signal_url(p: &Proc) -> String {
     let l = p.wait_line("signaling on ", Duration::from_secs(10));
@@ -345,8 +352,7 @@ fn d_conditioned_links_still_converge_after_rest() {
 fn b_host_killed_mid_interaction_earliest_joiner_takes_over() {
     require_netns();
     let dir = scratch("kill");
-    let signal = Proc::spawn(&dir, "signal", &["signal", "--bind", "127.0.0.1:0"]);
-    let url = signal_url(&signal);
+    let (_signal, url) = standalone_signal(&dir);
     let mut host = Proc::spawn(
         &dir,
         "host",
@@ -594,8 +600,7 @@ fn e_errors_are_clear_and_exit_non_zero() {
     assert_eq!(code, 3, "{err}");
     assert!(err.contains("unreachable"), "{err}");
 
-    let signal = Proc::spawn(&dir, "signal", &["signal", "--bind", "127.0.0.1:0"]);
-    let url = signal_url(&signal);
+    let (_signal, url) = standalone_signal(&dir);
     let (code, err) = run("noroom", &["join", "--room", "nobody", "--signal", &url]);
     assert_eq!(code, 3, "{err}");
     assert!(err.contains("room \"nobody\" not found"), "{err}");
@@ -656,8 +661,7 @@ fn e_errors_are_clear_and_exit_non_zero() {
 fn f_a_host_that_leaves_is_replaced_at_once() {
     require_netns();
     let dir = scratch("leave");
-    let signal = Proc::spawn(&dir, "signal", &["signal", "--bind", "127.0.0.1:0"]);
-    let url = signal_url(&signal);
+    let (_signal, url) = standalone_signal(&dir);
     let mut host = Proc::spawn(
         &dir,
         "host",
