@@ -120,8 +120,11 @@ fn percentile(v: &mut [f64], q: f64) -> f64 {
     v[((v.len() - 1) as f64 * q).round() as usize]
 }
 
+/// An object's points (center, particles) over its owner's time.
+type Track = Vec<(f64, Vec<[f32; 3]>)>;
+
 /// The owner's state of one object at time `t` (its clock), interpolated between dump lines.
-fn truth_at(track: &[(f64, Vec<[f32; 3]>)], t: f64) -> Option<Vec<[f32; 3]>> {
+fn truth_at(track: &Track, t: f64) -> Option<Vec<[f32; 3]>> {
     let i = track.partition_point(|(ti, _)| *ti <= t);
     if i == 0 || i >= track.len() {
         return None;
@@ -162,7 +165,7 @@ fn measure(
     let me = bot.first().ok_or("empty bot dump")?.peer;
     let to_t = bot.last().map_or(0.0, |l| l.t) - 0.3;
     // The bot's own objects over time.
-    let mut tracks: BTreeMap<u32, Vec<(f64, Vec<[f32; 3]>)>> = BTreeMap::new();
+    let mut tracks: BTreeMap<u32, Track> = BTreeMap::new();
     for l in bot {
         for o in l.objects.iter().filter(|o| o.owner == me) {
             let track = tracks.entry(o.id).or_default();
@@ -275,7 +278,7 @@ fn run_one(
     } else {
         SOFTBODY_SCRIPT
     };
-    let mut args: Vec<String> = ["join", "--room", &room, "--signal", &url, "--bot", &script]
+    let mut args: Vec<String> = ["join", "--room", &room, "--signal", &url, "--bot", script]
         .iter()
         .map(|s| s.to_string())
         .collect();

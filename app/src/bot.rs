@@ -430,11 +430,7 @@ impl Bot {
                     };
                     self.pos[p] = center[p] + f(ph + shift) - f(shift);
                 }
-                if t - t0 >= dur {
-                    true
-                } else {
-                    false
-                }
+                t - t0 >= dur
             }
             Active::Grab { hand, t0, until } => {
                 if let Some((id, _)) = room.held(hand - 1) {
