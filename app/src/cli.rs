@@ -15,6 +15,7 @@ USAGE:
   softsync host --room NAME [--bind ADDR | --signal URL] [--scene NAME] [PEER OPTIONS]
   softsync join --room NAME --signal URL [PEER OPTIONS]
   softsync bench net-live [--out DIR] [--seconds S] [--quick]
+  softsync bench room-load [--out DIR] [--seconds S] [--peers 2,4,8]
 
 signal          a standalone signaling server (default --bind 127.0.0.1:3536). Rooms that must
                 outlive their host use one: new peers can still join after a migration.
@@ -72,6 +73,15 @@ pub enum Command {
         seconds: f64,
         /// Fewer configurations.
         quick: bool,
+    },
+    /// Rooms of growing size.
+    BenchRoomLoad {
+        /// Output directory.
+        out: PathBuf,
+        /// Seconds measured per room.
+        seconds: f64,
+        /// Room sizes (peers, host included).
+        peers: Vec<usize>,
     },
     /// Usage.
     Help,
@@ -252,19 +262,40 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
             Ok(Command::Signal { bind })
         }
         "bench" => {
-            allowed(&["out", "seconds", "quick"])?;
+            allowed(&["out", "seconds", "quick", "peers"])?;
+            let out = get("out")
+                .map(PathBuf::from)
+                .unwrap_or_else(|| PathBuf::from("docs/results/live"));
             match positional.first().map(String::as_str) {
                 Some("net-live") => Ok(Command::BenchNetLive {
-                    out: get("out")
-                        .map(PathBuf::from)
-                        .unwrap_or_else(|| PathBuf::from("docs/results/live")),
+                    out,
                     seconds: match get("seconds") {
                         Some(s) => positive("--seconds", &s, 600.0)?,
                         None => 8.0,
                     },
                     quick: has("quick"),
                 }),
-                other => err(format!("bench: unknown benchmark {other:?} (net-live)")),
+                Some("room-load") => {
+                    let peers = get("peers").unwrap_or_else(|| "2,4,8".into());
+                    let peers: Vec<usize> = peers
+                        .split(',')
+                        .map(|p| match p.trim().parse::<usize>() {
+                            Ok(n) if (2..=32).contains(&n) => Ok(n),
+                            _ => err(format!("--peers: {p:?} must be 2-32")),
+                        })
+                        .collect::<Result<_, _>>()?;
+                    Ok(Command::BenchRoomLoad {
+                        out,
+                        seconds: match get("seconds") {
+                            Some(s) => positive("--seconds", &s, 600.0)?,
+                            None => 10.0,
+                        },
+                        peers,
+                    })
+                }
+                other => err(format!(
+                    "bench: unknown benchmark {other:?} (net-live, room-load)"
+                )),
             }
         }
         "host" | "join" => {

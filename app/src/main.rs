@@ -86,6 +86,14 @@ fn run(args: &[String]) -> Result<ExitCode, Failure> {
             bench::net_live(&out, seconds, quick).map_err(Failure::runtime)?;
             Ok(ExitCode::SUCCESS)
         }
+        Command::BenchRoomLoad {
+            out,
+            seconds,
+            peers,
+        } => {
+            bench::room_load(&out, seconds, &peers).map_err(Failure::runtime)?;
+            Ok(ExitCode::SUCCESS)
+        }
     }
 }
 
@@ -193,11 +201,12 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     let mut transport = MatchboxTransport::connect(&mcfg).map_err(Failure::connect)?;
     let me = transport.local_id();
     let now0 = softsync_net::Instant::ZERO;
+    let mut contact = None;
     let session = if a.host {
         Session::host(me, cfg, now0)
     } else {
         // Wait for the first data channel: that peer is our contact (a non-host redirects us).
-        let contact = loop {
+        let c = loop {
             if let Some(PeerEvent::Connected(p)) = transport.poll_peer_event() {
                 break p;
             }
@@ -216,10 +225,12 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
         };
         println!(
             "connected to peer {} after {:.0} ms",
-            contact.0,
+            c.0,
             started.elapsed().as_secs_f64() * 1e3
         );
-        Session::join(me, contact, cfg, now0)
+        let s = Session::join(me, c, cfg, now0);
+        contact = Some(c);
+        s
     };
     println!(
         "{} room={} peer={} signal={url}",
@@ -238,7 +249,8 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
         ..HandConfig::default()
     };
     let dt = (1.0 / a.sim_hz) as f32;
-    let mut room = Room::new(session, transport, scene, hand, dt).map_err(Failure::usage)?;
+    let mut room =
+        Room::new(contact, session, transport, scene, hand, dt).map_err(Failure::usage)?;
     room.no_avatar = a.no_avatar;
     if a.host {
         room.open().map_err(Failure::runtime)?;

@@ -13,11 +13,16 @@ use glam::{Quat, Vec3};
 use softsync_interaction::{
     HandConfig, HandId, HandInput, Interaction, InteractionEvent, ObjectRef, Ownership, Target,
 };
-use softsync_net::{Event, Instant, NetId, ObjectState, PeerId, Session, Term, Transport};
+use softsync_net::{
+    Event, Instant, NetId, ObjectState, PeerEvent, PeerId, Session, Term, Transport,
+};
 use softsync_softbody::rapier3d::prelude::*;
 use softsync_softbody::{SoftBodyHandle, SoftBodySet};
 
 use crate::scene::{Kind, Scene};
+
+/// How long a joiner waits for an answer to its `Hello` before trying the next peer.
+const JOIN_RETRY: Duration = Duration::from_millis(1000);
 
 /// How a networked object exists in the local world.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -130,6 +135,10 @@ pub struct Room {
     by_ref: HashMap<ObjectRef, NetId>,
     waiting_grant: BTreeSet<NetId>,
     joined: bool,
+    /// Joining: peers with open data channels, in the order they connected, and the one our
+    /// `Hello` went to last (another joiner cannot answer: we move on after `JOIN_RETRY`).
+    contacts: Vec<PeerId>,
+    contact: Option<(PeerId, std::time::Instant)>,
     started: std::time::Instant,
     /// Notes for the log and the bot.
     pub notes: Vec<Note>,
@@ -162,7 +171,9 @@ impl Ownership for SessionOwnership<'_> {
 
 impl Room {
     /// A peer around `session` on `transport`, with the scene's static geometry built.
+    /// `contact`: for a joiner, the peer its session sent `Hello` to.
     pub fn new(
+        contact: Option<PeerId>,
         session: Session,
         transport: Box<dyn Transport>,
         scene: Scene,
@@ -194,6 +205,8 @@ impl Room {
             by_ref: HashMap::new(),
             waiting_grant: BTreeSet::new(),
             joined,
+            contacts: contact.into_iter().collect(),
+            contact: contact.map(|c| (c, std::time::Instant::now())),
             started: std::time::Instant::now(),
             notes: Vec::new(),
             counters: Counters::default(),
@@ -387,8 +400,16 @@ impl Room {
         while let Some((from, bytes)) = self.transport.recv(now) {
             self.session.handle_packet(now, from, &bytes);
         }
-        // Connectivity news is informational: the session's heartbeats decide who is gone.
-        while self.transport.poll_peer_event().is_some() {}
+        // Connectivity news is informational for the session (its heartbeats decide who is
+        // gone); a joiner uses it to find someone who can answer its Hello.
+        while let Some(e) = self.transport.poll_peer_event() {
+            match e {
+                PeerEvent::Connected(p) if !self.contacts.contains(&p) => self.contacts.push(p),
+                PeerEvent::Disconnected(p) => self.contacts.retain(|q| *q != p),
+                _ => {}
+            }
+        }
+        self.retry_join(now);
         if self.session.poll_timeout().is_some_and(|t| t <= now) {
             self.session.handle_timeout(now);
         }
@@ -406,6 +427,30 @@ impl Room {
         self.session.leave(now);
         self.flush();
         std::thread::sleep(Duration::from_millis(100));
+    }
+
+    /// A joiner whose contact has not answered within `JOIN_RETRY` (it may be a joiner
+    /// itself, which knows no host yet) says Hello to the next connected peer. The host
+    /// answers `Welcome`, a member `Redirect`, another joiner nothing.
+    fn retry_join(&mut self, now: Instant) {
+        if self.joined {
+            return;
+        }
+        let Some((current, since)) = self.contact else {
+            return;
+        };
+        if since.elapsed() < JOIN_RETRY || self.contacts.is_empty() {
+            return;
+        }
+        let next = self
+            .contacts
+            .iter()
+            .position(|p| *p == current)
+            .map_or(0, |i| (i + 1) % self.contacts.len());
+        let next = self.contacts[next];
+        let cfg = self.session.config().clone();
+        self.session = Session::join(self.me(), next, cfg, now);
+        self.contact = Some((next, std::time::Instant::now()));
     }
 
     /// Network out.

@@ -713,3 +713,65 @@ fn f_a_host_that_leaves_is_replaced_at_once() {
         "took {took:?}: the Leave was not acted on (the timeout is 1 s)"
     );
 }
+
+/// Joiners that start together may first reach each other (neither knows the host yet): they
+/// move on to the next peer and all get in.
+#[test]
+fn g_simultaneous_joiners_all_get_in() {
+    require_netns();
+    let dir = scratch("crowd");
+    let host = Proc::spawn(
+        &dir,
+        "host",
+        &[
+            "host",
+            "--room",
+            "crowd",
+            "--bind",
+            "127.0.0.1:0",
+            "--quiet",
+            "--duration",
+            "25",
+        ],
+    );
+    let url = signal_url(&host);
+    let bots: Vec<Proc> = (0..4)
+        .map(|i| {
+            Proc::spawn(
+                &dir,
+                &format!("bot{i}"),
+                &[
+                    "join",
+                    "--room",
+                    "crowd",
+                    "--signal",
+                    &url,
+                    "--quiet",
+                    "--duration",
+                    "20",
+                    "--bot",
+                    "wave",
+                ],
+            )
+        })
+        .collect();
+    for b in &bots {
+        b.wait_line("joined", Duration::from_secs(15));
+    }
+    // The host relays for everyone: it lists all five members.
+    let members = bots.len() + 1;
+    let start = Instant::now();
+    loop {
+        let joined = host.stdout().matches("peer-joined").count();
+        if joined == bots.len() {
+            break;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(5),
+            "the host saw {joined} of {} joins ({members} members expected)\n{}",
+            bots.len(),
+            host.logs()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
