@@ -43,7 +43,8 @@ PEER OPTIONS:
 
 Every peer prints a stats line per second on stderr: peers, host, term, bytes/s up and down,
 RTT, objects owned. Exit codes: 0 done, 1 runtime failure, 2 usage or input error, 3 cannot
-reach the signaling server or the room.
+reach the signaling server or the room, 130 stopped by Ctrl-C/SIGTERM/SIGHUP (after a last
+dump and a Leave to the room).
 ";
 
 /// A usage error (exit code 2).

@@ -266,6 +266,12 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
         a.quiet,
         signal_server,
     );
+    // Ctrl-C, SIGTERM and SIGHUP end the peer cleanly (last dump, `Leave`). Installed here
+    // with overwrite: bevy's own installer gives up when SIGINT is ignored, which it is for
+    // every background job a script starts, and then SIGTERM is not handled either.
+    if let Err(e) = ctrlc::set_handler(TerminalCtrlCHandlerPlugin::gracefully_exit) {
+        eprintln!("warning: no signal handler ({e}): a kill is noticed by the timeout only");
+    }
     let exit = App::new()
         .add_plugins(MinimalPlugins.set(ScheduleRunnerPlugin::run_loop(Duration::from_millis(2))))
         .add_plugins(TerminalCtrlCHandlerPlugin)

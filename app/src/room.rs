@@ -530,6 +530,9 @@ impl Room {
             }
             Event::Despawned(id) => self.remove(id),
             Event::AuthorityChanged { id, owner, .. } => {
+                if !self.objects.contains_key(&id) {
+                    return Ok(()); // despawned meanwhile (the avatar of a peer that left)
+                }
                 if owner == me {
                     self.counters.authority_grants += 1;
                     self.notes.push(Note::AuthorityGained(id));

@@ -775,3 +775,55 @@ fn g_simultaneous_joiners_all_get_in() {
         std::thread::sleep(Duration::from_millis(50));
     }
 }
+
+/// SIGTERM (also for a background job, whose SIGINT a shell ignores) ends a peer cleanly:
+/// last stats line, exit 130, and the host drops it at once rather than after the timeout.
+#[test]
+fn h_sigterm_is_a_clean_leave() {
+    require_netns();
+    let dir = scratch("term");
+    let host = Proc::spawn(
+        &dir,
+        "host",
+        &[
+            "host",
+            "--room",
+            "term",
+            "--bind",
+            "127.0.0.1:0",
+            "--quiet",
+            "--duration",
+            "20",
+        ],
+    );
+    let url = signal_url(&host);
+    let mut bot = Proc::spawn(
+        &dir,
+        "bot",
+        &[
+            "join", "--room", "term", "--signal", &url, "--quiet", "--bot", "wave",
+        ],
+    );
+    let bot_id = bot.peer_id();
+    host.wait_line(&format!("peer-joined {bot_id}"), Duration::from_secs(15));
+    std::thread::sleep(Duration::from_millis(500));
+    let status = Command::new("kill")
+        .args(["-TERM", &bot.child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let sent = Instant::now();
+    assert_eq!(
+        bot.wait_exit(Duration::from_secs(10)),
+        130,
+        "{}",
+        bot.logs()
+    );
+    assert!(bot.stdout().contains("final stats"), "{}", bot.logs());
+    host.wait_line(&format!("peer-left {bot_id}"), Duration::from_secs(5));
+    let took = sent.elapsed();
+    assert!(
+        took < Duration::from_millis(700),
+        "the host took {took:?} (timeout 1 s)"
+    );
+}

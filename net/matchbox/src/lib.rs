@@ -19,7 +19,7 @@
 mod signal;
 mod transport;
 
-pub use signal::{RoomInfo, SignalError, SignalServer};
+pub use signal::{RoomInfo, SignalError, SignalLimits, SignalServer};
 pub use transport::{ConnectError, MatchboxConfig, MatchboxTransport, Role, TransportStats};
 
 /// Query parameter carrying the client's protocol version.

@@ -5,6 +5,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
 
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
@@ -39,14 +40,65 @@ pub struct RoomInfo {
     pub peers: usize,
 }
 
+/// What one signaling server accepts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SignalLimits {
+    /// Sockets in all rooms together (HTTP 503 beyond).
+    pub max_sockets: usize,
+    /// Sockets in one room (HTTP 409 beyond); the session's own member cap is 64.
+    pub max_per_room: usize,
+}
+
+impl Default for SignalLimits {
+    fn default() -> Self {
+        SignalLimits {
+            max_sockets: 1024,
+            max_per_room: 64,
+        }
+    }
+}
+
+/// An accepted upgrade that never got an id (the client went away mid-handshake) stops
+/// counting after this long.
+const PENDING_EXPIRY: Duration = Duration::from_secs(30);
+
 #[derive(Default, Debug)]
 struct Registry {
     /// Connected (or connecting) sockets per room.
     rooms: BTreeMap<String, usize>,
     /// Accepted upgrade requests waiting for their id, by client address.
-    pending: HashMap<SocketAddr, String>,
+    pending: HashMap<SocketAddr, (String, Instant)>,
     /// Room of every socket that has an id.
     peers: HashMap<MbPeerId, String>,
+}
+
+impl Registry {
+    fn leave_room(&mut self, room: &str) {
+        if let Some(n) = self.rooms.get_mut(room) {
+            *n = n.saturating_sub(1);
+            if *n == 0 {
+                self.rooms.remove(room);
+            }
+        }
+    }
+
+    fn expire_pending(&mut self, now: Instant) {
+        let stale: Vec<SocketAddr> = self
+            .pending
+            .iter()
+            .filter(|(_, (_, at))| now.duration_since(*at) > PENDING_EXPIRY)
+            .map(|(a, _)| *a)
+            .collect();
+        for a in stale {
+            if let Some((room, _)) = self.pending.remove(&a) {
+                self.leave_room(&room);
+            }
+        }
+    }
+
+    fn sockets(&self) -> usize {
+        self.rooms.values().sum()
+    }
 }
 
 fn lock(r: &Mutex<Registry>) -> MutexGuard<'_, Registry> {
@@ -73,8 +125,14 @@ pub struct SignalServer {
 }
 
 impl SignalServer {
-    /// Bind `bind` (port 0 picks a free port) and serve on a thread of its own.
+    /// Bind `bind` (port 0 picks a free port) and serve on a thread of its own, with the
+    /// default limits.
     pub fn start(bind: SocketAddr) -> Result<Self, SignalError> {
+        Self::start_with(bind, SignalLimits::default())
+    }
+
+    /// [`SignalServer::start`] with explicit limits.
+    pub fn start_with(bind: SocketAddr, limits: SignalLimits) -> Result<Self, SignalError> {
         let registry = Arc::new(Mutex::new(Registry::default()));
         let (tx, rx) = tokio::sync::oneshot::channel();
         let (r1, r2, r3) = (registry.clone(), registry.clone(), registry.clone());
@@ -100,7 +158,20 @@ impl SignalServer {
                 }
                 let role = meta.query_params.get(ROLE_PARAM).map(String::as_str);
                 let mut reg = lock(&r1);
+                reg.expire_pending(Instant::now());
+                if reg.sockets() >= limits.max_sockets {
+                    return Err(refuse(
+                        StatusCode::SERVICE_UNAVAILABLE,
+                        format!("the signaling server is full ({} sockets)", limits.max_sockets),
+                    ));
+                }
                 let present = reg.rooms.get(&room).copied().unwrap_or(0);
+                if present >= limits.max_per_room {
+                    return Err(refuse(
+                        StatusCode::CONFLICT,
+                        format!("room {room:?} is full ({present} peers)"),
+                    ));
+                }
                 match role {
                     Some("host") if present > 0 => {
                         return Err(refuse(
@@ -123,24 +194,21 @@ impl SignalServer {
                     }
                 }
                 *reg.rooms.entry(room.clone()).or_insert(0) += 1;
-                reg.pending.insert(meta.origin, room);
+                if let Some((old, _)) = reg.pending.insert(meta.origin, (room, Instant::now())) {
+                    reg.leave_room(&old); // the same address again: its first try failed
+                }
                 Ok(true)
             })
             .on_id_assignment(move |(origin, peer)| {
                 let mut reg = lock(&r2);
-                if let Some(room) = reg.pending.remove(&origin) {
+                if let Some((room, _)) = reg.pending.remove(&origin) {
                     reg.peers.insert(peer, room);
                 }
             })
             .on_peer_disconnected(move |peer| {
                 let mut reg = lock(&r3);
                 if let Some(room) = reg.peers.remove(&peer) {
-                    if let Some(n) = reg.rooms.get_mut(&room) {
-                        *n = n.saturating_sub(1);
-                        if *n == 0 {
-                            reg.rooms.remove(&room);
-                        }
-                    }
+                    reg.leave_room(&room);
                 }
             })
             .with_shutdown(rx)

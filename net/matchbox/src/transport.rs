@@ -220,6 +220,7 @@ fn classify(err: &matchbox_socket::Error, cfg: &MatchboxConfig) -> ConnectError 
                     room: cfg.room.clone(),
                     url,
                 },
+                409 if body.contains("is full") => ConnectError::Refused { url, status, body },
                 409 => ConnectError::RoomExists {
                     room: cfg.room.clone(),
                     url,

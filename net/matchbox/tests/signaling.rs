@@ -95,3 +95,19 @@ fn a_busy_port_is_a_bind_error() {
     let e = SignalServer::start(s.addr()).unwrap_err();
     assert!(e.to_string().contains("cannot listen on"), "{e}");
 }
+
+#[test]
+fn limits_refuse_with_a_reason() {
+    let limits = softsync_net_matchbox::SignalLimits {
+        max_sockets: 2,
+        max_per_room: 1,
+    };
+    let server = SignalServer::start_with("127.0.0.1:0".parse().unwrap(), limits).unwrap();
+    let url = server.url();
+    let _a = MatchboxTransport::connect(&cfg(&url, "one", Role::Host)).unwrap();
+    let e = MatchboxTransport::connect(&cfg(&url, "one", Role::Join)).unwrap_err();
+    assert!(e.to_string().contains("room \"one\" is full"), "{e}");
+    let _b = MatchboxTransport::connect(&cfg(&url, "two", Role::Host)).unwrap();
+    let e = MatchboxTransport::connect(&cfg(&url, "three", Role::Host)).unwrap_err();
+    assert!(e.to_string().contains("server is full"), "{e}");
+}
