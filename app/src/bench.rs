@@ -382,7 +382,11 @@ fn chart(rows: &[Row], path: &Path, thresholds: &[f32]) -> Result<(), Box<dyn st
     let (left, right) = root.split_horizontally(550);
     for (area, scen, title) in [
         (left, "avatar", "live: VR avatar (head + 2 hands)"),
-        (right, "softbody60", "live: 60-particle soft body, squeezed"),
+        (
+            right,
+            "softbody60",
+            "live: 60-particle soft body, dragged by a particle",
+        ),
     ] {
         let rs: Vec<&Row> = rows.iter().filter(|r| r.scenario == scen).collect();
         let xmax = rs.iter().map(|r| r.bytes_per_s).fold(10.0, f64::max) * 1.1;
