@@ -64,6 +64,23 @@ impl Proc {
         }
     }
 
+    /// The signaling URL the process printed (`signaling on ws://…`).
+    fn signal_url(&self) -> Result<String, String> {
+        Ok(self
+            .line("signaling on ", Duration::from_secs(10))?
+            .trim_start_matches("signaling on ")
+            .trim()
+            .to_owned())
+    }
+
+    /// A standalone signaling server on a free port, and its URL.
+    fn signal(dir: &Path, name: &str) -> Result<(Proc, String), String> {
+        let args = ["signal", "--bind", "127.0.0.1:0"].map(String::from);
+        let p = Proc::spawn(dir, name, &args)?;
+        let url = p.signal_url()?;
+        Ok((p, url))
+    }
+
     fn wait(&mut self, within: Duration) -> Result<(), String> {
         let start = Instant::now();
         loop {
@@ -268,11 +285,7 @@ fn run_one(
     args.extend(["--duration".into(), format!("{}", seconds + warm + 6.0)]);
     args.extend(common(&hd, "30"));
     let mut host = Proc::spawn(dir, &format!("{room}-host"), &args)?;
-    let url = host
-        .line("signaling on ", Duration::from_secs(10))?
-        .trim_start_matches("signaling on ")
-        .trim()
-        .to_owned();
+    let url = host.signal_url()?;
     let script = if scenario == "avatar" {
         AVATAR_SCRIPT
     } else {
@@ -330,16 +343,7 @@ fn run_one(
 /// Host killed with SIGKILL under two bots: ms until the earliest joiner says it is host.
 fn migration(dir: &Path, n: usize) -> Result<f64, String> {
     let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>();
-    let signal = Proc::spawn(
-        dir,
-        &format!("mig{n}-signal"),
-        &s(&["signal", "--bind", "127.0.0.1:0"]),
-    )?;
-    let url = signal
-        .line("signaling on ", Duration::from_secs(10))?
-        .trim_start_matches("signaling on ")
-        .trim()
-        .to_owned();
+    let (_signal, url) = Proc::signal(dir, &format!("mig{n}-signal"))?;
     let room = format!("mig{n}");
     let mut host = Proc::spawn(
         dir,
@@ -617,16 +621,7 @@ fn load_one(dir: &Path, peers: usize, seconds: f64) -> Result<LoadRow, String> {
         "bunny", "softbox", "softball", "block", "can", "ball", "plate",
     ];
     let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>();
-    let signal = Proc::spawn(
-        dir,
-        &format!("load{peers}-signal"),
-        &s(&["signal", "--bind", "127.0.0.1:0"]),
-    )?;
-    let url = signal
-        .line("signaling on ", Duration::from_secs(10))?
-        .trim_start_matches("signaling on ")
-        .trim()
-        .to_owned();
+    let (_signal, url) = Proc::signal(dir, &format!("load{peers}-signal"))?;
     let room = format!("load{peers}");
     let total = seconds + 8.0;
     let hd = dir.join(format!("{room}-host.jsonl"));
