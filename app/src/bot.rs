@@ -20,12 +20,17 @@
 //! loop                          start again from the top (last line)
 //! ```
 //!
+//! On a peer with a tracked device (`--vr`, `--desktop`), a script runs on top of it: tracked
+//! parts follow the device, displaced by the script's motion (`move` and `reach` still go to
+//! room positions), and the grip is the larger of the script's and the device's.
+//!
 //! Built-in scripts by name: `squeeze` (reach the soft ball, grab, squeeze, release, back),
 //! `idle` (stand still), `wave` (both hands waving, forever).
 
 use glam::{Quat, Vec3};
 use softsync_interaction::{HandInput, HandSample};
 
+use crate::device::{clamp01, DeviceFrame};
 use crate::room::Room;
 use crate::scene::Kind;
 
@@ -208,8 +213,18 @@ pub struct Bot {
     cmds: Vec<Cmd>,
     pc: usize,
     active: Option<Active>,
-    /// Head, left, right.
+    /// Head, left, right: where the script puts them (its own frame).
     pos: [Vec3; 3],
+    /// Added to `pos` to get the room position: zero for a bot alone; the tracked pose minus
+    /// the script's start point when a device drives the avatar (a script on a VR peer moves
+    /// the hands relative to the controllers).
+    base: [Vec3; 3],
+    /// Where the script started each part.
+    start: [Vec3; 3],
+    /// Tracked rotations (a device), else the bot's own.
+    rots: [Option<Quat>; 3],
+    /// Tracked grip values (a device): the grip is the larger of the script's and the device's.
+    device_grip: [f32; 3],
     rot: Quat,
     grip: [f32; 3],
     started: bool,
@@ -229,6 +244,10 @@ impl Bot {
             pc: 0,
             active: None,
             pos: [Vec3::ZERO; 3],
+            base: [Vec3::ZERO; 3],
+            start: [Vec3::ZERO; 3],
+            rots: [None; 3],
+            device_grip: [0.0; 3],
             rot: Quat::IDENTITY,
             grip: [0.0; 3],
             started: false,
@@ -246,8 +265,19 @@ impl Bot {
         );
     }
 
-    /// Drive one fixed step: set the hands' inputs and the avatar's pose.
-    pub fn step(&mut self, room: &mut Room) {
+    /// Room position of part `part` now.
+    fn at(&self, part: usize) -> Vec3 {
+        self.pos[part] + self.base[part]
+    }
+
+    /// A room position as a point in the script's frame for `part`.
+    fn to_script(&self, part: usize, room_pos: Vec3) -> Vec3 {
+        room_pos - self.base[part]
+    }
+
+    /// One fixed step: set the hands' inputs and the avatar's pose. With a tracked device under
+    /// the script, tracked parts follow the device, offset by what the script moved them.
+    pub fn step_with(&mut self, room: &mut Room, device: Option<&DeviceFrame>) {
         let t = room.sim_time();
         if !self.started {
             let (home, rot) = room.home();
@@ -257,7 +287,25 @@ impl Bot {
                 home + rot * Vec3::new(-0.2, -0.45, -0.25),
                 home + rot * Vec3::new(0.2, -0.45, -0.25),
             ];
+            self.start = self.pos;
             self.started = true;
+        }
+        // The device's poses are the base the script's motion adds to.
+        for part in 0..3 {
+            match device.and_then(|d| d.part(part)) {
+                Some((p, r)) => {
+                    // Room position = tracked + (script position - script start).
+                    self.base[part] = p - self.start[part];
+                    self.rots[part] = Some(r);
+                }
+                None => {
+                    self.base[part] = Vec3::ZERO;
+                    self.rots[part] = None;
+                }
+            }
+            if part > 0 {
+                self.device_grip[part] = device.map_or(0.0, |d| clamp01(d.grip[part - 1]));
+            }
         }
         // Run commands until one takes time.
         for _ in 0..64 {
@@ -269,17 +317,17 @@ impl Bot {
             }
         }
         for part in 0..3 {
-            room.set_avatar_pose(part, self.pos[part], self.rot);
+            room.set_avatar_pose(part, self.at(part), self.rots[part].unwrap_or(self.rot));
         }
         for h in 0..2 {
             let input = HandInput {
                 sample: HandSample {
-                    position_m: self.pos[h + 1],
-                    rotation: self.rot,
+                    position_m: self.at(h + 1),
+                    rotation: self.rots[h + 1].unwrap_or(self.rot),
                     time_s: t,
                 },
-                grip: self.grip[h + 1],
-                trigger: 0.0,
+                grip: self.grip[h + 1].max(self.device_grip[h + 1]),
+                trigger: device.map_or(0.0, |d| clamp01(d.trigger[h])),
             };
             room.set_hand_input(h, input);
         }
@@ -300,7 +348,7 @@ impl Bot {
             Cmd::Move(part, to, dur) => Some(Active::Motion {
                 part,
                 from: self.pos[part],
-                to,
+                to: self.to_script(part, to),
                 t0: t,
                 dur,
             }),
@@ -317,7 +365,7 @@ impl Bot {
                     Some(Active::Motion {
                         part,
                         from: self.pos[part],
-                        to,
+                        to: self.to_script(part, to),
                         t0: t,
                         dur,
                     })
@@ -348,7 +396,7 @@ impl Bot {
                     .map(|s| s.pos);
                 match center {
                     Some(c) => {
-                        let dir = (c - self.pos[hand]).normalize_or_zero();
+                        let dir = (c - self.at(hand)).normalize_or_zero();
                         Some(Active::Motion {
                             part: hand,
                             from: self.pos[hand],
@@ -458,7 +506,7 @@ impl Bot {
 
     /// A point to reach: the object's particle nearest to the hand, or its center.
     fn target(&self, room: &mut Room, part: usize, kind: Option<Kind>) -> Option<(Vec3, String)> {
-        let from = self.pos[part];
+        let from = self.at(part);
         let ids: Vec<_> = room
             .objects
             .iter()

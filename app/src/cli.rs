@@ -21,7 +21,8 @@ signal          a standalone signaling server (default --bind 127.0.0.1:3536). R
                 outlive their host use one: new peers can still join after a migration.
 host            creates the room and spawns the scene; embeds a signaling server on --bind
                 (default 127.0.0.1:3536, port 0 picks one) unless --signal names one
-join            enters a room as a headless peer (a bot when --bot is given)
+join            enters a room as a headless peer (a bot when --bot is given), a desktop peer
+                (--desktop) or a VR peer (--vr)
 
 PEER OPTIONS:
   --bot SCRIPT          a bot script: a file, a built-in name (squeeze, idle, wave), or inline
@@ -40,6 +41,24 @@ PEER OPTIONS:
   --connect-timeout S   give up joining after S seconds (default 15)
   --quiet               no stats lines
   --no-avatar           spawn no avatar (to measure one object's traffic)
+
+FRONT ENDS (host or join; need a build with `--features desktop` or `--features vr`):
+  --desktop             a window: orbit camera, the right hand on the mouse cursor; left
+                        button grips (Ctrl: left hand), wheel reaches (Shift: zoom), E trigger,
+                        right-drag orbits, middle-drag/WASDQZ pans, P particles, H HUD, R reset
+  --vr                  an OpenXR headset and controllers (SteamVR, Monado, ...): head and grip
+                        poses drive the avatar, squeeze grips, trigger triggers. Without a
+                        runtime or headset it says why and opens the desktop peer instead
+  --window WxH          desktop window size (default 1280x800)
+  --focus KIND          start the camera close to an object (softbox, bunny, softball, ...)
+  --particles           draw soft-body particles and their neighbour links (thesis Fig. 1.1)
+  --hide-avatars        draw no avatars
+  --no-hud              no HUD
+  --screenshot-dir DIR  save frame-NNNN.png there every --screenshot-every S (default 1) and
+                        print a line per frame (soft bodies' deformation and screen boxes);
+                        at most --screenshots N (default 60)
+  A bot script also runs on a desktop or VR peer: it then moves the hands relative to the
+  tracked ones and its grip adds to the device's.
 
 Every peer prints a stats line per second on stderr: peers, host, term, bytes/s up and down,
 RTT, objects owned. Exit codes: 0 done, 1 runtime failure, 2 usage or input error, 3 cannot
@@ -127,6 +146,44 @@ pub struct PeerArgs {
     pub quiet: bool,
     /// Spawn no avatar.
     pub no_avatar: bool,
+    /// Which front end.
+    pub front: FrontEnd,
+    /// View options (desktop and VR; parsed and checked in every build).
+    #[cfg_attr(not(feature = "desktop"), allow(dead_code))]
+    pub view: ViewArgs,
+}
+
+/// How a peer is seen and driven.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FrontEnd {
+    /// No window: a bot or an idle peer.
+    Headless,
+    /// A window, mouse hands.
+    Desktop,
+    /// An OpenXR headset (desktop if none).
+    Vr,
+}
+
+/// Options of the desktop and VR views.
+#[derive(Clone, Debug)]
+#[cfg_attr(not(feature = "desktop"), allow(dead_code))]
+pub struct ViewArgs {
+    /// Window size.
+    pub window: (u32, u32),
+    /// Start the camera at this kind of object.
+    pub focus: Option<String>,
+    /// Particle overlay.
+    pub particles: bool,
+    /// Draw no avatars.
+    pub hide_avatars: bool,
+    /// No HUD.
+    pub no_hud: bool,
+    /// Screenshot folder.
+    pub screenshot_dir: Option<PathBuf>,
+    /// Screenshot period.
+    pub screenshot_every: Duration,
+    /// Screenshot count.
+    pub screenshots: u32,
 }
 
 fn secs(flag: &str, v: &str) -> Result<f64, UsageError> {
@@ -219,7 +276,18 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
     while i < rest.len() {
         let a = &rest[i];
         if let Some(name) = a.strip_prefix("--") {
-            let takes_value = !matches!(name, "quiet" | "quick" | "help" | "no-avatar");
+            let takes_value = !matches!(
+                name,
+                "quiet"
+                    | "quick"
+                    | "help"
+                    | "no-avatar"
+                    | "desktop"
+                    | "vr"
+                    | "particles"
+                    | "hide-avatars"
+                    | "no-hud"
+            );
             if let Some((n, v)) = name.split_once('=') {
                 flags.push((n.to_owned(), Some(v.to_owned())));
             } else if takes_value {
@@ -317,6 +385,16 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
                 "connect-timeout",
                 "quiet",
                 "no-avatar",
+                "desktop",
+                "vr",
+                "window",
+                "focus",
+                "particles",
+                "hide-avatars",
+                "no-hud",
+                "screenshot-dir",
+                "screenshot-every",
+                "screenshots",
             ];
             if host {
                 ok.extend(["bind", "scene"]);
@@ -345,6 +423,60 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
                 }
             }
             let scene = get("scene").unwrap_or_else(|| "thesis-room".into());
+            let front = match (has("desktop"), has("vr")) {
+                (true, true) => return err("--desktop and --vr exclude each other"),
+                (true, false) => FrontEnd::Desktop,
+                (false, true) => FrontEnd::Vr,
+                (false, false) => FrontEnd::Headless,
+            };
+            let view_only = [
+                "window",
+                "focus",
+                "particles",
+                "hide-avatars",
+                "no-hud",
+                "screenshot-dir",
+                "screenshot-every",
+                "screenshots",
+            ];
+            if front == FrontEnd::Headless {
+                if let Some(f) = view_only.iter().find(|f| has(f)) {
+                    return err(format!("--{f} needs --desktop or --vr"));
+                }
+            }
+            let window = match get("window") {
+                Some(w) => match w
+                    .split_once('x')
+                    .map(|(a, b)| (a.parse::<u32>(), b.parse::<u32>()))
+                {
+                    Some((Ok(a), Ok(b)))
+                        if (64..=8192).contains(&a) && (64..=8192).contains(&b) =>
+                    {
+                        (a, b)
+                    }
+                    _ => return err(format!("--window: {w:?} is not WIDTHxHEIGHT (64-8192)")),
+                },
+                None => (1280, 800),
+            };
+            let view = ViewArgs {
+                window,
+                focus: get("focus"),
+                particles: has("particles"),
+                hide_avatars: has("hide-avatars"),
+                no_hud: has("no-hud"),
+                screenshot_dir: get("screenshot-dir").map(PathBuf::from),
+                screenshot_every: match get("screenshot-every") {
+                    Some(s) => Duration::from_secs_f64(positive("--screenshot-every", &s, 3600.0)?),
+                    None => Duration::from_secs(1),
+                },
+                screenshots: match get("screenshots") {
+                    Some(s) => match s.parse::<u32>() {
+                        Ok(n) if (1..=100_000).contains(&n) => n,
+                        _ => return err(format!("--screenshots: {s:?} must be 1-100000")),
+                    },
+                    None => 60,
+                },
+            };
             Ok(Command::Peer(Box::new(PeerArgs {
                 host,
                 room,
@@ -395,6 +527,8 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
                 },
                 quiet: has("quiet"),
                 no_avatar: has("no-avatar"),
+                front,
+                view,
             })))
         }
         other => err(format!(
@@ -410,6 +544,33 @@ mod tests {
 
     fn args(s: &str) -> Vec<String> {
         s.split_whitespace().map(String::from).collect()
+    }
+
+    #[test]
+    fn front_end_flags_parse() {
+        let Command::Peer(p) = parse(&args(
+            "join --room lab --signal ws://127.0.0.1:9 --desktop --window 320x240 --focus softbox \
+             --particles --hide-avatars --no-hud --screenshot-dir /tmp/x --screenshot-every 0.5 \
+             --screenshots 9",
+        ))
+        .unwrap() else {
+            panic!()
+        };
+        assert_eq!(p.front, FrontEnd::Desktop);
+        assert_eq!(p.view.window, (320, 240));
+        assert_eq!(p.view.focus.as_deref(), Some("softbox"));
+        assert!(p.view.particles && p.view.hide_avatars && p.view.no_hud);
+        assert_eq!(p.view.screenshot_every, Duration::from_millis(500));
+        assert_eq!(p.view.screenshots, 9);
+        let Command::Peer(p) = parse(&args("host --room lab --vr")).unwrap() else {
+            panic!()
+        };
+        assert_eq!(p.front, FrontEnd::Vr);
+        assert_eq!(p.view.window, (1280, 800));
+        let Command::Peer(p) = parse(&args("host --room lab")).unwrap() else {
+            panic!()
+        };
+        assert_eq!(p.front, FrontEnd::Headless);
     }
 
     #[test]
@@ -439,6 +600,11 @@ mod tests {
             ("host --room a --bind nowhere", "address"),
             ("host --room a --dump", "needs a value"),
             ("fly", "unknown command"),
+            ("host --room a --desktop --vr", "exclude"),
+            ("host --room a --window 10x10", "--window"),
+            ("host --room a --desktop --window 800", "--window"),
+            ("host --room a --particles", "needs --desktop or --vr"),
+            ("host --room a --vr --screenshots 0", "--screenshots"),
         ] {
             let e = parse(&args(bad)).unwrap_err().to_string();
             assert!(e.contains(says), "{bad}: {e}");

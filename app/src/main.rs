@@ -5,10 +5,19 @@
 mod bench;
 mod bot;
 mod cli;
+#[cfg(feature = "desktop")]
+mod desktop;
+mod device;
+#[cfg(feature = "desktop")]
+mod glue;
 mod plugins;
 mod report;
 mod room;
 mod scene;
+#[cfg(feature = "desktop")]
+mod view;
+#[cfg(feature = "vr")]
+mod vr;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -17,11 +26,13 @@ use std::time::Duration;
 use bevy::app::{App, AppExit, PluginGroup, ScheduleRunnerPlugin, TerminalCtrlCHandlerPlugin};
 use bevy::time::{Fixed, Time};
 use bevy::MinimalPlugins;
+#[cfg(feature = "vr")]
+use glam::Vec3;
 use softsync_interaction::HandConfig;
 use softsync_net::{LinkConditioner, PeerEvent, SendPolicy, Session, Transport};
 use softsync_net_matchbox::{MatchboxConfig, MatchboxTransport, Role, SignalServer};
 
-use crate::cli::{Command, PeerArgs, UsageError};
+use crate::cli::{Command, FrontEnd, PeerArgs, UsageError};
 use crate::plugins::{NetPlugin, Peer, ReportPlugin, SimPlugin};
 use crate::room::Room;
 use crate::scene::Scene;
@@ -142,6 +153,53 @@ fn assets_dir(given: Option<&Path>) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets")
 }
 
+/// bevy's plugins for the desktop peer: a window, the PBR renderer, the UI.
+#[cfg(feature = "desktop")]
+fn desktop_plugins(a: &PeerArgs) -> bevy::app::PluginGroupBuilder {
+    use bevy::prelude::*;
+    use bevy::render::RenderPlugin;
+    DefaultPlugins
+        .set(WindowPlugin {
+            primary_window: Some(Window {
+                title: format!("softsync — room {}", a.room),
+                resolution: a.view.window.into(),
+                ..default()
+            }),
+            ..default()
+        })
+        .set(RenderPlugin {
+            // Asynchronous: objects appear once their pipelines are ready (the first frames on
+            // a software renderer are empty), but the frame loop, and with it the session's
+            // heartbeats, never stalls on a compile.
+            synchronous_pipeline_compilation: false,
+            ..default()
+        })
+        .set(bevy::log::LogPlugin {
+            level: bevy::log::Level::WARN,
+            filter: "wgpu=error,naga=warn,bevy_render=warn,softsync=info".into(),
+            ..default()
+        })
+}
+
+#[cfg(feature = "desktop")]
+fn view_config(a: &PeerArgs, desktop: bool) -> view::ViewConfig {
+    view::ViewConfig {
+        particles: a.view.particles,
+        hide_avatars: a.view.hide_avatars,
+        hud: !a.view.no_hud && desktop,
+        hide_own_head: true,
+        screenshots: a
+            .view
+            .screenshot_dir
+            .as_ref()
+            .map(|d| view::ScreenshotPlan {
+                dir: d.clone(),
+                every: a.view.screenshot_every,
+                max: a.view.screenshots,
+            }),
+    }
+}
+
 fn load_bot(src: &str) -> Result<bot::Bot, Failure> {
     let text = if let Some(b) = bot::builtin(src) {
         b.to_owned()
@@ -159,8 +217,57 @@ fn load_bot(src: &str) -> Result<bot::Bot, Failure> {
     Ok(bot::Bot::new(cmds))
 }
 
+/// The front end this build can open for `asked`: `--vr` without a runtime or a headset says
+/// why and falls back to the desktop peer; a front end the build lacks is a usage error.
+fn front_end(asked: FrontEnd) -> Result<FrontEnd, Failure> {
+    let missing = |feature: &str, flag: &str| {
+        Failure::usage(format!(
+            "{flag}: this softsync was built without the `{feature}` feature; build it with \
+             `cargo build --release -p softsync --features {feature}`"
+        ))
+    };
+    match asked {
+        FrontEnd::Headless => Ok(FrontEnd::Headless),
+        FrontEnd::Desktop if cfg!(feature = "desktop") => Ok(FrontEnd::Desktop),
+        FrontEnd::Desktop => Err(missing("desktop", "--desktop")),
+        FrontEnd::Vr => {
+            #[cfg(feature = "vr")]
+            {
+                match vr::probe() {
+                    Ok(what) => {
+                        println!("vr: {what}");
+                        Ok(FrontEnd::Vr)
+                    }
+                    Err(why) => {
+                        eprintln!("vr: {why}");
+                        eprintln!("vr: opening the desktop peer instead");
+                        Ok(FrontEnd::Desktop)
+                    }
+                }
+            }
+            #[cfg(not(feature = "vr"))]
+            Err(missing("vr", "--vr"))
+        }
+    }
+}
+
 fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     // Check every input before opening anything.
+    let front = front_end(a.front)?;
+    #[cfg(feature = "desktop")]
+    let focus = match a.view.focus.as_deref() {
+        None => None,
+        Some(k) => Some(
+            scene::Kind::from_name(k)
+                .filter(|k| !k.is_avatar())
+                .ok_or_else(|| Failure::usage(format!("--focus: {k:?} is not an object kind")))?,
+        ),
+    };
+    #[cfg(feature = "desktop")]
+    if let Some(d) = &a.view.screenshot_dir {
+        std::fs::create_dir_all(d)
+            .map_err(|e| Failure::usage(format!("--screenshot-dir {}: {e}", d.display())))?;
+    }
     let scene =
         Scene::by_name(&a.scene, &assets_dir(a.assets.as_deref())).map_err(Failure::usage)?;
     let bot = a.bot.as_deref().map(load_bot).transpose()?;
@@ -238,13 +345,15 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
         a.room,
         me.0
     );
-    let transport: Box<dyn Transport> = match a.condition {
+    let transport: Box<dyn Transport> = match a.condition.clone() {
         Some(c) => Box::new(LinkConditioner::new(transport, c)),
         None => Box::new(transport),
     };
     let hand = HandConfig {
-        // Bots reach exactly; a physical hand body would shove what it reaches for.
-        physical_controller: false,
+        // Bots reach exactly; a physical hand body would shove what it reaches for. VR hands
+        // get one (people push things with their controllers); mouse hands do not: a hand
+        // resting under the view would shove whatever is there.
+        physical_controller: front == FrontEnd::Vr && a.bot.is_none(),
         hover_radius_m: 0.03,
         ..HandConfig::default()
     };
@@ -272,9 +381,38 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     if let Err(e) = ctrlc::set_handler(TerminalCtrlCHandlerPlugin::gracefully_exit) {
         eprintln!("warning: no signal handler ({e}): a kill is noticed by the timeout only");
     }
-    let exit = App::new()
-        .add_plugins(MinimalPlugins.set(ScheduleRunnerPlugin::run_loop(Duration::from_millis(2))))
-        .add_plugins(TerminalCtrlCHandlerPlugin)
+    let home = peer.room.home();
+    let mut app = App::new();
+    match front {
+        FrontEnd::Headless => {
+            app.add_plugins(
+                MinimalPlugins.set(ScheduleRunnerPlugin::run_loop(Duration::from_millis(2))),
+            )
+            .add_plugins(TerminalCtrlCHandlerPlugin);
+        }
+        #[cfg(feature = "desktop")]
+        FrontEnd::Desktop => {
+            app.add_plugins(desktop_plugins(&a))
+                .add_plugins(view::ViewPlugin(view_config(&a, true)))
+                .add_plugins(desktop::DesktopPlugin(desktop::OrbitCamera::at_home(
+                    home, focus,
+                )));
+        }
+        #[cfg(feature = "vr")]
+        FrontEnd::Vr => {
+            app.add_plugins(vr::plugins())
+                .add_plugins(view::ViewPlugin(view_config(&a, false)))
+                .add_plugins(vr::VrPlugin(vr::StageOrigin {
+                    // The floor under our place at the table, facing it.
+                    pos: glue::to_bevy(Vec3::new(home.0.x, 0.0, home.0.z)),
+                    rot: glue::to_bevy_quat(home.1),
+                }));
+        }
+        #[allow(unreachable_patterns)]
+        _ => return Err(Failure::usage("this front end is not in this build")),
+    }
+    let _ = home;
+    let exit = app
         .insert_resource(Time::<Fixed>::from_hz(a.sim_hz))
         .insert_non_send(peer)
         .add_plugins((NetPlugin, SimPlugin, ReportPlugin))

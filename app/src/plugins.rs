@@ -2,22 +2,28 @@
 //! and the reports. The headless peer runs on `MinimalPlugins` with the simulation in
 //! `FixedUpdate` at the simulation rate.
 //!
-//! Frame order (every loop iteration, ~250 Hz):
-//! 1. `PreUpdate` — [`NetPlugin`]: datagrams in, session timers and events.
-//! 2. `FixedUpdate` (0..n times, at `--sim-hz`) — [`SimPlugin`]: the bot sets the hands, hands
-//!    update (authority requests), remote objects are shown, soft bodies and rapier step, owned
-//!    objects are published.
-//! 3. `PostUpdate` — [`NetPlugin`]: datagrams out.
-//! 4. `Last` — [`ReportPlugin`]: stats line, dump, the end of `--duration`.
+//! Frame order (every loop iteration: ~250 Hz headless, the frame rate with a window):
+//! 1. `PreUpdate` — [`NetPlugin`]: datagrams in, session timers and events. Desktop/VR front
+//!    ends then read their device frame (mouse hands, or OpenXR poses after bevy_mod_xr has
+//!    located its spaces), so this frame's fixed steps use it.
+//! 2. `FixedUpdate` (0..n times, at `--sim-hz`) — [`SimPlugin`]: the bot and/or the device set
+//!    the hands, hands update (authority requests), remote objects are shown, soft bodies and
+//!    rapier step, owned objects are published.
+//! 3. `Update` — with a window or headset only: the view copies the room into bevy entities
+//!    (poses, deformed soft meshes, tints, avatars, HUD).
+//! 4. `PostUpdate` — [`NetPlugin`]: datagrams out. Then bevy renders.
+//! 5. `Last` — [`ReportPlugin`]: stats line, dump, the end of `--duration`.
 
+use std::collections::VecDeque;
 use std::time::Duration;
 
 use bevy::app::{App, AppExit, FixedUpdate, Last, Plugin, PostUpdate, PreUpdate};
 use bevy::ecs::message::{MessageReader, MessageWriter};
-use bevy::ecs::schedule::IntoScheduleConfigs;
+use bevy::ecs::schedule::{IntoScheduleConfigs, SystemSet};
 use bevy::ecs::system::NonSendMut;
 
 use crate::bot::Bot;
+use crate::device::DeviceFrame;
 use crate::report::{snapshot, Dump, StatsLine};
 use crate::room::{Note, Room};
 
@@ -27,6 +33,8 @@ pub struct Peer {
     pub room: Room,
     /// The bot, if any.
     pub bot: Option<Bot>,
+    /// This frame's tracked device (desktop or VR front end), if any.
+    pub device: Option<DeviceFrame>,
     /// Room name.
     pub room_name: String,
     /// Leave after this long.
@@ -39,6 +47,10 @@ pub struct Peer {
     pub dump_every: Duration,
     /// No stats lines.
     pub quiet: bool,
+    /// The last rates of the stats line (the HUD shows them).
+    pub last_rates: crate::report::Rates,
+    /// The last few events (the HUD shows them).
+    pub recent_events: VecDeque<String>,
     /// Kept alive while the peer runs (the host's embedded signaling server): held, never
     /// read; dropping it stops the server.
     #[allow(dead_code)]
@@ -66,12 +78,15 @@ impl Peer {
         Peer {
             room,
             bot,
+            device: None,
             room_name,
             duration,
             connect_timeout,
             dump,
             dump_every: Duration::from_secs_f64(1.0 / dump_hz.max(0.01)),
             quiet,
+            last_rates: crate::report::Rates::default(),
+            recent_events: VecDeque::new(),
             signal,
             stats: StatsLine::default(),
             next_stats: Duration::from_secs(1),
@@ -126,12 +141,35 @@ fn net_in(mut peer: NonSendMut<Peer>, mut exit: MessageWriter<AppExit>) {
             Note::AuthorityDenied(id) => format!("authority-denied object={}", id.0),
             Note::AuthorityReleased(id) => format!("authority-released object={}", id.0),
         };
-        println!(
-            "event peer={} t={:.2} {line}",
-            p.room.me().0,
-            p.room.now().as_secs_f64()
-        );
+        let t = p.room.now().as_secs_f64();
+        println!("event peer={} t={t:.2} {line}", p.room.me().0);
+        if p.recent_events.len() >= 6 {
+            p.recent_events.pop_front();
+        }
+        p.recent_events
+            .push_back(format!("{t:.1}s {}", hud_event(&line)));
     }
+}
+
+/// An event line with its peer ids shortened for the HUD.
+fn hud_event(line: &str) -> String {
+    line.split(' ')
+        .map(|w| {
+            let (k, v) = w.split_once('=').unwrap_or(("", w));
+            match v.parse::<u64>() {
+                Ok(id) if v.len() > 8 => {
+                    let id = format!("{:06x}", id & 0xff_ffff);
+                    if k.is_empty() {
+                        id
+                    } else {
+                        format!("{k}={id}")
+                    }
+                }
+                _ => w.to_owned(),
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 fn net_out(mut peer: NonSendMut<Peer>) {
@@ -143,8 +181,10 @@ fn simulate(mut peer: NonSendMut<Peer>) {
     if !p.room.joined() || p.exiting {
         return;
     }
-    if let Some(bot) = &mut p.bot {
-        bot.step(&mut p.room);
+    match (&mut p.bot, &p.device) {
+        (Some(bot), device) => bot.step_with(&mut p.room, device.as_ref()),
+        (None, Some(device)) => device.apply(&mut p.room),
+        (None, None) => {}
     }
     p.room.fixed_step();
 }
@@ -157,10 +197,11 @@ fn report(mut peer: NonSendMut<Peer>, mut exit: MessageWriter<AppExit>) {
     let t = Duration::from_micros(p.room.now().as_micros());
     if t >= p.next_stats {
         p.next_stats = t + Duration::from_secs(1);
-        let (line, _) = p.stats.line(&p.room);
+        let (line, rates) = p.stats.line(&p.room);
         if !p.quiet {
             eprintln!("{line}");
         }
+        p.last_rates = rates;
     }
     if t >= p.next_dump && p.room.joined() {
         p.next_dump = t + p.dump_every;
@@ -189,12 +230,16 @@ fn on_exit(mut peer: NonSendMut<Peer>, mut exits: MessageReader<AppExit>) {
     }
 }
 
+/// The system set of datagrams in (device front ends run after it).
+#[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct NetIn;
+
 /// Datagrams in and out around the frame.
 pub struct NetPlugin;
 
 impl Plugin for NetPlugin {
     fn build(&self, app: &mut App) {
-        app.add_systems(PreUpdate, net_in)
+        app.add_systems(PreUpdate, net_in.in_set(NetIn))
             .add_systems(PostUpdate, net_out);
     }
 }

@@ -660,6 +660,16 @@ impl Room {
         }
     }
 
+    /// Objects our hands hover now (the view tints them).
+    #[cfg_attr(not(feature = "desktop"), allow(dead_code))]
+    pub fn hovered_ids(&self) -> BTreeSet<NetId> {
+        self.hand_ids
+            .iter()
+            .flat_map(|h| self.hands.hovered(*h))
+            .filter_map(|hv| self.by_ref.get(&hv.target.object()).copied())
+            .collect()
+    }
+
     /// Hand inputs for this step (from a bot or a device).
     pub fn set_hand_input(&mut self, hand: usize, input: HandInput) {
         if let Some(h) = self.hand_ids.get(hand).copied() {

@@ -1,0 +1,214 @@
+//! The desktop peer (feature `desktop`): a window, an orbit camera, and mouse-driven hands,
+//! so people without a headset can join and grab.
+//!
+//! Controls:
+//! - mouse: the right hand follows the cursor, at the reach distance along the cursor's ray;
+//! - wheel: reach nearer or farther (0.15–2 m); Shift+wheel: zoom the camera;
+//! - left button: grip (hold to keep holding); Ctrl+left: grip with the left hand instead;
+//! - E (held): trigger;
+//! - right button drag: orbit; middle drag or W/A/S/D/Q/Z: move the camera's target;
+//! - P: particles and neighbour links; H: the HUD; R: reset the camera.
+//!
+//! The head of our avatar is the camera; the other peers see it move with the view.
+
+use bevy::input::mouse::{AccumulatedMouseMotion, AccumulatedMouseScroll, MouseScrollUnit};
+use bevy::prelude::*;
+use bevy::window::PrimaryWindow;
+
+use crate::device::DeviceFrame;
+use crate::glue::{from_bevy, from_bevy_quat, to_bevy, to_bevy_quat};
+use crate::plugins::Peer;
+use crate::scene::{Kind, TABLE_TOP_Y};
+
+/// Where the camera looks from and at.
+#[derive(Resource, Clone, Copy, Debug)]
+pub struct OrbitCamera {
+    /// The point it orbits.
+    pub target: Vec3,
+    /// Rotation about y, radians.
+    pub yaw: f32,
+    /// Elevation, radians (positive looks down).
+    pub pitch: f32,
+    /// Distance from the target, metres.
+    pub distance_m: f32,
+    /// How far along the cursor's ray the hand is, metres.
+    pub reach_m: f32,
+    /// Focus on an object kind once it exists (`--focus`).
+    pub focus: Option<Kind>,
+    focused: bool,
+    initial: Option<(Vec3, f32, f32, f32)>,
+}
+
+impl OrbitCamera {
+    /// A camera standing at the peer's place around the table, looking at its middle.
+    pub fn at_home(home: (glam::Vec3, glam::Quat), focus: Option<Kind>) -> Self {
+        let fwd = to_bevy_quat(home.1) * Vec3::Z;
+        let mut c = OrbitCamera {
+            target: Vec3::new(0.0, TABLE_TOP_Y, 0.0),
+            yaw: fwd.x.atan2(fwd.z),
+            pitch: 0.6,
+            distance_m: 1.3,
+            reach_m: 0.9,
+            focus,
+            focused: false,
+            initial: None,
+        };
+        c.initial = Some((c.target, c.yaw, c.pitch, c.distance_m));
+        c
+    }
+
+    /// The camera's transform.
+    pub fn transform(&self) -> Transform {
+        let dir = Vec3::new(
+            self.yaw.sin() * self.pitch.cos(),
+            self.pitch.sin(),
+            self.yaw.cos() * self.pitch.cos(),
+        );
+        Transform::from_translation(self.target + dir * self.distance_m)
+            .looking_at(self.target, Vec3::Y)
+    }
+}
+
+/// Marks the desktop camera.
+#[derive(Component)]
+pub struct DesktopCamera;
+
+/// Camera and mouse hands.
+pub struct DesktopPlugin(pub OrbitCamera);
+
+impl Plugin for DesktopPlugin {
+    fn build(&self, app: &mut App) {
+        app.insert_resource(self.0)
+            .add_systems(Startup, spawn_camera)
+            .add_systems(
+                PreUpdate,
+                desktop_input
+                    .after(bevy::input::InputSystems)
+                    .after(crate::plugins::NetIn),
+            );
+    }
+}
+
+fn spawn_camera(mut commands: Commands, orbit: Res<OrbitCamera>) {
+    commands.spawn((Camera3d::default(), DesktopCamera, orbit.transform()));
+}
+
+#[allow(clippy::too_many_arguments)]
+fn desktop_input(
+    mut peer: NonSendMut<Peer>,
+    mut orbit: ResMut<OrbitCamera>,
+    mut cam: Query<(&Camera, &GlobalTransform, &mut Transform), With<DesktopCamera>>,
+    windows: Query<&Window, With<PrimaryWindow>>,
+    buttons: Res<ButtonInput<MouseButton>>,
+    keys: Res<ButtonInput<KeyCode>>,
+    motion: Res<AccumulatedMouseMotion>,
+    scroll: Res<AccumulatedMouseScroll>,
+    time: Res<Time>,
+) {
+    let dt = time.delta_secs().min(0.1);
+    // Focus on an object once it is in the room.
+    if let (Some(kind), false) = (orbit.focus, orbit.focused) {
+        let found = peer
+            .room
+            .objects
+            .iter()
+            .find(|(_, o)| o.kind == kind)
+            .map(|(id, _)| *id);
+        if let Some(s) = found.and_then(|id| peer.room.shown_state(id)) {
+            // A fixed view of it, from the room's +z side and above, whoever we are: the
+            // same picture on every run (the pixel test relies on it).
+            orbit.target = to_bevy(s.pos);
+            orbit.yaw = 0.0;
+            orbit.pitch = 0.5;
+            orbit.distance_m = 0.4;
+            orbit.reach_m = 0.3;
+            orbit.focused = true;
+        }
+    }
+    // Camera: orbit, pan, zoom, reset.
+    let shift = keys.pressed(KeyCode::ShiftLeft) || keys.pressed(KeyCode::ShiftRight);
+    if buttons.pressed(MouseButton::Right) {
+        orbit.yaw -= motion.delta.x * 0.005;
+        orbit.pitch = (orbit.pitch + motion.delta.y * 0.005).clamp(-0.2, 1.5);
+    }
+    let (right, fwd) = {
+        let tf = orbit.transform();
+        let f = tf.forward().as_vec3();
+        (
+            tf.right().as_vec3(),
+            Vec3::new(f.x, 0.0, f.z).normalize_or_zero(),
+        )
+    };
+    if buttons.pressed(MouseButton::Middle) {
+        let k = orbit.distance_m * 0.0015;
+        orbit.target += (-right * motion.delta.x + Vec3::Y * motion.delta.y) * k;
+    }
+    let mut pan = Vec3::ZERO;
+    for (key, d) in [
+        (KeyCode::KeyW, fwd),
+        (KeyCode::KeyS, -fwd),
+        (KeyCode::KeyD, right),
+        (KeyCode::KeyA, -right),
+        (KeyCode::KeyQ, Vec3::Y),
+        (KeyCode::KeyZ, -Vec3::Y),
+    ] {
+        if keys.pressed(key) {
+            pan += d;
+        }
+    }
+    orbit.target += pan * dt * 0.8;
+    let wheel = match scroll.unit {
+        MouseScrollUnit::Line => scroll.delta.y,
+        MouseScrollUnit::Pixel => scroll.delta.y / 40.0,
+    };
+    if shift {
+        orbit.distance_m = (orbit.distance_m * (1.0 - wheel * 0.1)).clamp(0.15, 6.0);
+    } else {
+        orbit.reach_m = (orbit.reach_m + wheel * 0.05).clamp(0.15, 2.0);
+    }
+    if keys.just_pressed(KeyCode::KeyR) {
+        if let Some((t, y, p, d)) = orbit.initial {
+            (orbit.target, orbit.yaw, orbit.pitch, orbit.distance_m) = (t, y, p, d);
+        }
+    }
+    let Ok((camera, gt, mut tf)) = cam.single_mut() else {
+        return;
+    };
+    *tf = orbit.transform();
+    // Hands: the active one on the cursor's ray, the other resting below the view.
+    let head = (from_bevy(tf.translation), from_bevy_quat(tf.rotation));
+    let rest = |side: f32| {
+        (
+            from_bevy(tf.translation + tf.rotation * Vec3::new(0.2 * side, -0.3, -0.35)),
+            from_bevy_quat(tf.rotation),
+        )
+    };
+    let ray = windows
+        .single()
+        .ok()
+        .and_then(|w| w.cursor_position())
+        .and_then(|c| camera.viewport_to_world(gt, c).ok());
+    let ctrl = keys.pressed(KeyCode::ControlLeft) || keys.pressed(KeyCode::ControlRight);
+    let active = if ctrl { 0 } else { 1 };
+    let mut hands = [Some(rest(-1.0)), Some(rest(1.0))];
+    if let Some(r) = ray {
+        hands[active] = Some((
+            from_bevy(r.origin + r.direction.as_vec3() * orbit.reach_m),
+            from_bevy_quat(tf.rotation),
+        ));
+    }
+    let mut grip = [0.0; 2];
+    if buttons.pressed(MouseButton::Left) {
+        grip[active] = 1.0;
+    }
+    let mut trigger = [0.0; 2];
+    if keys.pressed(KeyCode::KeyE) {
+        trigger[active] = 1.0;
+    }
+    peer.device = Some(DeviceFrame {
+        head: Some(head),
+        hands,
+        grip,
+        trigger,
+    });
+}

@@ -1,0 +1,552 @@
+//! The room drawn with bevy (feature `desktop`; the VR peer uses it too): the floor and table,
+//! rigid props, soft meshes deformed every frame (positions and normals), remote avatars in
+//! one colour per peer, a tint for what this peer owns and what its hands hover, an optional
+//! overlay of soft-body particles and their neighbour links (thesis Figure 1.1), a HUD, and
+//! screenshots on a timer (`--screenshot-dir`).
+//!
+//! Nothing here changes the simulation: each frame (`Update`, after the fixed steps) copies
+//! the room's state into bevy entities.
+
+use std::collections::{HashMap, HashSet};
+use std::path::PathBuf;
+use std::time::Duration;
+
+use bevy::asset::RenderAssetUsages;
+use bevy::camera::Camera;
+use bevy::color::palettes::css;
+use bevy::ecs::observer::On;
+use bevy::mesh::{Indices, PrimitiveTopology};
+use bevy::prelude::*;
+use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
+use softsync_net::NetId;
+
+use crate::glue::{to_bevy, to_bevy_quat};
+use crate::plugins::Peer;
+use crate::room::{Body, Room};
+use crate::scene::{Kind, TABLE_TOP_Y};
+
+/// What the view shows and records.
+#[derive(Clone, Debug, Resource)]
+pub struct ViewConfig {
+    /// Draw particles and neighbour links over soft bodies (toggle: P).
+    pub particles: bool,
+    /// Draw no avatars (tests that look at a soft body's own pixels).
+    pub hide_avatars: bool,
+    /// Draw the HUD (toggle: H).
+    pub hud: bool,
+    /// Hide our own head (the camera is in it on the desktop and in VR).
+    pub hide_own_head: bool,
+    /// Screenshots: folder, period, how many at most.
+    pub screenshots: Option<ScreenshotPlan>,
+}
+
+/// Screenshots on a timer.
+#[derive(Clone, Debug)]
+pub struct ScreenshotPlan {
+    /// Folder for `frame-NNNN.png`.
+    pub dir: PathBuf,
+    /// Period.
+    pub every: Duration,
+    /// Stop after this many.
+    pub max: u32,
+}
+
+/// Draws the room: add to an app that has bevy's renderer and a `Peer`.
+pub struct ViewPlugin(pub ViewConfig);
+
+impl Plugin for ViewPlugin {
+    fn build(&self, app: &mut App) {
+        app.insert_resource(self.0.clone())
+            .init_resource::<Views>()
+            .init_resource::<ScreenshotState>()
+            .insert_resource(ClearColor(Color::srgb(0.62, 0.70, 0.78)))
+            .insert_resource(GlobalAmbientLight {
+                color: Color::WHITE,
+                // Low ambient, a strong key light: dents and bulges show in the shading.
+                brightness: 150.0,
+                ..default()
+            })
+            .add_systems(Startup, spawn_static)
+            .add_systems(
+                Update,
+                (sync_objects, draw_overlay, update_hud, take_screenshots).chain(),
+            );
+    }
+}
+
+/// Per-peer colour: evenly spread hues, none near the soft bodies' warm colours (so a test can
+/// tell an avatar from a soft body by hue).
+pub fn peer_color(peer: u64) -> Color {
+    // Hues 150..330: greens, blues, purples.
+    let h = 150.0 + ((peer.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40) % 180) as f32;
+    Color::hsl(h, 0.65, 0.5)
+}
+
+/// The colour a kind is drawn in (avatars use their peer's colour).
+pub fn kind_color(kind: Kind) -> Color {
+    match kind {
+        Kind::Plate => Color::srgb(0.93, 0.93, 0.90),
+        Kind::Block => Color::srgb(0.55, 0.38, 0.22),
+        Kind::Can => Color::srgb(0.70, 0.72, 0.75),
+        Kind::Ball => Color::srgb(0.95, 0.85, 0.20),
+        Kind::Bunny => Color::srgb(0.85, 0.72, 0.58),
+        Kind::SoftBall => Color::srgb(0.90, 0.25, 0.30),
+        Kind::SoftBox => Color::srgb(0.95, 0.50, 0.10),
+        Kind::Head | Kind::Hand => Color::srgb(0.4, 0.6, 0.9),
+    }
+}
+
+/// How an object is drawn this frame (a change rewrites its material).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Tint {
+    Plain,
+    Hovered,
+    Owned,
+    Held,
+}
+
+/// The bevy side of one networked object.
+#[derive(Component)]
+struct ObjView {
+    id: NetId,
+    kind: Kind,
+    base: Color,
+    material: Handle<StandardMaterial>,
+    /// Soft bodies: the mesh rewritten every frame.
+    soft_mesh: Option<Handle<Mesh>>,
+    tint: Tint,
+}
+
+#[derive(Resource, Default)]
+struct Views(HashMap<NetId, Entity>);
+
+#[derive(Component)]
+struct Hud;
+
+#[derive(Resource, Default)]
+struct ScreenshotState {
+    next: Duration,
+    taken: u32,
+}
+
+fn spawn_static(
+    mut commands: Commands,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut materials: ResMut<Assets<StandardMaterial>>,
+    cfg: Res<ViewConfig>,
+) {
+    let floor = materials.add(StandardMaterial {
+        base_color: Color::srgb(0.42, 0.44, 0.46),
+        perceptual_roughness: 0.9,
+        ..default()
+    });
+    let wood = materials.add(StandardMaterial {
+        base_color: Color::srgb(0.45, 0.32, 0.22),
+        perceptual_roughness: 0.7,
+        ..default()
+    });
+    commands.spawn((
+        Mesh3d(meshes.add(Plane3d::default().mesh().size(8.0, 8.0))),
+        MeshMaterial3d(floor),
+        Transform::IDENTITY,
+    ));
+    // The table as scene.rs builds it: a 1.2 × 0.04 × 0.8 m top and four legs.
+    commands.spawn((
+        Mesh3d(meshes.add(Cuboid::new(1.2, 0.04, 0.8))),
+        MeshMaterial3d(wood.clone()),
+        Transform::from_xyz(0.0, TABLE_TOP_Y - 0.02, 0.0),
+    ));
+    let leg_h = TABLE_TOP_Y - 0.04;
+    let leg = meshes.add(Cuboid::new(0.06, leg_h, 0.06));
+    for (x, z) in [(-0.55, -0.35), (0.55, -0.35), (-0.55, 0.35), (0.55, 0.35)] {
+        commands.spawn((
+            Mesh3d(leg.clone()),
+            MeshMaterial3d(wood.clone()),
+            Transform::from_xyz(x, leg_h / 2.0, z),
+        ));
+    }
+    commands.spawn((
+        DirectionalLight {
+            illuminance: 9000.0,
+            ..default()
+        },
+        Transform::from_xyz(1.5, 4.0, 2.0).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    commands.spawn((
+        Hud,
+        Text::new(""),
+        TextFont::from_font_size(13.0),
+        TextColor(Color::WHITE),
+        BackgroundColor(Color::srgba(0.0, 0.0, 0.0, 0.55)),
+        Node {
+            position_type: PositionType::Absolute,
+            top: Val::Px(6.0),
+            left: Val::Px(6.0),
+            padding: UiRect::all(Val::Px(4.0)),
+            ..default()
+        },
+        if cfg.hud {
+            Visibility::Inherited
+        } else {
+            Visibility::Hidden
+        },
+    ));
+}
+
+/// A mesh for a soft body from its current render data (world space).
+fn soft_mesh(room: &Room, h: softsync_softbody::SoftBodyHandle) -> Option<Mesh> {
+    let b = room.soft.get(h)?;
+    let mut m = Mesh::new(
+        PrimitiveTopology::TriangleList,
+        RenderAssetUsages::MAIN_WORLD | RenderAssetUsages::RENDER_WORLD,
+    );
+    m.insert_attribute(Mesh::ATTRIBUTE_POSITION, to_arrays(b.render_positions()));
+    m.insert_attribute(Mesh::ATTRIBUTE_NORMAL, to_arrays(b.render_normals()));
+    m.insert_indices(Indices::U32(
+        b.render_triangles().iter().flatten().copied().collect(),
+    ));
+    Some(m)
+}
+
+fn to_arrays(v: &[glam::Vec3]) -> Vec<[f32; 3]> {
+    v.iter().map(|p| p.to_array()).collect()
+}
+
+fn rigid_mesh(kind: Kind) -> Mesh {
+    // The colliders of scene.rs / the avatar sizes of the thesis's room.
+    match kind {
+        Kind::Plate => Cylinder::new(0.12, 0.02).into(),
+        Kind::Block => Cuboid::new(0.06, 0.06, 0.06).into(),
+        Kind::Can => Cylinder::new(0.033, 0.1).into(),
+        Kind::Ball => Sphere::new(0.035).mesh().uv(24, 16),
+        Kind::Head => Cuboid::new(0.16, 0.2, 0.18).into(),
+        Kind::Hand => Cuboid::new(0.05, 0.03, 0.09).into(),
+        // Soft kinds are built from their body.
+        _ => Sphere::new(0.05).into(),
+    }
+}
+
+/// The pose a rigid or avatar object is drawn at.
+fn drawn_pose(room: &mut Room, id: NetId) -> Option<(glam::Vec3, glam::Quat)> {
+    let o = room.objects.get(&id)?.clone();
+    match o.body {
+        Body::Rigid(h) => {
+            let b = room.world.bodies.get(h)?;
+            Some((b.translation(), *b.rotation()))
+        }
+        Body::Pose if o.avatar_of == Some(room.me()) => Some(o.pose),
+        _ => room.shown_state(id).map(|s| (s.pos, s.rot)),
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn sync_objects(
+    mut commands: Commands,
+    mut peer: NonSendMut<Peer>,
+    mut views: ResMut<Views>,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut materials: ResMut<Assets<StandardMaterial>>,
+    mut q: Query<(&mut Transform, &mut ObjView, &mut Visibility)>,
+    cfg: Res<ViewConfig>,
+) {
+    let room = &mut peer.room;
+    let me = room.me();
+    // Gone objects.
+    let live: HashSet<NetId> = room.objects.keys().copied().collect();
+    views.0.retain(|id, e| {
+        let keep = live.contains(id);
+        if !keep {
+            commands.entity(*e).despawn();
+        }
+        keep
+    });
+    let hovered = room.hovered_ids();
+    let held: HashSet<NetId> = (0..2).filter_map(|h| room.held(h).map(|x| x.0)).collect();
+    let ids: Vec<NetId> = room.objects.keys().copied().collect();
+    for id in ids {
+        let Some(o) = room.objects.get(&id).cloned() else {
+            continue;
+        };
+        let base = match o.avatar_of {
+            Some(p) => peer_color(p.0),
+            None => kind_color(o.kind),
+        };
+        let Some(&e) = views.0.get(&id) else {
+            // New object: spawn its entity.
+            let material = materials.add(StandardMaterial {
+                base_color: base,
+                perceptual_roughness: 0.6,
+                ..default()
+            });
+            let (mesh, soft) = match o.body {
+                Body::Soft(h) => match soft_mesh(room, h) {
+                    Some(m) => {
+                        let handle = meshes.add(m);
+                        (handle.clone(), Some(handle))
+                    }
+                    None => continue,
+                },
+                _ => (meshes.add(rigid_mesh(o.kind)), None),
+            };
+            let e = commands
+                .spawn((
+                    Mesh3d(mesh),
+                    MeshMaterial3d(material.clone()),
+                    Transform::IDENTITY,
+                    Visibility::Hidden,
+                    ObjView {
+                        id,
+                        kind: o.kind,
+                        base,
+                        material,
+                        soft_mesh: soft,
+                        tint: Tint::Plain,
+                    },
+                ))
+                .id();
+            views.0.insert(id, e);
+            continue;
+        };
+        let Ok((mut tf, mut view, mut vis)) = q.get_mut(e) else {
+            continue;
+        };
+        debug_assert_eq!(view.id, id);
+        let hidden = (o.kind.is_avatar() && cfg.hide_avatars)
+            || (o.kind == Kind::Head && cfg.hide_own_head && o.avatar_of == Some(me));
+        // Soft bodies: rewrite positions and normals (world space, identity transform).
+        if let (Body::Soft(h), Some(handle)) = (o.body, &view.soft_mesh) {
+            if let (Some(b), Some(mut m)) = (room.soft.get(h), meshes.get_mut(handle)) {
+                m.insert_attribute(Mesh::ATTRIBUTE_POSITION, to_arrays(b.render_positions()));
+                m.insert_attribute(Mesh::ATTRIBUTE_NORMAL, to_arrays(b.render_normals()));
+            }
+        } else if let Some((p, r)) = drawn_pose(room, id) {
+            if p.is_finite() && r.is_finite() {
+                *tf = Transform::from_translation(to_bevy(p)).with_rotation(to_bevy_quat(r));
+            }
+        }
+        let want_vis = if hidden {
+            Visibility::Hidden
+        } else {
+            Visibility::Inherited
+        };
+        if *vis != want_vis {
+            *vis = want_vis;
+        }
+        let owner = room.session.owner(id);
+        let tint = if held.contains(&id) {
+            Tint::Held
+        } else if owner == Some(me) && !o.kind.is_avatar() {
+            Tint::Owned
+        } else if hovered.contains(&id) {
+            Tint::Hovered
+        } else {
+            Tint::Plain
+        };
+        if tint != view.tint {
+            view.tint = tint;
+            if let Some(mut m) = materials.get_mut(&view.material) {
+                let glow = match tint {
+                    Tint::Plain => LinearRgba::BLACK,
+                    Tint::Hovered => LinearRgba::rgb(0.25, 0.25, 0.25),
+                    Tint::Owned => LinearRgba::rgb(0.0, 0.18, 0.05),
+                    Tint::Held => LinearRgba::rgb(0.05, 0.45, 0.12),
+                };
+                m.emissive = glow;
+                m.base_color = view.base;
+            }
+        }
+        let _ = view.kind;
+    }
+}
+
+/// Particles and neighbour links (thesis Figure 1.1), when switched on (P).
+fn draw_overlay(
+    peer: NonSend<Peer>,
+    mut gizmos: Gizmos,
+    mut cfg: ResMut<ViewConfig>,
+    keys: Option<Res<ButtonInput<KeyCode>>>,
+    mut hud: Query<&mut Visibility, With<Hud>>,
+) {
+    if let Some(k) = &keys {
+        if k.just_pressed(KeyCode::KeyP) {
+            cfg.particles = !cfg.particles;
+        }
+        if k.just_pressed(KeyCode::KeyH) {
+            cfg.hud = !cfg.hud;
+            for mut v in &mut hud {
+                *v = if cfg.hud {
+                    Visibility::Inherited
+                } else {
+                    Visibility::Hidden
+                };
+            }
+        }
+    }
+    if !cfg.particles {
+        return;
+    }
+    let room = &peer.room;
+    for o in room.objects.values() {
+        let Body::Soft(h) = o.body else { continue };
+        let Some(b) = room.soft.get(h) else { continue };
+        let ps = b.particle_positions(&room.world);
+        let map = b.particle_map();
+        for (i, p) in ps.iter().enumerate() {
+            gizmos.sphere(Isometry3d::from_translation(to_bevy(*p)), 0.004, css::AQUA);
+            let (nbrs, _) = map.neighbours.row(i);
+            for &j in nbrs {
+                let j = j as usize;
+                if j > i {
+                    if let Some(q) = ps.get(j) {
+                        gizmos.line(to_bevy(*p), to_bevy(*q), css::WHITE.with_alpha(0.6));
+                    }
+                }
+            }
+        }
+    }
+}
+
+fn update_hud(peer: NonSend<Peer>, cfg: Res<ViewConfig>, mut q: Query<&mut Text, With<Hud>>) {
+    if !cfg.hud {
+        return;
+    }
+    let Ok(mut text) = q.single_mut() else {
+        return;
+    };
+    let new = hud_text(&peer);
+    if text.0 != new {
+        text.0 = new;
+    }
+}
+
+/// A peer id, short enough for the HUD (its low 24 bits in hex; the log has the full id).
+fn short(id: u64) -> String {
+    format!("{:06x}", id & 0xff_ffff)
+}
+
+/// The HUD's text: room, peers, host, RTT, bytes/s, objects owned, the hands, the last events.
+pub fn hud_text(peer: &Peer) -> String {
+    let room = &peer.room;
+    let st = room.session.stats();
+    let rtts: Vec<f64> = st
+        .links
+        .values()
+        .filter_map(|l| l.rtt)
+        .map(|r| r.as_secs_f64() * 1e3)
+        .collect();
+    let rtt = if rtts.is_empty() {
+        "-".to_owned()
+    } else {
+        format!("{:.0} ms", rtts.iter().sum::<f64>() / rtts.len() as f64)
+    };
+    let host = room.session.host_id();
+    let mut s = format!(
+        "room {} | me {}{}\nhost {} term {} | peers {}\nrtt {rtt} | up {:.0} B/s down {:.0} B/s\nowned {}/{}\n",
+        peer.room_name,
+        short(room.me().0),
+        if room.session.is_host() { " (host)" } else { "" },
+        host.map_or("-".into(), |h| short(h.0)),
+        room.session.term().0,
+        room.session.members().len(),
+        peer.last_rates.up,
+        peer.last_rates.down,
+        room.owned_count(),
+        room.objects.len(),
+    );
+    for (h, name) in [(0, "left"), (1, "right")] {
+        if let Some((id, _)) = room.held(h) {
+            s.push_str(&format!("{name} hand holds {}\n", object_name(room, id)));
+        }
+    }
+    for e in peer.recent_events.iter() {
+        s.push_str(e);
+        s.push('\n');
+    }
+    s
+}
+
+fn object_name(room: &Room, id: NetId) -> String {
+    room.objects.get(&id).map_or(format!("#{}", id.0), |o| {
+        format!("{} #{}", o.kind.name(), id.0)
+    })
+}
+
+/// Shape change of a soft body: the largest distance of a vertex from where the rest shape,
+/// moved rigidly with the center, puts it (metres).
+pub fn deformation_m(room: &Room, h: softsync_softbody::SoftBodyHandle) -> Option<f32> {
+    let b = room.soft.get(h)?;
+    let (c, r) = b.center_pose(&room.world);
+    Some(
+        b.vertices()
+            .iter()
+            .zip(b.rest_vertices())
+            .map(|(v, rest)| v.distance(c + r * *rest))
+            .fold(0.0, f32::max),
+    )
+}
+
+fn take_screenshots(
+    mut commands: Commands,
+    peer: NonSend<Peer>,
+    mut state: ResMut<ScreenshotState>,
+    cfg: Res<ViewConfig>,
+    cams: Query<(&Camera, &GlobalTransform)>,
+) {
+    let Some(plan) = &cfg.screenshots else {
+        return;
+    };
+    let room = &peer.room;
+    let t = Duration::from_micros(room.now().as_micros());
+    if state.taken >= plan.max || t < state.next || !room.joined() {
+        return;
+    }
+    state.next = t + plan.every;
+    let n = state.taken;
+    state.taken += 1;
+    // What the frame shows, measured now: per soft body its deformation and screen box.
+    let mut fields = format!(
+        "screenshot n={n} t={:.2} peers={}",
+        t.as_secs_f64(),
+        room.session.members().len()
+    );
+    let cam = cams.iter().find(|(c, _)| c.is_active);
+    for o in room.objects.values() {
+        let Body::Soft(h) = o.body else { continue };
+        let name = o.kind.name();
+        if let Some(d) = deformation_m(room, h) {
+            fields.push_str(&format!(" {name}_deform_mm={:.2}", d * 1e3));
+        }
+        if let (Some((c, gt)), Some(b)) = (cam, room.soft.get(h)) {
+            let mut lo = Vec2::splat(f32::MAX);
+            let mut hi = Vec2::splat(f32::MIN);
+            for p in b.render_positions() {
+                if let Ok(s) = c.world_to_viewport(gt, to_bevy(*p)) {
+                    lo = lo.min(s);
+                    hi = hi.max(s);
+                }
+            }
+            if lo.x <= hi.x {
+                fields.push_str(&format!(
+                    " {name}_px={:.0},{:.0},{:.0},{:.0}",
+                    lo.x, lo.y, hi.x, hi.y
+                ));
+            }
+        }
+    }
+    let path = plan.dir.join(format!("frame-{n:04}.png"));
+    let line = format!("{fields} path={}", path.display());
+    commands
+        .spawn(Screenshot::primary_window())
+        .observe(move |shot: On<ScreenshotCaptured>| {
+            let saved = shot
+                .image
+                .clone()
+                .try_into_dynamic()
+                .map_err(|e| e.to_string())
+                .and_then(|img| img.to_rgb8().save(&path).map_err(|e| e.to_string()));
+            match saved {
+                Ok(()) => println!("{line}"),
+                Err(e) => eprintln!("screenshot {}: {e}", path.display()),
+            }
+        });
+}

@@ -1,0 +1,181 @@
+//! Helpers shared by the multi-process tests: the `softsync` binary, scratch folders, child
+//! processes killed when dropped, bounded waits on their output.
+#![allow(
+    dead_code,
+    clippy::unwrap_used,
+    clippy::disallowed_methods,
+    missing_docs
+)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+pub fn binary() -> PathBuf {
+    // target/<profile>/deps/live_rooms-… → target/<profile>/softsync
+    let exe = std::env::current_exe().unwrap();
+    let dir = exe.parent().unwrap().parent().unwrap();
+    let bin = dir.join("softsync");
+    assert!(
+        bin.exists(),
+        "{} is missing: build it first (`cargo build -p softsync`; scripts/test does)",
+        bin.display()
+    );
+    bin
+}
+
+pub fn require_netns() {
+    assert_eq!(
+        std::env::var("SOFTSYNC_IN_NETNS").as_deref(),
+        Ok("1"),
+        "these tests open WebRTC and must run inside scripts/netns-run (scripts/test does this)"
+    );
+}
+
+pub fn scratch(test: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("softsync-{test}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// A child process, killed (SIGKILL) when dropped.
+pub struct Proc {
+    /// For messages.
+    pub name: String,
+    /// The process.
+    pub child: Child,
+    /// Its stdout file.
+    pub out: PathBuf,
+    /// Its stderr file.
+    pub err: PathBuf,
+}
+
+impl Proc {
+    pub fn spawn(dir: &Path, name: &str, args: &[&str]) -> Proc {
+        Self::spawn_env(dir, name, args, &[])
+    }
+
+    /// Spawn with extra environment variables.
+    pub fn spawn_env(dir: &Path, name: &str, args: &[&str], env: &[(&str, &str)]) -> Proc {
+        Self::spawn_program(dir, name, &binary(), args, env)
+    }
+
+    /// Spawn any program (a wrapper script around the binary, say).
+    pub fn spawn_program(
+        dir: &Path,
+        name: &str,
+        program: &Path,
+        args: &[&str],
+        env: &[(&str, &str)],
+    ) -> Proc {
+        let out = dir.join(format!("{name}.out"));
+        let err = dir.join(format!("{name}.err"));
+        let child = Command::new(program)
+            .args(args)
+            .envs(env.iter().copied())
+            .stdout(Stdio::from(std::fs::File::create(&out).unwrap()))
+            .stderr(Stdio::from(std::fs::File::create(&err).unwrap()))
+            .spawn()
+            .unwrap();
+        Proc {
+            name: name.to_owned(),
+            child,
+            out,
+            err,
+        }
+    }
+
+    pub fn stdout(&self) -> String {
+        std::fs::read_to_string(&self.out).unwrap_or_default()
+    }
+
+    pub fn logs(&self) -> String {
+        format!(
+            "--- {} stdout\n{}\n--- {} stderr (tail)\n{}",
+            self.name,
+            self.stdout(),
+            self.name,
+            std::fs::read_to_string(&self.err)
+                .unwrap_or_default()
+                .lines()
+                .rev()
+                .take(15)
+                .collect::<Vec<_>>()
+                .into_iter()
+                .rev()
+                .collect::<Vec<_>>()
+                .join("\n")
+        )
+    }
+
+    /// Wait (bounded) until stdout has a line containing `needle`; return that line.
+    pub fn wait_line(&self, needle: &str, within: Duration) -> String {
+        let start = Instant::now();
+        loop {
+            if let Some(l) = self.stdout().lines().find(|l| l.contains(needle)) {
+                return l.to_owned();
+            }
+            assert!(
+                start.elapsed() < within,
+                "{} printed no {needle:?} within {within:?}\n{}",
+                self.name,
+                self.logs()
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// Wait (bounded) for the process to exit; its exit code.
+    pub fn wait_exit(&mut self, within: Duration) -> i32 {
+        let start = Instant::now();
+        loop {
+            if let Some(s) = self.child.try_wait().unwrap() {
+                return s.code().unwrap_or(-1);
+            }
+            assert!(
+                start.elapsed() < within,
+                "{} did not exit within {within:?}\n{}",
+                self.name,
+                self.logs()
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    pub fn kill(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+
+    /// The peer id it printed (`hosting …` / `joining …`).
+    pub fn peer_id(&self) -> u64 {
+        let l = self.wait_line("peer=", Duration::from_secs(20));
+        field(&l, "peer").parse().unwrap()
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
+pub fn field<'a>(line: &'a str, key: &str) -> &'a str {
+    line.split_whitespace()
+        .find_map(|w| w.strip_prefix(&format!("{key}=")))
+        .unwrap_or_else(|| panic!("no {key}= in {line:?}"))
+}
+
+/// A standalone signaling server on a free port, and its URL.
+pub fn standalone_signal(dir: &Path) -> (Proc, String) {
+    let p = Proc::spawn(dir, "signal", &["signal", "--bind", "127.0.0.1:0"]);
+    let url = signal_url(&p);
+    (p, url)
+}
+
+/// The signaling URL a process printed.
+pub fn signal_url(p: &Proc) -> String {
+    let l = p.wait_line("signaling on ", Duration::from_secs(10));
+    l.trim_start_matches("signaling on ").trim().to_owned()
+}

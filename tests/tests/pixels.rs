@@ -1,0 +1,375 @@
+//! Real pixels: a desktop peer (`softsync join --desktop`) renders the room under Xvfb with
+//! Mesa's software Vulkan (lavapipe), saves screenshots with bevy's screenshot API, and a bot
+//! on a third peer squeezes the soft box. The test checks the frames are not blank, that the
+//! box is on screen where the peer says, that its pixels do not change while it rests, and
+//! that they do when it is squeezed.
+//!
+//! Needs: the binary built with `--features desktop` (scripts/test builds `--features vr`,
+//! which includes it), `Xvfb`, `mesa-vulkan-drivers` (.ci/run installs them), and a network
+//! namespace (WebRTC; scripts/netns-run). It starts its own X server and bounds every wait.
+#![allow(clippy::unwrap_used, clippy::disallowed_methods, missing_docs)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+mod common;
+use common::{field, require_netns, scratch, signal_url, Proc};
+
+/// An Xvfb server on a free display, killed when dropped.
+struct Xvfb {
+    child: Child,
+    display: String,
+}
+
+impl Xvfb {
+    fn start(dir: &Path) -> Xvfb {
+        let log = std::fs::File::create(dir.join("xvfb.log")).unwrap();
+        for n in 0..20u32 {
+            let num = 90 + (std::process::id() + n * 7) % 400;
+            if Path::new(&format!("/tmp/.X11-unix/X{num}")).exists()
+                || Path::new(&format!("/tmp/.X{num}-lock")).exists()
+            {
+                continue;
+            }
+            let child = match Command::new("Xvfb")
+                .args([
+                    format!(":{num}").as_str(),
+                    "-screen",
+                    "0",
+                    "640x480x24",
+                    "-nolisten",
+                    "tcp",
+                ])
+                .stdout(Stdio::null())
+                .stderr(Stdio::from(log.try_clone().unwrap()))
+                .spawn()
+            {
+                Ok(c) => c,
+                Err(e) => {
+                    panic!("cannot start Xvfb ({e}): install the xvfb package (.ci/run does)")
+                }
+            };
+            let mut x = Xvfb {
+                child,
+                display: format!(":{num}"),
+            };
+            let start = Instant::now();
+            while start.elapsed() < Duration::from_secs(10) {
+                if Path::new(&format!("/tmp/.X11-unix/X{num}")).exists() {
+                    return x;
+                }
+                if x.child.try_wait().unwrap().is_some() {
+                    break; // taken meanwhile: try the next number
+                }
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            let _ = x.child.kill();
+        }
+        panic!(
+            "no Xvfb display came up; see {}",
+            dir.join("xvfb.log").display()
+        );
+    }
+}
+
+impl Drop for Xvfb {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// One saved frame and what the peer measured when it took it.
+#[derive(Debug, Clone)]
+struct Frame {
+    n: u32,
+    path: PathBuf,
+    deform_mm: f64,
+    /// The soft box's screen box (x0, y0, x1, y1), pixels.
+    bbox: [f64; 4],
+}
+
+fn frames(p: &Proc) -> Vec<Frame> {
+    p.stdout()
+        .lines()
+        .filter(|l| l.starts_with("screenshot ") && l.contains("softbox_px="))
+        .map(|l| {
+            let b: Vec<f64> = field(l, "softbox_px")
+                .split(',')
+                .map(|v| v.parse().unwrap())
+                .collect();
+            Frame {
+                n: field(l, "n").parse().unwrap(),
+                path: PathBuf::from(field(l, "path")),
+                deform_mm: field(l, "softbox_deform_mm").parse().unwrap(),
+                bbox: [b[0], b[1], b[2], b[3]],
+            }
+        })
+        .collect()
+}
+
+struct Rgb {
+    w: u32,
+    h: u32,
+    px: Vec<u8>,
+}
+
+impl Rgb {
+    fn load(path: &Path) -> Rgb {
+        let dec = png::Decoder::new(std::io::BufReader::new(
+            std::fs::File::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())),
+        ));
+        let mut r = dec.read_info().unwrap();
+        let mut buf = vec![0; r.output_buffer_size().unwrap()];
+        let info = r.next_frame(&mut buf).unwrap();
+        assert_eq!(info.color_type, png::ColorType::Rgb, "{}", path.display());
+        assert_eq!(info.bit_depth, png::BitDepth::Eight);
+        buf.truncate(info.buffer_size());
+        Rgb {
+            w: info.width,
+            h: info.height,
+            px: buf,
+        }
+    }
+
+    fn at(&self, x: u32, y: u32) -> [u8; 3] {
+        let i = ((y * self.w + x) * 3) as usize;
+        [self.px[i], self.px[i + 1], self.px[i + 2]]
+    }
+
+    /// Pixels in a box (clamped to the image), with a margin.
+    fn region(&self, b: [f64; 4], margin: f64) -> impl Iterator<Item = (u32, u32)> + '_ {
+        let x0 = (b[0] - margin).max(0.0) as u32;
+        let y0 = (b[1] - margin).max(0.0) as u32;
+        let x1 = ((b[2] + margin) as u32).min(self.w - 1);
+        let y1 = ((b[3] + margin) as u32).min(self.h - 1);
+        (y0..=y1).flat_map(move |y| (x0..=x1).map(move |x| (x, y)))
+    }
+}
+
+/// The soft box's orange (0.95, 0.5, 0.1) under any lighting: red well above blue, green
+/// between. Avatars and the table are other hues.
+fn is_orange(c: [u8; 3]) -> bool {
+    let [r, g, b] = c.map(i32::from);
+    r > 60 && r - b > 50 && g > b && r > g + 15
+}
+
+fn union(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+    [
+        a[0].min(b[0]),
+        a[1].min(b[1]),
+        a[2].max(b[2]),
+        a[3].max(b[3]),
+    ]
+}
+
+/// Fraction of pixels in `b` that differ by more than 30 (sum over channels), and how many of
+/// those are box-coloured in either frame (the change is on the box, not around it).
+fn changed(a: &Rgb, c: &Rgb, b: [f64; 4]) -> (f64, usize) {
+    let (mut n, mut diff, mut on_box) = (0usize, 0usize, 0usize);
+    for (x, y) in a.region(b, 4.0) {
+        let (p, q) = (a.at(x, y), c.at(x, y));
+        n += 1;
+        let d: i32 = (0..3)
+            .map(|i| (i32::from(p[i]) - i32::from(q[i])).abs())
+            .sum();
+        if d > 30 {
+            diff += 1;
+            if is_orange(p) || is_orange(q) {
+                on_box += 1;
+            }
+        }
+    }
+    (diff as f64 / n.max(1) as f64, on_box)
+}
+
+#[test]
+fn desktop_peer_renders_the_room_and_a_squeeze_changes_the_soft_box_pixels() {
+    require_netns();
+    let dir = scratch("pixels");
+    let shots = dir.join("shots");
+    let x = Xvfb::start(&dir);
+    let host = Proc::spawn(
+        &dir,
+        "host",
+        &[
+            "host",
+            "--room",
+            "pixels",
+            "--bind",
+            "127.0.0.1:0",
+            "--duration",
+            "150",
+            "--quiet",
+        ],
+    );
+    let url = signal_url(&host);
+    let shots_s = shots.to_str().unwrap().to_owned();
+    let mut desktop = Proc::spawn_env(
+        &dir,
+        "desktop",
+        &[
+            "join",
+            "--room",
+            "pixels",
+            "--signal",
+            &url,
+            "--desktop",
+            "--window",
+            "320x240",
+            "--focus",
+            "softbox",
+            "--hide-avatars",
+            "--no-hud",
+            "--screenshot-dir",
+            &shots_s,
+            "--screenshot-every",
+            "0.5",
+            "--screenshots",
+            "400",
+            "--duration",
+            "140",
+            "--quiet",
+        ],
+        &[
+            ("DISPLAY", x.display.as_str()),
+            ("WGPU_BACKEND", "vulkan"),
+            // Mesa's software Vulkan, whatever other ICDs are installed.
+            (
+                "VK_ICD_FILENAMES",
+                "/usr/share/vulkan/icd.d/lvp_icd.x86_64.json",
+            ),
+        ],
+    );
+    // Rendering works: a few frames at rest first (the software renderer's first frame
+    // compiles every pipeline; bounded generously).
+    let start = Instant::now();
+    while frames(&desktop).len() < 4 {
+        if let Some(s) = desktop.child.try_wait().unwrap() {
+            panic!("the desktop peer exited ({s})\n{}", desktop.logs());
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(90),
+            "fewer than 4 screenshots within 90 s\n{}",
+            desktop.logs()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let rest_frames = frames(&desktop);
+    println!(
+        "first frames after {:.1} s: {:?}",
+        start.elapsed().as_secs_f64(),
+        rest_frames
+    );
+    // Now a bot squeezes the box and holds it.
+    let bot = Proc::spawn(
+        &dir,
+        "bot",
+        &[
+            "join",
+            "--room",
+            "pixels",
+            "--signal",
+            &url,
+            "--bot",
+            // From the front (the box is at 0.32, 0.82, 0.05; `--focus` looks at it from +z):
+            // the face the camera sees is pressed in.
+            "wait 0.5; move right 0.32 0.83 0.3 in 0.6; reach right softbox in 0.5; grab right; \
+             squeeze right 0.03 in 0.5; wait 30; release right",
+            "--duration",
+            "60",
+            "--quiet",
+        ],
+    );
+    bot.wait_line("grabbed object", Duration::from_secs(30));
+    // At rest the box already sags a little under gravity: the squeeze adds to that.
+    let rest_deform = rest_frames.last().unwrap().deform_mm;
+    let last_rest = rest_frames.last().unwrap().n;
+    let start = Instant::now();
+    let squeezed = loop {
+        if let Some(f) = frames(&desktop)
+            .into_iter()
+            .find(|f| f.n > last_rest && f.deform_mm > rest_deform + 8.0)
+        {
+            // One more frame so the squeeze is well under way.
+            let n = f.n + 2;
+            if let Some(g) = frames(&desktop).into_iter().find(|g| g.n == n) {
+                break g;
+            }
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(40),
+            "the desktop peer never showed the box squeezed 8 mm beyond rest\n{}\n{}",
+            desktop.logs(),
+            bot.logs()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    // Two frames at rest, before the bot joined.
+    let (r1, r2) = (
+        &rest_frames[rest_frames.len() - 2],
+        &rest_frames[rest_frames.len() - 1],
+    );
+    assert!(
+        (r1.deform_mm - r2.deform_mm).abs() < 0.5,
+        "the box was not at rest: {r1:?} {r2:?}"
+    );
+    let (a, b, s) = (
+        Rgb::load(&r1.path),
+        Rgb::load(&r2.path),
+        Rgb::load(&squeezed.path),
+    );
+    assert_eq!((a.w, a.h), (320, 240), "screenshot size");
+    // Not blank: many colours, real contrast.
+    let lum: Vec<f64> =
+        a.px.chunks(3)
+            .map(|p| 0.299 * f64::from(p[0]) + 0.587 * f64::from(p[1]) + 0.114 * f64::from(p[2]))
+            .collect();
+    let mean = lum.iter().sum::<f64>() / lum.len() as f64;
+    let sd = (lum.iter().map(|l| (l - mean).powi(2)).sum::<f64>() / lum.len() as f64).sqrt();
+    let colours: std::collections::HashSet<[u8; 3]> =
+        a.px.chunks(3).map(|p| [p[0], p[1], p[2]]).collect();
+    println!(
+        "rest frame: luminance mean {mean:.1} sd {sd:.1}, {} colours",
+        colours.len()
+    );
+    assert!(sd > 8.0, "the frame is nearly uniform (sd {sd:.1})");
+    assert!(
+        colours.len() > 50,
+        "the frame has {} colours",
+        colours.len()
+    );
+    // The box is where the peer says, in its colour.
+    let orange = a
+        .region(r1.bbox, 0.0)
+        .filter(|&(x, y)| is_orange(a.at(x, y)))
+        .count();
+    let area = ((r1.bbox[2] - r1.bbox[0]) * (r1.bbox[3] - r1.bbox[1])).max(1.0);
+    println!("box at {:?}: {orange} orange pixels of {area:.0}", r1.bbox);
+    assert!(
+        orange as f64 > 0.3 * area && orange > 200,
+        "the soft box is not drawn where it projects ({orange} orange pixels in {area:.0})"
+    );
+    // At rest nothing changes; squeezed, the box's pixels do.
+    let region = union(r1.bbox, squeezed.bbox);
+    let (still, still_box) = changed(&a, &b, region);
+    let (moved, moved_box) = changed(&a, &s, region);
+    println!(
+        "box region {region:?}: at rest {:.2}% changed ({still_box} on the box); \
+         squeezed by {:.1} mm: {:.2}% changed ({moved_box} on the box)",
+        still * 100.0,
+        squeezed.deform_mm,
+        moved * 100.0
+    );
+    assert!(
+        still < 0.01,
+        "pixels changed while the box rested: {:.2}%",
+        still * 100.0
+    );
+    assert!(
+        moved > 0.05 && moved_box > 200,
+        "the squeeze did not change the box's pixels enough: {:.2}%, {moved_box} on the box",
+        moved * 100.0
+    );
+}
