@@ -11,6 +11,7 @@
 //!
 //! The head of our avatar is the camera; the other peers see it move with the view.
 
+use bevy::diagnostic::FrameCount;
 use bevy::input::mouse::{AccumulatedMouseMotion, AccumulatedMouseScroll, MouseScrollUnit};
 use bevy::prelude::*;
 use bevy::window::PrimaryWindow;
@@ -80,12 +81,22 @@ impl Plugin for DesktopPlugin {
     fn build(&self, app: &mut App) {
         app.insert_resource(self.0)
             .add_systems(Startup, spawn_camera)
+            .add_systems(Last, ready_after_first_frames)
             .add_systems(
                 PreUpdate,
                 desktop_input
                     .after(bevy::input::InputSystems)
                     .after(crate::plugins::NetIn),
             );
+    }
+}
+
+/// Frames rendered before the network starts (window and renderer setup stall the first).
+const WARMUP_FRAMES: u32 = 5;
+
+fn ready_after_first_frames(mut peer: NonSendMut<Peer>, frames: Res<FrameCount>) {
+    if frames.0 >= WARMUP_FRAMES {
+        peer.set_ready();
     }
 }
 

@@ -382,6 +382,9 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
         eprintln!("warning: no signal handler ({e}): a kill is noticed by the timeout only");
     }
     let home = peer.room.home();
+    let mut peer = peer;
+    // A desktop or VR peer enters the room once its front end renders (see `Peer::ready`).
+    peer.ready = front == FrontEnd::Headless;
     let mut app = App::new();
     match front {
         FrontEnd::Headless => {

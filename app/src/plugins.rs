@@ -35,6 +35,11 @@ pub struct Peer {
     pub bot: Option<Bot>,
     /// This frame's tracked device (desktop or VR front end), if any.
     pub device: Option<DeviceFrame>,
+    /// False while a front end warms up (window, renderer, XR session): the network is not
+    /// pumped, so nobody sees us join and then time out during the first frames' stalls
+    /// (measured: an OpenXR session start on a software renderer froze the loop for over the
+    /// session's 1 s peer timeout). Headless peers start ready.
+    pub ready: bool,
     /// Room name.
     pub room_name: String,
     /// Leave after this long.
@@ -79,6 +84,7 @@ impl Peer {
             room,
             bot,
             device: None,
+            ready: true,
             room_name,
             duration,
             connect_timeout,
@@ -92,6 +98,18 @@ impl Peer {
             next_stats: Duration::from_secs(1),
             next_dump: Duration::ZERO,
             exiting: false,
+        }
+    }
+
+    /// The front end is up: start pumping the network (and counting the join timeout).
+    pub fn set_ready(&mut self) {
+        if !self.ready {
+            self.ready = true;
+            self.room.start_join_clock();
+            println!(
+                "front end ready after {:.1} s: entering the room",
+                self.room.now().as_secs_f64()
+            );
         }
     }
 
@@ -116,7 +134,7 @@ fn fail(exit: &mut MessageWriter<AppExit>, peer: &mut Peer, msg: String, code: u
 }
 
 fn net_in(mut peer: NonSendMut<Peer>, mut exit: MessageWriter<AppExit>) {
-    if peer.exiting {
+    if peer.exiting || !peer.ready {
         return;
     }
     let p = &mut *peer;

@@ -140,6 +140,8 @@ pub struct Room {
     contacts: Vec<PeerId>,
     contact: Option<(PeerId, std::time::Instant)>,
     started: std::time::Instant,
+    /// When joining started (the front end may hold the network until it renders).
+    join_started: std::time::Instant,
     /// Notes for the log and the bot.
     pub notes: Vec<Note>,
     /// Counters.
@@ -208,6 +210,7 @@ impl Room {
             contacts: contact.into_iter().collect(),
             contact: contact.map(|c| (c, std::time::Instant::now())),
             started: std::time::Instant::now(),
+            join_started: std::time::Instant::now(),
             notes: Vec::new(),
             counters: Counters::default(),
             dt,
@@ -461,9 +464,14 @@ impl Room {
         }
     }
 
+    /// Start counting the join timeout now (when the network starts being pumped).
+    pub fn start_join_clock(&mut self) {
+        self.join_started = std::time::Instant::now();
+    }
+
     /// Whether a joiner has been waiting too long (for the caller to give up).
     pub fn join_deadline_passed(&self, room: &str, timeout: Duration) -> Result<(), RoomError> {
-        if self.joined || self.started.elapsed() < timeout {
+        if self.joined || self.join_started.elapsed() < timeout {
             return Ok(());
         }
         Err(RoomError::NotWelcomed {

@@ -145,7 +145,8 @@ impl Plugin for VrPlugin {
                     .after(crate::plugins::NetIn)
                     .run_if(openxr_session_running),
             )
-            .add_systems(Update, report_state);
+            .add_systems(Update, report_state)
+            .add_systems(Last, ready_when_running);
     }
 }
 
@@ -341,6 +342,22 @@ fn read_device(
         );
     }
     peer.device = Some(frame);
+}
+
+/// Frames the XR session renders before the network starts (session start stalls the loop).
+const WARMUP_FRAMES: u32 = 30;
+
+fn ready_when_running(
+    mut peer: NonSendMut<Peer>,
+    state: Option<Res<XrState>>,
+    mut running: Local<u32>,
+) {
+    if state.is_some_and(|s| *s == XrState::Running) {
+        *running += 1;
+        if *running >= WARMUP_FRAMES {
+            peer.set_ready();
+        }
+    }
 }
 
 /// Print session state changes (the smoke test waits for FOCUSED-equivalent `Running`).

@@ -82,6 +82,8 @@ fn vr_peer_under_a_simulated_headset_shows_its_avatar_and_grabs_with_a_squeeze()
     let vr_sim = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/vr-sim");
     let bin = binary();
     let root_s = root.to_str().unwrap().to_owned();
+    let vr_dump = dir.join("vr.jsonl");
+    let vr_dump_s = vr_dump.to_str().unwrap().to_owned();
     let vr = Proc::spawn_program(
         &dir,
         "vr",
@@ -103,6 +105,10 @@ fn vr_peer_under_a_simulated_headset_shows_its_avatar_and_grabs_with_a_squeeze()
              wait 3; release right; wait 120",
             "--duration",
             "120",
+            "--dump",
+            &vr_dump_s,
+            "--dump-hz",
+            "5",
             "--quiet",
         ],
         &[],
@@ -139,6 +145,9 @@ fn vr_peer_under_a_simulated_headset_shows_its_avatar_and_grabs_with_a_squeeze()
     let grabbed = vr.wait_line("grabbed object", Duration::from_secs(60));
     println!("{grabbed}");
     vr.wait_line("authority-gained", Duration::from_secs(5));
+    // Held for 3 s: both dumps cover the hold by the time it lets go.
+    vr.wait_line("release object", Duration::from_secs(20));
+    std::thread::sleep(Duration::from_millis(500));
     // The host sees the avatar where OpenXR put it, and the box owned by the VR peer.
     let lines = dump(&host_dump);
     let with_avatar: Vec<&Value> = lines
@@ -158,37 +167,72 @@ fn vr_peer_under_a_simulated_headset_shows_its_avatar_and_grabs_with_a_squeeze()
         "the host never showed two hands of the VR peer\n{}",
         vr.logs()
     );
-    // The first host line with the avatar after tracking started: head and left hand where
-    // OpenXR put them (the right hand may already be reaching).
-    let first = with_avatar.last().unwrap();
-    let objs = first["objects"].as_array().unwrap();
-    let mine = |kind: &str| -> Vec<[f64; 3]> {
-        objs.iter()
+    // The left controller rests (Monado's simulated controllers stand still): the host shows
+    // that hand where OpenXR put it.
+    let last = with_avatar.last().unwrap();
+    let mine = |line: &Value, kind: &str| -> Vec<[f64; 3]> {
+        line["objects"]
+            .as_array()
+            .unwrap()
+            .iter()
             .filter(|o| o["owner"].as_u64() == Some(me) && o["kind"] == kind)
             .map(pos)
             .collect()
     };
-    let heads = mine("head");
-    let hands = mine("hand");
-    assert_eq!(heads.len(), 1, "one head");
-    let dh = dist(heads[0], head);
-    let dl = hands
+    let dl = mine(last, "hand")
         .iter()
         .map(|h| dist(*h, left))
         .fold(f64::MAX, f64::min);
-    println!(
-        "host shows the VR head {:.1} mm and the left hand {:.1} mm from the tracked poses \
-         (right controller at {right:?})",
-        dh * 1e3,
-        dl * 1e3
-    );
+    // The simulated headset moves: compare the host's view of the head with the VR peer's
+    // own at the same wall-clock time (the dumps' wall_ms), over the whole run.
+    let own = dump(&vr_dump);
+    let mut errs: Vec<f64> = with_avatar
+        .iter()
+        .filter_map(|l| {
+            let w = l["wall_ms"].as_u64()?;
+            let o = own
+                .iter()
+                .min_by_key(|o| o["wall_ms"].as_u64().unwrap_or(0).abs_diff(w))?;
+            if o["wall_ms"].as_u64()?.abs_diff(w) > 150 {
+                return None;
+            }
+            let (a, b) = (mine(l, "head"), mine(o, "head"));
+            Some(dist(*a.first()?, *b.first()?))
+        })
+        .collect();
+    errs.sort_by(f64::total_cmp);
     assert!(
-        dh < 0.05,
-        "the host shows the VR head {dh} m from the headset"
+        errs.len() >= 5,
+        "too few matching dump lines: {}",
+        errs.len()
+    );
+    let median = errs[errs.len() / 2];
+    let heights: Vec<f64> = own
+        .iter()
+        .filter_map(|o| mine(o, "head").first().map(|h| h[1]))
+        .collect();
+    println!(
+        "host shows the VR left hand {:.1} mm from the controller; the VR head {:.1} mm \
+         (median over {} lines, max {:.1}) from where the VR peer has it; head height \
+         {:.2}-{:.2} m (headset first tracked at {head:?}, right controller at {right:?})",
+        dl * 1e3,
+        median * 1e3,
+        errs.len(),
+        errs.last().unwrap() * 1e3,
+        heights.iter().copied().fold(f64::MAX, f64::min),
+        heights.iter().copied().fold(f64::MIN, f64::max),
     );
     assert!(
         dl < 0.05,
         "the host shows the VR left hand {dl} m from the controller"
+    );
+    assert!(
+        median < 0.03,
+        "the host shows the VR head {median} m (median) from where the VR peer has it"
+    );
+    assert!(
+        heights.iter().all(|h| (1.0..2.2).contains(h)),
+        "the VR peer's head left standing height: {heights:?}"
     );
     let owned_box = lines.iter().any(|l| {
         l["objects"]
