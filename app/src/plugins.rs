@@ -102,6 +102,7 @@ impl Peer {
     }
 
     /// The front end is up: start pumping the network (and counting the join timeout).
+    #[cfg_attr(not(feature = "desktop"), allow(dead_code))]
     pub fn set_ready(&mut self) {
         if !self.ready {
             self.ready = true;

@@ -465,6 +465,7 @@ impl Room {
     }
 
     /// Start counting the join timeout now (when the network starts being pumped).
+    #[cfg_attr(not(feature = "desktop"), allow(dead_code))]
     pub fn start_join_clock(&mut self) {
         self.join_started = std::time::Instant::now();
     }

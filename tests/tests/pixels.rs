@@ -373,3 +373,82 @@ fn desktop_peer_renders_the_room_and_a_squeeze_changes_the_soft_box_pixels() {
         moved * 100.0
     );
 }
+
+#[test]
+fn vr_without_a_runtime_says_why_and_opens_the_desktop_peer() {
+    require_netns();
+    let dir = scratch("vr-fallback");
+    let shots = dir.join("shots");
+    let x = Xvfb::start(&dir);
+    let host = Proc::spawn(
+        &dir,
+        "host",
+        &[
+            "host",
+            "--room",
+            "fallback",
+            "--bind",
+            "127.0.0.1:0",
+            "--duration",
+            "60",
+            "--quiet",
+        ],
+    );
+    let url = signal_url(&host);
+    let shots_s = shots.to_str().unwrap().to_owned();
+    let mut peer = Proc::spawn_env(
+        &dir,
+        "vr",
+        &[
+            "join",
+            "--room",
+            "fallback",
+            "--signal",
+            &url,
+            "--vr",
+            "--window",
+            "160x120",
+            "--screenshot-dir",
+            &shots_s,
+            "--screenshots",
+            "1",
+            "--duration",
+            "6",
+            "--quiet",
+        ],
+        &[
+            ("DISPLAY", x.display.as_str()),
+            ("WGPU_BACKEND", "vulkan"),
+            (
+                "VK_ICD_FILENAMES",
+                "/usr/share/vulkan/icd.d/lvp_icd.x86_64.json",
+            ),
+            // No runtime, whatever this machine has installed.
+            ("XR_RUNTIME_JSON", "/nonexistent/openxr_runtime.json"),
+        ],
+    );
+    let code = peer.wait_exit(Duration::from_secs(60));
+    let err = std::fs::read_to_string(&peer.err).unwrap();
+    assert_eq!(code, 0, "{}", peer.logs());
+    let reason = err
+        .lines()
+        .find(|l| l.starts_with("vr: ") && !l.contains("opening the desktop"));
+    println!("{reason:?}");
+    assert!(
+        reason.is_some_and(|r| r.contains("OpenXR")),
+        "no reason given: {}",
+        peer.logs()
+    );
+    assert!(
+        err.contains("vr: opening the desktop peer instead"),
+        "{}",
+        peer.logs()
+    );
+    // The desktop peer joined and drew a frame.
+    peer.wait_line("joined host=", Duration::from_secs(1));
+    let shot = peer.wait_line("screenshot n=0", Duration::from_secs(1));
+    assert!(
+        Path::new(field(&shot, "path")).exists(),
+        "no screenshot file: {shot}"
+    );
+}
