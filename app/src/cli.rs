@@ -66,6 +66,18 @@ reach the signaling server or the room, 130 stopped by Ctrl-C/SIGTERM/SIGHUP (af
 dump and a Leave to the room).
 ";
 
+/// Options that only a desktop or VR peer takes.
+const VIEW_FLAGS: [&str; 8] = [
+    "window",
+    "focus",
+    "particles",
+    "hide-avatars",
+    "no-hud",
+    "screenshot-dir",
+    "screenshot-every",
+    "screenshots",
+];
+
 /// A usage error (exit code 2).
 #[derive(Debug, thiserror::Error)]
 #[error("{0}\n(run `softsync help` for usage)")]
@@ -387,15 +399,8 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
                 "no-avatar",
                 "desktop",
                 "vr",
-                "window",
-                "focus",
-                "particles",
-                "hide-avatars",
-                "no-hud",
-                "screenshot-dir",
-                "screenshot-every",
-                "screenshots",
             ];
+            ok.extend(VIEW_FLAGS);
             if host {
                 ok.extend(["bind", "scene"]);
             }
@@ -429,18 +434,8 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
                 (false, true) => FrontEnd::Vr,
                 (false, false) => FrontEnd::Headless,
             };
-            let view_only = [
-                "window",
-                "focus",
-                "particles",
-                "hide-avatars",
-                "no-hud",
-                "screenshot-dir",
-                "screenshot-every",
-                "screenshots",
-            ];
             if front == FrontEnd::Headless {
-                if let Some(f) = view_only.iter().find(|f| has(f)) {
+                if let Some(f) = VIEW_FLAGS.iter().find(|f| has(f)) {
                     return err(format!("--{f} needs --desktop or --vr"));
                 }
             }

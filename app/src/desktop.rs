@@ -17,7 +17,7 @@ use bevy::prelude::*;
 use bevy::window::PrimaryWindow;
 
 use crate::device::DeviceFrame;
-use crate::glue::{from_bevy, from_bevy_quat, to_bevy, to_bevy_quat};
+use crate::glue::{from_bevy, from_bevy_quat, pose_from_bevy, to_bevy, to_bevy_quat};
 use crate::plugins::Peer;
 use crate::scene::{Kind, TABLE_TOP_Y};
 
@@ -187,7 +187,7 @@ fn desktop_input(
     };
     *tf = orbit.transform();
     // Hands: the active one on the cursor's ray, the other resting below the view.
-    let head = (from_bevy(tf.translation), from_bevy_quat(tf.rotation));
+    let head = pose_from_bevy(&tf);
     let rest = |side: f32| {
         (
             from_bevy(tf.translation + tf.rotation * Vec3::new(0.2 * side, -0.3, -0.35)),

@@ -136,6 +136,19 @@ pub fn read_dump(path: &Path) -> std::io::Result<Vec<DumpLine>> {
         .collect())
 }
 
+/// The mean round-trip time over this peer's links, milliseconds (None before any probe).
+pub fn mean_rtt_ms(room: &Room) -> Option<f64> {
+    let rtts: Vec<f64> = room
+        .session
+        .stats()
+        .links
+        .values()
+        .filter_map(|l| l.rtt)
+        .map(|r| r.as_secs_f64() * 1e3)
+        .collect();
+    (!rtts.is_empty()).then(|| rtts.iter().sum::<f64>() / rtts.len() as f64)
+}
+
 /// Rates between two stats readings.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Rates {
@@ -167,17 +180,7 @@ impl StatsLine {
             None => Rates::default(),
         };
         self.last = Some((now, st.up, st.down));
-        let rtts: Vec<f64> = st
-            .links
-            .values()
-            .filter_map(|l| l.rtt)
-            .map(|r| r.as_secs_f64() * 1e3)
-            .collect();
-        let rtt = if rtts.is_empty() {
-            "-".to_owned()
-        } else {
-            format!("{:.2}ms", rtts.iter().sum::<f64>() / rtts.len() as f64)
-        };
+        let rtt = mean_rtt_ms(room).map_or("-".to_owned(), |r| format!("{r:.2}ms"));
         let line = format!(
             "stats t={:.1}s peer={} host={} term={} peers={} up={:.0}B/s down={:.0}B/s rtt={} owned={}/{}",
             now.as_secs_f64(),

@@ -427,18 +427,7 @@ fn short(id: u64) -> String {
 /// The HUD's text: room, peers, host, RTT, bytes/s, objects owned, the hands, the last events.
 pub fn hud_text(peer: &Peer) -> String {
     let room = &peer.room;
-    let st = room.session.stats();
-    let rtts: Vec<f64> = st
-        .links
-        .values()
-        .filter_map(|l| l.rtt)
-        .map(|r| r.as_secs_f64() * 1e3)
-        .collect();
-    let rtt = if rtts.is_empty() {
-        "-".to_owned()
-    } else {
-        format!("{:.0} ms", rtts.iter().sum::<f64>() / rtts.len() as f64)
-    };
+    let rtt = crate::report::mean_rtt_ms(room).map_or("-".to_owned(), |r| format!("{r:.0} ms"));
     let host = room.session.host_id();
     let mut s = format!(
         "room {} | me {}{}\nhost {} term {} | peers {}\nrtt {rtt} | up {:.0} B/s down {:.0} B/s\nowned {}/{}\n",

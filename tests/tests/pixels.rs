@@ -73,6 +73,43 @@ impl Xvfb {
     }
 }
 
+impl Xvfb {
+    /// The environment of a peer drawing on this display with Mesa's software Vulkan
+    /// (whatever other Vulkan drivers are installed), plus `extra`.
+    fn env<'a>(&'a self, extra: &[(&'a str, &'a str)]) -> Vec<(&'a str, &'a str)> {
+        let mut v = vec![
+            ("DISPLAY", self.display.as_str()),
+            ("WGPU_BACKEND", "vulkan"),
+            (
+                "VK_ICD_FILENAMES",
+                "/usr/share/vulkan/icd.d/lvp_icd.x86_64.json",
+            ),
+        ];
+        v.extend_from_slice(extra);
+        v
+    }
+}
+
+/// A host with embedded signaling on a free port, and its URL.
+fn host(dir: &Path, room: &str) -> (Proc, String) {
+    let p = Proc::spawn(
+        dir,
+        "host",
+        &[
+            "host",
+            "--room",
+            room,
+            "--bind",
+            "127.0.0.1:0",
+            "--duration",
+            "150",
+            "--quiet",
+        ],
+    );
+    let url = signal_url(&p);
+    (p, url)
+}
+
 impl Drop for Xvfb {
     fn drop(&mut self) {
         let _ = self.child.kill();
@@ -190,21 +227,7 @@ fn desktop_peer_renders_the_room_and_a_squeeze_changes_the_soft_box_pixels() {
     let dir = scratch("pixels");
     let shots = dir.join("shots");
     let x = Xvfb::start(&dir);
-    let host = Proc::spawn(
-        &dir,
-        "host",
-        &[
-            "host",
-            "--room",
-            "pixels",
-            "--bind",
-            "127.0.0.1:0",
-            "--duration",
-            "150",
-            "--quiet",
-        ],
-    );
-    let url = signal_url(&host);
+    let (_host, url) = host(&dir, "pixels");
     let shots_s = shots.to_str().unwrap().to_owned();
     let mut desktop = Proc::spawn_env(
         &dir,
@@ -232,15 +255,7 @@ fn desktop_peer_renders_the_room_and_a_squeeze_changes_the_soft_box_pixels() {
             "140",
             "--quiet",
         ],
-        &[
-            ("DISPLAY", x.display.as_str()),
-            ("WGPU_BACKEND", "vulkan"),
-            // Mesa's software Vulkan, whatever other ICDs are installed.
-            (
-                "VK_ICD_FILENAMES",
-                "/usr/share/vulkan/icd.d/lvp_icd.x86_64.json",
-            ),
-        ],
+        &x.env(&[]),
     );
     // Rendering works: a few frames at rest first (the software renderer's first frame
     // compiles every pipeline; bounded generously).
@@ -380,21 +395,7 @@ fn vr_without_a_runtime_says_why_and_opens_the_desktop_peer() {
     let dir = scratch("vr-fallback");
     let shots = dir.join("shots");
     let x = Xvfb::start(&dir);
-    let host = Proc::spawn(
-        &dir,
-        "host",
-        &[
-            "host",
-            "--room",
-            "fallback",
-            "--bind",
-            "127.0.0.1:0",
-            "--duration",
-            "60",
-            "--quiet",
-        ],
-    );
-    let url = signal_url(&host);
+    let (_host, url) = host(&dir, "fallback");
     let shots_s = shots.to_str().unwrap().to_owned();
     let mut peer = Proc::spawn_env(
         &dir,
@@ -416,16 +417,8 @@ fn vr_without_a_runtime_says_why_and_opens_the_desktop_peer() {
             "6",
             "--quiet",
         ],
-        &[
-            ("DISPLAY", x.display.as_str()),
-            ("WGPU_BACKEND", "vulkan"),
-            (
-                "VK_ICD_FILENAMES",
-                "/usr/share/vulkan/icd.d/lvp_icd.x86_64.json",
-            ),
-            // No runtime, whatever this machine has installed.
-            ("XR_RUNTIME_JSON", "/nonexistent/openxr_runtime.json"),
-        ],
+        // No runtime, whatever this machine has installed.
+        &x.env(&[("XR_RUNTIME_JSON", "/nonexistent/openxr_runtime.json")]),
     );
     let code = peer.wait_exit(Duration::from_secs(60));
     let err = std::fs::read_to_string(&peer.err).unwrap();
