@@ -83,7 +83,7 @@ pub enum Note {
 #[derive(Debug, thiserror::Error)]
 pub enum RoomError {
     /// The host refused us.
-    #[error("the host refused to let us in: {0}")]
+    #[error("the host refused us: {0}")]
     Refused(String),
     /// Connected but never welcomed.
     #[error("connected to room {room:?} but no host welcomed us within {secs} s")]

@@ -348,8 +348,8 @@ fn sync_objects(
                 let glow = match tint {
                     Tint::Plain => LinearRgba::BLACK,
                     Tint::Hovered => LinearRgba::rgb(0.25, 0.25, 0.25),
-                    Tint::Owned => LinearRgba::rgb(0.0, 0.18, 0.05),
-                    Tint::Held => LinearRgba::rgb(0.05, 0.45, 0.12),
+                    Tint::Owned => LinearRgba::rgb(0.0, 0.07, 0.02),
+                    Tint::Held => LinearRgba::rgb(0.04, 0.35, 0.10),
                 };
                 m.emissive = glow;
                 m.base_color = view.base;

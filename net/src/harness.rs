@@ -108,6 +108,14 @@ impl Harness {
         }
     }
 
+    /// Freeze peer `i` (its frame loop stalls: it neither sends nor processes anything, and
+    /// what others send it waits in its transport), or thaw it with `false`.
+    pub fn freeze(&mut self, i: usize, frozen: bool) {
+        if let Some(p) = self.peers.get_mut(i) {
+            p.alive = !frozen;
+        }
+    }
+
     /// Cut or restore the link between peers `a` and `b`.
     pub fn partition(&mut self, a: usize, b: usize, cut: bool) {
         self.hub.set_partition(Harness::id(a), Harness::id(b), cut);

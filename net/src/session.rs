@@ -363,6 +363,10 @@ pub struct Session {
     pending_new_hosts: BTreeMap<PeerId, PendingNewHost>,
     /// Peers that said `Leave`: their datagrams still in flight are ignored (bounded).
     departed: BTreeSet<PeerId>,
+    /// Host: members it timed out, with when it last told them so. A member whose loop
+    /// stalled past the peer timeout does not know it is out; when it talks again it is told
+    /// (a refusal), rather than carrying on alone and electing itself host of a room of one.
+    dropped: BTreeMap<PeerId, Option<Instant>>,
 }
 
 impl Session {
@@ -393,6 +397,7 @@ impl Session {
             lost_ids: None,
             pending_new_hosts: BTreeMap::new(),
             departed: BTreeSet::new(),
+            dropped: BTreeMap::new(),
         }
     }
 
@@ -1145,6 +1150,10 @@ impl Session {
                     .filter(|p| *p != self.local && !self.alive(*p, now))
                     .collect();
                 for p in gone {
+                    if self.dropped.len() >= MAX_DEPARTED {
+                        self.dropped.clear();
+                    }
+                    self.dropped.insert(p, None);
                     self.host_peer_left(now, p);
                 }
             }
@@ -1601,6 +1610,24 @@ impl Session {
         if self.departed.contains(&from) {
             return;
         }
+        if self.role == Role::Host {
+            if let Some(told) = self.dropped.get_mut(&from) {
+                // At most once per heartbeat interval, whatever it sends.
+                if told.is_none_or(|t| now.saturating_since(t) >= self.cfg.heartbeat_interval) {
+                    *told = Some(now);
+                    let reason = format!(
+                        "dropped from the room: silent for longer than the peer timeout \
+                         ({} ms); join again",
+                        self.cfg.peer_timeout.as_millis()
+                    );
+                    self.raw_out.push_back(Transmit {
+                        to: from,
+                        payload: encode_refusal(&reason),
+                    });
+                }
+                return;
+            }
+        }
         // State is kept for members and at most MAX_STRANGERS others (joiners, peers we have
         // not heard of yet): a flood of datagrams from made-up ids costs no memory.
         let known = self.links.contains_key(&from)
@@ -1617,7 +1644,8 @@ impl Session {
             }
         }
         if let Some((_, reason)) = decode_refusal(bytes) {
-            if self.role == Role::Joining && Some(from) == self.host {
+            // A joiner refused, or a member the host dropped (it stalled past the timeout).
+            if matches!(self.role, Role::Joining | Role::Client) && Some(from) == self.host {
                 self.role = Role::Refused;
                 self.events.push_back(Event::Refused { reason });
             }

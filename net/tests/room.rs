@@ -1316,3 +1316,47 @@ fn leaving_peers_are_handled_at_once() {
     }
     assert_single_owner_everywhere(&h, &ids);
 }
+
+/// A member whose loop stalls past the peer timeout is dropped by the host; when it wakes it
+/// is told so (a refusal) and does not elect itself host of a room of one (found live: a peer
+/// whose first frames on a software renderer froze its loop for over a second).
+#[test]
+fn a_member_that_stalls_past_the_timeout_is_told_it_was_dropped() {
+    let mut h = room(3, ConditionerConfig::default());
+    let ids = spawn_some(&mut h);
+    h.advance(ms(500));
+    h.freeze(2, true);
+    h.advance(ms(2500));
+    assert!(
+        !h.peers[0].session.members().contains_key(&Harness::id(2)),
+        "the host still lists the stalled peer"
+    );
+    h.freeze(2, false);
+    h.advance(ms(1500));
+    let refused = h.peers[2].events.iter().find_map(|e| match e {
+        Event::Refused { reason } => Some(reason.clone()),
+        _ => None,
+    });
+    assert!(
+        refused.as_deref().is_some_and(|r| r.contains("dropped")),
+        "the stalled peer was not told: {:?}",
+        h.peers[2].events
+    );
+    assert!(
+        !h.peers[2].session.is_host(),
+        "the stalled peer made itself host"
+    );
+    assert!(
+        !h.peers[2]
+            .events
+            .iter()
+            .any(|e| matches!(e, Event::HostChanged { .. })),
+        "the stalled peer saw a host change"
+    );
+    assert_eq!(h.host_index(), Some(0));
+    for i in 0..2 {
+        let s = &h.peers[i].session;
+        assert_eq!(s.members().len(), 2, "peer {i}: {:?}", s.members());
+        assert_eq!(s.owner(ids[0]), Some(Harness::id(0)), "peer {i}");
+    }
+}
