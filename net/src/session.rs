@@ -363,10 +363,28 @@ pub struct Session {
     pending_new_hosts: BTreeMap<PeerId, PendingNewHost>,
     /// Peers that said `Leave`: their datagrams still in flight are ignored (bounded).
     departed: BTreeSet<PeerId>,
-    /// Host: members it timed out, with when it last told them so. A member whose loop
-    /// stalled past the peer timeout does not know it is out; when it talks again it is told
-    /// (a refusal), rather than carrying on alone and electing itself host of a room of one.
-    dropped: BTreeMap<PeerId, Option<Instant>>,
+    /// Host: peers out of the room that may not know it, with why and when it last told them
+    /// so: members it timed out, and peers still speaking for an older term (a host or member
+    /// that stalled while the room elected this host). A peer whose loop stalled past the peer
+    /// timeout does not know it is out; when it talks again it is told (a refusal), rather
+    /// than carrying on alone as the host of a room of one, owning objects others now own.
+    dropped: BTreeMap<PeerId, Dropped>,
+}
+
+/// Why a peer is out of the room ([`Session::dropped`]).
+#[derive(Clone, Copy, Debug)]
+enum DropWhy {
+    /// This host timed it out.
+    TimedOut,
+    /// It spoke for this older term: the room elected a host while it was silent.
+    OlderTerm(Term),
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Dropped {
+    why: DropWhy,
+    /// When it was last told (at most once per heartbeat interval).
+    told: Option<Instant>,
 }
 
 impl Session {
@@ -1130,6 +1148,34 @@ impl Session {
         }
     }
 
+    /// Host: sends a dropped peer its refusal, at most once per heartbeat interval.
+    fn tell_dropped(&mut self, now: Instant, to: PeerId) {
+        let heartbeat = self.cfg.heartbeat_interval;
+        let Some(d) = self.dropped.get_mut(&to) else {
+            return;
+        };
+        if d.told.is_some_and(|t| now.saturating_since(t) < heartbeat) {
+            return;
+        }
+        d.told = Some(now);
+        let reason = match d.why {
+            DropWhy::TimedOut => format!(
+                "dropped from the room: silent for longer than the peer timeout ({} ms); \
+                 join again",
+                self.cfg.peer_timeout.as_millis()
+            ),
+            DropWhy::OlderTerm(old) => format!(
+                "the room moved on: peer {} became host in term {} while this peer was out of \
+                 touch (it still spoke for term {}); join again",
+                self.local.0, self.term.0, old.0
+            ),
+        };
+        self.raw_out.push_back(Transmit {
+            to,
+            payload: encode_refusal(&reason, self.term),
+        });
+    }
+
     fn alive(&self, p: PeerId, now: Instant) -> bool {
         if p == self.local {
             return true;
@@ -1153,7 +1199,13 @@ impl Session {
                     if self.dropped.len() >= MAX_DEPARTED {
                         self.dropped.clear();
                     }
-                    self.dropped.insert(p, None);
+                    self.dropped.insert(
+                        p,
+                        Dropped {
+                            why: DropWhy::TimedOut,
+                            told: None,
+                        },
+                    );
                     self.host_peer_left(now, p);
                 }
             }
@@ -1610,23 +1662,9 @@ impl Session {
         if self.departed.contains(&from) {
             return;
         }
-        if self.role == Role::Host {
-            if let Some(told) = self.dropped.get_mut(&from) {
-                // At most once per heartbeat interval, whatever it sends.
-                if told.is_none_or(|t| now.saturating_since(t) >= self.cfg.heartbeat_interval) {
-                    *told = Some(now);
-                    let reason = format!(
-                        "dropped from the room: silent for longer than the peer timeout \
-                         ({} ms); join again",
-                        self.cfg.peer_timeout.as_millis()
-                    );
-                    self.raw_out.push_back(Transmit {
-                        to: from,
-                        payload: encode_refusal(&reason),
-                    });
-                }
-                return;
-            }
+        if self.role == Role::Host && self.dropped.contains_key(&from) {
+            self.tell_dropped(now, from);
+            return;
         }
         // State is kept for members and at most MAX_STRANGERS others (joiners, peers we have
         // not heard of yet): a flood of datagrams from made-up ids costs no memory.
@@ -1643,11 +1681,19 @@ impl Session {
                 return;
             }
         }
-        if let Some((_, reason)) = decode_refusal(bytes) {
+        if let Some(refusal) = decode_refusal(bytes) {
             // A joiner refused, or a member the host dropped (it stalled past the timeout).
-            if matches!(self.role, Role::Joining | Role::Client) && Some(from) == self.host {
+            let from_our_host =
+                matches!(self.role, Role::Joining | Role::Client) && Some(from) == self.host;
+            // Or the host of a newer term: the room elected it while this peer was silent
+            // (a host or member that stalled past the peer timeout, or was cut off that long).
+            let newer = matches!(self.role, Role::Host | Role::Client)
+                && refusal.term.is_some_and(|t| t > self.term);
+            if from_our_host || newer {
                 self.role = Role::Refused;
-                self.events.push_back(Event::Refused { reason });
+                self.events.push_back(Event::Refused {
+                    reason: refusal.reason,
+                });
             }
             return;
         }
@@ -1661,7 +1707,7 @@ impl Session {
                     );
                     self.raw_out.push_back(Transmit {
                         to: from,
-                        payload: encode_refusal(&reason),
+                        payload: encode_refusal(&reason, self.term),
                     });
                 }
                 return;
@@ -1672,6 +1718,23 @@ impl Session {
             }
         };
         let is_member = self.members.contains_key(&from) || Some(from) == self.host;
+        // A non-member speaking for an older term of this room: it was out of touch while the
+        // room elected this host (a stalled old host, or a member the election left out as
+        // dead). Its objects have new owners; it is told, and ignored until it joins again.
+        if !is_member && self.role == Role::Host && header.term.0 != 0 && header.term < self.term {
+            if self.dropped.len() >= MAX_DEPARTED {
+                self.dropped.clear();
+            }
+            self.dropped.insert(
+                from,
+                Dropped {
+                    why: DropWhy::OlderTerm(header.term),
+                    told: None,
+                },
+            );
+            self.tell_dropped(now, from);
+            return;
+        }
         // term 0: a joiner's datagrams before it learned the term
         if is_member && header.term < self.term && header.term.0 != 0 {
             self.stats.dropped_old_term += 1;

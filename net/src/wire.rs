@@ -804,17 +804,35 @@ pub fn reliable_len(bytes: &[u8]) -> usize {
     3 + crate::bits::varint_len(bytes.len() as u64) + bytes.len()
 }
 
-/// The version-independent refusal datagram: `[0, our_version, len, reason…]`.
-pub fn encode_refusal(reason: &str) -> Vec<u8> {
+/// A parsed refusal datagram ([`encode_refusal`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Refusal {
+    /// The sender's protocol version.
+    pub version: u8,
+    /// Why, for people.
+    pub reason: String,
+    /// The sender's room term; `None` from a sender that did not say (older encoders).
+    pub term: Option<Term>,
+}
+
+/// The version-independent refusal datagram: `[0, our_version, len, reason…, term varint]`.
+/// The trailing term lets a peer of an older term (a host that stalled while the room elected
+/// another) tell that the room moved on; decoders that stop after the reason still work.
+pub fn encode_refusal(reason: &str, term: Term) -> Vec<u8> {
     let r = reason.as_bytes();
-    let n = r.len().min(200);
+    // Cut at a character boundary, so the reason stays valid UTF-8.
+    let mut n = r.len().min(200);
+    while !reason.is_char_boundary(n) {
+        n -= 1;
+    }
     let mut out = vec![REFUSAL_MARKER, PROTOCOL_VERSION, n as u8];
     out.extend_from_slice(r.get(..n).unwrap_or_default());
+    write_varint(&mut out, u64::from(term.0));
     out
 }
 
-/// Parse a refusal datagram.
-pub fn decode_refusal(bytes: &[u8]) -> Option<(u8, String)> {
+/// Parse a refusal datagram; `None` if it is not one or is cut short.
+pub fn decode_refusal(bytes: &[u8]) -> Option<Refusal> {
     let mut r = ByteReader::new(bytes);
     if r.u8().ok()? != REFUSAL_MARKER {
         return None;
@@ -822,7 +840,12 @@ pub fn decode_refusal(bytes: &[u8]) -> Option<(u8, String)> {
     let version = r.u8().ok()?;
     let n = r.u8().ok()? as usize;
     let text = r.take(n).ok()?;
-    Some((version, String::from_utf8_lossy(text).into_owned()))
+    let term = r.varint_u32().ok().map(Term);
+    Some(Refusal {
+        version,
+        reason: String::from_utf8_lossy(text).into_owned(),
+        term,
+    })
 }
 
 #[cfg(test)]
@@ -863,5 +886,30 @@ mod tests {
                 StateEntry::decode_body(NetId(7), &layout, &mut BitReader::new(&bytes)).unwrap();
             assert_eq!(d, e);
         }
+    }
+
+    #[test]
+    fn refusal_round_trip_keeps_the_term_and_cuts_long_reasons_at_a_char_boundary() {
+        let r = decode_refusal(&encode_refusal("room full", Term(300))).unwrap();
+        assert_eq!(
+            r,
+            Refusal {
+                version: PROTOCOL_VERSION,
+                reason: "room full".into(),
+                term: Some(Term(300)),
+            }
+        );
+        // 199 ASCII bytes then a 2-byte character: the cut falls inside it
+        let long = format!("{}é and more", "x".repeat(199));
+        let r = decode_refusal(&encode_refusal(&long, Term(1))).unwrap();
+        assert_eq!(r.reason, "x".repeat(199));
+        assert_eq!(r.term, Some(Term(1)));
+        // the older layout without a term, and datagrams cut short
+        let old = [REFUSAL_MARKER, 1, 2, b'n', b'o'];
+        let r = decode_refusal(&old).unwrap();
+        assert_eq!((r.reason.as_str(), r.term), ("no", None));
+        assert_eq!(decode_refusal(&old[..4]), None);
+        assert_eq!(decode_refusal(&[1, 2, 3]), None);
+        assert_eq!(decode_refusal(&[]), None);
     }
 }

@@ -367,8 +367,11 @@ fn render() -> String {
     writeln!(w).unwrap();
 
     writeln!(w, "## Refusal datagram (version-independent)\n").unwrap();
-    let r = encode_refusal("protocol version mismatch: host speaks 1, you speak 2");
-    writeln!(w, "`[0, host version, reason length ≤ 200, UTF-8 reason]`, sent by a host to a peer whose datagrams carry another version byte, e.g. `{}`.\n", hex(&r[..12])).unwrap();
+    let r = encode_refusal(
+        "protocol version mismatch: host speaks 1, you speak 2",
+        Term(1),
+    );
+    writeln!(w, "`[0, host version, reason length ≤ 200, UTF-8 reason, varint term]`, sent by a host to a peer it will not take: one whose datagrams carry another version byte, a member it timed out, or a peer still speaking for an older term (the term then tells that peer the room elected a newer host while it was out of touch; a refusal of a newer term than the receiver's stops a stalled host). Decoders read the term only if present. E.g. `{}` … `{}`.\n", hex(&r[..12]), hex(&r[r.len() - 1..])).unwrap();
 
     writeln!(w, "## A real exchange\n").unwrap();
     writeln!(w, "Host 100 and client 101, no loss; the client spawns an avatar hand and moves it 5 cm (every datagram produced by `Session`):\n").unwrap();

@@ -1321,6 +1321,66 @@ fn leaving_peers_are_handled_at_once() {
 /// is told so (a refusal) and does not elect itself host of a room of one (found live: a peer
 /// whose first frames on a software renderer froze its loop for over a second).
 #[test]
+fn a_host_that_stalls_past_the_timeout_is_told_the_room_moved_on() {
+    let mut h = room(3, ConditionerConfig::default());
+    let ids = spawn_some(&mut h);
+    h.advance(ms(500));
+    h.freeze(0, true);
+    h.advance(ms(3000));
+    assert_eq!(
+        h.host_index(),
+        Some(1),
+        "no new host while the old one stalled"
+    );
+    for id in &ids {
+        assert_eq!(h.peers[1].session.owner(*id), Some(Harness::id(1)));
+    }
+    // it carries on where it stopped: still host, still owning everything, and it talks
+    h.freeze(0, false);
+    h.advance(ms(1500));
+    let refused = h.peers[0].events.iter().find_map(|e| match e {
+        Event::Refused { reason } => Some(reason.clone()),
+        _ => None,
+    });
+    assert!(
+        refused.as_deref().is_some_and(|r| r.contains("moved on")),
+        "the stalled host was not told: {:?}",
+        h.peers[0].events
+    );
+    assert!(
+        !h.peers[0].session.is_host(),
+        "the stalled host still believes it is host"
+    );
+    // the room it left is whole: one host, two members, every object owned once
+    assert_eq!(h.host_index(), Some(1));
+    for i in 1..3 {
+        let s = &h.peers[i].session;
+        assert_eq!(s.members().len(), 2, "peer {i}: {:?}", s.members());
+        assert!(!s.members().contains_key(&Harness::id(0)), "peer {i}");
+        assert!(
+            !h.peers[i].events.iter().any(|e| matches!(
+                e,
+                Event::HostChanged { host, .. } if *host == Harness::id(0)
+            )),
+            "peer {i} followed the stalled host back"
+        );
+        for id in &ids {
+            assert_eq!(s.owner(*id), Some(Harness::id(1)), "peer {i}, {id:?}");
+        }
+    }
+    // and it stays out: quiet from then on, the room unchanged
+    let sent = h.peers[0].session.stats().up.bytes;
+    h.advance(ms(2000));
+    assert!(!h.peers[0].session.is_host());
+    assert_eq!(h.host_index(), Some(1));
+    assert_eq!(
+        h.peers[0].session.stats().up.bytes,
+        sent,
+        "the refused old host kept sending"
+    );
+}
+
+#[test]
 fn a_member_that_stalls_past_the_timeout_is_told_it_was_dropped() {
     let mut h = room(3, ConditionerConfig::default());
     let ids = spawn_some(&mut h);

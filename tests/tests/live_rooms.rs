@@ -682,3 +682,89 @@ fn h_sigterm_is_a_clean_leave() {
         "the host took {took:?} (timeout 1 s)"
     );
 }
+
+/// A host whose process stalls (SIGSTOP) past the peer timeout is replaced; when it runs
+/// again (SIGCONT) it still believes it is host and owns everything. The new host tells it
+/// the room moved on, and it stops with that message instead of carrying on as a second host.
+#[test]
+fn i_a_stalled_host_is_told_the_room_moved_on() {
+    require_netns();
+    let dir = scratch("stall");
+    let (_signal, url) = standalone_signal(&dir);
+    let mut host = Proc::spawn(
+        &dir,
+        "host",
+        &[
+            "host",
+            "--room",
+            "stall",
+            "--signal",
+            &url,
+            "--duration",
+            "40",
+        ],
+    );
+    let host_id = host.peer_id();
+    let mut bot = Proc::spawn(
+        &dir,
+        "bot",
+        &[
+            "join",
+            "--room",
+            "stall",
+            "--signal",
+            &url,
+            "--duration",
+            "40",
+            "--bot",
+            "wave",
+        ],
+    );
+    let bot_id = bot.peer_id();
+    bot.wait_line("joined", Duration::from_secs(20));
+    host.wait_line(&format!("peer-joined {bot_id}"), Duration::from_secs(15));
+    std::thread::sleep(Duration::from_millis(500));
+    let signal = |sig: &str, p: &Proc| {
+        let status = Command::new("kill")
+            .args([sig, &p.child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(status.success(), "kill {sig}");
+    };
+    signal("-STOP", &host);
+    let line = bot.wait_line(
+        &format!("host-changed host={bot_id}"),
+        Duration::from_secs(10),
+    );
+    println!("host {host_id} stopped; the bot took over: {line}");
+    std::thread::sleep(Duration::from_millis(1000));
+    signal("-CONT", &host);
+    let resumed = Instant::now();
+    let code = host.wait_exit(Duration::from_secs(10));
+    let took = resumed.elapsed();
+    let logs = host.logs();
+    assert_eq!(code, 3, "{logs}");
+    assert!(logs.contains("the room moved on"), "{logs}");
+    assert!(
+        logs.contains(&format!("peer {bot_id} became host")),
+        "{logs}"
+    );
+    let said = logs
+        .lines()
+        .find(|l| l.contains("moved on"))
+        .unwrap_or_default();
+    println!("the old host stopped {took:?} after it resumed: {said}");
+    // The room carries on under the bot, alone now.
+    std::thread::sleep(Duration::from_millis(1500));
+    assert!(
+        bot.child.try_wait().unwrap().is_none(),
+        "the bot stopped: {}",
+        bot.logs()
+    );
+    assert!(
+        !bot.stdout()
+            .contains(&format!("host-changed host={host_id}")),
+        "{}",
+        bot.logs()
+    );
+}
