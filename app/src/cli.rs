@@ -39,6 +39,9 @@ PEER OPTIONS:
   --assets DIR          where bunny.obj is (default: ./assets, or next to the binary)
   --ice URL             an ICE server (stun:/turn:), repeatable; default none (LAN/loopback)
   --connect-timeout S   give up joining after S seconds (default 15)
+  --rejoin-limit N      a peer the room went on without (it stalled or was cut off for longer
+                        than the 1 s peer timeout; a stalled host is replaced) joins the room
+                        again, at most N times (default 3); 0: exit with code 3 instead
   --quiet               no stats lines
   --no-avatar           spawn no avatar (to measure one object's traffic)
 
@@ -154,6 +157,8 @@ pub struct PeerArgs {
     pub ice: Vec<String>,
     /// Join timeout.
     pub connect_timeout: Duration,
+    /// How many times to join again after the room went on without us.
+    pub rejoin_limit: u32,
     /// No stats lines.
     pub quiet: bool,
     /// Spawn no avatar.
@@ -395,6 +400,7 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
                 "assets",
                 "ice",
                 "connect-timeout",
+                "rejoin-limit",
                 "quiet",
                 "no-avatar",
                 "desktop",
@@ -519,6 +525,13 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
                 connect_timeout: match get("connect-timeout") {
                     Some(s) => Duration::from_secs_f64(positive("--connect-timeout", &s, 3600.0)?),
                     None => Duration::from_secs(15),
+                },
+                rejoin_limit: match get("rejoin-limit") {
+                    Some(s) => match s.parse::<u32>() {
+                        Ok(n) if n <= 1000 => n,
+                        _ => return err(format!("--rejoin-limit: {s:?} must be 0-1000")),
+                    },
+                    None => 3,
                 },
                 quiet: has("quiet"),
                 no_avatar: has("no-avatar"),

@@ -361,6 +361,7 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     let mut room =
         Room::new(contact, session, transport, scene, hand, dt).map_err(Failure::usage)?;
     room.no_avatar = a.no_avatar;
+    room.rejoin_limit = a.rejoin_limit;
     if a.host {
         room.open().map_err(Failure::runtime)?;
     }

@@ -159,6 +159,9 @@ fn net_in(mut peer: NonSendMut<Peer>, mut exit: MessageWriter<AppExit>) {
             Note::AuthorityGained(id) => format!("authority-gained object={}", id.0),
             Note::AuthorityDenied(id) => format!("authority-denied object={}", id.0),
             Note::AuthorityReleased(id) => format!("authority-released object={}", id.0),
+            Note::Rejoining { host, reason } => {
+                format!("rejoining host={} reason={reason:?}", host.0)
+            }
         };
         let t = p.room.now().as_secs_f64();
         println!("event peer={} t={t:.2} {line}", p.room.me().0);

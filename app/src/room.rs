@@ -77,6 +77,14 @@ pub enum Note {
     AuthorityDenied(NetId),
     /// We gave an object back.
     AuthorityReleased(NetId),
+    /// The room went on without us (we were out of touch past the peer timeout): we dropped
+    /// our replica and join `host` again.
+    Rejoining {
+        /// The room's host.
+        host: PeerId,
+        /// What it said.
+        reason: String,
+    },
 }
 
 /// Why the peer must stop.
@@ -85,6 +93,16 @@ pub enum RoomError {
     /// The host refused us.
     #[error("the host refused us: {0}")]
     Refused(String),
+    /// The room went on without us, and we may not join again.
+    #[error(
+        "the room went on without us: {reason} (joined again {rejoins} times; --rejoin-limit)"
+    )]
+    Dropped {
+        /// What the host said.
+        reason: String,
+        /// Times we joined again already.
+        rejoins: u64,
+    },
     /// Connected but never welcomed.
     #[error("connected to room {room:?} but no host welcomed us within {secs} s")]
     NotWelcomed {
@@ -109,6 +127,8 @@ pub struct Counters {
     pub host_changes: u64,
     /// States that could not be applied (wrong particle count, non-finite).
     pub apply_errors: u64,
+    /// Times we joined the room again after it went on without us.
+    pub rejoins: u64,
 }
 
 /// One peer.
@@ -153,6 +173,8 @@ pub struct Room {
     pub steps: u64,
     /// Spawn no avatar (measurements of one object's traffic).
     pub no_avatar: bool,
+    /// How many times to join again after the room went on without us (0: stop instead).
+    pub rejoin_limit: u32,
     /// The session time of the last fixed step: the time our published states stand for.
     pub last_step_at: Instant,
 }
@@ -217,6 +239,7 @@ impl Room {
             sim_time: 0.0,
             steps: 0,
             no_avatar: false,
+            rejoin_limit: 3,
             last_step_at: Instant::ZERO,
         })
     }
@@ -456,6 +479,32 @@ impl Room {
         self.contact = Some((next, std::time::Instant::now()));
     }
 
+    /// The room went on without us: its objects have other owners, and our replica is stale.
+    /// Let go of everything, drop every networked object from the local world (the static
+    /// scene stays) and join `host` again with a fresh session; the room's snapshot then
+    /// rebuilds the objects, and `Joined` respawns our avatar.
+    fn rejoin(&mut self, host: PeerId, reason: String) {
+        let now = self.now();
+        self.counters.rejoins += 1;
+        self.hands.release_all();
+        let ids: Vec<NetId> = self.objects.keys().copied().collect();
+        for id in ids {
+            self.remove(id);
+        }
+        self.avatar = [None; 3];
+        self.avatar_requests = [None; 3];
+        self.waiting_grant.clear();
+        self.joined = false;
+        let cfg = self.session.config().clone();
+        self.session = Session::join(self.me(), host, cfg, now);
+        if !self.contacts.contains(&host) {
+            self.contacts.push(host);
+        }
+        self.contact = Some((host, std::time::Instant::now()));
+        self.join_started = std::time::Instant::now();
+        self.notes.push(Note::Rejoining { host, reason });
+    }
+
     /// Network out.
     pub fn flush(&mut self) {
         let now = self.now();
@@ -490,6 +539,15 @@ impl Room {
                 self.spawn_avatar();
             }
             Event::Refused { reason } => return Err(RoomError::Refused(reason)),
+            Event::Dropped { host, reason } => {
+                if self.counters.rejoins >= u64::from(self.rejoin_limit) {
+                    return Err(RoomError::Dropped {
+                        reason,
+                        rejoins: self.counters.rejoins,
+                    });
+                }
+                self.rejoin(host, reason);
+            }
             Event::PeerJoined(p) => self.notes.push(Note::PeerJoined(p)),
             Event::PeerLeft(p) => {
                 self.notes.push(Note::PeerLeft(p));

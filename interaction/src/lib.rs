@@ -524,6 +524,23 @@ impl Interaction {
         }
     }
 
+    /// Forgets every hold and every wait for authority, with no throw and no event, and the
+    /// objects watched until they rest: for when the objects are about to go (the peer
+    /// leaves the room and joins it again). The hands stay, and so does a physical controller;
+    /// a grip still held down grabs again only after it is let go and pressed anew.
+    pub fn release_all(&mut self) {
+        for h in &mut self.hands {
+            if matches!(
+                h.state,
+                HandState::Waiting { .. } | HandState::Holding { .. }
+            ) {
+                h.state = HandState::Free;
+            }
+            h.hovered.clear();
+        }
+        self.resting.clear();
+    }
+
     /// One fixed step of interaction, before the soft bodies and the world are stepped with
     /// the same `dt_s`: hover, grip edges, holds, throws, the physical controller, rest watch.
     pub fn update(

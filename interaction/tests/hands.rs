@@ -730,3 +730,55 @@ fn two_hands_on_one_object_release_one_at_a_time() {
     }
     assert!(rested);
 }
+
+#[test]
+fn release_all_forgets_holds_and_waits_without_a_throw() {
+    let mut r = Rig::new(HandConfig::default());
+    r.world.gravity = Vec3::ZERO;
+    let other = r.hands.add_hand(HandConfig::default()).unwrap();
+    let b = r.boxed(Vec3::ZERO, 0.03, 100.0);
+    let far = r.boxed(Vec3::X * 2.0, 0.03, 100.0);
+    r.world.step();
+    // hand A holds its box (moving it), hand B waits for authority over the far one
+    for i in 0..5 {
+        r.step(Vec3::Y * 0.02 * i as f32, 1.0, &AllLocal);
+    }
+    assert_eq!(r.hands.held(r.hand), Some(Target::Rigid(b)));
+    let wait = HandInput {
+        sample: HandSample {
+            position_m: Vec3::X * 2.0,
+            rotation: Quat::IDENTITY,
+            time_s: r.t,
+        },
+        grip: 1.0,
+        trigger: 0.0,
+    };
+    r.hands.set_input(other, wait).unwrap();
+    r.hands.update(&mut r.world, &mut r.soft, &NotMine, DT);
+    assert!(r.hands.is_waiting(other));
+    r.events();
+    r.hands.release_all();
+    assert_eq!(r.hands.held(r.hand), None);
+    assert!(!r.hands.is_waiting(other));
+    assert!(r.hands.hovered(r.hand).is_empty());
+    // A grant that comes late finds nobody waiting; the grip still down grabs nothing.
+    r.hands.grant(ObjectRef::Rigid(far));
+    let at = r.x(b);
+    for _ in 0..10 {
+        r.step(Vec3::Y * 0.5, 1.0, &AllLocal);
+    }
+    assert_eq!(r.hands.held(r.hand), None);
+    assert!(!r.hands.is_waiting(other));
+    assert!(
+        r.events().iter().all(|e| !matches!(
+            e,
+            InteractionEvent::Released { .. } | InteractionEvent::Grabbed { .. }
+        )),
+        "release_all threw or grabbed"
+    );
+    assert!(r.x(b).distance(at) < 0.05, "the box was carried on");
+    // Let go and grip again: a fresh grab works.
+    r.step(Vec3::ZERO + at, 0.0, &AllLocal);
+    r.step(Vec3::ZERO + at, 1.0, &AllLocal);
+    assert_eq!(r.hands.held(r.hand), Some(Target::Rigid(b)));
+}

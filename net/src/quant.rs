@@ -146,11 +146,19 @@ pub fn read_delta(
 pub struct QuatQ {
     /// Index of the dropped (largest) component.
     pub largest: u8,
-    /// The other three components on a `bits`-bit grid over [-1/√2, 1/√2].
+    /// The other three components on a `bits`-bit grid over [-1/√2, 1/√2]: values
+    /// 0..=2^bits − 2, an odd number of levels, so 0 (no rotation about that axis) is exact.
     pub comps: [u32; 3],
 }
 
 const INV_SQRT2: f32 = std::f32::consts::FRAC_1_SQRT_2;
+
+/// Top grid value of a component: 2^bits − 2. With 2^bits − 1 (an even number of levels) a zero
+/// component fell between two levels, and the identity came back as a 0.07° tilt (11 bits) about
+/// (−1, −1, −1): an upright object taken over from its replica started out tilted.
+fn comp_max(bits: u32) -> u32 {
+    ((1u32 << bits.min(16)).saturating_sub(2)).max(1)
+}
 
 /// Quantize a rotation with `bits` bits per component (≤ 16).
 pub fn quantize_quat(q: Quat, bits: u32) -> QuatQ {
@@ -167,7 +175,7 @@ pub fn quantize_quat(q: Quat, bits: u32) -> QuatQ {
         }
     }
     let sign = if a[largest] < 0.0 { -1.0 } else { 1.0 };
-    let max = ((1u32 << bits) - 1) as f32;
+    let max = comp_max(bits) as f32;
     let mut comps = [0u32; 3];
     let mut j = 0;
     for (i, v) in a.iter().enumerate() {
@@ -186,7 +194,7 @@ pub fn quantize_quat(q: Quat, bits: u32) -> QuatQ {
 
 /// Back to a unit quaternion (always finite).
 pub fn dequantize_quat(q: QuatQ, bits: u32) -> Quat {
-    let max = ((1u32 << bits) - 1) as f32;
+    let max = comp_max(bits) as f32;
     let mut a = [0.0f32; 4];
     let mut sum = 0.0;
     let mut j = 0;
@@ -233,6 +241,21 @@ pub fn angle_between(a: Quat, b: Quat) -> f32 {
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+
+    #[test]
+    fn identity_and_axis_rotations_survive_quantization_exactly() {
+        for bits in [4, 9, 11, 16] {
+            let d = dequantize_quat(quantize_quat(Quat::IDENTITY, bits), bits);
+            assert_eq!(d, Quat::IDENTITY, "{bits} bits");
+            // a yaw keeps x and z exactly zero: an upright object stays upright
+            let yaw = Quat::from_rotation_y(0.7);
+            let d = dequantize_quat(quantize_quat(yaw, bits), bits);
+            assert_eq!((d.x, d.z), (0.0, 0.0), "{bits} bits: {d:?}");
+            // the top value fits in `bits`
+            let q = quantize_quat(Quat::from_xyzw(0.7, 0.0, 0.0, 0.714), bits);
+            assert!(q.comps.iter().all(|c| *c < 1 << bits), "{q:?}");
+        }
+    }
 
     #[test]
     fn quat_round_trip_is_close() {

@@ -116,9 +116,21 @@ pub enum Event {
         /// Term.
         term: Term,
     },
-    /// The host refused us.
+    /// The host refused us (while joining): another protocol version or class table, or a
+    /// full room. The session is done.
     Refused {
         /// Why.
+        reason: String,
+    },
+    /// This peer was in the room, but the room went on without it: it was out of touch (its
+    /// loop stalled, or its link was cut) for longer than the peer timeout, so the host timed
+    /// it out, or, if it was the host, the others elected a new one. Its objects have other
+    /// owners now. The session is done and sends nothing more; to come back, join `host`
+    /// again with a fresh session ([`Session::join`]): it gets the room's current state.
+    Dropped {
+        /// The room's host (the peer that said so).
+        host: PeerId,
+        /// Why, for people.
         reason: String,
     },
     /// A peer joined.
@@ -369,6 +381,12 @@ pub struct Session {
     /// timeout does not know it is out; when it talks again it is told (a refusal), rather
     /// than carrying on alone as the host of a room of one, owning objects others now own.
     dropped: BTreeMap<PeerId, Dropped>,
+    /// When the application last drove the session (a datagram or a timer), to see our own
+    /// stalls: time this peer was not listening is not the others' silence.
+    last_driven: Option<Instant>,
+    /// When this peer last found it had stalled for the peer timeout or longer (the others
+    /// have timed it out, and may have elected another host meanwhile).
+    stalled_at: Option<Instant>,
 }
 
 /// Why a peer is out of the room ([`Session::dropped`]).
@@ -416,6 +434,8 @@ impl Session {
             pending_new_hosts: BTreeMap::new(),
             departed: BTreeSet::new(),
             dropped: BTreeMap::new(),
+            last_driven: None,
+            stalled_at: None,
         }
     }
 
@@ -1076,6 +1096,7 @@ impl Session {
         if self.role == Role::Refused {
             return;
         }
+        self.note_time(now);
         if now >= self.next_heartbeat {
             let peers: Vec<PeerId> = self
                 .members
@@ -1146,6 +1167,39 @@ impl Session {
             self.links.remove(&p);
             self.stats.links.remove(&p);
         }
+    }
+
+    /// Sees our own stalls (the application did not drive the session for a while: a frozen
+    /// loop, a debugger, a suspended process). Datagrams that arrived meanwhile wait in the
+    /// transport, so the silence of the others over that time says nothing: their `last_heard`
+    /// moves on by the gap, and nobody is timed out, nor a host elected, for our own pause.
+    /// A stall as long as the peer timeout is remembered: the others have timed us out.
+    fn note_time(&mut self, now: Instant) {
+        let Some(last) = self.last_driven.replace(now) else {
+            return;
+        };
+        let gap = now.saturating_since(last);
+        if gap < self.cfg.peer_timeout / 2 || self.role == Role::Joining {
+            return;
+        }
+        // Members and our host only: strangers are forgotten on their own schedule.
+        for (p, l) in self.links.iter_mut() {
+            if !self.members.contains_key(p) && Some(*p) != self.host {
+                continue;
+            }
+            if let Some(h) = l.last_heard.as_mut() {
+                *h = (*h + gap).min(now);
+            }
+        }
+        if gap >= self.cfg.peer_timeout {
+            self.stalled_at = Some(now);
+        }
+    }
+
+    /// Whether we stalled past the peer timeout lately (see [`Session::note_time`]).
+    fn stalled_recently(&self, now: Instant) -> bool {
+        self.stalled_at
+            .is_some_and(|t| now.saturating_since(t) < self.cfg.peer_timeout * 5)
     }
 
     /// Host: sends a dropped peer its refusal, at most once per heartbeat interval.
@@ -1659,12 +1713,22 @@ impl Session {
 
     /// Feed a datagram received from `from`.
     pub fn handle_packet(&mut self, now: Instant, from: PeerId, bytes: &[u8]) {
+        self.note_time(now);
         if self.departed.contains(&from) {
             return;
         }
         if self.role == Role::Host && self.dropped.contains_key(&from) {
-            self.tell_dropped(now, from);
-            return;
+            // A fresh session of the dropped peer (term 0: it joins again) is heard out as any
+            // joiner, with fresh link state (its sequences start over); the rest is answered
+            // with the refusal.
+            let rejoining = decode_packet(bytes).is_ok_and(|(h, _)| h.term.0 == 0);
+            if !rejoining {
+                self.tell_dropped(now, from);
+                return;
+            }
+            self.dropped.remove(&from);
+            self.links.remove(&from);
+            self.stats.links.remove(&from);
         }
         // State is kept for members and at most MAX_STRANGERS others (joiners, peers we have
         // not heard of yet): a flood of datagrams from made-up ids costs no memory.
@@ -1687,12 +1751,23 @@ impl Session {
                 matches!(self.role, Role::Joining | Role::Client) && Some(from) == self.host;
             // Or the host of a newer term: the room elected it while this peer was silent
             // (a host or member that stalled past the peer timeout, or was cut off that long).
+            // Only after a stall of our own: a peer cut off from the room elects itself host of
+            // a newer term too, and must not depose a host that never stopped.
             let newer = matches!(self.role, Role::Host | Role::Client)
-                && refusal.term.is_some_and(|t| t > self.term);
+                && refusal.term.is_some_and(|t| t > self.term)
+                && self.stalled_recently(now);
             if from_our_host || newer {
+                let was_in = matches!(self.role, Role::Host | Role::Client);
                 self.role = Role::Refused;
-                self.events.push_back(Event::Refused {
-                    reason: refusal.reason,
+                self.events.push_back(if was_in {
+                    Event::Dropped {
+                        host: from,
+                        reason: refusal.reason,
+                    }
+                } else {
+                    Event::Refused {
+                        reason: refusal.reason,
+                    }
                 });
             }
             return;
@@ -2300,7 +2375,16 @@ impl Session {
             }
             Control::PeerJoined { peer, join_seq } if from_host => {
                 self.members.insert(peer, join_seq);
-                self.links.entry(peer).or_default();
+                // A new membership: sequences start over (a peer that joins again after it
+                // was dropped runs a fresh session), only when we last heard it is kept.
+                let last_heard = self.links.get(&peer).and_then(|l| l.last_heard);
+                self.links.insert(
+                    peer,
+                    Link {
+                        last_heard,
+                        ..Link::default()
+                    },
+                );
                 self.events.push_back(Event::PeerJoined(peer));
             }
             Control::Leave

@@ -12,7 +12,7 @@ use crate::policy::{AuthorityPolicy, ClassConfig};
 use crate::quant::{read_quat, write_quat, QuatQ};
 
 /// Version byte at offset 0 of every datagram.
-pub const PROTOCOL_VERSION: u8 = 1;
+pub const PROTOCOL_VERSION: u8 = 2;
 /// First byte of the version-independent refusal datagram.
 pub const REFUSAL_MARKER: u8 = 0;
 /// Largest reliable control message (bytes), also the bincode decode limit.

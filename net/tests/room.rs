@@ -9,7 +9,7 @@ use common::*;
 use glam::{Quat, Vec3};
 use softsync_net::harness::Harness;
 use softsync_net::wire::DenyReason;
-use softsync_net::{ConditionerConfig, Event, ObjectState, SessionConfig};
+use softsync_net::{ConditionerConfig, Event, ObjectState, Session, SessionConfig};
 
 /// Client 1 spawns a rigid body and a soft body, moves them for 2 s, stops; every peer must
 /// end within 1.5 mm of the owner's final state (rest sync: thresholds leave no lasting error).
@@ -1339,7 +1339,7 @@ fn a_host_that_stalls_past_the_timeout_is_told_the_room_moved_on() {
     h.freeze(0, false);
     h.advance(ms(1500));
     let refused = h.peers[0].events.iter().find_map(|e| match e {
-        Event::Refused { reason } => Some(reason.clone()),
+        Event::Dropped { host, reason } if *host == Harness::id(1) => Some(reason.clone()),
         _ => None,
     });
     assert!(
@@ -1378,6 +1378,9 @@ fn a_host_that_stalls_past_the_timeout_is_told_the_room_moved_on() {
         sent,
         "the refused old host kept sending"
     );
+    // It comes back as a member of the room it used to host.
+    rejoin(&mut h, 0, 1);
+    assert_room_whole_again(&h, &ids, 1);
 }
 
 #[test]
@@ -1394,7 +1397,7 @@ fn a_member_that_stalls_past_the_timeout_is_told_it_was_dropped() {
     h.freeze(2, false);
     h.advance(ms(1500));
     let refused = h.peers[2].events.iter().find_map(|e| match e {
-        Event::Refused { reason } => Some(reason.clone()),
+        Event::Dropped { host, reason } if *host == Harness::id(0) => Some(reason.clone()),
         _ => None,
     });
     assert!(
@@ -1419,4 +1422,90 @@ fn a_member_that_stalls_past_the_timeout_is_told_it_was_dropped() {
         assert_eq!(s.members().len(), 2, "peer {i}: {:?}", s.members());
         assert_eq!(s.owner(ids[0]), Some(Harness::id(0)), "peer {i}");
     }
+    // It comes back with a fresh session (same peer id): a member again, with the room's
+    // state, and the others see it join.
+    rejoin(&mut h, 2, 0);
+    assert_room_whole_again(&h, &ids, 0);
+}
+
+/// Peer `i`, dropped, joins `host` again with a fresh session (as the app does).
+fn rejoin(h: &mut Harness, i: usize, host: usize) {
+    let cfg = h.peers[host].session.config().clone();
+    let now = h.now;
+    h.peers[i].events.clear();
+    *h.session(i) = Session::join(Harness::id(i), Harness::id(host), cfg, now);
+    h.advance(ms(1500));
+    assert!(
+        h.peers[i].events.iter().any(|e| matches!(
+            e,
+            Event::Joined { host: hh, .. } if *hh == Harness::id(host)
+        )),
+        "peer {i} did not get back in: {:?}",
+        h.peers[i].events
+    );
+}
+
+/// Three members under `host`, which owns every object; every replica agrees.
+fn assert_room_whole_again(h: &Harness, ids: &[softsync_net::NetId], host: usize) {
+    assert_eq!(h.host_index(), Some(host));
+    for i in 0..3 {
+        let s = &h.peers[i].session;
+        assert_eq!(s.members().len(), 3, "peer {i}: {:?}", s.members());
+        for id in ids {
+            assert_eq!(s.owner(*id), Some(Harness::id(host)), "peer {i}, {id:?}");
+        }
+    }
+    assert_single_owner_everywhere(h, ids);
+    let host_state = h.peers[host].session.latest_state(ids[0]).unwrap();
+    for i in 0..3 {
+        let s = h.peers[i].session.latest_state(ids[0]).unwrap();
+        assert!(
+            s.pos.distance(host_state.pos) < 0.002,
+            "peer {i}: {:?} vs the host's {:?}",
+            s.pos,
+            host_state.pos
+        );
+    }
+}
+
+#[test]
+fn a_newer_term_refusal_stops_only_a_peer_that_stalled() {
+    // A peer cut off from the room elects itself host of a newer term; it must not depose
+    // a host (or drop a client) that never stopped. The same refusal after a stall of our
+    // own is believed.
+    let mut h = room(3, ConditionerConfig::default());
+    let _ids = spawn_some(&mut h);
+    h.advance(ms(500));
+    let fake = softsync_net::wire::encode_refusal("the room moved on", softsync_net::Term(9));
+    let now = h.now;
+    for i in 0..2 {
+        h.session(i).handle_packet(now, Harness::id(2), &fake);
+    }
+    h.advance(ms(500));
+    assert_eq!(h.host_index(), Some(0));
+    for i in 0..2 {
+        assert!(
+            !h.peers[i]
+                .events
+                .iter()
+                .any(|e| matches!(e, Event::Dropped { .. })),
+            "peer {i} believed it"
+        );
+    }
+    assert_eq!(h.peers[0].session.members().len(), 3);
+    // after a stall of the peer timeout, it is believed
+    h.freeze(1, true);
+    h.advance(ms(1200));
+    h.freeze(1, false);
+    let now = h.now;
+    h.session(1).handle_packet(now, Harness::id(2), &fake);
+    assert!(
+        h.peers[1]
+            .session
+            .poll_event()
+            .into_iter()
+            .chain(std::iter::from_fn(|| h.peers[1].session.poll_event()))
+            .any(|e| matches!(e, Event::Dropped { host, .. } if host == Harness::id(2))),
+        "the stalled peer did not believe it"
+    );
 }
