@@ -1179,7 +1179,9 @@ impl Session {
             return;
         };
         let gap = now.saturating_since(last);
-        if gap < self.cfg.peer_timeout / 2 || self.role == Role::Joining {
+        // A session driven only at its deadlines sees gaps of up to a heartbeat interval.
+        let pause = (self.cfg.peer_timeout / 2).max(self.cfg.heartbeat_interval * 2);
+        if gap < pause || self.role == Role::Joining {
             return;
         }
         // Members and our host only: strangers are forgotten on their own schedule.
