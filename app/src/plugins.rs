@@ -175,6 +175,8 @@ fn net_in(mut peer: NonSendMut<Peer>, mut exit: MessageWriter<AppExit>) {
 
 /// An event line with its peer ids shortened for the HUD.
 fn hud_event(line: &str) -> String {
+    // The reason of a rejoin is for the log; the HUD keeps one short line per event.
+    let line = line.split(" reason=").next().unwrap_or(line);
     line.split(' ')
         .map(|w| {
             let (k, v) = w.split_once('=').unwrap_or(("", w));
