@@ -711,6 +711,14 @@ fn wait_for_rest(path: &Path, within: Duration) -> Duration {
     }
 }
 
+/// `softsync host|join --room ROOM --signal URL --quiet EXTRA…`, named "host" or "bot".
+fn peer(dir: &Path, command: &str, url: &str, room: &str, extra: &[&str]) -> Proc {
+    let mut args = vec![command, "--room", room, "--signal", url, "--quiet"];
+    args.extend_from_slice(extra);
+    let name = if command == "host" { "host" } else { "bot" };
+    Proc::spawn(dir, name, &args)
+}
+
 fn send_signal(sig: &str, p: &Proc) {
     let status = Command::new("kill")
         .args([sig, &p.child.id().to_string()])
@@ -729,43 +737,14 @@ fn i_a_stalled_host_is_told_the_room_moved_on_and_joins_again() {
     let dir = scratch("stall");
     let (_signal, url) = standalone_signal(&dir);
     let (hd, bd) = (dir.join("host.jsonl"), dir.join("bot.jsonl"));
-    let host = Proc::spawn(
-        &dir,
-        "host",
-        &[
-            "host",
-            "--room",
-            "stall",
-            "--signal",
-            &url,
-            "--duration",
-            "40",
-            "--quiet",
-            "--dump-hz",
-            "5",
-            "--dump",
-            hd.to_str().unwrap(),
-        ],
-    );
+    let dumped = |command: &str, dump: &Path| {
+        let dump = dump.to_str().unwrap();
+        let args = ["--duration", "40", "--dump-hz", "5", "--dump", dump];
+        peer(&dir, command, &url, "stall", &args)
+    };
+    let host = dumped("host", &hd);
     let host_id = host.peer_id();
-    let bot = Proc::spawn(
-        &dir,
-        "bot",
-        &[
-            "join",
-            "--room",
-            "stall",
-            "--signal",
-            &url,
-            "--duration",
-            "40",
-            "--quiet",
-            "--dump-hz",
-            "5",
-            "--dump",
-            bd.to_str().unwrap(),
-        ],
-    );
+    let bot = dumped("join", &bd);
     let bot_id = bot.peer_id();
     bot.wait_line("joined", Duration::from_secs(20));
     host.wait_line(&format!("peer-joined {bot_id}"), Duration::from_secs(15));
@@ -826,36 +805,14 @@ fn j_a_stalled_member_with_no_rejoins_left_stops_clearly() {
     require_netns();
     let dir = scratch("stall-member");
     let (_signal, url) = standalone_signal(&dir);
-    let host = Proc::spawn(
-        &dir,
-        "host",
-        &[
-            "host",
-            "--room",
-            "drop",
-            "--signal",
-            &url,
-            "--duration",
-            "30",
-            "--quiet",
-        ],
-    );
+    let host = peer(&dir, "host", &url, "drop", &["--duration", "30"]);
     host.peer_id();
-    let mut bot = Proc::spawn(
+    let mut bot = peer(
         &dir,
-        "bot",
-        &[
-            "join",
-            "--room",
-            "drop",
-            "--signal",
-            &url,
-            "--duration",
-            "30",
-            "--quiet",
-            "--rejoin-limit",
-            "0",
-        ],
+        "join",
+        &url,
+        "drop",
+        &["--duration", "30", "--rejoin-limit", "0"],
     );
     let bot_id = bot.peer_id();
     bot.wait_line("joined", Duration::from_secs(20));
