@@ -159,6 +159,17 @@ fn net_in(mut peer: NonSendMut<Peer>, mut exit: MessageWriter<AppExit>) {
             Note::AuthorityGained(id) => format!("authority-gained object={}", id.0),
             Note::AuthorityDenied(id) => format!("authority-denied object={}", id.0),
             Note::AuthorityReleased(id) => format!("authority-released object={}", id.0),
+            Note::GrabStarted { id, hand, particle } => format!(
+                "grab-started object={} hand={}{}",
+                id.0,
+                ["left", "right"].get(hand).unwrap_or(&"?"),
+                particle.map_or(String::new(), |p| format!(" particle={p}"))
+            ),
+            Note::GrabEnded { id, hand, speed } => format!(
+                "grab-ended object={} hand={} speed={speed:.2}m/s",
+                id.0,
+                ["left", "right"].get(hand).unwrap_or(&"?")
+            ),
             Note::Rejoining { host, reason } => {
                 format!("rejoining host={} reason={reason:?}", host.0)
             }

@@ -77,6 +77,25 @@ pub enum Note {
     AuthorityDenied(NetId),
     /// We gave an object back.
     AuthorityReleased(NetId),
+    /// A hand (0 left, 1 right) started holding an object (`particle`: one particle of a soft
+    /// body rather than its center).
+    GrabStarted {
+        /// The object.
+        id: NetId,
+        /// The hand.
+        hand: usize,
+        /// The particle held, if one.
+        particle: Option<u32>,
+    },
+    /// A hand let go of an object, throwing it at `speed` m/s.
+    GrabEnded {
+        /// The object.
+        id: NetId,
+        /// The hand.
+        hand: usize,
+        /// Throw speed.
+        speed: f32,
+    },
     /// The room went on without us (we were out of touch past the peer timeout): we dropped
     /// our replica and join `host` again.
     Rejoining {
@@ -820,6 +839,25 @@ impl Room {
                         }
                         Err(_) => self.hands.deny(object),
                     }
+                }
+            }
+            InteractionEvent::Grabbed { hand, target } => {
+                if let Some(id) = self.by_ref.get(&target.object()).copied() {
+                    let particle = match target {
+                        Target::SoftParticle(_, p) => Some(p),
+                        _ => None,
+                    };
+                    self.notes.push(Note::GrabStarted { id, hand, particle });
+                }
+            }
+            InteractionEvent::Released {
+                hand,
+                target,
+                velocity_mps,
+            } => {
+                if let Some(id) = self.by_ref.get(&target.object()).copied() {
+                    let speed = velocity_mps.length();
+                    self.notes.push(Note::GrabEnded { id, hand, speed });
                 }
             }
             InteractionEvent::CameToRest { object } => {

@@ -163,6 +163,15 @@ struct Actions {
 struct HandSpace(usize);
 
 fn spawn_root(mut commands: Commands, origin: Res<StageOrigin>) {
+    // Where the tracking space sits in the room (tests map room points into it with this).
+    let (axis, angle) = origin.rot.to_axis_angle();
+    println!(
+        "xr stage origin={:.3},{:.3},{:.3} yaw={:.1}",
+        origin.pos.x,
+        origin.pos.y,
+        origin.pos.z,
+        (axis.y.signum() * angle).to_degrees()
+    );
     commands.spawn((
         XrTrackingRoot,
         Transform::from_translation(origin.pos).with_rotation(origin.rot),
@@ -297,6 +306,7 @@ fn read_device(
     views: Query<&Transform, With<XrCamera>>,
     hands: Query<(&Transform, &HandSpace, &OxrSpaceLocationFlags), With<XrSpace>>,
     mut announced: Local<bool>,
+    mut pressed: Local<[[bool; 2]; 2]>,
 ) {
     let root = Transform::from_translation(origin.pos).with_rotation(origin.rot);
     let to_room = |t: &Transform| {
@@ -323,6 +333,17 @@ fn read_device(
         for h in 0..2 {
             frame.grip[h] = float_state(&session, &a.squeeze[h]);
             frame.trigger[h] = float_state(&session, &a.trigger[h]);
+            // Button edges, for people checking their bindings (and the tests).
+            let now = [frame.grip[h] > 0.5, frame.trigger[h] > 0.5];
+            if now != pressed[h] {
+                pressed[h] = now;
+                println!(
+                    "xr input hand={} squeeze={:.2} trigger={:.2}",
+                    ["left", "right"][h],
+                    frame.grip[h],
+                    frame.trigger[h]
+                );
+            }
         }
     }
     if !*announced && frame.head.is_some() && frame.hands.iter().all(Option::is_some) {

@@ -8,13 +8,21 @@
 //! ~1.5 min the first time); `scripts/vr-sim run` starts Monado beside the peer. Needs the
 //! binary built with `--features vr` and a network namespace (scripts/netns-run).
 //!
-//! Monado's simulated controllers have no scriptable buttons, so the squeeze comes from a bot
-//! script running on the VR peer: its grip adds to the controller's squeeze action, and its
-//! motion is added to the tracked poses (the hand reaches from the controller to the box).
+//! Monado's simulated controllers have no scriptable buttons, so in the first test the squeeze
+//! comes from a bot script running on the VR peer: its grip adds to the controller's squeeze
+//! action, and its motion is added to the tracked poses (the hand reaches from the controller
+//! to the box). The second test runs Monado's remote driver instead (`P_OVERRIDE_ACTIVE_CONFIG=
+//! remote`: a headset and two Valve Index controllers whose poses and buttons come over TCP
+//! port 4242): the test itself moves the controller to the box and presses its squeeze, so the
+//! grab goes through the OpenXR action path, with no bot.
 #![allow(clippy::unwrap_used, clippy::disallowed_methods, missing_docs)]
 
+use std::io::{Read, Write};
+use std::net::TcpStream;
 use std::path::{Path, PathBuf};
-use std::time::Duration;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
@@ -242,4 +250,288 @@ fn vr_peer_under_a_simulated_headset_shows_its_avatar_and_grabs_with_a_squeeze()
             .any(|o| o["kind"] == "softbox" && o["owner"].as_u64() == Some(me))
     });
     assert!(owned_box, "the host never saw the VR peer own the soft box");
+}
+
+/// One `struct r_remote_data` of Monado's remote driver (header "mndrmt3", 376 bytes, little
+/// endian; `xrt_pose` is the quaternion x, y, z, w then the position): the headset's center
+/// pose, then per controller its grip pose and the Index inputs. Checked against the two
+/// frames the driver sends on connect (its reset state) before anything is sent.
+const REMOTE_BYTES: usize = 376;
+
+#[derive(Clone, Copy, Debug, Default)]
+struct RemoteHand {
+    pos: [f32; 3],
+    squeeze: f32,
+    trigger: f32,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct RemoteFrame {
+    head: [f32; 3],
+    hands: [RemoteHand; 2],
+}
+
+impl RemoteFrame {
+    fn encode(&self) -> Vec<u8> {
+        let mut b = vec![0u8; REMOTE_BYTES];
+        b[..8].copy_from_slice(b"mndrmt3\0");
+        let put =
+            |b: &mut Vec<u8>, at: usize, v: f32| b[at..at + 4].copy_from_slice(&v.to_le_bytes());
+        // head: views[2] (2 × 48 bytes, unused: per_view_data_valid stays false), then the center
+        put(&mut b, 104 + 12, 1.0); // orientation w
+        for (i, v) in self.head.iter().enumerate() {
+            put(&mut b, 120 + 4 * i, *v);
+        }
+        for (h, hand) in self.hands.iter().enumerate() {
+            let c = 136 + 120 * h;
+            put(&mut b, c + 12, 1.0); // orientation w
+            for (i, v) in hand.pos.iter().enumerate() {
+                put(&mut b, c + 16 + 4 * i, *v);
+            }
+            put(&mut b, c + 72, hand.trigger); // trigger_value
+            put(&mut b, c + 76, hand.squeeze); // squeeze_value
+            b[c + 104] = 1; // hand_tracking_active
+            b[c + 105] = 1; // active
+            b[c + 112] = u8::from(hand.trigger > 0.5); // trigger_click
+        }
+        b
+    }
+}
+
+fn f32_at(b: &[u8], at: usize) -> f32 {
+    f32::from_le_bytes(b[at..at + 4].try_into().unwrap())
+}
+
+/// Connects to the remote driver (bounded), checks the layout against the reset frames it
+/// sends first, then streams `frame` at 100 Hz from a thread until `stop`.
+fn drive_remote(
+    frame: Arc<Mutex<RemoteFrame>>,
+    stop: Arc<AtomicBool>,
+) -> std::thread::JoinHandle<()> {
+    let start = Instant::now();
+    let mut sock = loop {
+        match TcpStream::connect(("127.0.0.1", 4242)) {
+            Ok(s) => break s,
+            Err(e) => {
+                assert!(
+                    start.elapsed() < Duration::from_secs(90),
+                    "Monado's remote driver never listened on 4242: {e}"
+                );
+                std::thread::sleep(Duration::from_millis(100));
+            }
+        }
+    };
+    sock.set_read_timeout(Some(Duration::from_secs(10)))
+        .unwrap();
+    let mut reset = vec![0u8; 2 * REMOTE_BYTES];
+    sock.read_exact(&mut reset).unwrap();
+    let (head_y, left) = (
+        f32_at(&reset, 124),
+        [152, 156, 160].map(|o| f32_at(&reset, o)),
+    );
+    assert!(
+        (head_y - 1.6).abs() < 1e-6 && (left[0] + 0.2).abs() < 1e-6 && (left[1] - 1.3).abs() < 1e-6,
+        "Monado's remote frame layout is not the one this test writes (head y {head_y}, left \
+         {left:?}): another Monado version?"
+    );
+    std::thread::spawn(move || {
+        while !stop.load(Ordering::Relaxed) {
+            let bytes = frame.lock().unwrap().encode();
+            if sock.write_all(&bytes).is_err() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    })
+}
+
+/// Moves one hand of the shared frame linearly to `to` over `secs` (blocking).
+fn move_hand(frame: &Mutex<RemoteFrame>, h: usize, to: [f32; 3], secs: f32) {
+    let from = frame.lock().unwrap().hands[h].pos;
+    let steps = (secs * 50.0).max(1.0) as usize;
+    for k in 1..=steps {
+        let a = k as f32 / steps as f32;
+        frame.lock().unwrap().hands[h].pos = [0, 1, 2].map(|i| from[i] + (to[i] - from[i]) * a);
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[test]
+fn vr_remote_controllers_grab_and_lift_through_openxr_actions() {
+    require_netns();
+    let root = vr_root();
+    assert!(
+        root.join(".softsync-vr-sim-ready").exists(),
+        "no simulated-headset chroot at {}: run `scripts/vr-sim setup` (scripts/test does)",
+        root.display()
+    );
+    let dir = scratch("vr-remote");
+    let host_dump = dir.join("host.jsonl");
+    let host = Proc::spawn(
+        &dir,
+        "host",
+        &[
+            "host",
+            "--room",
+            "vrr",
+            "--bind",
+            "127.0.0.1:0",
+            "--duration",
+            "150",
+            "--dump",
+            host_dump.to_str().unwrap(),
+            "--dump-hz",
+            "5",
+            "--quiet",
+        ],
+    );
+    let url = signal_url(&host);
+    let vr_sim = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/vr-sim");
+    let bin = binary();
+    let root_s = root.to_str().unwrap().to_owned();
+    let vr = Proc::spawn_program(
+        &dir,
+        "vr",
+        &vr_sim,
+        &[
+            "run",
+            "--root",
+            &root_s,
+            "--",
+            bin.to_str().unwrap(),
+            "join",
+            "--vr",
+            "--room",
+            "vrr",
+            "--signal",
+            &url,
+            "--duration",
+            "120",
+            "--quiet",
+        ],
+        &[("P_OVERRIDE_ACTIVE_CONFIG", "remote")],
+    );
+    let rest = RemoteFrame {
+        head: [0.0, 1.6, 0.0],
+        hands: [
+            RemoteHand {
+                pos: [-0.2, 1.3, -0.5],
+                ..Default::default()
+            },
+            RemoteHand {
+                pos: [0.2, 1.3, -0.5],
+                ..Default::default()
+            },
+        ],
+    };
+    let frame = Arc::new(Mutex::new(rest));
+    let stop = Arc::new(AtomicBool::new(false));
+    let streamer = drive_remote(frame.clone(), stop.clone());
+    let found = vr.wait_line("vr: ", Duration::from_secs(60));
+    assert!(found.contains("Monado"), "{found}\n{}", vr.logs());
+    let origin = vr.wait_line("xr stage origin=", Duration::from_secs(60));
+    let (o, yaw) = (
+        xyz(field(&origin, "origin")),
+        field(&origin, "yaw").parse::<f64>().unwrap().to_radians(),
+    );
+    // room = origin + R_y(yaw) · stage, and back
+    let to_room = |p: [f32; 3]| {
+        let (x, z) = (p[0] as f64, p[2] as f64);
+        [
+            o[0] + x * yaw.cos() + z * yaw.sin(),
+            o[1] + p[1] as f64,
+            o[2] - x * yaw.sin() + z * yaw.cos(),
+        ]
+    };
+    let to_stage = |w: [f64; 3]| {
+        let (x, z) = (w[0] - o[0], w[2] - o[2]);
+        [
+            (x * yaw.cos() - z * yaw.sin()) as f32,
+            (w[1] - o[1]) as f32,
+            (x * yaw.sin() + z * yaw.cos()) as f32,
+        ]
+    };
+    vr.wait_line("joined host=", Duration::from_secs(90));
+    let me: u64 = field(
+        &vr.wait_line("joining room=", Duration::from_secs(5)),
+        "peer",
+    )
+    .parse()
+    .unwrap();
+    let tracked = vr.wait_line("xr tracked ", Duration::from_secs(30));
+    println!("{origin}\n{tracked}");
+    let left_room = to_room(rest.hands[0].pos);
+    let seen = dist(xyz(field(&tracked, "left")), left_room);
+    assert!(
+        seen < 0.01,
+        "OpenXR put the left controller {seen} m from where the driver has it"
+    );
+    // The soft box, where the host has it.
+    let box_at = || -> Option<([f64; 3], u64, u64)> {
+        let lines = dump(&host_dump);
+        let o = lines.last()?["objects"]
+            .as_array()?
+            .iter()
+            .find(|o| o["kind"] == "softbox")?
+            .clone();
+        Some((pos(&o), o["owner"].as_u64()?, o["id"].as_u64()?))
+    };
+    let start = Instant::now();
+    while box_at().is_none() {
+        assert!(
+            start.elapsed() < Duration::from_secs(10),
+            "no soft box in the host's dump"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let (box0, _, box_id) = box_at().unwrap();
+    // Reach: the right controller to the box (OpenXR reports it there, the hand hovers it).
+    let target = to_stage(box0);
+    move_hand(&frame, 1, target, 1.0);
+    std::thread::sleep(Duration::from_millis(300));
+    // Squeeze through the Index controller's squeeze/value.
+    frame.lock().unwrap().hands[1].squeeze = 1.0;
+    let pressed = vr.wait_line("xr input hand=right squeeze=1.00", Duration::from_secs(10));
+    vr.wait_line(
+        &format!("authority-gained object={box_id}"),
+        Duration::from_secs(10),
+    );
+    let grabbed = vr.wait_line(
+        &format!("grab-started object={box_id} hand=right"),
+        Duration::from_secs(10),
+    );
+    println!("{pressed}\n{grabbed}");
+    // Lift it 15 cm and hold.
+    move_hand(&frame, 1, [target[0], target[1] + 0.15, target[2]], 1.0);
+    std::thread::sleep(Duration::from_millis(1500));
+    let (held, owner, _) = box_at().unwrap();
+    // Let go; the trigger of the other hand reads through its action too.
+    frame.lock().unwrap().hands[1].squeeze = 0.0;
+    vr.wait_line("xr input hand=right squeeze=0.00", Duration::from_secs(10));
+    vr.wait_line(
+        &format!("grab-ended object={box_id} hand=right"),
+        Duration::from_secs(10),
+    );
+    frame.lock().unwrap().hands[0].trigger = 1.0;
+    let trig = vr.wait_line(
+        "xr input hand=left squeeze=0.00 trigger=1.00",
+        Duration::from_secs(10),
+    );
+    println!("{trig}");
+    stop.store(true, Ordering::Relaxed);
+    streamer.join().unwrap();
+    println!(
+        "the host shows the soft box owned by {owner} (VR peer {me}), lifted {:.1} cm by the \
+         controller (from {box0:?} to {held:?})",
+        (held[1] - box0[1]) * 100.0
+    );
+    assert_eq!(
+        owner, me,
+        "the host does not show the VR peer holding the box"
+    );
+    assert!(
+        held[1] - box0[1] > 0.08,
+        "the box rose {:.3} m on the host while the controller rose 0.15 m",
+        held[1] - box0[1]
+    );
 }
