@@ -9,6 +9,8 @@
 
 use std::collections::{HashMap, HashSet};
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::Duration;
 
 use bevy::asset::RenderAssetUsages;
@@ -17,7 +19,9 @@ use bevy::color::palettes::css;
 use bevy::ecs::observer::On;
 use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::prelude::*;
+use bevy::render::render_resource::PipelineCache;
 use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
+use bevy::render::{Render, RenderApp, RenderSystems};
 use softsync_net::NetId;
 
 use crate::glue::{to_bevy, to_bevy_quat};
@@ -67,11 +71,36 @@ impl Plugin for ViewPlugin {
                 ..default()
             })
             .add_systems(Startup, spawn_static)
+            .init_resource::<RenderWarm>()
             .add_systems(
                 Update,
                 (sync_objects, draw_overlay, update_hud, take_screenshots).chain(),
             );
     }
+
+    fn finish(&self, app: &mut App) {
+        let warm = app.world().resource::<RenderWarm>().clone();
+        if let Some(render) = app.get_sub_app_mut(RenderApp) {
+            render
+                .insert_resource(warm)
+                .add_systems(Render, note_render_warm.after(RenderSystems::Render));
+        }
+    }
+}
+
+/// Whether the last rendered frame drew with every render pipeline compiled. Pipelines
+/// compile in the background (a synchronous compile would stall the frame loop past the
+/// peer timeout on a software renderer); until they are ready, what uses them is not drawn,
+/// and the first frames on lavapipe under load are the clear colour alone (measured).
+/// Screenshots wait for this.
+#[derive(Resource, Clone, Default)]
+struct RenderWarm(Arc<AtomicBool>);
+
+fn note_render_warm(cache: Option<Res<PipelineCache>>, warm: Res<RenderWarm>) {
+    let ready = cache.is_some_and(|c| {
+        c.pipelines().next().is_some() && c.waiting_pipelines().next().is_none()
+    });
+    warm.0.store(ready, Ordering::Relaxed);
 }
 
 /// Per-peer colour: evenly spread hues, none near the soft bodies' warm colours (so a test can
@@ -480,13 +509,18 @@ fn take_screenshots(
     mut state: ResMut<ScreenshotState>,
     cfg: Res<ViewConfig>,
     cams: Query<(&Camera, &GlobalTransform)>,
+    warm: Res<RenderWarm>,
 ) {
     let Some(plan) = &cfg.screenshots else {
         return;
     };
     let room = &peer.room;
     let t = Duration::from_micros(room.now().as_micros());
-    if state.taken >= plan.max || t < state.next || !room.joined() {
+    if state.taken >= plan.max
+        || t < state.next
+        || !room.joined()
+        || !warm.0.load(Ordering::Relaxed)
+    {
         return;
     }
     state.next = t + plan.every;
