@@ -97,9 +97,8 @@ impl Plugin for ViewPlugin {
 struct RenderWarm(Arc<AtomicBool>);
 
 fn note_render_warm(cache: Option<Res<PipelineCache>>, warm: Res<RenderWarm>) {
-    let ready = cache.is_some_and(|c| {
-        c.pipelines().next().is_some() && c.waiting_pipelines().next().is_none()
-    });
+    let ready = cache
+        .is_some_and(|c| c.pipelines().next().is_some() && c.waiting_pipelines().next().is_none());
     warm.0.store(ready, Ordering::Relaxed);
 }
 

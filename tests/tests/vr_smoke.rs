@@ -57,8 +57,9 @@ fn dump(path: &Path) -> Vec<Value> {
         .collect()
 }
 
-#[test]
-fn vr_peer_under_a_simulated_headset_shows_its_avatar_and_grabs_with_a_squeeze() {
+/// A host (dumping 5 times a second) for a VR test in room `room`: its scratch folder, dump
+/// path, process and signaling URL. Fails clearly without the simulated-headset chroot.
+fn vr_room(test: &str, room: &str) -> (PathBuf, PathBuf, Proc, String) {
     require_netns();
     let root = vr_root();
     assert!(
@@ -66,58 +67,69 @@ fn vr_peer_under_a_simulated_headset_shows_its_avatar_and_grabs_with_a_squeeze()
         "no simulated-headset chroot at {}: run `scripts/vr-sim setup` (scripts/test does)",
         root.display()
     );
-    let dir = scratch("vr-smoke");
-    let host_dump = dir.join("host.jsonl");
-    let host = Proc::spawn(
-        &dir,
+    let dir = scratch(test);
+    let dump = dir.join("host.jsonl");
+    let args = [
         "host",
-        &[
-            "host",
-            "--room",
-            "vr",
-            "--bind",
-            "127.0.0.1:0",
-            "--duration",
-            "150",
-            "--dump",
-            host_dump.to_str().unwrap(),
-            "--dump-hz",
-            "5",
-            "--quiet",
-        ],
-    );
+        "--room",
+        room,
+        "--bind",
+        "127.0.0.1:0",
+        "--duration",
+        "150",
+        "--dump",
+        dump.to_str().unwrap(),
+        "--dump-hz",
+        "5",
+        "--quiet",
+    ];
+    let host = Proc::spawn(&dir, "host", &args);
     let url = signal_url(&host);
+    (dir, dump, host, url)
+}
+
+/// `softsync join --vr` under Monado (`scripts/vr-sim run`), with `extra` arguments and `env`
+/// for Monado and the peer.
+fn vr_peer(dir: &Path, url: &str, room: &str, extra: &[&str], env: &[(&str, &str)]) -> Proc {
     let vr_sim = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/vr-sim");
+    let root = vr_root();
     let bin = binary();
-    let root_s = root.to_str().unwrap().to_owned();
+    let mut args = vec![
+        "run",
+        "--root",
+        root.to_str().unwrap(),
+        "--",
+        bin.to_str().unwrap(),
+        "join",
+        "--vr",
+        "--room",
+        room,
+        "--signal",
+        url,
+        "--duration",
+        "120",
+        "--quiet",
+    ];
+    args.extend_from_slice(extra);
+    Proc::spawn_program(dir, "vr", &vr_sim, &args, env)
+}
+
+#[test]
+fn vr_peer_under_a_simulated_headset_shows_its_avatar_and_grabs_with_a_squeeze() {
+    let (dir, host_dump, _host, url) = vr_room("vr-smoke", "vr");
     let vr_dump = dir.join("vr.jsonl");
-    let vr_dump_s = vr_dump.to_str().unwrap().to_owned();
-    let vr = Proc::spawn_program(
+    let vr = vr_peer(
         &dir,
+        &url,
         "vr",
-        &vr_sim,
         &[
-            "run",
-            "--root",
-            &root_s,
-            "--",
-            bin.to_str().unwrap(),
-            "join",
-            "--vr",
-            "--room",
-            "vr",
-            "--signal",
-            &url,
             "--bot",
             "wait 3; reach right softbox in 1; grab right timeout 6; squeeze right 0.02 in 0.5; \
              wait 3; release right; wait 120",
-            "--duration",
-            "120",
             "--dump",
-            &vr_dump_s,
+            vr_dump.to_str().unwrap(),
             "--dump-hz",
             "5",
-            "--quiet",
         ],
         &[],
     );
@@ -358,57 +370,12 @@ fn move_hand(frame: &Mutex<RemoteFrame>, h: usize, to: [f32; 3], secs: f32) {
 
 #[test]
 fn vr_remote_controllers_grab_and_lift_through_openxr_actions() {
-    require_netns();
-    let root = vr_root();
-    assert!(
-        root.join(".softsync-vr-sim-ready").exists(),
-        "no simulated-headset chroot at {}: run `scripts/vr-sim setup` (scripts/test does)",
-        root.display()
-    );
-    let dir = scratch("vr-remote");
-    let host_dump = dir.join("host.jsonl");
-    let host = Proc::spawn(
+    let (dir, host_dump, _host, url) = vr_room("vr-remote", "vrr");
+    let vr = vr_peer(
         &dir,
-        "host",
-        &[
-            "host",
-            "--room",
-            "vrr",
-            "--bind",
-            "127.0.0.1:0",
-            "--duration",
-            "150",
-            "--dump",
-            host_dump.to_str().unwrap(),
-            "--dump-hz",
-            "5",
-            "--quiet",
-        ],
-    );
-    let url = signal_url(&host);
-    let vr_sim = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/vr-sim");
-    let bin = binary();
-    let root_s = root.to_str().unwrap().to_owned();
-    let vr = Proc::spawn_program(
-        &dir,
-        "vr",
-        &vr_sim,
-        &[
-            "run",
-            "--root",
-            &root_s,
-            "--",
-            bin.to_str().unwrap(),
-            "join",
-            "--vr",
-            "--room",
-            "vrr",
-            "--signal",
-            &url,
-            "--duration",
-            "120",
-            "--quiet",
-        ],
+        &url,
+        "vrr",
+        &[],
         &[("P_OVERRIDE_ACTIVE_CONFIG", "remote")],
     );
     let rest = RemoteFrame {
