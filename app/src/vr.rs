@@ -297,6 +297,14 @@ fn float_state(session: &OxrSession, a: &openxr::Action<f32>) -> f32 {
         .unwrap_or(0.0)
 }
 
+/// What [`read_device`] has printed: the tracked poses once, the button states per hand.
+#[derive(Default)]
+struct Seen {
+    announced: bool,
+    /// [squeeze, trigger] held, per hand.
+    pressed: [[bool; 2]; 2],
+}
+
 /// Headset and controllers → the device frame, in room coordinates.
 fn read_device(
     mut peer: NonSendMut<Peer>,
@@ -305,8 +313,7 @@ fn read_device(
     actions: Option<Res<Actions>>,
     views: Query<&Transform, With<XrCamera>>,
     hands: Query<(&Transform, &HandSpace, &OxrSpaceLocationFlags), With<XrSpace>>,
-    mut announced: Local<bool>,
-    mut pressed: Local<[[bool; 2]; 2]>,
+    mut seen: Local<Seen>,
 ) {
     let root = Transform::from_translation(origin.pos).with_rotation(origin.rot);
     let to_room = |t: &Transform| {
@@ -335,8 +342,8 @@ fn read_device(
             frame.trigger[h] = float_state(&session, &a.trigger[h]);
             // Button edges, for people checking their bindings (and the tests).
             let now = [frame.grip[h] > 0.5, frame.trigger[h] > 0.5];
-            if now != pressed[h] {
-                pressed[h] = now;
+            if now != seen.pressed[h] {
+                seen.pressed[h] = now;
                 println!(
                     "xr input hand={} squeeze={:.2} trigger={:.2}",
                     ["left", "right"][h],
@@ -346,10 +353,10 @@ fn read_device(
             }
         }
     }
-    if !*announced && frame.head.is_some() && frame.hands.iter().all(Option::is_some) {
+    if !seen.announced && frame.head.is_some() && frame.hands.iter().all(Option::is_some) {
         // Once: where the tracked parts are in the room (the smoke test compares the host's
         // view of our avatar with this).
-        *announced = true;
+        seen.announced = true;
         let f = |p: Option<(glam::Vec3, glam::Quat)>| {
             p.map_or("-".into(), |(v, _)| {
                 format!("{:.3},{:.3},{:.3}", v.x, v.y, v.z)
