@@ -2377,16 +2377,7 @@ impl Session {
             }
             Control::PeerJoined { peer, join_seq } if from_host => {
                 self.members.insert(peer, join_seq);
-                // A new membership: sequences start over (a peer that joins again after it
-                // was dropped runs a fresh session), only when we last heard it is kept.
-                let last_heard = self.links.get(&peer).and_then(|l| l.last_heard);
-                self.links.insert(
-                    peer,
-                    Link {
-                        last_heard,
-                        ..Link::default()
-                    },
-                );
+                self.links.entry(peer).or_default();
                 self.events.push_back(Event::PeerJoined(peer));
             }
             Control::Leave
@@ -2406,6 +2397,10 @@ impl Session {
             }
             Control::PeerLeft { peer } if from_host => {
                 self.members.remove(&peer);
+                // Its sequences die with its membership: should it join again, it does so
+                // with a fresh session, and both ends start over.
+                self.links.remove(&peer);
+                self.stats.links.remove(&peer);
                 self.events.push_back(Event::PeerLeft(peer));
             }
             Control::Spawn(info) if from_host => self.on_spawn_from_host(now, info),
@@ -2608,6 +2603,19 @@ impl Session {
         self.role = Role::Client;
         self.members = members.into_iter().collect();
         self.pending_new_hosts.clear();
+        // Peers the new room does not have (the old host, members it found dead) lose their
+        // link state: should one come back, it joins with a fresh session, and both ends
+        // start their sequences over.
+        let gone: Vec<PeerId> = self
+            .links
+            .keys()
+            .copied()
+            .filter(|p| !self.members.contains_key(p) && *p != host)
+            .collect();
+        for p in gone {
+            self.links.remove(&p);
+            self.stats.links.remove(&p);
+        }
         for l in self.links.values_mut() {
             l.send.clear();
             l.recv.clear();

@@ -1509,3 +1509,25 @@ fn a_newer_term_refusal_stops_only_a_peer_that_stalled() {
         "the stalled peer did not believe it"
     );
 }
+
+#[test]
+fn a_joiner_redirected_by_a_member_follows_that_member_when_it_takes_over() {
+    // The joiner first says Hello to a member (it answers Redirect on the reliable channel),
+    // then joins through the host. When the host dies, that member takes over and its
+    // `NewHost` to the joiner travels on the same channel: sequences on both ends must still
+    // agree (resetting the member's link when it learned of the join broke this).
+    let mut h = room(3, ConditionerConfig::default());
+    let ids = spawn_some(&mut h);
+    let j = h.add_peer_contacting(config(), Harness::id(1));
+    h.advance(ms(2000));
+    assert!(h.peers[j].session.is_connected(), "the joiner is not in");
+    h.freeze(0, true);
+    h.advance(ms(3000));
+    assert_eq!(h.host_index(), Some(1));
+    for i in [1, 2, j] {
+        let s = &h.peers[i].session;
+        assert_eq!(s.host_id(), Some(Harness::id(1)), "peer {i}");
+        assert_eq!(s.members().len(), 3, "peer {i}: {:?}", s.members());
+    }
+    assert_single_owner_everywhere(&h, &ids);
+}
