@@ -461,6 +461,24 @@ impl Session {
         s
     }
 
+    /// A joiner whose contact has not answered (another joiner knows no host yet) asks
+    /// `contact` instead, with this same session: its sequences with the peers it asked
+    /// before stay in step (a fresh session would restart them, and a peer that saw the first
+    /// `Hello` would later take this peer's first reliable message for a duplicate). False,
+    /// and nothing sent, unless the session is still joining.
+    pub fn join_via(&mut self, now: Instant, contact: PeerId) -> bool {
+        if self.role != Role::Joining || contact == self.local {
+            return false;
+        }
+        self.host = Some(contact);
+        let hello = Control::Hello {
+            protocol: PROTOCOL_VERSION,
+            config_digest: self.cfg.digest(),
+        };
+        self.send_control(now, contact, &hello);
+        true
+    }
+
     /// Override the interpolation settings (made sane first: see
     /// [`InterpolationConfig::sanitized`]).
     pub fn set_interpolation(&mut self, cfg: InterpolationConfig) {
@@ -2368,12 +2386,7 @@ impl Session {
                 self.events.push_back(Event::Refused { reason });
             }
             Control::Redirect { host } if self.role == Role::Joining && from != host => {
-                self.host = Some(host);
-                let hello = Control::Hello {
-                    protocol: PROTOCOL_VERSION,
-                    config_digest: self.cfg.digest(),
-                };
-                self.send_control(now, host, &hello);
+                self.join_via(now, host);
             }
             Control::PeerJoined { peer, join_seq } if from_host => {
                 self.members.insert(peer, join_seq);

@@ -1531,3 +1531,42 @@ fn a_joiner_redirected_by_a_member_follows_that_member_when_it_takes_over() {
     }
     assert_single_owner_everywhere(&h, &ids);
 }
+
+#[test]
+fn a_joiner_that_asked_another_joiner_first_keeps_its_reliable_channel_with_it() {
+    // J2 says Hello to J1 while J1 is still joining (no answer), then asks the host with the
+    // same session (`join_via`, as the app does after a second). The host dies and J1 takes
+    // over: J2's first reliable message to it, a spawn request, must arrive (with a fresh
+    // session J1 took it for a repeat of the unanswered Hello).
+    let mut h = Harness::new(1, config(), ConditionerConfig::default());
+    let j1 = h.add_peer_contacting(config(), Harness::id(0));
+    let j2 = h.add_peer_contacting(config(), Harness::id(j1));
+    h.advance(ms(1000));
+    assert!(h.peers[j1].session.is_connected());
+    assert!(
+        !h.peers[j2].session.is_connected(),
+        "J1 answered while joining"
+    );
+    let now = h.now;
+    assert!(h.session(j2).join_via(now, Harness::id(0)));
+    h.advance(ms(1000));
+    assert!(h.peers[j2].session.is_connected(), "J2 did not get in");
+    h.freeze(0, true);
+    h.advance(ms(3000));
+    assert_eq!(h.host_index(), Some(j1));
+    assert_eq!(h.peers[j2].session.host_id(), Some(Harness::id(j1)));
+    let now = h.now;
+    let (_, request) = h
+        .session(j2)
+        .spawn(now, RIGID, ObjectState::rigid(Vec3::Y, Quat::IDENTITY))
+        .unwrap();
+    h.advance(ms(1000));
+    assert!(
+        h.peers[j2].events.iter().any(|e| matches!(
+            e,
+            Event::Spawned { request: Some(r), .. } if *r == request
+        )),
+        "J2's spawn request never reached the new host: {:?}",
+        h.peers[j2].events
+    );
+}
