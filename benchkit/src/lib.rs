@@ -1,0 +1,1 @@
+//! `softsync-benchkit`: what softsync's benchmarks share.

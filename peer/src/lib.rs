@@ -1,0 +1,1 @@
+//! `softsync-peer`: one peer of a softsync room, engine-agnostic and sans-IO.
