@@ -93,6 +93,11 @@ impl<'a> BitReader<'a> {
         BitReader { bytes, pos: 0 }
     }
 
+    /// Bits read so far.
+    pub fn bits_read(&self) -> usize {
+        self.pos
+    }
+
     /// Bits left.
     pub fn remaining(&self) -> usize {
         (self.bytes.len() * 8).saturating_sub(self.pos)

@@ -163,7 +163,7 @@ impl Harness {
                     p.session.handle_timeout(now);
                 }
                 while let Some(t) = p.session.poll_transmit(now) {
-                    p.transport.send(now, t.to, &t.payload);
+                    p.transport.send(now, &t);
                     p.last_send = Some(now);
                     any = true;
                 }

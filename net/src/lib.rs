@@ -8,10 +8,16 @@
 //! interpolated on remote peers; when the host goes, the earliest joiner takes over.
 //!
 //! No sockets, no clock, no randomness inside: time and seeds are arguments.
+//!
+//! Feature `testing` (off by default; the crate's own tests and examples turn it on):
+//! the in-memory transport (`transport::memory`), the N-peer virtual-time harness
+//! (`harness`), fuzzing entry points (`fuzzing`) and `Session::send_raw_control`.
 
 pub mod bits;
 pub mod error;
+#[cfg(feature = "testing")]
 pub mod fuzzing;
+#[cfg(feature = "testing")]
 pub mod harness;
 pub mod ids;
 pub mod interp;
@@ -31,8 +37,10 @@ pub use error::NetError;
 pub use ids::{AuthorityEpoch, ClassId, NetId, PeerId, Term};
 pub use interp::InterpolationConfig;
 pub use policy::{AuthorityPolicy, ClassConfig, SendPolicy, SessionConfig, SoftBodyMode};
-pub use session::{DisplayedState, Event, ObjectState, Session, Transmit};
+pub use session::{DisplayedState, Event, ObjectState, Session};
 pub use stats::Stats;
 pub use time::Instant;
-pub use transport::{ConditionerConfig, LinkConditioner, MemoryHub, PeerEvent, Transport};
+#[cfg(feature = "testing")]
+pub use transport::MemoryHub;
+pub use transport::{ConditionerConfig, LinkConditioner, PeerEvent, Transmit, Transport};
 pub use wire::PROTOCOL_VERSION;

@@ -10,7 +10,7 @@ use softsync_net::bits::BitWriter;
 use softsync_net::quant::quantize_quat;
 use softsync_net::stats::TRANSPORT_OVERHEAD_BYTES;
 use softsync_net::wire::{
-    self, decode_packet, encode_refusal, tag, write_entry_id, write_reliable, ChunkEnc, Control,
+    self, decode_packet, encode_refusal, tag, write_entry_id, ChunkEnc, Control,
     EntryLayout, PacketHeader, PartBody, PosEnc, StateEntry,
 };
 use softsync_net::{
@@ -438,7 +438,6 @@ fn render() -> String {
         )
         .unwrap();
     }
-    let _ = write_reliable;
     d
 }
 

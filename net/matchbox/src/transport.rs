@@ -7,7 +7,7 @@ use std::time::Duration;
 use matchbox_socket::{
     ChannelConfig, PeerId as MbPeerId, PeerState, RtcIceServerConfig, SignalingError, WebRtcSocket,
 };
-use softsync_net::{Instant, PeerEvent, PeerId, Transport, PROTOCOL_VERSION};
+use softsync_net::{Instant, PeerEvent, PeerId, Transmit, Transport, PROTOCOL_VERSION};
 
 use crate::{valid_room_name, DEFAULT_MTU, ROLE_PARAM, VERSION_HEADER, VERSION_PARAM};
 
@@ -390,7 +390,8 @@ impl Transport for MatchboxTransport {
         self.local
     }
 
-    fn send(&mut self, _now: Instant, to: PeerId, datagram: &[u8]) {
+    fn send(&mut self, _now: Instant, transmit: &Transmit) {
+        let (to, datagram) = (transmit.to, &transmit.payload);
         if datagram.len() > self.mtu {
             self.stats.oversize_dropped += 1;
             return;
@@ -399,7 +400,9 @@ impl Transport for MatchboxTransport {
             self.stats.unroutable_dropped += 1;
             return;
         };
-        let ch = if softsync_net::wire::carries_control(datagram) {
+        // The session says which datagrams carry control messages (and refusals): those go
+        // on the reliable, ordered channel; state and heartbeats on the unreliable one.
+        let ch = if transmit.reliable {
             RELIABLE
         } else {
             UNRELIABLE

@@ -1,171 +1,14 @@
-//! Transports: one small object-safe trait, an in-memory hub for tests and a seeded link
-//! conditioner (latency, jitter, bursty loss, duplication, reordering, MTU drop) wrapping any
-//! transport.
+//! The seeded link conditioner: latency, jitter, Gilbert–Elliott bursty loss, duplication,
+//! reordering and MTU drop on what a transport sends. Used in tests and in real runs
+//! (`softsync join --net-condition …`); all randomness comes from its seed, so a run replays.
 
-use std::cell::RefCell;
-use std::collections::{BTreeMap, BTreeSet, BinaryHeap, VecDeque};
-use std::rc::Rc;
+use std::collections::BinaryHeap;
 use std::time::Duration;
 
+use super::{PeerEvent, Transmit, Transport};
 use crate::ids::PeerId;
 use crate::rng::SeededRng;
 use crate::time::Instant;
-
-/// Connectivity news from the transport (informational: the session trusts only silence).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum PeerEvent {
-    /// A peer became reachable.
-    Connected(PeerId),
-    /// A peer became unreachable.
-    Disconnected(PeerId),
-}
-
-/// An unreliable datagram transport. Time is passed in; nothing blocks.
-pub trait Transport {
-    /// This endpoint's address.
-    fn local_id(&self) -> PeerId;
-    /// Send one datagram (best effort).
-    fn send(&mut self, now: Instant, to: PeerId, datagram: &[u8]);
-    /// Next datagram that has arrived by `now`.
-    fn recv(&mut self, now: Instant) -> Option<(PeerId, Vec<u8>)>;
-    /// Next connectivity event.
-    fn poll_peer_event(&mut self) -> Option<PeerEvent>;
-    /// Largest datagram the path carries.
-    fn mtu(&self) -> usize;
-    /// When something queued inside the transport becomes due (virtual-time drivers).
-    fn poll_timeout(&self) -> Option<Instant> {
-        None
-    }
-}
-
-#[derive(Default, Debug)]
-struct HubInner {
-    inboxes: BTreeMap<PeerId, VecDeque<(PeerId, Vec<u8>)>>,
-    events: BTreeMap<PeerId, VecDeque<PeerEvent>>,
-    dead: BTreeSet<PeerId>,
-    cut: BTreeSet<(PeerId, PeerId)>,
-    mtu: usize,
-    dropped_mtu: u64,
-}
-
-/// In-memory datagram switch: endpoints deliver instantly into each other's inboxes.
-#[derive(Clone, Debug)]
-pub struct MemoryHub {
-    inner: Rc<RefCell<HubInner>>,
-}
-
-impl MemoryHub {
-    /// A hub whose links carry datagrams up to `mtu` bytes.
-    pub fn new(mtu: usize) -> Self {
-        MemoryHub {
-            inner: Rc::new(RefCell::new(HubInner {
-                mtu,
-                ..HubInner::default()
-            })),
-        }
-    }
-
-    /// Attach an endpoint; every existing endpoint hears `Connected`.
-    pub fn endpoint(&self, id: PeerId) -> HubEndpoint {
-        let mut h = self.inner.borrow_mut();
-        let others: Vec<PeerId> = h.inboxes.keys().copied().collect();
-        for o in &others {
-            h.events
-                .entry(*o)
-                .or_default()
-                .push_back(PeerEvent::Connected(id));
-            h.events
-                .entry(id)
-                .or_default()
-                .push_back(PeerEvent::Connected(*o));
-        }
-        h.inboxes.entry(id).or_default();
-        h.dead.remove(&id);
-        HubEndpoint {
-            id,
-            hub: self.clone(),
-        }
-    }
-
-    /// The endpoint stops sending and receiving (a crash).
-    pub fn kill(&self, id: PeerId) {
-        let mut h = self.inner.borrow_mut();
-        h.dead.insert(id);
-        if let Some(q) = h.inboxes.get_mut(&id) {
-            q.clear();
-        }
-    }
-
-    /// Cut (or restore) both directions between `a` and `b`.
-    pub fn set_partition(&self, a: PeerId, b: PeerId, cut: bool) {
-        let mut h = self.inner.borrow_mut();
-        for pair in [(a, b), (b, a)] {
-            if cut {
-                h.cut.insert(pair);
-            } else {
-                h.cut.remove(&pair);
-            }
-        }
-    }
-
-    /// Change the path MTU.
-    pub fn set_mtu(&self, mtu: usize) {
-        self.inner.borrow_mut().mtu = mtu;
-    }
-
-    /// Datagrams dropped for exceeding the MTU.
-    pub fn dropped_over_mtu(&self) -> u64 {
-        self.inner.borrow().dropped_mtu
-    }
-}
-
-/// One endpoint of a [`MemoryHub`].
-#[derive(Debug)]
-pub struct HubEndpoint {
-    id: PeerId,
-    hub: MemoryHub,
-}
-
-impl Transport for HubEndpoint {
-    fn local_id(&self) -> PeerId {
-        self.id
-    }
-
-    fn send(&mut self, _now: Instant, to: PeerId, datagram: &[u8]) {
-        let mut h = self.hub.inner.borrow_mut();
-        if h.dead.contains(&self.id) || h.dead.contains(&to) || h.cut.contains(&(self.id, to)) {
-            return;
-        }
-        if datagram.len() > h.mtu {
-            h.dropped_mtu += 1;
-            return;
-        }
-        if let Some(q) = h.inboxes.get_mut(&to) {
-            q.push_back((self.id, datagram.to_vec()));
-        }
-    }
-
-    fn recv(&mut self, _now: Instant) -> Option<(PeerId, Vec<u8>)> {
-        let mut h = self.hub.inner.borrow_mut();
-        if h.dead.contains(&self.id) {
-            return None;
-        }
-        h.inboxes.get_mut(&self.id)?.pop_front()
-    }
-
-    fn poll_peer_event(&mut self) -> Option<PeerEvent> {
-        self.hub
-            .inner
-            .borrow_mut()
-            .events
-            .get_mut(&self.id)?
-            .pop_front()
-    }
-
-    fn mtu(&self) -> usize {
-        self.hub.inner.borrow().mtu
-    }
-}
 
 /// Link impairments; all randomness comes from `seed`.
 #[derive(Clone, Debug, PartialEq)]
@@ -235,8 +78,7 @@ impl ConditionerConfig {
 struct Delayed {
     at: Instant,
     order: u64,
-    to: PeerId,
-    bytes: Vec<u8>,
+    transmit: Transmit,
 }
 
 impl Ord for Delayed {
@@ -288,7 +130,7 @@ impl<T: Transport> LinkConditioner<T> {
     fn flush(&mut self, now: Instant) {
         while self.queue.peek().is_some_and(|d| d.at <= now) {
             if let Some(d) = self.queue.pop() {
-                self.inner.send(d.at, d.to, &d.bytes);
+                self.inner.send(d.at, &d.transmit);
             }
         }
     }
@@ -308,9 +150,9 @@ impl<T: Transport> Transport for LinkConditioner<T> {
         self.inner.local_id()
     }
 
-    fn send(&mut self, now: Instant, to: PeerId, datagram: &[u8]) {
+    fn send(&mut self, now: Instant, transmit: &Transmit) {
         self.flush(now);
-        if self.cfg.mtu.is_some_and(|m| datagram.len() > m) {
+        if self.cfg.mtu.is_some_and(|m| transmit.payload.len() > m) {
             self.dropped += 1;
             return;
         }
@@ -342,8 +184,7 @@ impl<T: Transport> Transport for LinkConditioner<T> {
             self.queue.push(Delayed {
                 at,
                 order: self.order,
-                to,
-                bytes: datagram.to_vec(),
+                transmit: transmit.clone(),
             });
         }
         self.flush(now);

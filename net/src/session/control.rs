@@ -1,0 +1,177 @@
+//! Control messages: sending them on a link's reliable channel, routing received ones to the
+//! part of the session that handles them, and the host as a client of itself — a local
+//! request ([`Session::ask_host`]) goes the same way as a member's, the host just hands it
+//! to itself instead of sending it.
+
+use super::migration::Deferred;
+use super::{Role, Session};
+use crate::error::NetError;
+use crate::ids::PeerId;
+use crate::time::Instant;
+use crate::wire::Control;
+
+impl Session {
+    /// Queue `msg` to `to` on the reliable channel; returns its reliable sequence.
+    pub(super) fn send_control(&mut self, now: Instant, to: PeerId, msg: &Control) -> u16 {
+        let bytes = msg.encode();
+        self.links.entry(to).or_default().reliable.push(now, bytes)
+    }
+
+    /// Queue `msg` to every member but us and `except`. A `Spawn` is remembered per link
+    /// until acknowledged: no state flows for the object before.
+    pub(super) fn broadcast(&mut self, now: Instant, msg: &Control, except: Option<PeerId>) {
+        let peers: Vec<PeerId> = self
+            .members
+            .keys()
+            .copied()
+            .filter(|p| *p != self.local && Some(*p) != except)
+            .collect();
+        for p in peers {
+            let seq = self.send_control(now, p, msg);
+            if let Control::Spawn(info) = msg {
+                if let Some(l) = self.links.get_mut(&p) {
+                    l.spawn_pending.insert(info.id, seq);
+                }
+            }
+        }
+    }
+
+    /// A request to the host (spawn, despawn, authority): a client sends it; the host, a
+    /// client of itself, handles it at once as if a member had sent it.
+    pub(super) fn ask_host(&mut self, now: Instant, msg: Control) -> Result<(), NetError> {
+        match self.role {
+            Role::Host => {
+                let me = self.local;
+                self.on_request(now, me, msg);
+                Ok(())
+            }
+            Role::Client => {
+                let host = self.host.ok_or(NetError::NotConnected)?;
+                self.send_control(now, host, &msg);
+                Ok(())
+            }
+            Role::Joining | Role::Refused => Err(NetError::NotConnected),
+        }
+    }
+
+    /// Is `p` a member other than us, and are we the host (the only peer that serves
+    /// requests)?
+    pub(super) fn is_member_client(&self, p: PeerId) -> bool {
+        self.role == Role::Host && p != self.local && self.members.contains_key(&p)
+    }
+
+    /// A control message that arrived from `from`. After a `NewHost` we have not adopted yet,
+    /// its sender's later messages (the snapshot, ownership changes) wait for it.
+    pub(super) fn deliver_control(&mut self, now: Instant, from: PeerId, c: Control) {
+        let c = match self.succession.defer(from, c) {
+            Deferred::NotPending(c) => c,
+            Deferred::Kept => return,
+            Deferred::Overflow => {
+                self.stats.refused_controls += 1;
+                return;
+            }
+        };
+        self.handle_control(now, from, c);
+    }
+
+    /// Route a control message from `from` to its handler, if it is in place: joining
+    /// messages while joining, room news from our host, requests at the host from members.
+    pub(super) fn handle_control(&mut self, now: Instant, from: PeerId, msg: Control) {
+        let from_host = Some(from) == self.host && self.role != Role::Host;
+        match msg {
+            // ---- joining and membership (join.rs)
+            Control::Hello {
+                protocol,
+                config_digest,
+            } => self.on_hello(now, from, protocol, config_digest),
+            Control::Welcome {
+                term,
+                host,
+                join_seq: _,
+                members,
+            } if self.role == Role::Joining && from == host => self.on_welcome(term, host, members),
+            Control::Refused { reason } if self.role == Role::Joining => self.on_refused(reason),
+            Control::Redirect { host } if self.role == Role::Joining && from != host => {
+                self.join_via(now, host);
+            }
+            Control::PeerJoined { peer, join_seq } if from_host => {
+                self.on_peer_joined(peer, join_seq);
+            }
+            Control::Leave
+                if from != self.local
+                    && (self.members.contains_key(&from) || Some(from) == self.host) =>
+            {
+                self.on_leave(now, from);
+            }
+            Control::PeerLeft { peer } if from_host => self.on_peer_left(peer),
+            // ---- objects and owners, from our host (spawn.rs, authority.rs)
+            Control::Spawn(info) if from_host => self.on_spawn_from_host(now, info),
+            Control::Despawn { id } if from_host => self.on_despawn_from_host(id),
+            Control::OwnerChanged {
+                id,
+                owner,
+                epoch,
+                held,
+            } if from_host => self.set_owner(id, owner, epoch, held),
+            Control::AuthorityDenied { id, reason } if from_host => {
+                self.on_denied(id, reason);
+            }
+            Control::AuthorityAsk { id, by } if from_host => self.on_asked(id, by),
+            // ---- migration (migration.rs)
+            Control::NewHost {
+                term,
+                host,
+                members,
+            } if host == from && self.role == Role::Client => {
+                self.on_new_host(now, from, term, members);
+            }
+            // ---- requests at the host
+            msg @ (Control::SpawnRequest { .. }
+            | Control::DespawnRequest { .. }
+            | Control::AuthorityRequest { .. }
+            | Control::AuthorityAnswer { .. }
+            | Control::AuthorityRelease { .. }
+            | Control::Resync { .. })
+                if self.is_member_client(from) =>
+            {
+                self.on_request(now, from, msg);
+            }
+            _ => {}
+        }
+    }
+
+    /// The host serves a request of `from` (a member, or itself).
+    fn on_request(&mut self, now: Instant, from: PeerId, msg: Control) {
+        match msg {
+            Control::SpawnRequest {
+                request,
+                class,
+                particles,
+                pos,
+                rot,
+            } => self.on_spawn_request(now, from, request, class, particles, pos, rot),
+            // the host may despawn anything; a member what it owns
+            Control::DespawnRequest { id }
+                if from == self.local || self.owner(id) == Some(from) =>
+            {
+                self.host_despawn(now, id);
+            }
+            Control::AuthorityRequest { id } => self.host_authority_request(now, from, id),
+            Control::AuthorityAnswer { id, by, agree } => {
+                self.host_authority_answer(now, from, id, by, agree);
+            }
+            Control::AuthorityRelease { id } => self.host_release(now, from, id),
+            // claims are answers to our NewHost: only shortly after we took over
+            Control::Resync { claims } => {
+                if self.succession.resync_open(now) {
+                    for c in claims {
+                        self.host_merge_claim(now, from, c);
+                    }
+                } else {
+                    self.stats.refused_controls += 1;
+                }
+            }
+            _ => {}
+        }
+    }
+}

@@ -1,0 +1,163 @@
+//! Joining and leaving: a joiner says `Hello` (protocol version and class-table digest) to
+//! its contact; the host answers `Welcome` and a snapshot, or a clear refusal; a member that
+//! is not the host answers `Redirect` to the host. Members hear of each other through the
+//! host (`PeerJoined`, `PeerLeft`); a member leaving on purpose says `Leave`.
+
+use super::{Event, Role, Session};
+use crate::ids::{PeerId, Term};
+use crate::time::Instant;
+use crate::wire::{Control, PROTOCOL_VERSION};
+
+impl Session {
+    /// Say `Hello` to `contact`.
+    pub(super) fn say_hello(&mut self, now: Instant, contact: PeerId) {
+        let hello = Control::Hello {
+            protocol: PROTOCOL_VERSION,
+            config_digest: self.cfg.digest(),
+        };
+        self.send_control(now, contact, &hello);
+    }
+
+    /// A joiner whose contact has not answered (another joiner knows no host yet) asks
+    /// `contact` instead, with this same session: its sequences with the peers it asked
+    /// before stay in step (a fresh session would restart them, and a peer that saw the first
+    /// `Hello` would later take this peer's first reliable message for a duplicate). False,
+    /// and nothing sent, unless the session is still joining.
+    pub fn join_via(&mut self, now: Instant, contact: PeerId) -> bool {
+        if self.role != Role::Joining || contact == self.local {
+            return false;
+        }
+        self.host = Some(contact);
+        self.say_hello(now, contact);
+        true
+    }
+
+    /// Leave the room: tell every member (and the host) that we are gone, so that they act
+    /// at once instead of after `peer_timeout`. Send what `poll_transmit` gives afterwards;
+    /// the session is not meant to be used after that.
+    pub fn leave(&mut self, now: Instant) {
+        let peers: std::collections::BTreeSet<PeerId> = self
+            .members
+            .keys()
+            .copied()
+            .chain(self.host)
+            .filter(|p| *p != self.local)
+            .collect();
+        for p in peers {
+            self.send_control(now, p, &Control::Leave);
+        }
+    }
+
+    /// `Hello` from `from`: the host welcomes it (or refuses: another protocol or class
+    /// table, a full room); a member redirects it to the host; a joiner cannot answer.
+    pub(super) fn on_hello(&mut self, now: Instant, from: PeerId, protocol: u8, digest: u64) {
+        if self.role != Role::Host {
+            if let Some(host) = self.host {
+                if self.is_connected() {
+                    self.send_control(now, from, &Control::Redirect { host });
+                }
+            }
+            return;
+        }
+        if self.members.contains_key(&from) {
+            return;
+        }
+        let refusal = if protocol != PROTOCOL_VERSION {
+            Some(format!(
+                "protocol version mismatch: host speaks {PROTOCOL_VERSION}, you speak {protocol}"
+            ))
+        } else if digest != self.cfg.digest() {
+            Some("object class configuration differs from the host's".to_string())
+        } else if self.members.len() >= self.cfg.max_members {
+            Some(format!(
+                "the room is full ({} members)",
+                self.cfg.max_members
+            ))
+        } else {
+            None
+        };
+        if let Some(reason) = refusal {
+            self.send_control(now, from, &Control::Refused { reason });
+            return;
+        }
+        let join_seq = self.next_join_seq;
+        self.next_join_seq = self.next_join_seq.saturating_add(1);
+        self.members.insert(from, join_seq);
+        let members: Vec<(PeerId, u32)> = self.members.iter().map(|(p, s)| (*p, *s)).collect();
+        let welcome = Control::Welcome {
+            term: self.term,
+            host: self.local,
+            join_seq,
+            members,
+        };
+        self.send_control(now, from, &welcome);
+        self.send_snapshot(now, from);
+        self.broadcast(
+            now,
+            &Control::PeerJoined {
+                peer: from,
+                join_seq,
+            },
+            Some(from),
+        );
+        self.events.push_back(Event::PeerJoined(from));
+    }
+
+    /// The host welcomed us.
+    pub(super) fn on_welcome(&mut self, term: Term, host: PeerId, members: Vec<(PeerId, u32)>) {
+        self.role = Role::Client;
+        self.term = term;
+        self.host = Some(host);
+        self.members = members.into_iter().collect();
+        self.events.push_back(Event::Joined { host, term });
+    }
+
+    /// The host refused us while joining.
+    pub(super) fn on_refused(&mut self, reason: String) {
+        self.role = Role::Refused;
+        self.events.push_back(Event::Refused { reason });
+    }
+
+    /// Our host says `peer` joined.
+    pub(super) fn on_peer_joined(&mut self, peer: PeerId, join_seq: u32) {
+        self.members.insert(peer, join_seq);
+        self.links.entry(peer).or_default();
+        self.events.push_back(Event::PeerJoined(peer));
+    }
+
+    /// Our host says `peer` left or timed out.
+    pub(super) fn on_peer_left(&mut self, peer: PeerId) {
+        self.members.remove(&peer);
+        // Its sequences die with its membership: should it join again, it does so with a
+        // fresh session, and both ends start over.
+        self.links.remove(&peer);
+        self.stats.links.remove(&peer);
+        self.events.push_back(Event::PeerLeft(peer));
+    }
+
+    /// A member (or our host) says it leaves: gone now, not after the timeout. The host
+    /// drops the member (authority returns); if the host left, the earliest joiner takes
+    /// over.
+    pub(super) fn on_leave(&mut self, now: Instant, from: PeerId) {
+        self.departed.insert(from);
+        if let Some(l) = self.links.get_mut(&from) {
+            l.last_heard = None;
+        }
+        self.check_liveness(now);
+    }
+
+    /// Host: member `p` is gone (timed out or left): drop it, tell the others, take its
+    /// objects back.
+    pub(super) fn host_peer_left(&mut self, now: Instant, p: PeerId) {
+        self.members.remove(&p);
+        self.links.remove(&p);
+        self.events.push_back(Event::PeerLeft(p));
+        self.broadcast(now, &Control::PeerLeft { peer: p }, None);
+        // authority returns to the host
+        let me = self.local;
+        for id in self.objects.owned_by(p) {
+            self.host_grant(now, id, me, false);
+        }
+        self.forget_asks_of(p);
+    }
+}

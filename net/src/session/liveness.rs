@@ -1,0 +1,341 @@
+//! Who is alive: heartbeats (any datagram is one; a ping when a link is quiet, and once a
+//! second for the RTT), the peer timeout (a peer silent that long is gone, whatever the
+//! transport says), our own stalls ([`StallWatch`]: time we were not listening is not the
+//! others' silence), peers that left on purpose ([`Departed`]) and peers the host dropped
+//! that may not know it yet ([`DroppedPeers`]).
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::time::Duration;
+
+use super::migration::heir;
+use super::{Role, Session, Transmit};
+use crate::ids::{PeerId, Term};
+use crate::time::Instant;
+use crate::wire::encode_refusal;
+
+/// Departed or dropped peers remembered; the set is cleared when full (peers that left long
+/// ago send nothing).
+const MAX_REMEMBERED: usize = 256;
+
+/// Why a peer is out of the room ([`DroppedPeers`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum DropWhy {
+    /// This host timed it out.
+    TimedOut,
+    /// It spoke for this older term: the room elected a host while it was silent.
+    OlderTerm(Term),
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Dropped {
+    why: DropWhy,
+    /// When it was last told (at most once per heartbeat interval).
+    told: Option<Instant>,
+}
+
+/// Host: peers out of the room that may not know it, with why and when it last told them
+/// so: members it timed out, and peers still speaking for an older term (a host or member
+/// that stalled while the room elected this host). A peer whose loop stalled past the peer
+/// timeout does not know it is out; when it talks again it is told (a refusal), rather than
+/// carrying on alone as the host of a room of one, owning objects others now own.
+#[derive(Debug, Default)]
+pub(crate) struct DroppedPeers {
+    peers: BTreeMap<PeerId, Dropped>,
+}
+
+impl DroppedPeers {
+    /// `p` is out of the room.
+    pub fn insert(&mut self, p: PeerId, why: DropWhy) {
+        if self.peers.len() >= MAX_REMEMBERED {
+            self.peers.clear();
+        }
+        self.peers.insert(p, Dropped { why, told: None });
+    }
+
+    /// Whether `p` is out.
+    pub fn contains(&self, p: PeerId) -> bool {
+        self.peers.contains_key(&p)
+    }
+
+    /// `p` joins again.
+    pub fn remove(&mut self, p: PeerId) {
+        self.peers.remove(&p);
+    }
+
+    /// Why `p` is out, if it is due to be told at `now` (once per `every`); noted as told.
+    fn due_notice(&mut self, p: PeerId, now: Instant, every: Duration) -> Option<DropWhy> {
+        let d = self.peers.get_mut(&p)?;
+        if d.told.is_some_and(|t| now.saturating_since(t) < every) {
+            return None;
+        }
+        d.told = Some(now);
+        Some(d.why)
+    }
+}
+
+/// Peers that said `Leave`: their datagrams still in flight are ignored (bounded).
+#[derive(Debug, Default)]
+pub(crate) struct Departed {
+    peers: BTreeSet<PeerId>,
+}
+
+impl Departed {
+    /// `p` left.
+    pub fn insert(&mut self, p: PeerId) {
+        if self.peers.len() >= MAX_REMEMBERED {
+            self.peers.clear();
+        }
+        self.peers.insert(p);
+    }
+
+    /// Whether `p` left.
+    pub fn contains(&self, p: PeerId) -> bool {
+        self.peers.contains(&p)
+    }
+}
+
+/// When the application last drove the session (a datagram or a timer), and when it last
+/// found it had stalled for the peer timeout or longer (the others have timed it out, and
+/// may have elected another host meanwhile).
+#[derive(Debug, Default)]
+pub(crate) struct StallWatch {
+    last_driven: Option<Instant>,
+    stalled_at: Option<Instant>,
+}
+
+impl StallWatch {
+    /// The session is driven at `now`: the time since it was last driven (none the first
+    /// time).
+    fn driven(&mut self, now: Instant) -> Option<Duration> {
+        let last = self.last_driven.replace(now)?;
+        Some(now.saturating_since(last))
+    }
+
+    /// We found at `now` that we stalled past the peer timeout.
+    fn stalled(&mut self, now: Instant) {
+        self.stalled_at = Some(now);
+    }
+
+    /// A stall past the timeout ended less than 5 timeouts ago.
+    fn recent(&self, now: Instant, timeout: Duration) -> bool {
+        self.stalled_at
+            .is_some_and(|t| now.saturating_since(t) < timeout * 5)
+    }
+}
+
+impl Session {
+    /// Heartbeat round: a ping to every member whose link was quiet for a heartbeat interval
+    /// or whose RTT was not probed for a second.
+    pub(super) fn heartbeat(&mut self, now: Instant) {
+        if now < self.schedule.next_heartbeat {
+            return;
+        }
+        let peers: Vec<PeerId> = self
+            .members
+            .keys()
+            .copied()
+            .chain(self.host)
+            .filter(|p| *p != self.local)
+            .collect();
+        let hb = self.cfg.heartbeat_interval;
+        for p in peers {
+            let l = self.links.entry(p).or_default();
+            // Any datagram is a heartbeat: an explicit ping only if the link was quiet,
+            // and at least once a second for the RTT estimate.
+            let quiet = l.last_sent.is_none_or(|t| now >= t + hb);
+            let rtt_due = l
+                .last_ping
+                .is_none_or(|t| now >= t + Duration::from_secs(1));
+            if quiet || rtt_due {
+                l.ping_due = true;
+            }
+        }
+        self.schedule.next_heartbeat = now + hb;
+    }
+
+    /// Peers we keep link state for that are neither members nor our host.
+    pub(super) fn stranger_count(&self) -> usize {
+        self.links
+            .keys()
+            .filter(|p| !self.members.contains_key(p) && Some(**p) != self.host)
+            .count()
+    }
+
+    /// Drops the state of non-members silent for `peer_timeout` (a joiner that gave up, a
+    /// refused or spoofed sender), with whatever was still queued for them.
+    pub(super) fn forget_silent_strangers(&mut self, now: Instant) {
+        let timeout = self.cfg.peer_timeout;
+        let gone: Vec<PeerId> = self
+            .links
+            .iter()
+            .filter(|(p, l)| {
+                !self.members.contains_key(p)
+                    && Some(**p) != self.host
+                    && l.last_heard.is_some_and(|h| now >= h + timeout)
+            })
+            .map(|(p, _)| *p)
+            .collect();
+        for p in gone {
+            self.links.remove(&p);
+            self.stats.links.remove(&p);
+        }
+    }
+
+    /// Sees our own stalls (the application did not drive the session for a while: a frozen
+    /// loop, a debugger, a suspended process). Datagrams that arrived meanwhile wait in the
+    /// transport, so the silence of the others over that time says nothing: their `last_heard`
+    /// moves on by the gap, and nobody is timed out, nor a host elected, for our own pause.
+    /// A stall as long as the peer timeout is remembered: the others have timed us out.
+    pub(super) fn note_time(&mut self, now: Instant) {
+        let Some(gap) = self.stalls.driven(now) else {
+            return;
+        };
+        // A session driven only at its deadlines sees gaps of up to a heartbeat interval.
+        let pause = (self.cfg.peer_timeout / 2).max(self.cfg.heartbeat_interval * 2);
+        if gap < pause || self.role == Role::Joining {
+            return;
+        }
+        // Members and our host only: strangers are forgotten on their own schedule.
+        for (p, l) in self.links.iter_mut() {
+            if !self.members.contains_key(p) && Some(*p) != self.host {
+                continue;
+            }
+            if let Some(h) = l.last_heard.as_mut() {
+                *h = (*h + gap).min(now);
+            }
+        }
+        if gap >= self.cfg.peer_timeout {
+            self.stalls.stalled(now);
+        }
+    }
+
+    /// Whether we stalled past the peer timeout lately (see [`Session::note_time`]).
+    pub(super) fn stalled_recently(&self, now: Instant) -> bool {
+        self.stalls.recent(now, self.cfg.peer_timeout)
+    }
+
+    /// Host: sends a dropped peer its refusal, at most once per heartbeat interval.
+    pub(super) fn tell_dropped(&mut self, now: Instant, to: PeerId) {
+        let Some(why) = self
+            .dropped
+            .due_notice(to, now, self.cfg.heartbeat_interval)
+        else {
+            return;
+        };
+        let reason = match why {
+            DropWhy::TimedOut => format!(
+                "dropped from the room: silent for longer than the peer timeout ({} ms); \
+                 join again",
+                self.cfg.peer_timeout.as_millis()
+            ),
+            DropWhy::OlderTerm(old) => format!(
+                "the room moved on: peer {} became host in term {} while this peer was out of \
+                 touch (it still spoke for term {}); join again",
+                self.local.0, self.term.0, old.0
+            ),
+        };
+        self.raw_out.push_back(Transmit {
+            to,
+            payload: encode_refusal(&reason, self.term),
+            reliable: true,
+        });
+    }
+
+    /// Whether we heard from `p` within the peer timeout (we are always alive).
+    pub(super) fn alive(&self, p: PeerId, now: Instant) -> bool {
+        if p == self.local {
+            return true;
+        }
+        self.links
+            .get(&p)
+            .and_then(|l| l.last_heard)
+            .is_some_and(|h| now < h + self.cfg.peer_timeout)
+    }
+
+    /// The host drops members silent past the timeout; a member whose host is silent takes
+    /// over if it is the heir (or adopts a waiting `NewHost`).
+    pub(super) fn check_liveness(&mut self, now: Instant) {
+        match self.role {
+            Role::Host => {
+                let gone: Vec<PeerId> = self
+                    .members
+                    .keys()
+                    .copied()
+                    .filter(|p| *p != self.local && !self.alive(*p, now))
+                    .collect();
+                for p in gone {
+                    self.dropped.insert(p, DropWhy::TimedOut);
+                    self.host_peer_left(now, p);
+                }
+            }
+            Role::Client => {
+                if self.retry_new_hosts(now) {
+                    return;
+                }
+                let Some(host) = self.host else { return };
+                if self.alive(host, now) {
+                    return;
+                }
+                // Host silent: the earliest-joined surviving member takes over (no vote).
+                if heir(&self.members, host, |p| self.alive(p, now)) == Some(self.local) {
+                    self.become_host(now, host);
+                }
+            }
+            Role::Joining | Role::Refused => {}
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn a_dropped_peer_is_told_at_most_once_per_interval() {
+        let mut d = DroppedPeers::default();
+        let p = PeerId(4);
+        let every = Duration::from_millis(200);
+        assert_eq!(d.due_notice(p, Instant::ZERO, every), None, "not dropped");
+        d.insert(p, DropWhy::TimedOut);
+        assert!(d.contains(p));
+        assert_eq!(
+            d.due_notice(p, Instant::from_millis(10), every),
+            Some(DropWhy::TimedOut)
+        );
+        assert_eq!(d.due_notice(p, Instant::from_millis(209), every), None);
+        assert_eq!(
+            d.due_notice(p, Instant::from_millis(210), every),
+            Some(DropWhy::TimedOut)
+        );
+        d.remove(p);
+        assert!(!d.contains(p));
+    }
+
+    #[test]
+    fn remembered_peers_are_bounded() {
+        let mut d = Departed::default();
+        let mut dropped = DroppedPeers::default();
+        for i in 0..=MAX_REMEMBERED as u64 {
+            d.insert(PeerId(i));
+            dropped.insert(PeerId(i), DropWhy::OlderTerm(Term(1)));
+        }
+        assert!(d.peers.len() <= MAX_REMEMBERED && d.contains(PeerId(MAX_REMEMBERED as u64)));
+        assert!(dropped.peers.len() <= MAX_REMEMBERED);
+    }
+
+    #[test]
+    fn the_stall_watch_measures_gaps_and_remembers_a_long_stall_for_five_timeouts() {
+        let mut w = StallWatch::default();
+        let timeout = Duration::from_secs(1);
+        assert_eq!(w.driven(Instant::from_millis(100)), None);
+        assert_eq!(
+            w.driven(Instant::from_millis(1600)),
+            Some(Duration::from_millis(1500))
+        );
+        assert!(!w.recent(Instant::from_millis(1600), timeout));
+        w.stalled(Instant::from_millis(1600));
+        assert!(w.recent(Instant::from_millis(6599), timeout));
+        assert!(!w.recent(Instant::from_millis(6600), timeout));
+    }
+}

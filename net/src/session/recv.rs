@@ -1,0 +1,458 @@
+//! Datagrams in: decoded once ([`decode_datagram`]), then, in order: who may be heard (peers
+//! that left, peers the host dropped, strangers beyond [`MAX_STRANGERS`]), refusals, the
+//! term, the link's sequence and clock, the sections (acks, pings, keyframe requests,
+//! control messages), and last the state entries, applied against their delta bases and
+//! relayed by the host.
+
+use std::collections::BTreeSet;
+use std::time::Duration;
+
+use super::delta::PartQ;
+use super::liveness::DropWhy;
+use super::{Event, Role, Session, Transmit, MAX_STRANGERS};
+use crate::error::NetError;
+use crate::ids::{NetId, PeerId};
+use crate::time::Instant;
+use crate::wire::{
+    decode_datagram, decode_state_block_sized, encode_refusal, ChunkEnc, Control, Datagram,
+    EntryLayout, PacketHeader, PartBody, PosEnc, Refusal, Section, StateEntry,
+};
+
+/// What an entry did.
+enum Applied {
+    /// Applied, or kept as a delta base.
+    Kept,
+    /// Dropped (unknown object, not from its source, stale epoch, base missing).
+    Dropped,
+}
+
+impl Session {
+    /// A datagram from `from`.
+    pub(super) fn receive(&mut self, now: Instant, from: PeerId, bytes: &[u8]) {
+        if self.departed.contains(from) {
+            return;
+        }
+        let datagram = decode_datagram(bytes);
+        if self.role == Role::Host && self.dropped.contains(from) {
+            // A fresh session of the dropped peer (term 0: it joins again) is heard out as any
+            // joiner, with fresh link state (its sequences start over); the rest is answered
+            // with the refusal.
+            let rejoining =
+                matches!(&datagram, Ok(Datagram::Packet { header, .. }) if header.term.0 == 0);
+            if !rejoining {
+                self.tell_dropped(now, from);
+                return;
+            }
+            self.dropped.remove(from);
+            self.links.remove(&from);
+            self.stats.links.remove(&from);
+        }
+        // State is kept for members and at most MAX_STRANGERS others (joiners, peers we have
+        // not heard of yet): a flood of datagrams from made-up ids costs no memory.
+        let known = self.links.contains_key(&from)
+            || self.members.contains_key(&from)
+            || Some(from) == self.host;
+        if known {
+            self.stats.on_recv(from, bytes.len());
+        } else {
+            // Per-peer statistics start once the sender has link state (below).
+            self.stats.down.add(bytes.len());
+            if self.stranger_count() >= MAX_STRANGERS {
+                self.stats.dropped_strangers += 1;
+                return;
+            }
+        }
+        let (header, sections) = match datagram {
+            Ok(Datagram::Packet { header, sections }) => (header, sections),
+            Ok(Datagram::Refusal(refusal)) => return self.on_refusal(now, from, refusal),
+            Err(NetError::VersionMismatch { ours, theirs }) => {
+                self.stats.decode_errors += 1;
+                if self.role == Role::Host {
+                    let reason = format!(
+                        "protocol version mismatch: host speaks {ours}, you speak {theirs}"
+                    );
+                    self.raw_out.push_back(Transmit {
+                        to: from,
+                        payload: encode_refusal(&reason, self.term),
+                        reliable: true,
+                    });
+                }
+                return;
+            }
+            Err(_) => {
+                self.stats.decode_errors += 1;
+                return;
+            }
+        };
+        let is_member = self.members.contains_key(&from) || Some(from) == self.host;
+        // A non-member speaking for an older term of this room: it was out of touch while the
+        // room elected this host (a stalled old host, or a member the election left out as
+        // dead). Its objects have new owners; it is told, and ignored until it joins again.
+        if !is_member && self.role == Role::Host && header.term.0 != 0 && header.term < self.term {
+            self.dropped.insert(from, DropWhy::OlderTerm(header.term));
+            self.tell_dropped(now, from);
+            return;
+        }
+        // term 0: a joiner's datagrams before it learned the term
+        if is_member && header.term < self.term && header.term.0 != 0 {
+            self.stats.dropped_old_term += 1;
+            return;
+        }
+        self.on_packet(now, from, known, bytes.len(), &header, sections);
+    }
+
+    /// A refusal: a joiner refused, or a member the host dropped (it stalled past the
+    /// timeout), or the host of a newer term telling a peer that stalled.
+    fn on_refusal(&mut self, now: Instant, from: PeerId, refusal: Refusal) {
+        let from_our_host =
+            matches!(self.role, Role::Joining | Role::Client) && Some(from) == self.host;
+        // Or the host of a newer term: the room elected it while this peer was silent
+        // (a host or member that stalled past the peer timeout, or was cut off that long).
+        // Only after a stall of our own: a peer cut off from the room elects itself host of
+        // a newer term too, and must not depose a host that never stopped.
+        let newer = matches!(self.role, Role::Host | Role::Client)
+            && refusal.term.is_some_and(|t| t > self.term)
+            && self.stalled_recently(now);
+        if from_our_host || newer {
+            let was_in = matches!(self.role, Role::Host | Role::Client);
+            self.role = Role::Refused;
+            self.events.push_back(if was_in {
+                Event::Dropped {
+                    host: from,
+                    reason: refusal.reason,
+                }
+            } else {
+                Event::Refused {
+                    reason: refusal.reason,
+                }
+            });
+        }
+    }
+
+    /// A datagram of this room's protocol and term from `from`.
+    fn on_packet(
+        &mut self,
+        now: Instant,
+        from: PeerId,
+        known: bool,
+        len: usize,
+        header: &PacketHeader,
+        sections: Vec<Section<'_>>,
+    ) {
+        let link = self.links.entry(from).or_default();
+        link.last_heard = Some(now);
+        let ls = self.stats.links.entry(from).or_default();
+        if !known {
+            ls.down.add(len);
+        }
+        let arrival = link.seq.on_receive(now, header.seq, ls);
+        let sample_time = link.clock.observe(now, header.time_ms);
+
+        let mut states = Vec::new();
+        let mut controls = Vec::new();
+        for s in sections {
+            match s {
+                Section::Ack { next_expected } => self.on_reliable_ack(now, from, next_expected),
+                Section::Reliable { seq, bytes } => {
+                    if let Some(l) = self.links.get_mut(&from) {
+                        for m in l.reliable.on_receive(seq, bytes) {
+                            match Control::decode(&m) {
+                                Ok(c) => controls.push(c),
+                                Err(_) => self.stats.decode_errors += 1,
+                            }
+                        }
+                    }
+                }
+                Section::Ping { time_ms } => {
+                    if let Some(l) = self.links.get_mut(&from) {
+                        l.pong_due = Some(time_ms);
+                    }
+                }
+                Section::Pong { time_ms } => {
+                    let now_ms = (now.as_micros() / 1000) & 0xFFFF_FFFF;
+                    let rtt_ms = (now_ms as u32).wrapping_sub(time_ms);
+                    if rtt_ms < 60_000 {
+                        if let Some(l) = self.links.get_mut(&from) {
+                            l.rtt.on_sample(Duration::from_millis(u64::from(rtt_ms)));
+                            self.stats.links.entry(from).or_default().rtt = l.rtt.srtt();
+                        }
+                    }
+                }
+                Section::KeyframeRequest { ids } => {
+                    for id in ids {
+                        let sends = self
+                            .objects
+                            .get(id)
+                            .is_some_and(|o| o.info.owner == self.local || self.role == Role::Host);
+                        if sends {
+                            self.queue_entries(now, from, id, false, true);
+                        }
+                    }
+                }
+                Section::State { count, bits } => states.push((count, bits)),
+                Section::StateAck { latest, mask } => self.on_state_ack(from, latest, mask),
+            }
+        }
+        for c in controls {
+            self.deliver_control(now, from, c);
+        }
+        if !self.members.contains_key(&from) && Some(from) != self.host {
+            return; // state only from members
+        }
+        let mut touched = BTreeSet::new();
+        let carried_state = !states.is_empty();
+        let mut complete = !arrival.too_late;
+        for (count, bits) in states {
+            if arrival.too_late {
+                break;
+            }
+            let cfg = &self.cfg;
+            let objects = &self.objects;
+            let parsed = decode_state_block_sized(count, bits, |id| {
+                let o = objects.get(id)?;
+                Some(EntryLayout {
+                    class: cfg.classes.get(usize::from(o.info.class.0))?,
+                    particles: o.info.particles,
+                })
+            });
+            let entries = match parsed {
+                Ok((e, all)) => {
+                    complete &= all;
+                    e
+                }
+                Err(_) => {
+                    self.stats.decode_errors += 1;
+                    complete = false;
+                    continue;
+                }
+            };
+            for (e, body_bits) in entries {
+                // per-class down bytes: what the entry's body took on the wire
+                if let Some(class) = self
+                    .objects
+                    .get(e.id)
+                    .and_then(|o| self.cfg.classes.get(usize::from(o.info.class.0)))
+                {
+                    *self
+                        .stats
+                        .class_down_bytes
+                        .entry(class.name.clone())
+                        .or_default() += body_bits as f64 / 8.0;
+                }
+                self.apply_entry(now, from, e, arrival.fresh, &mut touched);
+            }
+        }
+        // acknowledge the datagram (its entries become delta bases at the sender) unless
+        // we could not read all of it
+        if carried_state && complete {
+            if let Some(l) = self.links.get_mut(&from) {
+                l.state_acks.record(header.seq);
+            }
+        }
+        for id in touched {
+            self.after_update(now, from, id, sample_time);
+        }
+    }
+
+    /// The peer's cumulative ack of our reliable messages. Objects whose `Spawn` it now
+    /// acknowledged get their current state at once (a resting object would otherwise never
+    /// be sent again).
+    fn on_reliable_ack(&mut self, now: Instant, from: PeerId, next_expected: u16) {
+        let Some(l) = self.links.get_mut(&from) else {
+            return;
+        };
+        l.reliable.on_ack(next_expected);
+        let acked: Vec<NetId> = l
+            .spawn_pending
+            .iter()
+            .filter(|(_, seq)| l.reliable.is_acked(**seq))
+            .map(|(id, _)| *id)
+            .collect();
+        for id in &acked {
+            l.spawn_pending.remove(id);
+        }
+        if self.role == Role::Host {
+            for id in acked {
+                if self.owner(id) != Some(from) {
+                    self.queue_entries(now, from, id, false, true);
+                }
+            }
+        }
+    }
+
+    /// The peer's state ack: the entries of the datagrams it covers become delta bases.
+    fn on_state_ack(&mut self, from: PeerId, latest: u8, mask: u32) {
+        let Some(l) = self.links.get_mut(&from) else {
+            return;
+        };
+        for (id, part, number) in l.in_flight.on_ack(latest, mask) {
+            l.send.on_acked(&(id, part), number);
+        }
+    }
+
+    /// Applies one entry; an entry dropped is forgotten in its ring slot (see
+    /// [`super::delta::DeltaBases::forget_entry`]).
+    fn apply_entry(
+        &mut self,
+        now: Instant,
+        from: PeerId,
+        e: StateEntry,
+        fresh: bool,
+        touched: &mut BTreeSet<NetId>,
+    ) {
+        let (id, part, seq) = (e.id, e.part(), e.seq);
+        if let Applied::Dropped = self.try_apply_entry(now, from, e, fresh, touched) {
+            if let Some(l) = self.links.get_mut(&from) {
+                l.recv.forget_entry(&(id, part), seq);
+            }
+        }
+    }
+
+    fn try_apply_entry(
+        &mut self,
+        now: Instant,
+        from: PeerId,
+        e: StateEntry,
+        fresh: bool,
+        touched: &mut BTreeSet<NetId>,
+    ) -> Applied {
+        let Some(o) = self.objects.get(e.id) else {
+            return Applied::Dropped;
+        };
+        if o.info.owner == self.local {
+            self.stats.dropped_non_owner += 1;
+            return Applied::Dropped;
+        }
+        // the host hears an object's owner; a client hears its host (which relays)
+        let sender_ok = if self.role == Role::Host {
+            from == o.info.owner
+        } else {
+            Some(from) == self.host
+        };
+        if !sender_ok {
+            self.stats.dropped_non_owner += 1;
+            return Applied::Dropped;
+        }
+        if e.epoch_tag != o.info.epoch.tag() {
+            self.stats.dropped_stale_epoch += 1;
+            return Applied::Dropped;
+        }
+        let Some(class) = self.cfg.classes.get(usize::from(o.info.class.0)) else {
+            return Applied::Dropped;
+        };
+        let pq = class.position_quantizer();
+        let part = e.part();
+        let Some(link) = self.links.get_mut(&from) else {
+            return Applied::Dropped;
+        };
+        let rp = link.recv.part((e.id, part));
+        let state = if e.key {
+            match &e.body {
+                PartBody::Transform {
+                    pos: Some(PosEnc::Abs(p)),
+                    rot: Some(r),
+                } => Some(PartQ::Transform {
+                    pos: pq.clamp(p.map(i64::from)),
+                    rot: *r,
+                }),
+                PartBody::Chunk {
+                    values: ChunkEnc::Abs(v),
+                    ..
+                } => Some(PartQ::Chunk(v.clone())),
+                _ => None,
+            }
+        } else {
+            match (&e.body, rp.base(e.base)) {
+                (PartBody::Transform { pos, rot }, Some(PartQ::Transform { pos: bp, rot: br })) => {
+                    let np = match pos {
+                        Some(PosEnc::Delta(d)) => {
+                            pq.clamp([0, 1, 2].map(|i| i64::from(bp[i]) + i64::from(d[i])))
+                        }
+                        Some(PosEnc::Abs(p)) => pq.clamp(p.map(i64::from)),
+                        None => bp,
+                    };
+                    Some(PartQ::Transform {
+                        pos: np,
+                        rot: rot.unwrap_or(br),
+                    })
+                }
+                (
+                    PartBody::Chunk {
+                        values: ChunkEnc::Delta(list),
+                        ..
+                    },
+                    Some(PartQ::Chunk(mut v)),
+                ) => {
+                    let q = class.particle_quantizer();
+                    for (i, d) in list {
+                        if let Some(x) = v.get_mut(*i as usize) {
+                            *x = q.clamp([0, 1, 2].map(|k| i64::from(x[k]) + i64::from(d[k])));
+                        }
+                    }
+                    Some(PartQ::Chunk(v))
+                }
+                (_, None) => {
+                    // the base is unknown (history reset): ask for a keyframe, rate-limited
+                    self.stats.chain_breaks += 1;
+                    let gap = link.rtt.keyframe_request_gap();
+                    link.keyframes.want(e.id, now, gap);
+                    return Applied::Dropped;
+                }
+                _ => None,
+            }
+        };
+        let Some(state) = state else {
+            return Applied::Dropped;
+        };
+        if !link
+            .recv
+            .part((e.id, part))
+            .record(e.seq, state.clone(), fresh)
+        {
+            return Applied::Kept; // older than what we show (reordered); kept only as a base
+        }
+        let chunk_len = class.chunk_len();
+        let Some(o) = self.objects.get_mut(e.id) else {
+            return Applied::Dropped;
+        };
+        o.apply_part(part, state, chunk_len);
+        if o.rest != e.rest {
+            o.rest = e.rest;
+            if e.rest {
+                o.last_change = now;
+            }
+        }
+        o.source = Some(from);
+        touched.insert(e.id);
+        Applied::Kept
+    }
+
+    /// An object's state changed from `from`'s datagram: buffer it for interpolation, and,
+    /// as host, relay it to every other member (thesis Figure 5.2).
+    fn after_update(&mut self, now: Instant, from: PeerId, id: NetId, sample_time: Instant) {
+        let interp = self.interp;
+        let Some(o) = self.objects.get(id) else {
+            return;
+        };
+        let Some(class) = self.class(o.info.class) else {
+            return;
+        };
+        let snap = o.snapshot(sample_time, class);
+        if let Some(o) = self.objects.get_mut(id) {
+            o.buffer.push(snap, &interp);
+        }
+        if self.role == Role::Host {
+            let targets: Vec<PeerId> = self
+                .members
+                .keys()
+                .copied()
+                .filter(|p| *p != self.local && *p != from)
+                .collect();
+            for p in targets {
+                if self.queue_entries(now, p, id, false, false) {
+                    self.last_relay_at = Some(now);
+                }
+            }
+        }
+    }
+}

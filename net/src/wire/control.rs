@@ -1,0 +1,239 @@
+//! Control messages: serde + bincode 2, carried in reliable sections, validated on decode.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{decode_err, NetError};
+use crate::ids::{AuthorityEpoch, ClassId, NetId, PeerId, Term};
+use crate::policy::AuthorityPolicy;
+
+use super::{MAX_CONTROL_LEN, MAX_MEMBERS, MAX_PARTICLES};
+
+/// Control messages, carried reliably and in order per link.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Control {
+    /// Client → host: join request.
+    Hello {
+        /// Protocol version (also in the header).
+        protocol: u8,
+        /// Digest of the class table ([`crate::SessionConfig::digest`]).
+        config_digest: u64,
+    },
+    /// Host → client: accepted.
+    Welcome {
+        /// Current term.
+        term: Term,
+        /// The host.
+        host: PeerId,
+        /// Join order of the new peer.
+        join_seq: u32,
+        /// Every member (including host and new peer) with its join order.
+        members: Vec<(PeerId, u32)>,
+    },
+    /// Host → client: join refused.
+    Refused {
+        /// Why.
+        reason: String,
+    },
+    /// Non-host → client: the host is someone else.
+    Redirect {
+        /// Current host.
+        host: PeerId,
+    },
+    /// Host → all: a peer joined.
+    PeerJoined {
+        /// The peer.
+        peer: PeerId,
+        /// Its join order.
+        join_seq: u32,
+    },
+    /// Host → all: a peer left (timed out).
+    PeerLeft {
+        /// The peer.
+        peer: PeerId,
+    },
+    /// Host → all: an object exists (also the late-join snapshot and post-migration resync).
+    Spawn(SpawnInfo),
+    /// Host → all: an object is gone.
+    Despawn {
+        /// Object.
+        id: NetId,
+    },
+    /// Client → host: please spawn an object owned by me.
+    SpawnRequest {
+        /// Caller's request number (echoed in the event).
+        request: u32,
+        /// Class.
+        class: ClassId,
+        /// Particle count (0 for rigid).
+        particles: u32,
+        /// Initial position.
+        pos: [f32; 3],
+        /// Initial rotation.
+        rot: [f32; 4],
+    },
+    /// Owner → host: please despawn.
+    DespawnRequest {
+        /// Object.
+        id: NetId,
+    },
+    /// Client → host: I want authority.
+    AuthorityRequest {
+        /// Object.
+        id: NetId,
+    },
+    /// Host → holder: `by` asks for your object (policy OwnerMustAgree).
+    AuthorityAsk {
+        /// Object.
+        id: NetId,
+        /// Asking peer.
+        by: PeerId,
+    },
+    /// Holder → host: answer to an ask.
+    AuthorityAnswer {
+        /// Object.
+        id: NetId,
+        /// Asking peer.
+        by: PeerId,
+        /// Agreed?
+        agree: bool,
+    },
+    /// Host → all: new owner.
+    OwnerChanged {
+        /// Object.
+        id: NetId,
+        /// New owner.
+        owner: PeerId,
+        /// New epoch.
+        epoch: AuthorityEpoch,
+        /// Held by a peer (vs. resting with the host by default).
+        held: bool,
+    },
+    /// Host → requester: denied.
+    AuthorityDenied {
+        /// Object.
+        id: NetId,
+        /// Why.
+        reason: DenyReason,
+    },
+    /// Owner → host: I let go.
+    AuthorityRelease {
+        /// Object.
+        id: NetId,
+    },
+    /// New host → all: I am the host of `term`.
+    NewHost {
+        /// New term.
+        term: Term,
+        /// New host.
+        host: PeerId,
+        /// Surviving members with join order.
+        members: Vec<(PeerId, u32)>,
+    },
+    /// Client → new host: the objects I own, so a handoff in flight is not lost.
+    Resync {
+        /// Claims.
+        claims: Vec<SpawnInfo>,
+    },
+    /// Any member → the others: I am leaving now. The receivers treat the sender as gone at
+    /// once instead of after `peer_timeout` (authority returns, a host is replaced).
+    Leave,
+}
+
+/// Why authority was denied.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum DenyReason {
+    /// Policy Locked.
+    Locked,
+    /// Someone else holds it.
+    Held(PeerId),
+    /// The holder said no.
+    OwnerRefused,
+    /// No such object.
+    Unknown,
+}
+
+/// Everything needed to create an object replica.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SpawnInfo {
+    /// Id.
+    pub id: NetId,
+    /// Class.
+    pub class: ClassId,
+    /// Owner.
+    pub owner: PeerId,
+    /// Authority epoch.
+    pub epoch: AuthorityEpoch,
+    /// Held by a peer.
+    pub held: bool,
+    /// Authority policy.
+    pub policy: AuthorityPolicy,
+    /// Particle count.
+    pub particles: u32,
+    /// Position.
+    pub pos: [f32; 3],
+    /// Rotation (x, y, z, w).
+    pub rot: [f32; 4],
+    /// The `SpawnRequest` number of the client that asked for the object (its first
+    /// owner), if one did: the requester matches its request exactly, also after a migration.
+    pub request: Option<u32>,
+}
+
+fn bincode_config() -> impl bincode::config::Config {
+    bincode::config::standard().with_limit::<MAX_CONTROL_LEN>()
+}
+
+impl Control {
+    /// Encode with bincode 2.
+    pub fn encode(&self) -> Vec<u8> {
+        bincode::serde::encode_to_vec(self, bincode_config()).unwrap_or_default()
+    }
+
+    /// Decode and validate (finite floats, bounded lists).
+    pub fn decode(bytes: &[u8]) -> Result<Control, NetError> {
+        if bytes.len() > MAX_CONTROL_LEN {
+            return Err(decode_err(0, "control message too long"));
+        }
+        let (msg, used): (Control, usize) =
+            bincode::serde::decode_from_slice(bytes, bincode_config())
+                .map_err(|_| decode_err(0, "malformed control message"))?;
+        if used != bytes.len() {
+            return Err(decode_err(used, "trailing bytes after control message"));
+        }
+        msg.validate()?;
+        Ok(msg)
+    }
+
+    fn validate(&self) -> Result<(), NetError> {
+        let finite = |a: &[f32]| a.iter().all(|v| v.is_finite() && v.abs() < 1e6);
+        let ok = match self {
+            Control::Spawn(s) => s.valid(),
+            Control::Resync { claims } => claims.iter().all(SpawnInfo::valid),
+            Control::SpawnRequest {
+                pos,
+                rot,
+                particles,
+                ..
+            } => finite(pos) && finite(rot) && *particles <= MAX_PARTICLES,
+            Control::Welcome { members, .. } | Control::NewHost { members, .. } => {
+                members.len() <= MAX_MEMBERS
+            }
+            Control::Refused { reason } => reason.len() <= 512,
+            _ => true,
+        };
+        if ok {
+            Ok(())
+        } else {
+            Err(decode_err(0, "control message fails validation"))
+        }
+    }
+}
+
+impl SpawnInfo {
+    fn valid(&self) -> bool {
+        self.pos
+            .iter()
+            .chain(self.rot.iter())
+            .all(|v| v.is_finite() && v.abs() < 1e6)
+            && self.particles <= MAX_PARTICLES
+    }
+}
