@@ -36,14 +36,7 @@ impl Session {
     /// at once instead of after `peer_timeout`. Send what `poll_transmit` gives afterwards;
     /// the session is not meant to be used after that.
     pub fn leave(&mut self, now: Instant) {
-        let peers: std::collections::BTreeSet<PeerId> = self
-            .members
-            .keys()
-            .copied()
-            .chain(self.host)
-            .filter(|p| *p != self.local)
-            .collect();
-        for p in peers {
+        for p in self.others() {
             self.send_control(now, p, &Control::Leave);
         }
     }

@@ -130,15 +130,8 @@ impl Session {
         if now < self.schedule.next_heartbeat {
             return;
         }
-        let peers: Vec<PeerId> = self
-            .members
-            .keys()
-            .copied()
-            .chain(self.host)
-            .filter(|p| *p != self.local)
-            .collect();
         let hb = self.cfg.heartbeat_interval;
-        for p in peers {
+        for p in self.others() {
             let l = self.links.entry(p).or_default();
             // Any datagram is a heartbeat: an explicit ping only if the link was quiet,
             // and at least once a second for the RTT estimate.

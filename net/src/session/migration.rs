@@ -7,8 +7,9 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
+use super::spawn::spawn_request;
 use super::{Event, Role, Session, LOST_ID_WINDOW, MAX_TERM_JUMP};
-use crate::ids::{ClassId, PeerId, Term};
+use crate::ids::{PeerId, Term};
 use crate::time::Instant;
 use crate::wire::{Control, SpawnInfo};
 
@@ -312,15 +313,12 @@ impl Session {
                 },
             );
         }
-        let pending: Vec<(u32, ClassId, _)> = self.spawns.iter().collect();
-        for (request, class, st) in pending {
-            let msg = Control::SpawnRequest {
-                request,
-                class,
-                particles: st.particles.len() as u32,
-                pos: st.pos.to_array(),
-                rot: st.rot.to_array(),
-            };
+        let requests: Vec<Control> = self
+            .spawns
+            .iter()
+            .map(|(request, class, st)| spawn_request(request, class, &st))
+            .collect();
+        for msg in requests {
             self.send_control(now, host, &msg);
         }
         self.events.push_back(Event::HostChanged { host, term });

@@ -374,6 +374,16 @@ impl Session {
         })
     }
 
+    /// Every member but us, and our host (a joiner's contact before it is a member).
+    fn others(&self) -> std::collections::BTreeSet<PeerId> {
+        self.members
+            .keys()
+            .copied()
+            .chain(self.host)
+            .filter(|p| *p != self.local)
+            .collect()
+    }
+
     fn class(&self, c: ClassId) -> Option<&ClassConfig> {
         self.cfg.classes.get(usize::from(c.0))
     }

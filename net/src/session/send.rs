@@ -103,6 +103,15 @@ pub(crate) fn plan_entries(
     let rest = o.rest;
     let tag = o.info.epoch.tag();
     let bits = class.rot_bits();
+    let entry = |seq: u8, key: bool, base: u8, body: PartBody| StateEntry {
+        id,
+        epoch_tag: tag,
+        seq,
+        key,
+        base,
+        rest,
+        body,
+    };
     let key_due = |sp: Option<&SendPart>| {
         !rest && key_interval.is_some_and(|k| sp.is_some_and(|sp| now >= sp.last_key_at + k))
     };
@@ -184,18 +193,11 @@ pub(crate) fn plan_entries(
             let Some(seq) = parts.emit((id, part), emission, now, ack_wait) else {
                 continue;
             };
-            out.push(StateEntry {
-                id,
-                epoch_tag: tag,
-                seq,
-                key,
-                base: base_seq,
-                rest,
-                body: PartBody::Chunk {
-                    chunk: ci as u32,
-                    values,
-                },
-            });
+            let body = PartBody::Chunk {
+                chunk: ci as u32,
+                values,
+            };
+            out.push(entry(seq, key, base_seq, body));
         }
     }
     // transform part (position and rotation sent separately, thesis 5.3); when particles
@@ -264,18 +266,7 @@ pub(crate) fn plan_entries(
             field_count: 2,
         };
         if let Some(seq) = parts.emit((id, 0), emission, now, ack_wait) {
-            out.insert(
-                0,
-                StateEntry {
-                    id,
-                    epoch_tag: tag,
-                    seq,
-                    key,
-                    base: base_seq,
-                    rest,
-                    body,
-                },
-            );
+            out.insert(0, entry(seq, key, base_seq, body));
         }
     }
     out

@@ -52,6 +52,17 @@ impl PendingSpawns {
     }
 }
 
+/// The request to the host for an object of `class` in `state`.
+pub(crate) fn spawn_request(request: u32, class: ClassId, state: &ObjectState) -> Control {
+    Control::SpawnRequest {
+        request,
+        class,
+        particles: state.particles.len() as u32,
+        pos: state.pos.to_array(),
+        rot: state.rot.to_array(),
+    }
+}
+
 impl Session {
     /// Spawn an object. On the host it exists at once (owned by the host) and its id is
     /// returned; on a client the host is asked and `Event::Spawned { request }` follows,
@@ -81,13 +92,7 @@ impl Session {
             }
             Role::Client => {
                 let host = self.host.ok_or(NetError::NotConnected)?;
-                let msg = Control::SpawnRequest {
-                    request,
-                    class,
-                    particles: state.particles.len() as u32,
-                    pos: state.pos.to_array(),
-                    rot: state.rot.to_array(),
-                };
+                let msg = spawn_request(request, class, &state);
                 self.spawns.insert(request, class, state);
                 self.send_control(now, host, &msg);
                 Ok((NetId(0), request))

@@ -338,19 +338,8 @@ pub fn decode_state_block<'c>(
     bits: &[u8],
     layout_of: impl Fn(NetId) -> Option<EntryLayout<'c>>,
 ) -> Result<(Vec<StateEntry>, bool), NetError> {
-    let mut r = BitReader::new(bits);
-    let mut out = Vec::new();
-    let mut prev: Option<NetId> = None;
-    for _ in 0..count {
-        let d = r.read_exp_golomb()?;
-        let id = NetId(prev.map_or(0, |p| p.0).wrapping_add(d));
-        let Some(layout) = layout_of(id) else {
-            return Ok((out, false));
-        };
-        out.push(StateEntry::decode_body(id, &layout, &mut r)?);
-        prev = Some(id);
-    }
-    Ok((out, true))
+    let (entries, complete) = decode_state_block_sized(count, bits, layout_of)?;
+    Ok((entries.into_iter().map(|(e, _)| e).collect(), complete))
 }
 
 /// A decoded entry with the bits its body took on the wire (the id prefix excluded).
