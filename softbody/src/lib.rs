@@ -11,7 +11,6 @@ mod error;
 pub mod mesh;
 pub mod methods;
 pub mod metrics;
-mod ply;
 pub mod scenario;
 
 pub use body::{SoftBody, SoftBodyHandle, SoftBodySet, SoftPart};

@@ -5,7 +5,7 @@ use std::path::Path;
 
 use glam::Vec3;
 
-use crate::mesh::{Mesh, MAX_MESH_ELEMENTS};
+use super::{Mesh, MAX_MESH_ELEMENTS};
 use crate::SoftBodyError;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -100,7 +100,7 @@ impl Reader<'_> {
 }
 
 /// Parses a PLY file's bytes; `source` names the file in errors.
-pub fn parse_ply(bytes: &[u8], source: &Path) -> Result<Mesh, SoftBodyError> {
+pub(super) fn parse_ply(bytes: &[u8], source: &Path) -> Result<Mesh, SoftBodyError> {
     let bad = |what: String| SoftBodyError::malformed(source, what);
     let header_end = bytes
         .windows(10)
