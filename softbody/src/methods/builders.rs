@@ -3,7 +3,6 @@
 
 use glam::Vec3;
 use rapier3d::prelude::PhysicsWorld;
-use serde::{Deserialize, Serialize};
 
 use crate::cluster::build_particle_map;
 use crate::methods::ispc::ispc_links;
@@ -11,206 +10,13 @@ use crate::methods::model::DeformableModel;
 use crate::methods::native::NativeModel;
 use crate::methods::particle::ParticleModel;
 use crate::methods::pbd::{
-    BendingGroup, DistanceGroup, PbdBody, PbdParams, ShapeClusters, SolverKind, SurfaceMap,
-    VolumeGroup,
+    BendingGroup, DistanceGroup, PbdBody, ShapeClusters, SolverKind, SurfaceMap, VolumeGroup,
 };
 use crate::methods::tets::{tet_edges, tetrahedralize};
-use crate::{ClusterMethod, Mesh, SimulationSpace, SoftBodyConfig, SoftBodyError, SoftRegion};
+use crate::{ClusterMethod, Mesh, SimulationSpace, SoftBodyConfig, SoftBodyError};
 
-/// The methods compared.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, PartialOrd, Ord)]
-#[serde(rename_all = "snake_case")]
-pub enum MethodKind {
-    /// The thesis's particle method on rapier ([`crate::SoftBodySet`]).
-    Particle,
-    /// PBD/XPBD on the surface only: edge distance + dihedral bending.
-    Surface,
-    /// The surface model plus internal shape-preserving links (ISPC paper).
-    Ispc,
-    /// XPBD on tets (edges + volume) with the surface embedded: the accuracy reference.
-    Tet,
-    /// Shape matching on overlapping clusters from the particle map (Müller et al. 2005).
-    ShapeMatching,
-    /// rapier 0.36's own volumetric soft body, surface embedded in its cells.
-    RapierNative,
-}
-
-impl MethodKind {
-    /// All methods.
-    pub const ALL: [MethodKind; 6] = [
-        MethodKind::Particle,
-        MethodKind::Surface,
-        MethodKind::Ispc,
-        MethodKind::Tet,
-        MethodKind::ShapeMatching,
-        MethodKind::RapierNative,
-    ];
-
-    /// Short name.
-    pub fn name(&self) -> &'static str {
-        match self {
-            MethodKind::Particle => "particle",
-            MethodKind::Surface => "surface_pbd",
-            MethodKind::Ispc => "ispc",
-            MethodKind::Tet => "tet",
-            MethodKind::ShapeMatching => "shape_matching",
-            MethodKind::RapierNative => "rapier_native",
-        }
-    }
-}
-
-/// Material shared by the position-based methods, so that they model the same object.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Material {
-    /// Young's modulus, Pa (distance constraints get `E · V_share / L²`).
-    pub young_pa: f32,
-    /// Bulk modulus of the tet volume constraints, Pa.
-    pub bulk_pa: f32,
-    /// Bending stiffness as a fraction of `E · L³`.
-    pub bend_ratio: f32,
-    /// Density, kg/m³.
-    pub density_kg_m3: f32,
-    /// Plain-PBD stiffness per iteration, (0, 1].
-    pub pbd_stiffness: f32,
-    /// Shape-matching rate, 1/s.
-    pub shape_rate_per_s: f32,
-    /// Stiffness of the ISPC links relative to a rod sharing the body's volume evenly: links
-    /// span the body, so a thin rod underestimates the solid they stand for (the paper tunes
-    /// its link stiffness against the tet model the same way).
-    pub link_scale: f32,
-}
-
-impl Default for Material {
-    fn default() -> Self {
-        Self {
-            young_pa: 2.0e5,
-            bulk_pa: 4.0e5,
-            bend_ratio: 0.05,
-            density_kg_m3: 1000.0,
-            pbd_stiffness: 0.5,
-            shape_rate_per_s: 120.0,
-            link_scale: 30.0,
-        }
-    }
-}
-
-/// A method at one resolution and solver budget.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct MethodSpec {
-    /// The method.
-    pub kind: MethodKind,
-    /// Resolution knob as a fraction of the object's size: tet / native cell size, particle
-    /// and shape-matching cluster radius. Unused by the surface and ISPC models (they use the
-    /// mesh's own vertices).
-    pub cell_frac: f32,
-    /// Substeps and iterations, solver and contact settings of the position-based methods.
-    pub params: PbdParams,
-    /// Material.
-    pub material: Material,
-    /// Only this region (world coordinates of the mesh given to [`build_model`]) is soft; the
-    /// rest follows rigidly (thesis 3.5.2). Particle method only; `None` = all soft.
-    #[serde(default)]
-    pub soft_region: Option<SoftRegion>,
-}
-
-impl MethodSpec {
-    /// `kind` with its default resolution and budget.
-    pub fn new(kind: MethodKind) -> Self {
-        Self {
-            kind,
-            cell_frac: match kind {
-                MethodKind::Particle | MethodKind::ShapeMatching => 0.06,
-                _ => 0.12,
-            },
-            params: PbdParams::default(),
-            material: Material::default(),
-            soft_region: None,
-        }
-    }
-
-    /// With substeps and iterations.
-    pub fn budget(mut self, substeps: u32, iterations: u32) -> Self {
-        self.params.substeps = substeps.max(1);
-        self.params.iterations = iterations.max(1);
-        self
-    }
-
-    /// With a resolution knob.
-    pub fn cell(mut self, cell_frac: f32) -> Self {
-        self.cell_frac = cell_frac;
-        self
-    }
-
-    /// Rejects values outside their range (a spec may come from a file): resolution in
-    /// [0.005, 1] of the size, 1–256 substeps and iterations, a finite positive material.
-    pub fn validate(&self) -> Result<(), SoftBodyError> {
-        let bad = |what: &str| Err(SoftBodyError::Config(format!("{}: {what}", self.label())));
-        if !(self.cell_frac.is_finite() && (0.005..=1.0).contains(&self.cell_frac)) {
-            return bad("cell_frac must be in [0.005, 1]");
-        }
-        let p = &self.params;
-        if !(1..=256).contains(&p.substeps) || !(1..=256).contains(&p.iterations) {
-            return bad("substeps and iterations must be in 1..=256");
-        }
-        let m = &self.material;
-        let positive = [
-            m.young_pa,
-            m.bulk_pa,
-            m.density_kg_m3,
-            m.pbd_stiffness,
-            m.shape_rate_per_s,
-            m.link_scale,
-        ];
-        if positive.iter().any(|v| !(v.is_finite() && *v > 0.0))
-            || !(m.bend_ratio.is_finite() && m.bend_ratio >= 0.0)
-            || m.pbd_stiffness > 1.0
-        {
-            return bad("material values must be finite and positive (pbd_stiffness ≤ 1)");
-        }
-        let nonneg = [
-            p.damping_per_s,
-            p.contact_radius_m,
-            p.friction,
-            p.sleep_speed_mps,
-            p.sleep_after_s,
-        ];
-        if nonneg.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
-            return bad("solver values must be finite and non-negative");
-        }
-        Ok(())
-    }
-
-    /// With a restricted soft region (particle method).
-    pub fn region(mut self, region: Option<SoftRegion>) -> Self {
-        self.soft_region = region;
-        self
-    }
-
-    /// A label such as `tet c0.08 s4i8`.
-    pub fn label(&self) -> String {
-        let p = &self.params;
-        let region = if self.soft_region.is_some() {
-            " region"
-        } else {
-            ""
-        };
-        match self.kind {
-            MethodKind::Surface | MethodKind::Ispc => {
-                format!("{} s{}i{}", self.kind.name(), p.substeps, p.iterations)
-            }
-            MethodKind::Particle | MethodKind::RapierNative => {
-                format!("{} c{:.3}{region}", self.kind.name(), self.cell_frac)
-            }
-            _ => format!(
-                "{} c{:.3} s{}i{}",
-                self.kind.name(),
-                self.cell_frac,
-                p.substeps,
-                p.iterations
-            ),
-        }
-    }
-}
+// The spec types were defined here before `spec` took them: their paths stay.
+pub use crate::methods::spec::{Material, MethodKind, MethodSpec};
 
 /// Builds the position-based body of a PBD-family spec (surface, ISPC, tet, shape matching)
 /// for `mesh` (world space).
@@ -245,6 +51,18 @@ pub fn build_pbd_welded(
     };
     let n = positions.len();
     let name = spec.label();
+    // The surface and shape-matching bodies simulate the mesh's own vertices, of equal mass.
+    let surface_body = |name: String| {
+        let masses = vec![m.density_kg_m3 * volume / n.max(1) as f32; n];
+        PbdBody::new(
+            name,
+            spec.params,
+            positions.to_vec(),
+            &masses,
+            SurfaceMap::Direct,
+            triangles.to_vec(),
+        )
+    };
     match spec.kind {
         MethodKind::Surface | MethodKind::Ispc => {
             let mut edges: Vec<[u32; 2]> = triangles
@@ -260,15 +78,7 @@ pub fn build_pbd_welded(
                 Vec::new()
             };
             let share = volume;
-            let masses = vec![m.density_kg_m3 * volume / n.max(1) as f32; n];
-            let mut body = PbdBody::new(
-                name,
-                spec.params,
-                positions.to_vec(),
-                &masses,
-                SurfaceMap::Direct,
-                triangles.to_vec(),
-            );
+            let mut body = surface_body(name);
             body.distance.push(DistanceGroup::new(
                 "edges",
                 edges,
@@ -356,15 +166,7 @@ pub fn build_pbd_welded(
                 members.dedup();
                 clusters.push(members);
             }
-            let masses = vec![m.density_kg_m3 * volume / n.max(1) as f32; n];
-            let mut body = PbdBody::new(
-                name,
-                spec.params,
-                positions.to_vec(),
-                &masses,
-                SurfaceMap::Direct,
-                triangles.to_vec(),
-            );
+            let mut body = surface_body(name);
             body.clusters = Some(ShapeClusters::new(&clusters, positions, m.shape_rate_per_s));
             Ok(body)
         }

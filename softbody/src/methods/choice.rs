@@ -4,7 +4,7 @@
 
 use serde::Serialize;
 
-use crate::methods::builders::MethodSpec;
+use crate::methods::spec::MethodSpec;
 
 /// One measured point of a method's speed/accuracy curve for one object.
 #[derive(Clone, Debug, PartialEq, Serialize)]

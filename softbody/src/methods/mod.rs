@@ -7,7 +7,8 @@
 //! | [`pbd`] | the XPBD / PBD solver core (ISPC paper Algorithm 1): distance (eq. 1–3), dihedral bending (eq. 4), tet volume, shape-matching clusters, contacts against the rapier world |
 //! | [`ispc`] | internal shape-preserving links (ISPC paper Algorithm 2) |
 //! | [`tets`] | tetrahedral reference: parry's `volume_mesh` cover (Apache-2.0), surface embedded |
-//! | [`builders`] | one constructor per method and resolution ([`MethodSpec`]) |
+//! | [`spec`] | what a method is: [`MethodKind`], [`MethodSpec`] (resolution, budget), [`spec::Material`] |
+//! | [`builders`] | one constructor per method and resolution ([`build_model`]) |
 //! | [`particle`] | the thesis's particle method ([`crate::SoftBodySet`]) as a model |
 //! | [`native`] | rapier 0.36's own soft bodies as a model |
 //! | [`scene`] | rest / drop / squeeze / poke / impact scenarios for any model |
@@ -21,7 +22,9 @@ pub mod native;
 pub mod particle;
 pub mod pbd;
 pub mod scene;
+pub mod spec;
 pub mod tets;
 
-pub use builders::{build_model, MethodKind, MethodSpec};
+pub use builders::build_model;
 pub use model::{step_models, DeformableModel};
+pub use spec::{MethodKind, MethodSpec};

@@ -6,9 +6,9 @@ use glam::Vec3;
 use rapier3d::dynamics::{SoftBodyMaterial, SpringCoefficients};
 use rapier3d::prelude::{PhysicsWorld, SoftBodyBuilder, SoftBodyHandle};
 
-use crate::methods::builders::MethodSpec;
 use crate::methods::model::DeformableModel;
 use crate::methods::pbd::{tet_volume, Embedding};
+use crate::methods::spec::{Material, MethodSpec};
 use crate::methods::tets::embed;
 use crate::{Mesh, SoftBodyError};
 
@@ -44,7 +44,7 @@ impl NativeModel {
             })?;
         let volume = crate::mesh::enclosed_volume(&welded.positions, &welded.triangles).abs();
         // The material's stiffness relative to the default scales the springs' frequency.
-        let f = (spec.material.young_pa / crate::methods::builders::Material::default().young_pa)
+        let f = (spec.material.young_pa / Material::default().young_pa)
             .max(1e-4)
             .sqrt();
         let d = SoftBodyMaterial::default();

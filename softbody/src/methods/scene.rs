@@ -9,11 +9,12 @@
 use glam::{Quat, Vec3};
 use rapier3d::prelude::{ColliderBuilder, PhysicsWorld, RigidBodyBuilder, RigidBodyHandle};
 
-use crate::methods::builders::{build_model, MethodSpec};
+use crate::methods::builders::build_model;
 use crate::methods::model::DeformableModel;
 use crate::methods::pbd::{
     tet_volume, DistanceGroup, PbdBody, PbdParams, SolverKind, SurfaceMap, VolumeGroup,
 };
+use crate::methods::spec::MethodSpec;
 use crate::metrics::rigid_fit_error;
 use crate::scenario::ScenarioKind;
 use crate::{Mesh, SoftBodyError};
