@@ -26,7 +26,7 @@ join            enters a room as a headless peer (a bot when --bot is given), a 
 
 PEER OPTIONS:
   --bot SCRIPT          a bot script: a file, a built-in name (squeeze, idle, wave), or inline
-                        commands separated by ';' (see app/src/bot.rs)
+                        commands separated by ';' (see peer/src/bot.rs)
   --duration S          leave after S seconds (default: run until killed)
   --net-condition SPEC  impair what this peer sends with the seeded link conditioner, e.g.
                         \"lat=40ms,jitter=8ms,loss=2%,seed=7\" (also burst=…%, dup=…%, mtu=…)

@@ -16,10 +16,11 @@ use bevy::input::mouse::{AccumulatedMouseMotion, AccumulatedMouseScroll, MouseSc
 use bevy::prelude::*;
 use bevy::window::PrimaryWindow;
 
-use crate::device::DeviceFrame;
+use softsync_peer::scene::TABLE_TOP_Y;
+use softsync_peer::{DeviceFrame, Kind};
+
+use crate::driver::Driver;
 use crate::glue::{from_bevy, from_bevy_quat, pose_from_bevy, to_bevy, to_bevy_quat};
-use crate::plugins::Peer;
-use crate::scene::{Kind, TABLE_TOP_Y};
 
 /// Where the camera looks from and at.
 #[derive(Resource, Clone, Copy, Debug)]
@@ -94,9 +95,9 @@ impl Plugin for DesktopPlugin {
 /// Frames rendered before the network starts (window and renderer setup stall the first).
 const WARMUP_FRAMES: u32 = 5;
 
-fn ready_after_first_frames(mut peer: NonSendMut<Peer>, frames: Res<FrameCount>) {
+fn ready_after_first_frames(mut driver: NonSendMut<Driver>, frames: Res<FrameCount>) {
     if frames.0 >= WARMUP_FRAMES {
-        peer.set_ready();
+        driver.set_ready();
     }
 }
 
@@ -106,7 +107,7 @@ fn spawn_camera(mut commands: Commands, orbit: Res<OrbitCamera>) {
 
 #[allow(clippy::too_many_arguments)]
 fn desktop_input(
-    mut peer: NonSendMut<Peer>,
+    mut driver: NonSendMut<Driver>,
     mut orbit: ResMut<OrbitCamera>,
     mut cam: Query<(&Camera, &GlobalTransform, &mut Transform), With<DesktopCamera>>,
     windows: Query<&Window, With<PrimaryWindow>>,
@@ -119,13 +120,14 @@ fn desktop_input(
     let dt = time.delta_secs().min(0.1);
     // Focus on an object once it is in the room.
     if let (Some(kind), false) = (orbit.focus, orbit.focused) {
-        let found = peer
-            .room
-            .objects
+        let now = driver.now();
+        let found = driver
+            .peer
+            .objects()
             .iter()
             .find(|(_, o)| o.kind == kind)
             .map(|(id, _)| *id);
-        if let Some(s) = found.and_then(|id| peer.room.shown_state(id)) {
+        if let Some(s) = found.and_then(|id| driver.peer.shown_state(now, id)) {
             // A fixed view of it, from the room's +z side and above, whoever we are: the
             // same picture on every run (the pixel test relies on it).
             orbit.target = to_bevy(s.pos);
@@ -216,7 +218,7 @@ fn desktop_input(
     if keys.pressed(KeyCode::KeyE) {
         trigger[active] = 1.0;
     }
-    peer.device = Some(DeviceFrame {
+    driver.device = Some(DeviceFrame {
         head: Some(head),
         hands,
         grip,

@@ -3,17 +3,14 @@
 #![allow(clippy::disallowed_methods)] // the app is the I/O layer: clocks, sleeps, processes
 
 mod bench;
-mod bot;
 mod cli;
 #[cfg(feature = "desktop")]
 mod desktop;
-mod device;
+mod driver;
 #[cfg(feature = "desktop")]
 mod glue;
 mod plugins;
 mod report;
-mod room;
-mod scene;
 #[cfg(feature = "desktop")]
 mod view;
 #[cfg(feature = "vr")]
@@ -31,11 +28,11 @@ use glam::Vec3;
 use softsync_interaction::HandConfig;
 use softsync_net::{LinkConditioner, PeerEvent, SendPolicy, Session, Transport};
 use softsync_net_matchbox::{MatchboxConfig, MatchboxTransport, Role, SignalServer};
+use softsync_peer::{bot, scene, Bot, Peer, PeerConfig, Scene};
 
 use crate::cli::{Command, FrontEnd, PeerArgs, UsageError};
-use crate::plugins::{NetPlugin, Peer, ReportPlugin, SimPlugin};
-use crate::room::Room;
-use crate::scene::Scene;
+use crate::driver::{Clock, Driver};
+use crate::plugins::{NetPlugin, ReportPlugin, SimPlugin};
 
 /// A failure with its exit code.
 struct Failure {
@@ -200,7 +197,7 @@ fn view_config(a: &PeerArgs, desktop: bool) -> view::ViewConfig {
     }
 }
 
-fn load_bot(src: &str) -> Result<bot::Bot, Failure> {
+fn load_bot(src: &str) -> Result<Bot, Failure> {
     let text = if let Some(b) = bot::builtin(src) {
         b.to_owned()
     } else if Path::new(src).is_file() {
@@ -214,7 +211,7 @@ fn load_bot(src: &str) -> Result<bot::Bot, Failure> {
         )));
     };
     let cmds = bot::parse(&text).map_err(Failure::usage)?;
-    Ok(bot::Bot::new(cmds))
+    Ok(Bot::new(cmds))
 }
 
 /// The front end this build can open for `asked`: `--vr` without a runtime or a headset says
@@ -357,20 +354,27 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
         hover_radius_m: 0.03,
         ..HandConfig::default()
     };
-    let dt = (1.0 / a.sim_hz) as f32;
-    let mut room =
-        Room::new(contact, session, transport, scene, hand, dt).map_err(Failure::usage)?;
-    room.no_avatar = a.no_avatar;
-    room.rejoin_limit = a.rejoin_limit;
+    let config = PeerConfig {
+        hand,
+        dt_s: (1.0 / a.sim_hz) as f32,
+        avatar: !a.no_avatar,
+        rejoin_limit: a.rejoin_limit,
+        join_timeout: a.connect_timeout,
+    };
+    // The session's clock starts with the peer.
+    let clock = Clock::start();
+    let mut peer =
+        Peer::new(clock.now(), session, contact, scene, config).map_err(Failure::usage)?;
     if a.host {
-        room.open().map_err(Failure::runtime)?;
+        peer.open(clock.now()).map_err(Failure::runtime)?;
     }
-    let peer = Peer::new(
-        room,
+    let driver = Driver::new(
+        peer,
+        transport,
+        clock,
         bot,
         a.room.clone(),
         a.duration,
-        a.connect_timeout,
         dump,
         a.dump_hz,
         a.quiet,
@@ -382,10 +386,10 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     if let Err(e) = ctrlc::set_handler(TerminalCtrlCHandlerPlugin::gracefully_exit) {
         eprintln!("warning: no signal handler ({e}): a kill is noticed by the timeout only");
     }
-    let home = peer.room.home();
-    let mut peer = peer;
-    // A desktop or VR peer enters the room once its front end renders (see `Peer::ready`).
-    peer.ready = front == FrontEnd::Headless;
+    let home = driver.peer.home();
+    let mut driver = driver;
+    // A desktop or VR peer enters the room once its front end renders (see `Driver::ready`).
+    driver.ready = front == FrontEnd::Headless;
     let mut app = App::new();
     match front {
         FrontEnd::Headless => {
@@ -418,7 +422,7 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     let _ = home;
     let exit = app
         .insert_resource(Time::<Fixed>::from_hz(a.sim_hz))
-        .insert_non_send(peer)
+        .insert_non_send(driver)
         .add_plugins((NetPlugin, SimPlugin, ReportPlugin))
         .run();
     Ok(match exit {

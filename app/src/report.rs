@@ -7,8 +7,8 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 use softsync_net::stats::Traffic;
-
-use crate::room::Room;
+use softsync_net::Instant;
+use softsync_peer::Peer;
 
 /// One object in a dump line.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -57,24 +57,23 @@ pub struct DumpLine {
     pub objects: Vec<DumpObject>,
 }
 
-/// Take a dump line of what `room` shows now.
-pub fn snapshot(room: &mut Room) -> DumpLine {
-    let now = room.now();
-    let ids: Vec<_> = room.objects.keys().copied().collect();
-    let me = room.me();
+/// Take a dump line of what `peer` shows at `now`.
+pub fn snapshot(now: Instant, peer: &mut Peer) -> DumpLine {
+    let ids: Vec<_> = peer.objects().keys().copied().collect();
+    let me = peer.me();
     let mut objects = Vec::with_capacity(ids.len());
     for id in ids {
-        let Some(kind) = room.objects.get(&id).map(|o| o.kind) else {
+        let Some(kind) = peer.objects().get(&id).map(|o| o.kind) else {
             continue;
         };
-        let owner = room.session.owner(id);
+        let owner = peer.session().owner(id);
         let mine = owner == Some(me);
         let (state, src) = if mine {
-            (room.shown_state(id), None)
+            (peer.shown_state(now, id), None)
         } else {
-            match room.session.display_state(now, id) {
+            match peer.displayed_state(now, id) {
                 Some(d) => (Some(d.state), Some(d.source_time.as_secs_f64())),
-                None => (room.session.latest_state(id), None),
+                None => (peer.session().latest_state(id), None),
             }
         };
         let Some(s) = state else {
@@ -90,18 +89,19 @@ pub fn snapshot(room: &mut Room) -> DumpLine {
             src,
         });
     }
+    let session = peer.session();
     DumpLine {
         t: now.as_secs_f64(),
-        state_t: room.last_step_at.as_secs_f64(),
+        state_t: peer.last_step_at().as_secs_f64(),
         wall_ms: std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_millis() as u64),
         peer: me.0,
-        host: room.session.host_id().map(|h| h.0),
-        term: room.session.term().0,
-        members: room.session.members().keys().map(|p| p.0).collect(),
-        up_bytes: room.session.stats().up.bytes,
-        down_bytes: room.session.stats().down.bytes,
+        host: session.host_id().map(|h| h.0),
+        term: session.term().0,
+        members: session.members().keys().map(|p| p.0).collect(),
+        up_bytes: session.stats().up.bytes,
+        down_bytes: session.stats().down.bytes,
         objects,
     }
 }
@@ -137,9 +137,9 @@ pub fn read_dump(path: &Path) -> std::io::Result<Vec<DumpLine>> {
 }
 
 /// The mean round-trip time over this peer's links, milliseconds (None before any probe).
-pub fn mean_rtt_ms(room: &Room) -> Option<f64> {
-    let rtts: Vec<f64> = room
-        .session
+pub fn mean_rtt_ms(peer: &Peer) -> Option<f64> {
+    let rtts: Vec<f64> = peer
+        .session()
         .stats()
         .links
         .values()
@@ -165,10 +165,10 @@ pub struct StatsLine {
 }
 
 impl StatsLine {
-    /// The stats line for now (and the rates it shows).
-    pub fn line(&mut self, room: &Room) -> (String, Rates) {
-        let now = room.now();
-        let st = room.session.stats();
+    /// The stats line of `peer` at `now` (and the rates it shows).
+    pub fn line(&mut self, now: Instant, peer: &Peer) -> (String, Rates) {
+        let session = peer.session();
+        let st = session.stats();
         let rates = match self.last {
             Some((t, up, down)) => {
                 let dt = now.saturating_since(t).max(Duration::from_millis(1));
@@ -180,19 +180,19 @@ impl StatsLine {
             None => Rates::default(),
         };
         self.last = Some((now, st.up, st.down));
-        let rtt = mean_rtt_ms(room).map_or("-".to_owned(), |r| format!("{r:.2}ms"));
+        let rtt = mean_rtt_ms(peer).map_or("-".to_owned(), |r| format!("{r:.2}ms"));
         let line = format!(
             "stats t={:.1}s peer={} host={} term={} peers={} up={:.0}B/s down={:.0}B/s rtt={} owned={}/{}",
             now.as_secs_f64(),
-            room.me().0,
-            room.session.host_id().map_or("-".into(), |h| h.0.to_string()),
-            room.session.term().0,
-            room.session.members().len(),
+            peer.me().0,
+            session.host_id().map_or("-".into(), |h| h.0.to_string()),
+            session.term().0,
+            session.members().len(),
             rates.up,
             rates.down,
             rtt,
-            room.owned_count(),
-            room.objects.len(),
+            peer.owned_count(),
+            peer.objects().len(),
         );
         (line, rates)
     }

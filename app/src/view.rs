@@ -24,10 +24,11 @@ use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
 use bevy::render::{Render, RenderApp, RenderSystems};
 use softsync_net::NetId;
 
+use softsync_peer::scene::TABLE_TOP_Y;
+use softsync_peer::{Kind, LocalBody, Peer};
+
+use crate::driver::Driver;
 use crate::glue::{to_bevy, to_bevy_quat};
-use crate::plugins::Peer;
-use crate::room::{Body, Room};
-use crate::scene::{Kind, TABLE_TOP_Y};
 
 /// What the view shows and records.
 #[derive(Clone, Debug, Resource)]
@@ -55,7 +56,7 @@ pub struct ScreenshotPlan {
     pub max: u32,
 }
 
-/// Draws the room: add to an app that has bevy's renderer and a `Peer`.
+/// Draws the room: add to an app that has bevy's renderer and a `Driver`.
 pub struct ViewPlugin(pub ViewConfig);
 
 impl Plugin for ViewPlugin {
@@ -222,8 +223,8 @@ fn spawn_static(
 }
 
 /// A mesh for a soft body from its current render data (world space).
-fn soft_mesh(room: &Room, h: softsync_softbody::SoftBodyHandle) -> Option<Mesh> {
-    let b = room.soft.get(h)?;
+fn soft_mesh(peer: &Peer, h: softsync_softbody::SoftBodyHandle) -> Option<Mesh> {
+    let b = peer.soft_bodies().get(h)?;
     let mut m = Mesh::new(
         PrimitiveTopology::TriangleList,
         RenderAssetUsages::MAIN_WORLD | RenderAssetUsages::RENDER_WORLD,
@@ -255,32 +256,37 @@ fn rigid_mesh(kind: Kind) -> Mesh {
 }
 
 /// The pose a rigid or avatar object is drawn at.
-fn drawn_pose(room: &mut Room, id: NetId) -> Option<(glam::Vec3, glam::Quat)> {
-    let o = room.objects.get(&id)?.clone();
+fn drawn_pose(
+    now: softsync_net::Instant,
+    peer: &mut Peer,
+    id: NetId,
+) -> Option<(glam::Vec3, glam::Quat)> {
+    let o = peer.objects().get(&id)?.clone();
     match o.body {
-        Body::Rigid(h) => {
-            let b = room.world.bodies.get(h)?;
+        LocalBody::Rigid(h) => {
+            let b = peer.world().bodies.get(h)?;
             Some((b.translation(), *b.rotation()))
         }
-        Body::Pose if o.avatar_of == Some(room.me()) => Some(o.pose),
-        _ => room.shown_state(id).map(|s| (s.pos, s.rot)),
+        LocalBody::Pose if o.avatar_of == Some(peer.me()) => Some(o.pose),
+        _ => peer.shown_state(now, id).map(|s| (s.pos, s.rot)),
     }
 }
 
 #[allow(clippy::too_many_arguments)]
 fn sync_objects(
     mut commands: Commands,
-    mut peer: NonSendMut<Peer>,
+    mut driver: NonSendMut<Driver>,
     mut views: ResMut<Views>,
     mut meshes: ResMut<Assets<Mesh>>,
     mut materials: ResMut<Assets<StandardMaterial>>,
     mut q: Query<(&mut Transform, &mut ObjView, &mut Visibility)>,
     cfg: Res<ViewConfig>,
 ) {
-    let room = &mut peer.room;
-    let me = room.me();
+    let now = driver.now();
+    let peer = &mut driver.peer;
+    let me = peer.me();
     // Gone objects.
-    let live: HashSet<NetId> = room.objects.keys().copied().collect();
+    let live: HashSet<NetId> = peer.objects().keys().copied().collect();
     views.0.retain(|id, e| {
         let keep = live.contains(id);
         if !keep {
@@ -288,11 +294,11 @@ fn sync_objects(
         }
         keep
     });
-    let hovered = room.hovered_ids();
-    let held: HashSet<NetId> = (0..2).filter_map(|h| room.held(h).map(|x| x.0)).collect();
-    let ids: Vec<NetId> = room.objects.keys().copied().collect();
+    let hovered = peer.hovered_ids();
+    let held: HashSet<NetId> = (0..2).filter_map(|h| peer.held(h).map(|x| x.0)).collect();
+    let ids: Vec<NetId> = peer.objects().keys().copied().collect();
     for id in ids {
-        let Some(o) = room.objects.get(&id).cloned() else {
+        let Some(o) = peer.objects().get(&id).cloned() else {
             continue;
         };
         let base = match o.avatar_of {
@@ -307,7 +313,7 @@ fn sync_objects(
                 ..default()
             });
             let (mesh, soft) = match o.body {
-                Body::Soft(h) => match soft_mesh(room, h) {
+                LocalBody::Soft(h) => match soft_mesh(peer, h) {
                     Some(m) => {
                         let handle = meshes.add(m);
                         (handle.clone(), Some(handle))
@@ -342,12 +348,12 @@ fn sync_objects(
         let hidden = (o.kind.is_avatar() && cfg.hide_avatars)
             || (o.kind == Kind::Head && cfg.hide_own_head && o.avatar_of == Some(me));
         // Soft bodies: rewrite positions and normals (world space, identity transform).
-        if let (Body::Soft(h), Some(handle)) = (o.body, &view.soft_mesh) {
-            if let (Some(b), Some(mut m)) = (room.soft.get(h), meshes.get_mut(handle)) {
+        if let (LocalBody::Soft(h), Some(handle)) = (o.body, &view.soft_mesh) {
+            if let (Some(b), Some(mut m)) = (peer.soft_bodies().get(h), meshes.get_mut(handle)) {
                 m.insert_attribute(Mesh::ATTRIBUTE_POSITION, to_arrays(b.render_positions()));
                 m.insert_attribute(Mesh::ATTRIBUTE_NORMAL, to_arrays(b.render_normals()));
             }
-        } else if let Some((p, r)) = drawn_pose(room, id) {
+        } else if let Some((p, r)) = drawn_pose(now, peer, id) {
             if p.is_finite() && r.is_finite() {
                 *tf = Transform::from_translation(to_bevy(p)).with_rotation(to_bevy_quat(r));
             }
@@ -360,7 +366,7 @@ fn sync_objects(
         if *vis != want_vis {
             *vis = want_vis;
         }
-        let owner = room.session.owner(id);
+        let owner = peer.session().owner(id);
         let tint = if held.contains(&id) {
             Tint::Held
         } else if owner == Some(me) && !o.kind.is_avatar() {
@@ -389,7 +395,7 @@ fn sync_objects(
 
 /// Particles and neighbour links (thesis Figure 1.1), when switched on (P).
 fn draw_overlay(
-    peer: NonSend<Peer>,
+    driver: NonSend<Driver>,
     mut gizmos: Gizmos,
     mut cfg: ResMut<ViewConfig>,
     keys: Option<Res<ButtonInput<KeyCode>>>,
@@ -413,11 +419,13 @@ fn draw_overlay(
     if !cfg.particles {
         return;
     }
-    let room = &peer.room;
-    for o in room.objects.values() {
-        let Body::Soft(h) = o.body else { continue };
-        let Some(b) = room.soft.get(h) else { continue };
-        let ps = b.particle_positions(&room.world);
+    let peer = &driver.peer;
+    for o in peer.objects().values() {
+        let LocalBody::Soft(h) = o.body else { continue };
+        let Some(b) = peer.soft_bodies().get(h) else {
+            continue;
+        };
+        let ps = b.particle_positions(peer.world());
         let map = b.particle_map();
         for (i, p) in ps.iter().enumerate() {
             gizmos.sphere(Isometry3d::from_translation(to_bevy(*p)), 0.004, css::AQUA);
@@ -434,14 +442,14 @@ fn draw_overlay(
     }
 }
 
-fn update_hud(peer: NonSend<Peer>, cfg: Res<ViewConfig>, mut q: Query<&mut Text, With<Hud>>) {
+fn update_hud(driver: NonSend<Driver>, cfg: Res<ViewConfig>, mut q: Query<&mut Text, With<Hud>>) {
     if !cfg.hud {
         return;
     }
     let Ok(mut text) = q.single_mut() else {
         return;
     };
-    let new = hud_text(&peer);
+    let new = hud_text(&driver);
     if text.0 != new {
         text.0 = new;
     }
@@ -453,46 +461,47 @@ fn short(id: u64) -> String {
 }
 
 /// The HUD's text: room, peers, host, RTT, bytes/s, objects owned, the hands, the last events.
-pub fn hud_text(peer: &Peer) -> String {
-    let room = &peer.room;
-    let rtt = crate::report::mean_rtt_ms(room).map_or("-".to_owned(), |r| format!("{r:.0} ms"));
-    let host = room.session.host_id();
+pub fn hud_text(driver: &Driver) -> String {
+    let peer = &driver.peer;
+    let session = peer.session();
+    let rtt = crate::report::mean_rtt_ms(peer).map_or("-".to_owned(), |r| format!("{r:.0} ms"));
+    let host = session.host_id();
     let mut s = format!(
         "room {} | me {}{}\nhost {} term {} | peers {}\nrtt {rtt} | up {:.0} B/s down {:.0} B/s\nowned {}/{}\n",
-        peer.room_name,
-        short(room.me().0),
-        if room.session.is_host() { " (host)" } else { "" },
+        driver.room_name,
+        short(peer.me().0),
+        if session.is_host() { " (host)" } else { "" },
         host.map_or("-".into(), |h| short(h.0)),
-        room.session.term().0,
-        room.session.members().len(),
-        peer.last_rates.up,
-        peer.last_rates.down,
-        room.owned_count(),
-        room.objects.len(),
+        session.term().0,
+        session.members().len(),
+        driver.last_rates.up,
+        driver.last_rates.down,
+        peer.owned_count(),
+        peer.objects().len(),
     );
     for (h, name) in [(0, "left"), (1, "right")] {
-        if let Some((id, _)) = room.held(h) {
-            s.push_str(&format!("{name} hand holds {}\n", object_name(room, id)));
+        if let Some((id, _)) = peer.held(h) {
+            s.push_str(&format!("{name} hand holds {}\n", object_name(peer, id)));
         }
     }
-    for e in peer.recent_events.iter() {
+    for e in driver.recent_events.iter() {
         s.push_str(e);
         s.push('\n');
     }
     s
 }
 
-fn object_name(room: &Room, id: NetId) -> String {
-    room.objects.get(&id).map_or(format!("#{}", id.0), |o| {
+fn object_name(peer: &Peer, id: NetId) -> String {
+    peer.objects().get(&id).map_or(format!("#{}", id.0), |o| {
         format!("{} #{}", o.kind.name(), id.0)
     })
 }
 
 /// Shape change of a soft body: the largest distance of a vertex from where the rest shape,
 /// moved rigidly with the center, puts it (metres).
-pub fn deformation_m(room: &Room, h: softsync_softbody::SoftBodyHandle) -> Option<f32> {
-    let b = room.soft.get(h)?;
-    let (c, r) = b.center_pose(&room.world);
+pub fn deformation_m(peer: &Peer, h: softsync_softbody::SoftBodyHandle) -> Option<f32> {
+    let b = peer.soft_bodies().get(h)?;
+    let (c, r) = b.center_pose(peer.world());
     Some(
         b.vertices()
             .iter()
@@ -504,7 +513,7 @@ pub fn deformation_m(room: &Room, h: softsync_softbody::SoftBodyHandle) -> Optio
 
 fn take_screenshots(
     mut commands: Commands,
-    peer: NonSend<Peer>,
+    driver: NonSend<Driver>,
     mut state: ResMut<ScreenshotState>,
     cfg: Res<ViewConfig>,
     cams: Query<(&Camera, &GlobalTransform)>,
@@ -513,11 +522,11 @@ fn take_screenshots(
     let Some(plan) = &cfg.screenshots else {
         return;
     };
-    let room = &peer.room;
-    let t = Duration::from_micros(room.now().as_micros());
+    let peer = &driver.peer;
+    let t = Duration::from_micros(driver.now().as_micros());
     if state.taken >= plan.max
         || t < state.next
-        || !room.joined()
+        || !peer.joined()
         || !warm.0.load(Ordering::Relaxed)
     {
         return;
@@ -529,16 +538,16 @@ fn take_screenshots(
     let mut fields = format!(
         "screenshot n={n} t={:.2} peers={}",
         t.as_secs_f64(),
-        room.session.members().len()
+        peer.session().members().len()
     );
     let cam = cams.iter().find(|(c, _)| c.is_active);
-    for o in room.objects.values() {
-        let Body::Soft(h) = o.body else { continue };
+    for o in peer.objects().values() {
+        let LocalBody::Soft(h) = o.body else { continue };
         let name = o.kind.name();
-        if let Some(d) = deformation_m(room, h) {
+        if let Some(d) = deformation_m(peer, h) {
             fields.push_str(&format!(" {name}_deform_mm={:.2}", d * 1e3));
         }
-        if let (Some((c, gt)), Some(b)) = (cam, room.soft.get(h)) {
+        if let (Some((c, gt)), Some(b)) = (cam, peer.soft_bodies().get(h)) {
             let mut lo = Vec2::splat(f32::MAX);
             let mut hi = Vec2::splat(f32::MIN);
             for p in b.render_positions() {

@@ -31,9 +31,10 @@ use bevy_mod_xr::camera::XrCamera;
 use bevy_mod_xr::session::{session_available, XrSessionCreated, XrState, XrTrackingRoot};
 use bevy_mod_xr::spaces::{XrSpace, XrSpaceSyncSet};
 
-use crate::device::DeviceFrame;
+use softsync_peer::DeviceFrame;
+
+use crate::driver::Driver;
 use crate::glue::pose_from_bevy;
-use crate::plugins::Peer;
 
 /// Is there an OpenXR runtime with a headset? `Err` says what is missing.
 #[allow(unsafe_code)]
@@ -307,7 +308,7 @@ struct Seen {
 
 /// Headset and controllers → the device frame, in room coordinates.
 fn read_device(
-    mut peer: NonSendMut<Peer>,
+    mut driver: NonSendMut<Driver>,
     origin: Res<StageOrigin>,
     session: Res<OxrSession>,
     actions: Option<Res<Actions>>,
@@ -369,21 +370,21 @@ fn read_device(
             f(frame.hands[1])
         );
     }
-    peer.device = Some(frame);
+    driver.device = Some(frame);
 }
 
 /// Frames the XR session renders before the network starts (session start stalls the loop).
 const WARMUP_FRAMES: u32 = 30;
 
 fn ready_when_running(
-    mut peer: NonSendMut<Peer>,
+    mut driver: NonSendMut<Driver>,
     state: Option<Res<XrState>>,
     mut running: Local<u32>,
 ) {
     if state.is_some_and(|s| *s == XrState::Running) {
         *running += 1;
         if *running >= WARMUP_FRAMES {
-            peer.set_ready();
+            driver.set_ready();
         }
     }
 }

@@ -26,12 +26,18 @@
 //!
 //! Built-in scripts by name: `squeeze` (reach the soft ball, grab, squeeze, release, back),
 //! `idle` (stand still), `wave` (both hands waving, forever).
+//!
+//! A bot says what it does (`reach softbox (object 5)`, `grabbed object 5 after 120 ms`, …);
+//! the driver takes those lines with [`Bot::poll_message`] after each step and logs them.
+
+use std::collections::VecDeque;
 
 use glam::{Quat, Vec3};
 use softsync_interaction::{HandInput, HandSample};
+use softsync_net::Instant;
 
 use crate::device::{clamp01, DeviceFrame};
-use crate::room::Room;
+use crate::peer::Peer;
 use crate::scene::Kind;
 
 /// A bot script command.
@@ -234,6 +240,8 @@ pub struct Bot {
     pub grabs: Vec<f64>,
     /// Grabs that gave up.
     pub failed_grabs: u64,
+    /// What the bot said, not yet taken by the driver.
+    said: VecDeque<String>,
 }
 
 impl Bot {
@@ -254,15 +262,17 @@ impl Bot {
             done: false,
             grabs: Vec::new(),
             failed_grabs: 0,
+            said: VecDeque::new(),
         }
     }
 
-    fn say(room: &Room, msg: String) {
-        println!(
-            "bot peer={} t={:.2} {msg}",
-            room.me().0,
-            room.now().as_secs_f64()
-        );
+    fn say(&mut self, msg: String) {
+        self.said.push_back(msg);
+    }
+
+    /// The next thing the bot said (oldest first), for the driver's log.
+    pub fn poll_message(&mut self) -> Option<String> {
+        self.said.pop_front()
     }
 
     /// Room position of part `part` now.
@@ -275,12 +285,13 @@ impl Bot {
         room_pos - self.base[part]
     }
 
-    /// One fixed step: set the hands' inputs and the avatar's pose. With a tracked device under
-    /// the script, tracked parts follow the device, offset by what the script moved them.
-    pub fn step_with(&mut self, room: &mut Room, device: Option<&DeviceFrame>) {
-        let t = room.sim_time();
+    /// One fixed step at `now` (before [`Peer::fixed_step`]): set the hands' inputs and the
+    /// avatar's pose. With a tracked device under the script, tracked parts follow the device,
+    /// offset by what the script moved them.
+    pub fn step(&mut self, now: Instant, peer: &mut Peer, device: Option<&DeviceFrame>) {
+        let t = peer.sim_time();
         if !self.started {
-            let (home, rot) = room.home();
+            let (home, rot) = peer.home();
             self.rot = rot;
             self.pos = [
                 home,
@@ -309,15 +320,15 @@ impl Bot {
         }
         // Run commands until one takes time.
         for _ in 0..64 {
-            if self.active.is_none() && !self.next(room, t) {
+            if self.active.is_none() && !self.next(now, peer, t) {
                 break;
             }
-            if !self.advance(room, t) {
+            if !self.advance(peer, t) {
                 break;
             }
         }
         for part in 0..3 {
-            room.set_avatar_pose(part, self.at(part), self.rots[part].unwrap_or(self.rot));
+            peer.set_avatar_pose(part, self.at(part), self.rots[part].unwrap_or(self.rot));
         }
         for h in 0..2 {
             let input = HandInput {
@@ -329,16 +340,16 @@ impl Bot {
                 grip: self.grip[h + 1].max(self.device_grip[h + 1]),
                 trigger: device.map_or(0.0, |d| clamp01(d.trigger[h])),
             };
-            room.set_hand_input(h, input);
+            peer.set_hand_input(h, input);
         }
     }
 
     /// Start the next command; false when there is none.
-    fn next(&mut self, room: &mut Room, t: f64) -> bool {
+    fn next(&mut self, now: Instant, peer: &mut Peer, t: f64) -> bool {
         let Some(cmd) = self.cmds.get(self.pc).cloned() else {
             if !self.done {
                 self.done = true;
-                Self::say(room, "script done".into());
+                self.say("script done".into());
             }
             return false;
         };
@@ -359,9 +370,9 @@ impl Bot {
                 t0: t,
                 dur,
             }),
-            Cmd::Reach(part, kind, dur) => match self.target(room, part, kind) {
+            Cmd::Reach(part, kind, dur) => match self.target(now, peer, part, kind) {
                 Some((to, name)) => {
-                    Self::say(room, format!("reach {name}"));
+                    self.say(format!("reach {name}"));
                     Some(Active::Motion {
                         part,
                         from: self.pos[part],
@@ -371,13 +382,10 @@ impl Bot {
                     })
                 }
                 None => {
-                    Self::say(
-                        room,
-                        format!(
-                            "reach: no {} in the room",
-                            kind.map_or("object", Kind::name)
-                        ),
-                    );
+                    self.say(format!(
+                        "reach: no {} in the room",
+                        kind.map_or("object", Kind::name)
+                    ));
                     None
                 }
             },
@@ -390,9 +398,9 @@ impl Bot {
                 })
             }
             Cmd::Squeeze(hand, depth, dur) => {
-                let center = room
+                let center = peer
                     .held(hand - 1)
-                    .and_then(|(id, _)| room.shown_state(id))
+                    .and_then(|(id, _)| peer.shown_state(now, id))
                     .map(|s| s.pos);
                 match center {
                     Some(c) => {
@@ -406,15 +414,15 @@ impl Bot {
                         })
                     }
                     None => {
-                        Self::say(room, "squeeze: the hand holds nothing".into());
+                        self.say("squeeze: the hand holds nothing".into());
                         None
                     }
                 }
             }
             Cmd::Release(hand) => {
                 self.grip[hand] = 0.0;
-                if let Some((id, _)) = room.held(hand - 1) {
-                    Self::say(room, format!("release object {}", id.0));
+                if let Some((id, _)) = peer.held(hand - 1) {
+                    self.say(format!("release object {}", id.0));
                 }
                 None
             }
@@ -435,7 +443,7 @@ impl Bot {
     }
 
     /// Progress the active command; true when it finished.
-    fn advance(&mut self, room: &mut Room, t: f64) -> bool {
+    fn advance(&mut self, peer: &Peer, t: f64) -> bool {
         let Some(a) = self.active.clone() else {
             return true;
         };
@@ -481,17 +489,18 @@ impl Bot {
                 t - t0 >= dur
             }
             Active::Grab { hand, t0, until } => {
-                if let Some((id, _)) = room.held(hand - 1) {
+                if let Some((id, _)) = peer.held(hand - 1) {
                     self.grabs.push(t - t0);
-                    Self::say(
-                        room,
-                        format!("grabbed object {} after {:.0} ms", id.0, (t - t0) * 1e3),
-                    );
+                    self.say(format!(
+                        "grabbed object {} after {:.0} ms",
+                        id.0,
+                        (t - t0) * 1e3
+                    ));
                     true
                 } else if t >= until {
                     self.failed_grabs += 1;
                     self.grip[hand] = 0.0;
-                    Self::say(room, "grab: nothing taken".into());
+                    self.say("grab: nothing taken".into());
                     true
                 } else {
                     false
@@ -505,17 +514,23 @@ impl Bot {
     }
 
     /// A point to reach: the object's particle nearest to the hand, or its center.
-    fn target(&self, room: &mut Room, part: usize, kind: Option<Kind>) -> Option<(Vec3, String)> {
+    fn target(
+        &self,
+        now: Instant,
+        peer: &mut Peer,
+        part: usize,
+        kind: Option<Kind>,
+    ) -> Option<(Vec3, String)> {
         let from = self.at(part);
-        let ids: Vec<_> = room
-            .objects
+        let ids: Vec<_> = peer
+            .objects()
             .iter()
             .filter(|(_, o)| !o.kind.is_avatar() && kind.is_none_or(|k| o.kind == k))
             .map(|(id, o)| (*id, o.kind))
             .collect();
         let mut best: Option<(f32, Vec3, String)> = None;
         for (id, k) in ids {
-            let Some(s) = room.shown_state(id) else {
+            let Some(s) = peer.shown_state(now, id) else {
                 continue;
             };
             let p = if s.particles.is_empty() {

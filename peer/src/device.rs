@@ -5,7 +5,7 @@
 use glam::{Quat, Vec3};
 use softsync_interaction::{HandInput, HandSample};
 
-use crate::room::Room;
+use crate::peer::Peer;
 
 /// One frame of device input, in room coordinates (metres, y up).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -33,16 +33,16 @@ impl DeviceFrame {
     }
 
     /// Drive the avatar and the hands from this frame alone (no bot).
-    pub fn apply(&self, room: &mut Room) {
-        let t = room.sim_time();
+    pub fn apply(&self, peer: &mut Peer) {
+        let t = peer.sim_time();
         for part in 0..3 {
             if let Some((p, r)) = self.part(part) {
-                room.set_avatar_pose(part, p, r);
+                peer.set_avatar_pose(part, p, r);
             }
         }
         for h in 0..2 {
             if let Some((p, r)) = self.part(h + 1) {
-                room.set_hand_input(
+                peer.set_hand_input(
                     h,
                     HandInput {
                         sample: HandSample {

@@ -1,0 +1,99 @@
+//! What a peer tells its driver: the news it queues ([`Event`], drained with
+//! [`Peer::poll_event`](crate::Peer::poll_event)), why it must stop ([`PeerError`]) and what
+//! it counts ([`Counters`]).
+//!
+//! Membership news is the session's own [`softsync_net::Event`], carried as [`Event::Room`]
+//! rather than declared again; the peer adds what only it sees: its hands, the authority they
+//! ask for, and rejoining.
+
+use softsync_net::{NetId, PeerId};
+
+/// Something that happened to this peer, for the driver's log, HUD and tests.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Event {
+    /// Room membership news, as the session said it: [`softsync_net::Event::Joined`],
+    /// `HostChanged`, `PeerJoined` or `PeerLeft` (the peer acts on the session's other
+    /// events itself).
+    Room(softsync_net::Event),
+    /// Our hand reached for an object another peer owns: we asked for it.
+    AuthorityAsked(NetId),
+    /// An object became ours.
+    AuthorityGained(NetId),
+    /// Our request for an object was denied.
+    AuthorityDenied(NetId),
+    /// We gave an object back (it came to rest after our hands let go).
+    AuthorityReleased(NetId),
+    /// A hand (0 left, 1 right) started holding an object (`particle`: one particle of a soft
+    /// body rather than its center).
+    GrabStarted {
+        /// The object.
+        id: NetId,
+        /// The hand: 0 left, 1 right.
+        hand: usize,
+        /// The particle held, if one.
+        particle: Option<u32>,
+    },
+    /// A hand let go of an object, throwing it at `speed` m/s.
+    GrabEnded {
+        /// The object.
+        id: NetId,
+        /// The hand: 0 left, 1 right.
+        hand: usize,
+        /// Throw speed, m/s.
+        speed: f32,
+    },
+    /// The room went on without us (we were out of touch past the peer timeout): we dropped
+    /// our replica and join `host` again.
+    Rejoining {
+        /// The room's host.
+        host: PeerId,
+        /// What it said.
+        reason: String,
+    },
+    /// Something went wrong that the peer carried on through (an avatar not spawned, a hand
+    /// input refused, a state not published); the text says what, for the log.
+    Warning(String),
+}
+
+/// Why the peer must stop.
+#[derive(Debug, thiserror::Error)]
+pub enum PeerError {
+    /// The host refused us.
+    #[error("the host refused us: {0}")]
+    Refused(String),
+    /// The room went on without us, and we may not join again.
+    #[error(
+        "the room went on without us: {reason} (joined again {rejoins} times; --rejoin-limit)"
+    )]
+    Dropped {
+        /// What the host said.
+        reason: String,
+        /// Times we joined again already.
+        rejoins: u64,
+    },
+    /// No host welcomed us within the join timeout (the driver names the room it connected
+    /// to: "connected to room … but" this).
+    #[error("no host welcomed us within {secs} s")]
+    NotWelcomed {
+        /// Seconds waited.
+        secs: u64,
+    },
+    /// A body or a hand could not be built.
+    #[error("{0}")]
+    Build(String),
+}
+
+/// Counters for the driver's reports and benchmarks.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Counters {
+    /// Authority requests sent.
+    pub authority_requests: u64,
+    /// Grants received.
+    pub authority_grants: u64,
+    /// Host changes seen.
+    pub host_changes: u64,
+    /// States that could not be applied (wrong particle count, non-finite).
+    pub apply_errors: u64,
+    /// Times we joined the room again after it went on without us.
+    pub rejoins: u64,
+}

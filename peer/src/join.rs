@@ -1,0 +1,206 @@
+//! Getting into the room: which peer a joiner says `Hello` to, when it tries the next one,
+//! when it gives up, and whether a peer the room went on without may join again.
+//!
+//! A joiner's first contact is the first peer whose data channel opened; that one may be a
+//! joiner itself, which knows no host yet and cannot answer. So after [`JOIN_RETRY`] without
+//! a welcome the joiner asks the next connected peer, in the order they connected, around
+//! and around: the host answers `Welcome`, a member `Redirect`, another joiner nothing.
+
+use std::time::Duration;
+
+use softsync_net::{Instant, PeerEvent, PeerId};
+
+/// How long a joiner waits for an answer to its `Hello` before trying the next peer.
+pub const JOIN_RETRY: Duration = Duration::from_millis(1000);
+
+/// Whether a peer the room went on without may join again, having done so `rejoins` times
+/// already under a limit of `limit` (0: never).
+pub fn may_rejoin(rejoins: u64, limit: u32) -> bool {
+    rejoins < u64::from(limit)
+}
+
+/// A peer's way into the room: in or not, the peers it can ask, the one it asked last.
+#[derive(Clone, Debug)]
+pub(crate) struct Joining {
+    joined: bool,
+    /// Peers with open data channels, in the order they connected.
+    contacts: Vec<PeerId>,
+    /// The peer our `Hello` went to last, and when.
+    contact: Option<(PeerId, Instant)>,
+    /// When joining started (the join timeout counts from here).
+    started: Instant,
+}
+
+impl Joining {
+    /// In the room already (a host), or asking `contact` since `now`.
+    pub(crate) fn new(now: Instant, joined: bool, contact: Option<PeerId>) -> Self {
+        Joining {
+            joined,
+            contacts: contact.into_iter().collect(),
+            contact: contact.map(|c| (c, now)),
+            started: now,
+        }
+    }
+
+    /// In the room (host, or welcomed).
+    pub(crate) fn joined(&self) -> bool {
+        self.joined
+    }
+
+    /// Welcomed.
+    pub(crate) fn set_joined(&mut self) {
+        self.joined = true;
+    }
+
+    /// Connectivity news: a joiner collects the peers it could ask.
+    pub(crate) fn on_link_event(&mut self, e: PeerEvent) {
+        match e {
+            PeerEvent::Connected(p) if !self.contacts.contains(&p) => self.contacts.push(p),
+            PeerEvent::Disconnected(p) => self.contacts.retain(|q| *q != p),
+            _ => {}
+        }
+    }
+
+    /// The peer to say `Hello` to now, if our contact has not answered within [`JOIN_RETRY`]:
+    /// the one after it among the connected peers (the first if it is gone).
+    pub(crate) fn next_contact(&mut self, now: Instant) -> Option<PeerId> {
+        if self.joined {
+            return None;
+        }
+        let (current, since) = self.contact?;
+        if now.saturating_since(since) < JOIN_RETRY || self.contacts.is_empty() {
+            return None;
+        }
+        let next = self
+            .contacts
+            .iter()
+            .position(|p| *p == current)
+            .map_or(0, |i| (i + 1) % self.contacts.len());
+        let next = self.contacts[next];
+        self.contact = Some((next, now));
+        Some(next)
+    }
+
+    /// Out of the room: join again through `host`, counting the timeout from `now`.
+    pub(crate) fn restart(&mut self, now: Instant, host: PeerId) {
+        self.joined = false;
+        if !self.contacts.contains(&host) {
+            self.contacts.push(host);
+        }
+        self.contact = Some((host, now));
+        self.started = now;
+    }
+
+    /// Count the join timeout from `now` (the driver starts pumping the network late).
+    pub(crate) fn restart_clock(&mut self, now: Instant) {
+        self.started = now;
+    }
+
+    /// Not in the room after waiting `timeout` since joining started.
+    pub(crate) fn overdue(&self, now: Instant, timeout: Duration) -> bool {
+        !self.joined && now.saturating_since(self.started) >= timeout
+    }
+
+    /// When this needs a look next (a retry or the timeout), for virtual-time drivers.
+    pub(crate) fn poll_timeout(&self, timeout: Duration) -> Option<Instant> {
+        if self.joined {
+            return None;
+        }
+        let retry = self
+            .contact
+            .filter(|_| !self.contacts.is_empty())
+            .map(|(_, since)| since + JOIN_RETRY);
+        let give_up = self.started + timeout;
+        Some(retry.map_or(give_up, |r| r.min(give_up)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const A: PeerId = PeerId(1);
+    const B: PeerId = PeerId(2);
+    const C: PeerId = PeerId(3);
+
+    fn at_ms(ms: u64) -> Instant {
+        Instant::from_millis(ms)
+    }
+
+    #[test]
+    fn a_joiner_asks_the_next_connected_peer_in_connection_order_around_and_around() {
+        let mut j = Joining::new(at_ms(0), false, Some(A));
+        j.on_link_event(PeerEvent::Connected(B));
+        j.on_link_event(PeerEvent::Connected(A)); // already known: keeps its place
+        j.on_link_event(PeerEvent::Connected(C));
+        assert_eq!(j.next_contact(at_ms(999)), None, "asked A too recently");
+        assert_eq!(j.next_contact(at_ms(1000)), Some(B));
+        assert_eq!(j.next_contact(at_ms(1500)), None, "asked B too recently");
+        assert_eq!(j.next_contact(at_ms(2000)), Some(C));
+        assert_eq!(j.next_contact(at_ms(3000)), Some(A), "wraps around");
+        j.set_joined();
+        assert_eq!(
+            j.next_contact(at_ms(9000)),
+            None,
+            "in the room: nobody to ask"
+        );
+    }
+
+    #[test]
+    fn a_contact_that_disconnects_is_skipped_and_a_gone_one_restarts_the_order() {
+        let mut j = Joining::new(at_ms(0), false, Some(A));
+        j.on_link_event(PeerEvent::Connected(B));
+        j.on_link_event(PeerEvent::Connected(C));
+        j.on_link_event(PeerEvent::Disconnected(B));
+        assert_eq!(j.next_contact(at_ms(1000)), Some(C));
+        j.on_link_event(PeerEvent::Disconnected(C));
+        // The peer asked last is gone: start again from the first connected.
+        assert_eq!(j.next_contact(at_ms(2000)), Some(A));
+        j.on_link_event(PeerEvent::Disconnected(A));
+        assert_eq!(j.next_contact(at_ms(3000)), None, "nobody connected");
+    }
+
+    #[test]
+    fn a_host_never_retries_nor_times_out() {
+        let mut j = Joining::new(at_ms(0), true, None);
+        j.on_link_event(PeerEvent::Connected(B));
+        assert_eq!(j.next_contact(at_ms(5000)), None);
+        assert!(!j.overdue(at_ms(60_000), Duration::from_secs(15)));
+        assert_eq!(j.poll_timeout(Duration::from_secs(15)), None);
+    }
+
+    #[test]
+    fn the_join_timeout_counts_from_the_last_restart() {
+        let timeout = Duration::from_secs(15);
+        let mut j = Joining::new(at_ms(0), false, Some(A));
+        assert_eq!(
+            j.poll_timeout(timeout),
+            Some(at_ms(1000)),
+            "the retry comes first"
+        );
+        assert!(!j.overdue(at_ms(14_999), timeout));
+        assert!(j.overdue(at_ms(15_000), timeout));
+        j.restart_clock(at_ms(10_000));
+        assert!(!j.overdue(at_ms(15_000), timeout));
+        assert!(j.overdue(at_ms(25_000), timeout));
+        // Rejoining: out of the room, asking the host from now on.
+        j.set_joined();
+        j.restart(at_ms(30_000), C);
+        assert!(!j.joined());
+        assert_eq!(j.next_contact(at_ms(30_500)), None);
+        assert_eq!(
+            j.next_contact(at_ms(31_000)),
+            Some(A),
+            "C is last: wraps to A"
+        );
+        assert!(j.overdue(at_ms(45_000), timeout));
+    }
+
+    #[test]
+    fn rejoining_stops_at_the_limit_and_a_zero_limit_never_rejoins() {
+        assert!(may_rejoin(0, 3));
+        assert!(may_rejoin(2, 3));
+        assert!(!may_rejoin(3, 3));
+        assert!(!may_rejoin(0, 0));
+    }
+}

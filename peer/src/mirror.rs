@@ -1,0 +1,337 @@
+//! The mirror: the room's networked objects as bodies in this peer's rapier world.
+//!
+//! Who simulates what: the owner of an object simulates it (rigid props are dynamic bodies,
+//! soft bodies run the particle method); everyone else shows the session's interpolated state
+//! (rigid props become kinematic, soft bodies get `apply_state`). The mirror owns the world,
+//! the soft bodies and the map both ways between network ids and bodies; the [`Peer`]
+//! decides, from the session, which objects are whose.
+//!
+//! [`Peer`]: crate::Peer
+
+use std::collections::{BTreeMap, HashMap};
+
+use glam::{Quat, Vec3};
+use softsync_interaction::ObjectRef;
+use softsync_net::{NetId, ObjectState, PeerId};
+use softsync_softbody::rapier3d::prelude::*;
+use softsync_softbody::{SoftBodyHandle, SoftBodySet};
+
+use crate::events::PeerError;
+use crate::scene::{Kind, Scene};
+
+/// How a networked object exists in the local world.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LocalBody {
+    /// A pose only (avatar parts).
+    Pose,
+    /// A rigid body.
+    Rigid(RigidBodyHandle),
+    /// A soft body.
+    Soft(SoftBodyHandle),
+}
+
+/// A networked object as this peer knows it.
+#[derive(Clone, Debug)]
+pub struct MirroredObject {
+    /// What it is.
+    pub kind: Kind,
+    /// Its body in the local world.
+    pub body: LocalBody,
+    /// For avatar parts: the peer whose avatar it is (its first owner).
+    pub avatar_of: Option<PeerId>,
+    /// Last pose of an avatar part we own (set by the bot or the device).
+    pub pose: (Vec3, Quat),
+}
+
+/// The local world and the networked objects in it.
+pub(crate) struct Mirror {
+    /// rapier: the scene's static geometry and the objects' bodies.
+    pub(crate) world: PhysicsWorld,
+    /// Soft bodies.
+    pub(crate) soft: SoftBodySet,
+    /// Networked objects by id.
+    pub(crate) objects: BTreeMap<NetId, MirroredObject>,
+    /// Networked ids by body (what the hands touch).
+    pub(crate) by_ref: HashMap<ObjectRef, NetId>,
+}
+
+impl Mirror {
+    /// A world stepping by `dt_s` with `scene`'s static geometry, and no objects yet.
+    pub(crate) fn new(scene: &Scene, dt_s: f32) -> Self {
+        let mut world = PhysicsWorld::new();
+        world.integration_parameters.dt = dt_s;
+        scene.build_static(&mut world);
+        Mirror {
+            world,
+            soft: SoftBodySet::new(),
+            objects: BTreeMap::new(),
+            by_ref: HashMap::new(),
+        }
+    }
+
+    /// The body an object's hands would touch (none for avatar parts).
+    pub(crate) fn object_ref(&self, id: NetId) -> Option<ObjectRef> {
+        match self.objects.get(&id)?.body {
+            LocalBody::Rigid(h) => Some(ObjectRef::Rigid(h)),
+            LocalBody::Soft(h) => Some(ObjectRef::Soft(h)),
+            LocalBody::Pose => None,
+        }
+    }
+
+    /// The networked id of a body.
+    pub(crate) fn id_of(&self, r: ObjectRef) -> Option<NetId> {
+        self.by_ref.get(&r).copied()
+    }
+
+    /// Build a body of `kind` at a pose (not yet a networked object: see [`Mirror::insert`]).
+    pub(crate) fn build(
+        &mut self,
+        scene: &Scene,
+        kind: Kind,
+        pos: Vec3,
+        rot: Quat,
+    ) -> Result<LocalBody, PeerError> {
+        if kind.is_avatar() {
+            return Ok(LocalBody::Pose);
+        }
+        if !kind.is_soft() {
+            return Ok(LocalBody::Rigid(Scene::build_rigid(
+                kind,
+                &mut self.world,
+                pos,
+                rot,
+            )));
+        }
+        let mesh = scene.soft_mesh(kind).map_err(PeerError::Build)?;
+        let h = self
+            .soft
+            .insert(&mesh, Scene::soft_config(kind), &mut self.world)
+            .map_err(|e| PeerError::Build(format!("{}: {e}", kind.name())))?;
+        // Built around the origin, then placed: the rest shape stays in the body's own frame.
+        if let Some(b) = self.soft.get_mut(h) {
+            let particles: Vec<Vec3> = b.rest_offsets().iter().map(|o| pos + rot * *o).collect();
+            b.apply_state(&mut self.world, pos, rot, &particles)
+                .map_err(|e| PeerError::Build(e.to_string()))?;
+        }
+        Ok(LocalBody::Soft(h))
+    }
+
+    /// Make `body` the networked object `id`.
+    pub(crate) fn insert(
+        &mut self,
+        id: NetId,
+        kind: Kind,
+        body: LocalBody,
+        avatar_of: Option<PeerId>,
+    ) {
+        match body {
+            LocalBody::Rigid(h) => {
+                self.by_ref.insert(ObjectRef::Rigid(h), id);
+            }
+            LocalBody::Soft(h) => {
+                self.by_ref.insert(ObjectRef::Soft(h), id);
+            }
+            LocalBody::Pose => {}
+        }
+        self.objects.insert(
+            id,
+            MirroredObject {
+                kind,
+                body,
+                avatar_of,
+                pose: (Vec3::ZERO, Quat::IDENTITY),
+            },
+        );
+    }
+
+    /// Drop object `id` and its body from the world.
+    pub(crate) fn remove(&mut self, id: NetId) {
+        let Some(o) = self.objects.remove(&id) else {
+            return;
+        };
+        match o.body {
+            LocalBody::Rigid(h) => {
+                self.by_ref.remove(&ObjectRef::Rigid(h));
+                self.world.remove_body(h);
+            }
+            LocalBody::Soft(h) => {
+                self.by_ref.remove(&ObjectRef::Soft(h));
+                self.soft.remove(h, &mut self.world);
+            }
+            LocalBody::Pose => {}
+        }
+    }
+
+    /// Drop every networked object (the static scene stays).
+    pub(crate) fn clear(&mut self) {
+        let ids: Vec<NetId> = self.objects.keys().copied().collect();
+        for id in ids {
+            self.remove(id);
+        }
+    }
+
+    /// Set the pose of a pose-only object (an avatar part).
+    pub(crate) fn set_pose(&mut self, id: NetId, pos: Vec3, rot: Quat) {
+        if let Some(o) = self.objects.get_mut(&id) {
+            o.pose = (pos, rot);
+        }
+    }
+
+    /// The state of a body in the local world (`pose`: for a pose-only body, or a body that
+    /// is gone).
+    pub(crate) fn body_state(&self, body: LocalBody, pose: (Vec3, Quat)) -> ObjectState {
+        let (pos, rot) = pose;
+        match body {
+            LocalBody::Pose => ObjectState::rigid(pos, rot),
+            LocalBody::Rigid(h) => match self.world.bodies.get(h) {
+                Some(b) => ObjectState::rigid(b.translation(), *b.rotation()),
+                None => ObjectState::rigid(pos, rot),
+            },
+            LocalBody::Soft(h) => match self.soft.get(h) {
+                Some(b) => {
+                    let (pos, rot) = b.center_pose(&self.world);
+                    ObjectState {
+                        pos,
+                        rot,
+                        particles: b.particle_positions(&self.world),
+                    }
+                }
+                None => ObjectState::rigid(pos, rot),
+            },
+        }
+    }
+
+    /// The state of object `id`'s body in the local world.
+    pub(crate) fn state(&self, id: NetId) -> Option<ObjectState> {
+        let o = self.objects.get(&id)?;
+        Some(self.body_state(o.body, o.pose))
+    }
+
+    /// Rigid props we own are dynamic; the others follow the network, kinematically.
+    pub(crate) fn set_simulated(&mut self, id: NetId, ours: bool) {
+        let Some(LocalBody::Rigid(h)) = self.objects.get(&id).map(|o| o.body) else {
+            return;
+        };
+        if let Some(b) = self.world.bodies.get_mut(h) {
+            let want = if ours {
+                RigidBodyType::Dynamic
+            } else {
+                RigidBodyType::KinematicPositionBased
+            };
+            if b.body_type() != want {
+                b.set_body_type(want, true);
+            }
+        }
+    }
+
+    /// Show state `s` on object `id`'s body. False when a soft body refused it (wrong particle
+    /// count, non-finite values): the body keeps its last state.
+    pub(crate) fn apply_shown(&mut self, id: NetId, s: &ObjectState) -> bool {
+        let Some(o) = self.objects.get(&id) else {
+            return true;
+        };
+        match o.body {
+            LocalBody::Pose => true,
+            LocalBody::Rigid(h) => {
+                if let Some(b) = self.world.bodies.get_mut(h) {
+                    let pose = Pose::from_parts(s.pos, s.rot);
+                    if b.is_kinematic() {
+                        b.set_next_kinematic_position(pose);
+                    } else {
+                        b.set_position(pose, true);
+                        b.set_linvel(Vec3::ZERO, true);
+                        b.set_angvel(Vec3::ZERO, true);
+                    }
+                }
+                true
+            }
+            LocalBody::Soft(h) => match self.soft.get_mut(h) {
+                Some(b) => b
+                    .apply_state(&mut self.world, s.pos, s.rot, &s.particles)
+                    .is_ok(),
+                None => true,
+            },
+        }
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    fn scene() -> Scene {
+        Scene::by_name("bench-ball", Path::new(".")).unwrap()
+    }
+
+    #[test]
+    fn bodies_and_ids_map_both_ways_until_removed() {
+        let scene = scene();
+        let mut m = Mirror::new(&scene, 1.0 / 60.0);
+        let statics = m.world.bodies.len();
+        let pos = Vec3::new(0.0, 1.0, 0.0);
+        let ball = m
+            .build(&scene, Kind::SoftBall, pos, Quat::IDENTITY)
+            .unwrap();
+        let block = m.build(&scene, Kind::Block, pos, Quat::IDENTITY).unwrap();
+        let head = m.build(&scene, Kind::Head, pos, Quat::IDENTITY).unwrap();
+        assert_eq!(head, LocalBody::Pose);
+        m.insert(NetId(1), Kind::SoftBall, ball, None);
+        m.insert(NetId(2), Kind::Block, block, None);
+        m.insert(NetId(3), Kind::Head, head, Some(PeerId(7)));
+        for id in [NetId(1), NetId(2)] {
+            let r = m.object_ref(id).unwrap();
+            assert_eq!(m.id_of(r), Some(id));
+        }
+        assert_eq!(
+            m.object_ref(NetId(3)),
+            None,
+            "avatar parts have no body to touch"
+        );
+        // A soft body is placed where it was built: its center is at `pos`.
+        let s = m.state(NetId(1)).unwrap();
+        assert!(s.pos.distance(pos) < 0.01, "{}", s.pos);
+        assert_eq!(s.particles.len(), 60);
+        m.set_pose(NetId(3), Vec3::ONE, Quat::IDENTITY);
+        assert_eq!(m.state(NetId(3)).unwrap().pos, Vec3::ONE);
+        let r = m.object_ref(NetId(1)).unwrap();
+        m.remove(NetId(1));
+        assert_eq!(m.id_of(r), None);
+        m.clear();
+        assert!(m.objects.is_empty() && m.by_ref.is_empty());
+        assert_eq!(m.world.bodies.len(), statics, "the static scene stays");
+    }
+
+    #[test]
+    fn remote_rigid_props_are_kinematic_and_a_bad_soft_state_is_refused() {
+        let scene = scene();
+        let mut m = Mirror::new(&scene, 1.0 / 60.0);
+        let pos = Vec3::new(0.0, 1.0, 0.0);
+        let block = m.build(&scene, Kind::Block, pos, Quat::IDENTITY).unwrap();
+        m.insert(NetId(2), Kind::Block, block, None);
+        let LocalBody::Rigid(h) = block else {
+            panic!("a block is rigid")
+        };
+        m.set_simulated(NetId(2), false);
+        assert!(m.world.bodies.get(h).unwrap().is_kinematic());
+        m.set_simulated(NetId(2), true);
+        assert!(m.world.bodies.get(h).unwrap().is_dynamic());
+        // A dynamic body takes a shown state at once.
+        let to = Vec3::new(0.2, 1.1, 0.0);
+        assert!(m.apply_shown(NetId(2), &ObjectState::rigid(to, Quat::IDENTITY)));
+        assert_eq!(m.state(NetId(2)).unwrap().pos, to);
+
+        let ball = m
+            .build(&scene, Kind::SoftBall, pos, Quat::IDENTITY)
+            .unwrap();
+        m.insert(NetId(1), Kind::SoftBall, ball, None);
+        let mut s = m.state(NetId(1)).unwrap();
+        s.particles.pop();
+        assert!(!m.apply_shown(NetId(1), &s), "one particle short");
+        let mut s = m.state(NetId(1)).unwrap();
+        s.particles[0].x = f32::NAN;
+        assert!(!m.apply_shown(NetId(1), &s), "non-finite");
+        assert!(m.state(NetId(1)).unwrap().particles[0].is_finite());
+    }
+}

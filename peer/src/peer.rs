@@ -1,0 +1,616 @@
+//! [`Peer`]: one peer of a room. It puts together the session (membership, ownership,
+//! replication), the mirror of the room's objects in a rapier world, the hands, the avatar
+//! and the way in ([`crate::join`]), and acts on what each says to the others: a hand that
+//! reaches for someone else's object asks the session for it, a grant lets the hand hold on,
+//! an object that came to rest goes back to the host, a peer the room went on without joins
+//! again.
+//!
+//! Sans-IO: it reads no clock and owns no socket. The driver feeds it datagrams and link
+//! news, calls [`Peer::pump`] and [`Peer::fixed_step`] with `now`, and sends what
+//! [`Peer::poll_transmit`] gives it.
+
+use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
+use std::time::Duration;
+
+use glam::{Quat, Vec3};
+use softsync_interaction::{
+    HandConfig, HandId, HandInput, Interaction, InteractionEvent, ObjectRef, Ownership, Target,
+};
+use softsync_net::{
+    DisplayedState, Instant, NetId, ObjectState, PeerEvent, PeerId, Session, Transmit,
+};
+use softsync_softbody::rapier3d::prelude::PhysicsWorld;
+use softsync_softbody::SoftBodySet;
+
+use crate::avatar::{self, Avatar};
+use crate::events::{Counters, Event, PeerError};
+use crate::join::{may_rejoin, Joining};
+use crate::mirror::{LocalBody, Mirror, MirroredObject};
+use crate::scene::{Kind, Scene};
+
+/// How a peer simulates and how patient it is.
+#[derive(Clone, Debug)]
+pub struct PeerConfig {
+    /// Both hands' configuration.
+    pub hand: HandConfig,
+    /// The fixed simulation step, seconds.
+    pub dt_s: f32,
+    /// Spawn an avatar (head and hands); false to measure one object's traffic.
+    pub avatar: bool,
+    /// How many times to join again after the room went on without us (0: stop instead).
+    pub rejoin_limit: u32,
+    /// How long a joiner waits for a welcome before [`Peer::pump`] gives up.
+    pub join_timeout: Duration,
+}
+
+impl Default for PeerConfig {
+    fn default() -> Self {
+        PeerConfig {
+            hand: HandConfig::default(),
+            dt_s: 1.0 / 60.0,
+            avatar: true,
+            rejoin_limit: 3,
+            join_timeout: Duration::from_secs(15),
+        }
+    }
+}
+
+/// One peer of a room: session, rapier world, soft bodies, hands, avatar.
+pub struct Peer {
+    session: Session,
+    mirror: Mirror,
+    hands: Interaction,
+    /// Left and right hand.
+    hand_ids: [HandId; 2],
+    scene: Scene,
+    config: PeerConfig,
+    avatar: Avatar,
+    joining: Joining,
+    /// Objects our hands asked for, until the answer.
+    waiting_grant: BTreeSet<NetId>,
+    events: VecDeque<Event>,
+    counters: Counters,
+    sim_time_s: f64,
+    steps: u64,
+    last_step_at: Instant,
+}
+
+/// The hands' answer to "may this peer move that object": its session says who owns it.
+struct SessionOwnership<'a> {
+    me: PeerId,
+    session: &'a Session,
+    by_ref: &'a HashMap<ObjectRef, NetId>,
+}
+
+impl Ownership for SessionOwnership<'_> {
+    fn is_local(&self, object: ObjectRef) -> bool {
+        self.by_ref
+            .get(&object)
+            .is_some_and(|id| self.session.owner(*id) == Some(self.me))
+    }
+}
+
+impl Peer {
+    /// A peer around `session` (hosting, or joining through `contact`, the peer its session
+    /// said `Hello` to), with `scene`'s static geometry built. A host then calls
+    /// [`Peer::open`].
+    pub fn new(
+        now: Instant,
+        session: Session,
+        contact: Option<PeerId>,
+        scene: Scene,
+        config: PeerConfig,
+    ) -> Result<Self, PeerError> {
+        let mirror = Mirror::new(&scene, config.dt_s);
+        let mut hands = Interaction::new();
+        let mut add_hand = || {
+            hands
+                .add_hand(config.hand.clone())
+                .map_err(|e| PeerError::Build(e.to_string()))
+        };
+        let hand_ids = [add_hand()?, add_hand()?];
+        let joining = Joining::new(now, session.is_host(), contact);
+        Ok(Peer {
+            session,
+            mirror,
+            hands,
+            hand_ids,
+            scene,
+            config,
+            avatar: Avatar::default(),
+            joining,
+            waiting_grant: BTreeSet::new(),
+            events: VecDeque::new(),
+            counters: Counters::default(),
+            sim_time_s: 0.0,
+            steps: 0,
+            last_step_at: Instant::ZERO,
+        })
+    }
+
+    /// The host opens the room: spawn the scene's objects and our avatar.
+    pub fn open(&mut self, now: Instant) -> Result<(), PeerError> {
+        for p in self.scene.objects.clone() {
+            let body = self
+                .mirror
+                .build(&self.scene, p.kind, p.pos, Quat::IDENTITY)?;
+            let state = self.mirror.body_state(body, (p.pos, Quat::IDENTITY));
+            let (id, _) = self
+                .session
+                .spawn(now, p.kind.class(), state)
+                .map_err(|e| PeerError::Build(format!("spawning {}: {e}", p.kind.name())))?;
+            self.mirror.insert(id, p.kind, body, None);
+        }
+        self.spawn_avatar(now);
+        Ok(())
+    }
+
+    fn spawn_avatar(&mut self, now: Instant) {
+        if self.config.avatar {
+            self.avatar
+                .spawn(now, &mut self.session, &mut self.mirror, &mut self.events);
+        }
+    }
+
+    // --- Sans-IO: what the driver feeds in and takes out ---
+
+    /// A datagram from `from` arrived.
+    pub fn handle_datagram(&mut self, now: Instant, from: PeerId, datagram: &[u8]) {
+        self.session.handle_packet(now, from, datagram);
+    }
+
+    /// Connectivity news from the transport: informational for the session (its heartbeats
+    /// decide who is gone); a joiner uses it to find someone who can answer its `Hello`.
+    pub fn handle_link_event(&mut self, event: PeerEvent) {
+        self.joining.on_link_event(event);
+    }
+
+    /// Timers and the session's news: the join retry, the session's timeouts, acting on its
+    /// events, the join timeout. Call once per frame, after this frame's datagrams and link
+    /// events. An error means the peer must stop.
+    pub fn pump(&mut self, now: Instant) -> Result<(), PeerError> {
+        if let Some(next) = self.joining.next_contact(now) {
+            // The same session: the peers asked before keep their sequences with us in step.
+            self.session.join_via(now, next);
+        }
+        if self.session.poll_timeout().is_some_and(|t| t <= now) {
+            self.session.handle_timeout(now);
+        }
+        while let Some(e) = self.session.poll_event() {
+            self.on_session_event(now, e)?;
+        }
+        if self.joining.overdue(now, self.config.join_timeout) {
+            return Err(PeerError::NotWelcomed {
+                secs: self.config.join_timeout.as_secs(),
+            });
+        }
+        Ok(())
+    }
+
+    /// When [`Peer::pump`] has something to do next (for drivers on virtual time; a frame
+    /// loop just pumps every frame).
+    pub fn poll_timeout(&self) -> Option<Instant> {
+        let join = self.joining.poll_timeout(self.config.join_timeout);
+        match (self.session.poll_timeout(), join) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+
+    /// The next datagram to send. Drain after [`Peer::pump`], [`Peer::fixed_step`] and
+    /// [`Peer::leave`].
+    pub fn poll_transmit(&mut self, now: Instant) -> Option<Transmit> {
+        self.session.poll_transmit(now)
+    }
+
+    /// The next thing that happened, oldest first.
+    pub fn poll_event(&mut self) -> Option<Event> {
+        self.events.pop_front()
+    }
+
+    /// Say goodbye: the others drop us at once instead of after the peer timeout. Send what
+    /// [`Peer::poll_transmit`] gives before the process ends.
+    pub fn leave(&mut self, now: Instant) {
+        self.session.leave(now);
+    }
+
+    /// Count the join timeout from `now` (a driver that holds the network while its front
+    /// end warms up).
+    pub fn restart_join_clock(&mut self, now: Instant) {
+        self.joining.restart_clock(now);
+    }
+
+    /// The room went on without us: its objects have other owners, and our replica is stale.
+    /// Let go of everything, drop every networked object from the local world (the static
+    /// scene stays) and join `host` again with a fresh session; the room's snapshot then
+    /// rebuilds the objects, and `Joined` respawns our avatar.
+    fn rejoin(&mut self, now: Instant, host: PeerId, reason: String) {
+        self.counters.rejoins += 1;
+        self.hands.release_all();
+        self.mirror.clear();
+        self.avatar.clear();
+        self.waiting_grant.clear();
+        let cfg = self.session.config().clone();
+        self.session = Session::join(self.me(), host, cfg, now);
+        self.joining.restart(now, host);
+        self.events.push_back(Event::Rejoining { host, reason });
+    }
+
+    fn on_session_event(&mut self, now: Instant, e: softsync_net::Event) -> Result<(), PeerError> {
+        use softsync_net::Event as SessionEvent;
+        let me = self.me();
+        match e {
+            SessionEvent::Joined { .. } => {
+                self.joining.set_joined();
+                self.events.push_back(Event::Room(e));
+                self.spawn_avatar(now);
+            }
+            SessionEvent::Refused { reason } => return Err(PeerError::Refused(reason)),
+            SessionEvent::Dropped { host, reason } => {
+                if !may_rejoin(self.counters.rejoins, self.config.rejoin_limit) {
+                    return Err(PeerError::Dropped {
+                        reason,
+                        rejoins: self.counters.rejoins,
+                    });
+                }
+                self.rejoin(now, host, reason);
+            }
+            SessionEvent::PeerJoined(_) => self.events.push_back(Event::Room(e)),
+            SessionEvent::PeerLeft(_) => {
+                self.events.push_back(Event::Room(e));
+                if self.session.is_host() {
+                    self.despawn_avatars_of_absent(now);
+                }
+            }
+            SessionEvent::HostChanged { host, .. } => {
+                self.counters.host_changes += 1;
+                self.events.push_back(Event::Room(e));
+                if host == me {
+                    self.despawn_avatars_of_absent(now);
+                }
+            }
+            SessionEvent::Spawned {
+                id,
+                class,
+                owner,
+                request,
+            } => {
+                if self.mirror.objects.contains_key(&id) {
+                    return Ok(());
+                }
+                let Some(kind) = Kind::of_class(class) else {
+                    return Ok(());
+                };
+                let s = self
+                    .session
+                    .latest_state(id)
+                    .unwrap_or_else(|| ObjectState::rigid(Vec3::ZERO, Quat::IDENTITY));
+                let body = self.mirror.build(&self.scene, kind, s.pos, s.rot)?;
+                let avatar_of = kind.is_avatar().then_some(owner);
+                self.mirror.insert(id, kind, body, avatar_of);
+                if let (true, Some(request)) = (owner == me, request) {
+                    self.avatar
+                        .on_spawned(request, id, (s.pos, s.rot), &mut self.mirror);
+                }
+            }
+            SessionEvent::Despawned(id) => self.mirror.remove(id),
+            SessionEvent::AuthorityChanged { id, owner, .. } => {
+                if !self.mirror.objects.contains_key(&id) {
+                    return Ok(()); // despawned meanwhile (the avatar of a peer that left)
+                }
+                if owner == me {
+                    self.counters.authority_grants += 1;
+                    self.events.push_back(Event::AuthorityGained(id));
+                    // Take over from what we showed.
+                    if let Some(s) = self.session.latest_state(id) {
+                        self.apply_shown(id, &s);
+                    }
+                    if self.waiting_grant.remove(&id) {
+                        if let Some(r) = self.mirror.object_ref(id) {
+                            self.hands.grant(r);
+                        }
+                    }
+                }
+                self.mirror.set_simulated(id, owner == me);
+            }
+            SessionEvent::AuthorityDenied { id, .. } => {
+                self.events.push_back(Event::AuthorityDenied(id));
+                if self.waiting_grant.remove(&id) {
+                    if let Some(r) = self.mirror.object_ref(id) {
+                        self.hands.deny(r);
+                    }
+                }
+            }
+            SessionEvent::AuthorityAsked { id, by } => {
+                // Not while one of our hands holds it.
+                let held = self.mirror.object_ref(id).is_some_and(|r| self.is_held(r));
+                self.session.answer_authority(now, id, by, !held);
+            }
+        }
+        Ok(())
+    }
+
+    /// The host removes the avatars of peers that are no longer members.
+    fn despawn_avatars_of_absent(&mut self, now: Instant) {
+        let members = self.session.members();
+        let gone: Vec<NetId> = self
+            .mirror
+            .objects
+            .iter()
+            .filter(|(_, o)| o.avatar_of.is_some_and(|p| !members.contains_key(&p)))
+            .map(|(id, _)| *id)
+            .collect();
+        for id in gone {
+            if self.session.despawn(now, id).is_ok() {
+                self.mirror.remove(id);
+            }
+        }
+    }
+
+    fn apply_shown(&mut self, id: NetId, s: &ObjectState) {
+        if !self.mirror.apply_shown(id, s) {
+            self.counters.apply_errors += 1;
+        }
+    }
+
+    fn is_held(&self, r: ObjectRef) -> bool {
+        self.hand_ids
+            .iter()
+            .any(|h| self.hands.held(*h).is_some_and(|t| t.object() == r))
+    }
+
+    // --- Simulation ---
+
+    /// Hand input for the next step (0 left, 1 right), from a bot or a device.
+    pub fn set_hand_input(&mut self, hand: usize, input: HandInput) {
+        if let Some(h) = self.hand_ids.get(hand).copied() {
+            if let Err(e) = self.hands.set_input(h, input) {
+                self.events
+                    .push_back(Event::Warning(format!("hand input refused: {e}")));
+            }
+        }
+    }
+
+    /// Set a pose for one of our avatar parts (0 head, 1 left hand, 2 right hand).
+    pub fn set_avatar_pose(&mut self, part: usize, pos: Vec3, rot: Quat) {
+        if let Some(id) = self.avatar.parts.get(part).copied().flatten() {
+            self.mirror.set_pose(id, pos, rot);
+        }
+    }
+
+    /// Advance the simulation by one fixed step at `now` and publish what we own (then send
+    /// what [`Peer::poll_transmit`] gives).
+    pub fn fixed_step(&mut self, now: Instant) {
+        let me = self.me();
+        let dt = self.config.dt_s;
+        self.sim_time_s += dt as f64;
+        self.steps += 1;
+        self.last_step_at = now;
+        // Show what others simulate (before the step, so our bodies collide with it).
+        let remote: Vec<NetId> = self
+            .mirror
+            .objects
+            .keys()
+            .copied()
+            .filter(|id| self.session.owner(*id).is_some_and(|o| o != me))
+            .collect();
+        for id in &remote {
+            self.mirror.set_simulated(*id, false);
+            if let Some(d) = self.session.display_state(now, *id) {
+                self.apply_shown(*id, &d.state);
+            }
+        }
+        // Hands, then physics.
+        let own = SessionOwnership {
+            me,
+            session: &self.session,
+            by_ref: &self.mirror.by_ref,
+        };
+        self.hands
+            .update(&mut self.mirror.world, &mut self.mirror.soft, &own, dt);
+        while let Some(e) = self.hands.poll_event() {
+            self.on_hand_event(now, e);
+        }
+        self.mirror.soft.step(&mut self.mirror.world, dt);
+        // Remote soft bodies: show exactly the interpolated state again after the step.
+        for id in &remote {
+            let soft = matches!(
+                self.mirror.objects.get(id).map(|o| o.body),
+                Some(LocalBody::Soft(_))
+            );
+            if soft {
+                if let Some(d) = self.session.display_state(now, *id) {
+                    self.apply_shown(*id, &d.state);
+                }
+            }
+        }
+        // Publish ours.
+        let owned: Vec<NetId> = self
+            .mirror
+            .objects
+            .keys()
+            .copied()
+            .filter(|id| self.session.owner(*id) == Some(me))
+            .collect();
+        for id in owned {
+            // Ours since a grant or a migration: simulate it (idempotent).
+            self.mirror.set_simulated(id, true);
+            let Some(o) = self.mirror.objects.get(&id) else {
+                continue;
+            };
+            let s = self.mirror.body_state(o.body, o.pose);
+            if let Err(e) = self.session.publish_state(now, id, &s) {
+                let msg = format!("not publishing {}: {e}", o.kind.name());
+                self.events.push_back(Event::Warning(msg));
+            }
+        }
+    }
+
+    fn on_hand_event(&mut self, now: Instant, e: InteractionEvent) {
+        match e {
+            InteractionEvent::AuthorityRequested { object, .. } => {
+                if let Some(id) = self.mirror.id_of(object) {
+                    self.counters.authority_requests += 1;
+                    self.events.push_back(Event::AuthorityAsked(id));
+                    match self.session.request_authority(now, id) {
+                        Ok(()) => {
+                            self.waiting_grant.insert(id);
+                        }
+                        Err(_) => self.hands.deny(object),
+                    }
+                }
+            }
+            InteractionEvent::Grabbed { hand, target } => {
+                if let Some(id) = self.mirror.id_of(target.object()) {
+                    let particle = match target {
+                        Target::SoftParticle(_, p) => Some(p),
+                        _ => None,
+                    };
+                    self.events
+                        .push_back(Event::GrabStarted { id, hand, particle });
+                }
+            }
+            InteractionEvent::Released {
+                hand,
+                target,
+                velocity_mps,
+            } => {
+                if let Some(id) = self.mirror.id_of(target.object()) {
+                    let speed = velocity_mps.length();
+                    self.events.push_back(Event::GrabEnded { id, hand, speed });
+                }
+            }
+            InteractionEvent::CameToRest { object } => {
+                if let Some(id) = self.mirror.id_of(object) {
+                    if !self.session.is_host()
+                        && self.session.owner(id) == Some(self.me())
+                        && !self.is_held(object)
+                        && self.session.release_authority(now, id).is_ok()
+                    {
+                        self.events.push_back(Event::AuthorityReleased(id));
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+
+    // --- What the peer shows ---
+
+    /// This peer's id.
+    pub fn me(&self) -> PeerId {
+        self.session.local_id()
+    }
+
+    /// In the room (host, or welcomed).
+    pub fn joined(&self) -> bool {
+        self.joining.joined()
+    }
+
+    /// The session (membership, owners, states, traffic statistics).
+    pub fn session(&self) -> &Session {
+        &self.session
+    }
+
+    /// The networked objects as this peer knows them.
+    pub fn objects(&self) -> &BTreeMap<NetId, MirroredObject> {
+        &self.mirror.objects
+    }
+
+    /// The rapier world (static scene and the objects' bodies).
+    pub fn world(&self) -> &PhysicsWorld {
+        &self.mirror.world
+    }
+
+    /// The soft bodies in [`Peer::world`].
+    pub fn soft_bodies(&self) -> &SoftBodySet {
+        &self.mirror.soft
+    }
+
+    /// The scene.
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &PeerConfig {
+        &self.config
+    }
+
+    /// What this peer counted.
+    pub fn counters(&self) -> Counters {
+        self.counters
+    }
+
+    /// Simulated seconds.
+    pub fn sim_time(&self) -> f64 {
+        self.sim_time_s
+    }
+
+    /// Fixed steps run.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// The time of the last fixed step: the time our published states stand for.
+    pub fn last_step_at(&self) -> Instant {
+        self.last_step_at
+    }
+
+    /// Where this peer stands: around the table, by its id.
+    pub fn home(&self) -> (Vec3, Quat) {
+        avatar::home(self.me())
+    }
+
+    /// Our avatar's parts (head, left hand, right hand), once spawned.
+    pub fn avatar_parts(&self) -> [Option<NetId>; 3] {
+        self.avatar.parts
+    }
+
+    /// The state this peer shows for an object now: simulated if we own it, interpolated
+    /// otherwise (what the dump writes).
+    pub fn shown_state(&mut self, now: Instant, id: NetId) -> Option<ObjectState> {
+        if !self.mirror.objects.contains_key(&id) {
+            return None;
+        }
+        if self.session.owner(id) == Some(self.me()) {
+            self.mirror.state(id)
+        } else {
+            self.session
+                .display_state(now, id)
+                .map(|d| d.state)
+                .or_else(|| self.session.latest_state(id))
+        }
+    }
+
+    /// The interpolated state of an object another peer owns, with the owner's time it
+    /// stands for (see [`Session::display_state`]).
+    pub fn displayed_state(&mut self, now: Instant, id: NetId) -> Option<DisplayedState> {
+        self.session.display_state(now, id)
+    }
+
+    /// What a hand (0 left, 1 right) holds, as a networked id.
+    pub fn held(&self, hand: usize) -> Option<(NetId, Target)> {
+        let t = self.hands.held(*self.hand_ids.get(hand)?)?;
+        Some((self.mirror.id_of(t.object())?, t))
+    }
+
+    /// Objects our hands hover now (a view tints them).
+    pub fn hovered_ids(&self) -> BTreeSet<NetId> {
+        self.hand_ids
+            .iter()
+            .flat_map(|h| self.hands.hovered(*h))
+            .filter_map(|hv| self.mirror.id_of(hv.target.object()))
+            .collect()
+    }
+
+    /// How many objects we own.
+    pub fn owned_count(&self) -> usize {
+        let me = self.me();
+        self.mirror
+            .objects
+            .keys()
+            .filter(|id| self.session.owner(**id) == Some(me))
+            .count()
+    }
+}
