@@ -1,0 +1,410 @@
+//! The position-based solver shared by the surface, ISPC, tetrahedral and shape-matching
+//! models (ISPC paper Algorithm 1; Müller et al. 2007; XPBD, Macklin et al. 2016).
+//!
+//! Per step: gather the rapier colliders near the body once, then per substep: predict
+//! (gravity, damping), project the constraints Gauss–Seidel, match shapes, resolve contacts
+//! (with a swept ray so a thin wall is never crossed), and derive velocities from positions.
+//! With [`SolverKind::Xpbd`] every constraint has a compliance and a multiplier reset per
+//! substep, so the stiffness does not depend on the iteration count or the substep size; with
+//! [`SolverKind::Pbd`] each projection is scaled by a per-iteration stiffness in (0, 1], the
+//! original (iteration-dependent) form, kept to show the difference.
+//!
+//! The constraint groups (`constraints`), the surface map (`surface`) and the contacts with
+//! the world (`contacts`) are children that know nothing of the body: [`PbdBody`] owns them
+//! and orders the work.
+
+mod constraints;
+mod contacts;
+mod surface;
+
+use glam::Vec3;
+use rapier3d::prelude::{Aabb, PhysicsWorld, QueryFilter};
+
+use crate::methods::model::DeformableModel;
+use constraints::{inverse_or_zero, Sweep};
+pub use constraints::{tet_volume, BendingGroup, DistanceGroup, ShapeClusters, VolumeGroup};
+use contacts::{near_colliders, Contact, ContactPoints};
+pub use surface::{Embedding, SurfaceMap};
+
+/// Which projection the solver uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SolverKind {
+    /// Extended PBD: compliance per constraint, stiffness independent of iterations and substeps.
+    Xpbd,
+    /// Plain PBD: every correction scaled by a per-iteration stiffness; the effective stiffness
+    /// grows with the iteration count and the step rate.
+    Pbd,
+}
+
+/// Solver settings shared by every constraint group of a body.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PbdParams {
+    /// XPBD or plain PBD.
+    pub solver: SolverKind,
+    /// Substeps per step (≥ 1).
+    pub substeps: u32,
+    /// Gauss–Seidel iterations per substep (≥ 1).
+    pub iterations: u32,
+    /// Velocity damping rate, 1/s (ISPC paper Algorithm 1 line 9): `v *= exp(−d·h)`.
+    pub damping_per_s: f32,
+    /// Contact thickness of each surface point, metres.
+    pub contact_radius_m: f32,
+    /// Coulomb friction against colliders.
+    pub friction: f32,
+    /// Below this RMS particle speed for [`Self::sleep_after_s`] (and with nothing moving near)
+    /// the body sleeps.
+    pub sleep_speed_mps: f32,
+    /// Seconds of stillness before sleeping; 0 disables sleeping.
+    pub sleep_after_s: f32,
+}
+
+impl Default for PbdParams {
+    fn default() -> Self {
+        Self {
+            solver: SolverKind::Xpbd,
+            substeps: 4,
+            iterations: 4,
+            damping_per_s: 1.0,
+            contact_radius_m: 0.002,
+            friction: 0.5,
+            sleep_speed_mps: 0.02,
+            sleep_after_s: 0.5,
+        }
+    }
+}
+
+/// A position-based body: particles, constraint groups, a surface, contacts with the world.
+#[derive(Clone, Debug)]
+pub struct PbdBody {
+    name: String,
+    /// Solver settings.
+    pub params: PbdParams,
+    x: Vec<Vec3>,
+    v: Vec<Vec3>,
+    prev: Vec<Vec3>,
+    inv_mass: Vec<f32>,
+    /// Distance constraint groups (edges, links, tet edges).
+    pub distance: Vec<DistanceGroup>,
+    /// Bending constraints, if any.
+    pub bending: Option<BendingGroup>,
+    /// Tet volume constraints, if any.
+    pub volume: Option<VolumeGroup>,
+    /// Shape-matching clusters, if any.
+    pub clusters: Option<ShapeClusters>,
+    surface_map: SurfaceMap,
+    surface: Vec<Vec3>,
+    triangles: Vec<[u32; 3]>,
+    sleeping: bool,
+    still_s: f32,
+    max_speed: f32,
+    /// Contact half-spaces of this substep.
+    contacts: Vec<Contact>,
+    non_finite_resets: u64,
+    constraint_solves: u64,
+}
+
+impl PbdBody {
+    /// A body of particles `x` (masses `mass_kg`, 0 = pinned) whose surface is `surface_map`
+    /// over them with `triangles`.
+    pub fn new(
+        name: impl Into<String>,
+        params: PbdParams,
+        x: Vec<Vec3>,
+        mass_kg: &[f32],
+        surface_map: SurfaceMap,
+        triangles: Vec<[u32; 3]>,
+    ) -> Self {
+        let n = x.len();
+        let inv_mass = (0..n)
+            .map(|i| inverse_or_zero(mass_kg.get(i).copied().unwrap_or(0.0)))
+            .collect();
+        let mut b = PbdBody {
+            name: name.into(),
+            params,
+            v: vec![Vec3::ZERO; n],
+            prev: x.clone(),
+            x,
+            inv_mass,
+            distance: Vec::new(),
+            bending: None,
+            volume: None,
+            clusters: None,
+            surface_map,
+            surface: Vec::new(),
+            triangles,
+            sleeping: false,
+            still_s: 0.0,
+            max_speed: 0.0,
+            contacts: Vec::new(),
+            non_finite_resets: 0,
+            constraint_solves: 0,
+        };
+        b.update_surface();
+        b
+    }
+
+    /// Particle positions, world space.
+    pub fn positions(&self) -> &[Vec3] {
+        &self.x
+    }
+
+    /// Inverse masses (0 = pinned).
+    pub fn inverse_masses(&self) -> &[f32] {
+        &self.inv_mass
+    }
+
+    /// Renames the body (for tables).
+    pub fn set_name(&mut self, name: impl Into<String>) {
+        self.name = name.into();
+    }
+
+    /// Constraint projections done so far (a machine-independent cost measure).
+    pub fn constraint_solves(&self) -> u64 {
+        self.constraint_solves
+    }
+
+    /// Constraint projections per step at the current settings.
+    pub fn solves_per_step(&self) -> u64 {
+        let per_iter = self.distance.iter().map(|g| g.len()).sum::<usize>()
+            + self.bending.as_ref().map_or(0, |b| b.quads.len())
+            + self.volume.as_ref().map_or(0, |v| v.tets.len());
+        let sm = self.clusters.as_ref().map_or(0, |c| c.members.len());
+        let contacts = self.surface.len();
+        (self.params.substeps as u64)
+            * (self.params.iterations as u64 * per_iter as u64 + sm as u64 + contacts as u64)
+    }
+
+    /// How often a non-finite particle was reset (should stay 0).
+    pub fn non_finite_resets(&self) -> u64 {
+        self.non_finite_resets
+    }
+
+    fn update_surface(&mut self) {
+        self.surface_map.update(&self.x, &mut self.surface);
+    }
+
+    fn bounds(&self) -> (Vec3, Vec3) {
+        crate::mesh::bounds(&self.x)
+    }
+
+    /// True if a collider of a moving (or awake dynamic) body is within the body's bounds.
+    fn intruder(&self, world: &PhysicsWorld) -> bool {
+        let (lo, hi) = self.bounds();
+        let m = Vec3::splat(self.params.contact_radius_m + 0.01);
+        let aabb = Aabb::new(lo - m, hi + m);
+        world
+            .intersect_aabb_conservative(aabb, QueryFilter::default())
+            .any(|(_, co)| {
+                let Some(parent) = co.parent().and_then(|p| world.bodies.get(p)) else {
+                    return false;
+                };
+                crate::body::is_moving(parent)
+            })
+    }
+
+    /// One step of Algorithm 1 (ISPC paper), `params.substeps` substeps, against `world`'s
+    /// colliders at their current poses.
+    pub fn step(&mut self, world: &PhysicsWorld, dt_s: f32) {
+        let dt = if dt_s.is_finite() && dt_s > 0.0 {
+            dt_s
+        } else {
+            return;
+        };
+        if self.sleeping {
+            if self.intruder(world) {
+                self.sleeping = false;
+                self.still_s = 0.0;
+            } else {
+                return;
+            }
+        }
+        let substeps = self.params.substeps.max(1);
+        let h = dt / substeps as f32;
+        let gravity = world.gravity;
+        // Colliders near the body for the whole step: its bounds grown by its travel.
+        let (lo, hi) = self.bounds();
+        let travel = (self.max_speed + gravity.length() * dt) * dt;
+        let grow = Vec3::splat(travel + self.params.contact_radius_m + 0.02);
+        let near = near_colliders(world, lo - grow, hi + grow);
+        let damp = (-self.params.damping_per_s.max(0.0) * h).exp();
+        for _ in 0..substeps {
+            // Algorithm 1 lines 8–10: external forces, damping, prediction.
+            for i in 0..self.x.len() {
+                self.prev[i] = self.x[i];
+                if self.inv_mass[i] == 0.0 {
+                    self.v[i] = Vec3::ZERO;
+                    continue;
+                }
+                self.v[i] = (self.v[i] + gravity * h) * damp;
+                self.x[i] += self.v[i] * h;
+            }
+            // Line 11: contact constraints (half-spaces) for this substep.
+            let (points, contacts) = self.contact_points();
+            points.generate(&near, h, contacts);
+            // Lines 12–14: Gauss–Seidel projection, contacts with the other constraints.
+            self.reset_multipliers();
+            // Symmetric Gauss–Seidel: odd iterations sweep backwards, so a load travels the
+            // whole body both ways within one substep instead of one element per iteration.
+            for it in 0..self.params.iterations.max(1) {
+                self.project_constraints(h, it % 2 == 1);
+                let (mut points, contacts) = self.contact_points();
+                points.project(contacts);
+            }
+            if let Some(clusters) = &mut self.clusters {
+                clusters.match_shapes(&mut self.x, &self.inv_mass, h);
+            }
+            // Contacts once more, last, so the final positions are collision-free.
+            self.contact_points().0.collide(&near, h);
+            // Lines 16–17: velocities from positions.
+            for i in 0..self.x.len() {
+                if !self.x[i].is_finite() {
+                    self.x[i] = self.prev[i];
+                    self.v[i] = Vec3::ZERO;
+                    self.non_finite_resets += 1;
+                    continue;
+                }
+                self.v[i] = (self.x[i] - self.prev[i]) / h;
+            }
+        }
+        self.constraint_solves += self.solves_per_step();
+        self.update_surface();
+        self.max_speed = self.v.iter().map(|v| v.length()).fold(0.0, f32::max);
+        // Sleep on the RMS speed: a resting body's contact jitter moves a few particles a little
+        // every substep, which a maximum would never forgive.
+        let rms_speed = (self.v.iter().map(|v| v.length_squared()).sum::<f32>()
+            / self.v.len().max(1) as f32)
+            .sqrt();
+        // A resting body under gravity is re-accelerated by g·dt every step and stopped again
+        // by its contacts: that much residual speed is rest, not motion.
+        let threshold = self.params.sleep_speed_mps + gravity.length() * dt;
+        if self.params.sleep_after_s > 0.0 && rms_speed < threshold {
+            self.still_s += dt;
+            if self.still_s >= self.params.sleep_after_s && !self.intruder(world) {
+                self.sleeping = true;
+                self.v.iter_mut().for_each(|v| *v = Vec3::ZERO);
+                self.max_speed = 0.0;
+            }
+        } else {
+            self.still_s = 0.0;
+        }
+    }
+
+    fn reset_multipliers(&mut self) {
+        for g in &mut self.distance {
+            g.reset();
+        }
+        if let Some(b) = &mut self.bending {
+            b.reset();
+        }
+        if let Some(v) = &mut self.volume {
+            v.reset();
+        }
+    }
+
+    /// One Gauss–Seidel sweep over the distance, bending and volume constraints, in that
+    /// order (`reverse`: each group backwards).
+    fn project_constraints(&mut self, h: f32, reverse: bool) {
+        let sweep = Sweep::new(self.params.solver == SolverKind::Xpbd, h, reverse);
+        for g in &mut self.distance {
+            g.project(&mut self.x, &self.inv_mass, sweep);
+        }
+        if let Some(g) = &mut self.bending {
+            g.project(&mut self.x, &self.inv_mass, sweep);
+        }
+        if let Some(g) = &mut self.volume {
+            g.project(&mut self.x, &self.inv_mass, sweep);
+        }
+    }
+
+    /// The points that collide, over the particles as they are, and this substep's contacts.
+    fn contact_points(&mut self) -> (ContactPoints<'_>, &mut Vec<Contact>) {
+        (
+            ContactPoints {
+                map: &self.surface_map,
+                x: &mut self.x,
+                prev: &self.prev,
+                inv_mass: &self.inv_mass,
+                radius_m: self.params.contact_radius_m,
+            },
+            &mut self.contacts,
+        )
+    }
+
+    /// Number of tets with non-positive volume.
+    pub fn count_inverted(&self) -> usize {
+        self.volume
+            .as_ref()
+            .map_or(0, |g| g.count_inverted(&self.x))
+    }
+    /// Pins particles inside a box; returns the count.
+    pub fn pin_box(&mut self, lo: Vec3, hi: Vec3) -> usize {
+        let mut n = 0;
+        for (i, p) in self.x.iter().enumerate() {
+            if p.cmpge(lo).all() && p.cmple(hi).all() {
+                self.inv_mass[i] = 0.0;
+                self.v[i] = Vec3::ZERO;
+                n += 1;
+            }
+        }
+        n
+    }
+
+    /// Sets every free particle's velocity.
+    pub fn set_all_velocities(&mut self, v: Vec3) {
+        for (vi, w) in self.v.iter_mut().zip(&self.inv_mass) {
+            if *w > 0.0 {
+                *vi = v;
+            }
+        }
+        self.max_speed = v.length();
+        self.sleeping = false;
+        self.still_s = 0.0;
+    }
+}
+
+impl DeformableModel for PbdBody {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn post_physics(&mut self, world: &mut PhysicsWorld, dt_s: f32) {
+        self.step(world, dt_s);
+    }
+
+    fn surface(&self) -> &[Vec3] {
+        &self.surface
+    }
+
+    fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
+
+    fn is_sleeping(&self) -> bool {
+        self.sleeping
+    }
+
+    fn num_particles(&self) -> usize {
+        self.x.len()
+    }
+
+    fn inverted_elements(&self) -> usize {
+        self.count_inverted()
+    }
+
+    fn max_speed_mps(&self) -> f32 {
+        self.max_speed
+    }
+
+    fn contact_thickness_m(&self) -> f32 {
+        self.params.contact_radius_m
+    }
+
+    fn pin_region(&mut self, _world: &mut PhysicsWorld, min_m: Vec3, max_m: Vec3) -> usize {
+        self.pin_box(min_m, max_m)
+    }
+
+    fn set_velocity(&mut self, _world: &mut PhysicsWorld, v_mps: Vec3) {
+        self.set_all_velocities(v_mps);
+    }
+}
