@@ -32,7 +32,7 @@ pub enum SoftBodyError {
     Config(String),
     /// A handle refers to a soft body that has been removed.
     #[error("soft body handle {0:?} is not in this set")]
-    InvalidHandle(crate::SoftBodyHandle),
+    InvalidHandle(crate::body::handle::SoftBodyHandle),
 }
 
 impl SoftBodyError {

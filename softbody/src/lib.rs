@@ -13,7 +13,9 @@ pub mod methods;
 pub mod metrics;
 pub mod scenario;
 
-pub use body::{SoftBody, SoftBodyHandle, SoftBodySet, SoftPart};
+pub use body::handle::SoftBodyHandle;
+pub use body::set::{SoftBodySet, SoftPart};
+pub use body::SoftBody;
 pub use cluster::{build_particle_map, ClusterMethod, ParticleMap, WeightedRows};
 pub use config::{
     CenterCollider, ContinuousCollision, ParticleCollider, RestoringScheme, SimulationSpace,
