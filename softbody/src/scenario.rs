@@ -87,6 +87,74 @@ pub(crate) fn drop_floor(world: &mut PhysicsWorld, mesh: &mut Mesh, lowest_y: f3
     }
 }
 
+/// What every scene keeps of its setting, whatever simulates the body: the scenario, the
+/// fixed step and how many were taken, and the body's rest bounds after re-centring.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SceneFrame {
+    /// The scenario.
+    pub(crate) kind: ScenarioKind,
+    /// The fixed step, seconds.
+    pub(crate) dt_s: f32,
+    /// Steps taken.
+    pub(crate) steps: u64,
+    /// Half the body's rest height, metres.
+    pub(crate) half_height_m: f32,
+    /// Largest rest extent, metres.
+    pub(crate) size_m: f32,
+    /// Rest bounds, low corner.
+    pub(crate) lo: Vec3,
+    /// Rest bounds, high corner.
+    pub(crate) hi: Vec3,
+}
+
+impl SceneFrame {
+    /// Checks `dt_s` and re-centres a copy of `mesh` at the origin; returns the frame, that
+    /// mesh and an empty world stepping at `dt_s`.
+    pub(crate) fn new(
+        kind: ScenarioKind,
+        mesh: &Mesh,
+        dt_s: f32,
+    ) -> Result<(Self, Mesh, PhysicsWorld), SoftBodyError> {
+        if !(dt_s.is_finite() && dt_s > 0.0 && dt_s <= 0.1) {
+            return Err(SoftBodyError::Config(format!(
+                "dt_s = {dt_s} must be in (0, 0.1]"
+            )));
+        }
+        let mut mesh = mesh.clone();
+        mesh.recenter();
+        let (lo, hi) = crate::mesh::bounds(&mesh.positions);
+        let half_height_m = (hi.y - lo.y) * 0.5;
+        let size_m = (hi - lo).max_element();
+        let mut world = PhysicsWorld::new();
+        world.integration_parameters.dt = dt_s;
+        let frame = SceneFrame {
+            kind,
+            dt_s,
+            steps: 0,
+            half_height_m,
+            size_m,
+            lo,
+            hi,
+        };
+        Ok((frame, mesh, world))
+    }
+
+    /// Simulated time, seconds.
+    pub(crate) fn time_s(&self) -> f32 {
+        self.steps as f32 * self.dt_s
+    }
+
+    /// True until the step that reaches `t_s` has been taken.
+    pub(crate) fn before(&self, t_s: f32) -> bool {
+        self.time_s() + 0.5 * self.dt_s < t_s
+    }
+}
+
+/// How far (0 → 1) a motion starting at `start_s` and lasting `len_s` is at time `t_s`.
+pub(crate) fn ramp(t_s: f32, start_s: f32, len_s: f32) -> f32 {
+    ((t_s - start_s) / len_s).clamp(0.0, 1.0)
+}
+
 /// A running scenario: its own rapier world with one soft body and the props that act on it.
 pub struct Scenario {
     /// The rapier world.
@@ -95,13 +163,7 @@ pub struct Scenario {
     pub set: SoftBodySet,
     /// The soft body.
     pub body: SoftBodyHandle,
-    kind: ScenarioKind,
-    dt_s: f32,
-    steps: u64,
-    half_height_m: f32,
-    size_m: f32,
-    lo: Vec3,
-    hi: Vec3,
+    frame: SceneFrame,
     max_particle_radius_m: f32,
     plate_travel_m: f32,
     median_particle_radius_m: f32,
@@ -121,18 +183,8 @@ impl Scenario {
         mut config: SoftBodyConfig,
         dt_s: f32,
     ) -> Result<Self, SoftBodyError> {
-        if !(dt_s.is_finite() && dt_s > 0.0 && dt_s <= 0.1) {
-            return Err(SoftBodyError::Config(format!(
-                "dt_s = {dt_s} must be in (0, 0.1]"
-            )));
-        }
-        let mut mesh = mesh.clone();
-        mesh.recenter();
-        let (lo, hi) = crate::mesh::bounds(&mesh.positions);
-        let half_height_m = (hi.y - lo.y) * 0.5;
-        let size_m = (hi - lo).max_element();
-        let mut world = PhysicsWorld::new();
-        world.integration_parameters.dt = dt_s;
+        let (frame, mut mesh, mut world) = SceneFrame::new(kind, mesh, dt_s)?;
+        let SceneFrame { lo, hi, size_m, .. } = frame;
         let mut set = SoftBodySet::new();
         config.space = if kind == ScenarioKind::Drop {
             SimulationSpace::World
@@ -238,13 +290,7 @@ impl Scenario {
             world,
             set,
             body,
-            kind,
-            dt_s,
-            steps: 0,
-            half_height_m,
-            size_m,
-            lo,
-            hi,
+            frame,
             max_particle_radius_m,
             plate_travel_m: 0.0,
             median_particle_radius_m,
@@ -257,12 +303,12 @@ impl Scenario {
 
     /// Simulated time, seconds.
     pub fn time_s(&self) -> f32 {
-        self.steps as f32 * self.dt_s
+        self.frame.time_s()
     }
 
     /// The scenario's kind.
     pub fn kind(&self) -> ScenarioKind {
-        self.kind
+        self.frame.kind
     }
 
     /// The soft body.
@@ -281,22 +327,21 @@ impl Scenario {
     /// Moves the props for the current time, then steps the body and the world once.
     pub fn step(&mut self) {
         let t = self.time_s();
-        let release = self.kind.release_s();
-        // Closing fraction of the squeeze: ramps 0 → 1 over 0.8 s, holds, opens 1.5 → 1.8 s.
-        let ramp = |t: f32, start: f32, len: f32| ((t - start) / len).clamp(0.0, 1.0);
-        match self.kind {
+        let frame = self.frame;
+        let release = frame.kind.release_s();
+        match frame.kind {
             ScenarioKind::Squeeze => {
                 // Each plate closes over 0.8 s until its surface is a particle radius beyond
                 // 30 % of the rest height, holds until the release, then opens over 0.3 s.
                 let close = ramp(t, 0.0, 0.8) - ramp(t, release, 0.3);
                 let full =
-                    self.half_height_m * 0.7 + self.max_particle_radius_m + 0.01 * self.size_m
+                    frame.half_height_m * 0.7 + self.max_particle_radius_m + 0.01 * frame.size_m
                         - self.median_particle_radius_m;
                 self.plate_travel_m = close * full;
                 for (h, sign) in [(self.top_plate, 1.0f32), (self.bottom_plate, -1.0)] {
                     if let Some(b) = h.and_then(|h| self.world.bodies.get_mut(h)) {
-                        let open = if sign > 0.0 { self.hi.y } else { self.lo.y }
-                            + sign * (self.max_particle_radius_m + 0.01 * self.size_m);
+                        let open = if sign > 0.0 { frame.hi.y } else { frame.lo.y }
+                            + sign * (self.max_particle_radius_m + 0.01 * frame.size_m);
                         let surface = open - sign * self.plate_travel_m;
                         b.set_next_kinematic_translation(Vec3::new(
                             0.0,
@@ -307,10 +352,10 @@ impl Scenario {
                 }
             }
             ScenarioKind::Poke => {
-                let depth = (ramp(t, 0.0, 0.5) - ramp(t, release, 0.5)) * 0.3 * self.size_m;
+                let depth = (ramp(t, 0.0, 0.5) - ramp(t, release, 0.5)) * 0.3 * frame.size_m;
                 if let Some(b) = self.poker.and_then(|h| self.world.bodies.get_mut(h)) {
-                    let r = 0.1 * self.size_m;
-                    let x0 = self.hi.x + r + self.max_particle_radius_m + 0.01 * self.size_m;
+                    let r = 0.1 * frame.size_m;
+                    let x0 = frame.hi.x + r + self.max_particle_radius_m + 0.01 * frame.size_m;
                     b.set_next_kinematic_translation(Vec3::new(x0 - depth, 0.0, 0.0));
                 }
             }
@@ -326,13 +371,13 @@ impl Scenario {
             }
             ScenarioKind::Rest | ScenarioKind::Drop => {}
         }
-        self.set.step(&mut self.world, self.dt_s);
-        self.steps += 1;
+        self.set.step(&mut self.world, self.frame.dt_s);
+        self.frame.steps += 1;
     }
 
     /// Runs until `t_s` seconds of simulated time.
     pub fn run_until(&mut self, t_s: f32) {
-        while self.time_s() + 0.5 * self.dt_s < t_s {
+        while self.frame.before(t_s) {
             self.step();
         }
     }

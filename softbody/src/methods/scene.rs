@@ -16,7 +16,7 @@ use crate::methods::pbd::{
 };
 use crate::methods::spec::MethodSpec;
 use crate::metrics::rigid_fit_error;
-use crate::scenario::ScenarioKind;
+use crate::scenario::{ramp, ScenarioKind, SceneFrame};
 use crate::{Mesh, SoftBodyError};
 
 /// Whether a run stayed sane (the stability maps' criteria).
@@ -61,13 +61,7 @@ pub struct ModelScene {
     pub world: PhysicsWorld,
     /// The model.
     pub model: Box<dyn DeformableModel>,
-    kind: ScenarioKind,
-    dt_s: f32,
-    steps: u64,
-    half_height_m: f32,
-    size_m: f32,
-    lo: Vec3,
-    hi: Vec3,
+    frame: SceneFrame,
     thickness_m: f32,
     top_plate: Option<RigidBodyHandle>,
     bottom_plate: Option<RigidBodyHandle>,
@@ -96,22 +90,13 @@ impl ModelScene {
         dt_s: f32,
         anchored: bool,
     ) -> Result<Self, SoftBodyError> {
-        if !(dt_s.is_finite() && dt_s > 0.0 && dt_s <= 0.1) {
-            return Err(SoftBodyError::Config(format!(
-                "dt_s = {dt_s} must be in (0, 0.1]"
-            )));
-        }
+        let (frame, mut mesh, mut world) = SceneFrame::new(kind, mesh, dt_s)?;
         if kind == ScenarioKind::Pull {
             return Err(SoftBodyError::Config(
                 "pull is a particle-method scenario".into(),
             ));
         }
-        let mut mesh = mesh.clone();
-        mesh.recenter();
-        let (lo, hi) = crate::mesh::bounds(&mesh.positions);
-        let size_m = (hi - lo).max_element();
-        let mut world = PhysicsWorld::new();
-        world.integration_parameters.dt = dt_s;
+        let SceneFrame { lo, size_m, .. } = frame;
         if kind != ScenarioKind::Drop {
             world.gravity = Vec3::ZERO;
         }
@@ -163,13 +148,7 @@ impl ModelScene {
         let mut s = ModelScene {
             world,
             model,
-            kind,
-            dt_s,
-            steps: 0,
-            half_height_m: (hi.y - lo.y) * 0.5,
-            size_m,
-            lo,
-            hi,
+            frame,
             thickness_m,
             top_plate,
             bottom_plate,
@@ -193,12 +172,13 @@ impl ModelScene {
         let mut s = Self::setup(ScenarioKind::Rest, mesh, spec, dt_s, false)?;
         s.world.gravity = Vec3::ZERO;
         let half_t = 0.005;
-        let near = s.hi.x + 0.02;
+        let near = s.frame.hi.x + 0.02;
         let wall = s
             .world
             .insert_body(RigidBodyBuilder::fixed().translation(Vec3::new(near + half_t, 0.0, 0.0)));
         s.world.insert_collider(
-            ColliderBuilder::cuboid(half_t, 2.0 * s.size_m, 2.0 * s.size_m).friction(0.5),
+            ColliderBuilder::cuboid(half_t, 2.0 * s.frame.size_m, 2.0 * s.frame.size_m)
+                .friction(0.5),
             Some(wall),
         );
         s.wall_far_x = Some(near + 2.0 * half_t);
@@ -208,18 +188,18 @@ impl ModelScene {
 
     fn place_props(&mut self, teleport: bool) {
         let t = self.time_s();
-        let ramp = |t: f32, start: f32, len: f32| ((t - start) / len).clamp(0.0, 1.0);
-        let release = self.kind.release_s();
-        let th = self.thickness_m + 0.01 * self.size_m;
-        let plate_half_y = 0.05f32.max(0.5 * self.size_m);
-        match self.kind {
+        let frame = self.frame;
+        let release = frame.kind.release_s();
+        let th = self.thickness_m + 0.01 * frame.size_m;
+        let plate_half_y = 0.05f32.max(0.5 * frame.size_m);
+        match frame.kind {
             ScenarioKind::Squeeze => {
                 // Close over 0.8 s until the surfaces are at 30 % of the height, hold, open.
                 let close = ramp(t, 0.0, 0.8) - ramp(t, release, 0.3);
-                let full = self.half_height_m * 0.7 + 0.01 * self.size_m;
+                let full = frame.half_height_m * 0.7 + 0.01 * frame.size_m;
                 for (h, sign) in [(self.top_plate, 1.0f32), (self.bottom_plate, -1.0)] {
                     if let Some(b) = h.and_then(|h| self.world.bodies.get_mut(h)) {
-                        let open = if sign > 0.0 { self.hi.y } else { self.lo.y } + sign * th;
+                        let open = if sign > 0.0 { frame.hi.y } else { frame.lo.y } + sign * th;
                         let y = open - sign * close * full + sign * plate_half_y;
                         let p = Vec3::new(0.0, y, 0.0);
                         if teleport {
@@ -231,10 +211,10 @@ impl ModelScene {
                 }
             }
             ScenarioKind::Poke => {
-                let depth = (ramp(t, 0.0, 0.5) - ramp(t, release, 0.5)) * 0.3 * self.size_m;
+                let depth = (ramp(t, 0.0, 0.5) - ramp(t, release, 0.5)) * 0.3 * frame.size_m;
                 if let Some(b) = self.poker.and_then(|h| self.world.bodies.get_mut(h)) {
-                    let r = 0.1 * self.size_m;
-                    let p = Vec3::new(self.hi.x + r + th - depth, 0.0, 0.0);
+                    let r = 0.1 * frame.size_m;
+                    let p = Vec3::new(frame.hi.x + r + th - depth, 0.0, 0.0);
                     if teleport {
                         b.set_translation(p, false);
                     } else {
@@ -248,17 +228,17 @@ impl ModelScene {
 
     /// Simulated time, seconds.
     pub fn time_s(&self) -> f32 {
-        self.steps as f32 * self.dt_s
+        self.frame.time_s()
     }
 
     /// The scenario kind.
     pub fn kind(&self) -> ScenarioKind {
-        self.kind
+        self.frame.kind
     }
 
     /// Largest extent of the body at rest, metres.
     pub fn size_m(&self) -> f32 {
-        self.size_m
+        self.frame.size_m
     }
 
     /// Moves the props for the current time and steps the world and the model once.
@@ -267,14 +247,14 @@ impl ModelScene {
         crate::methods::model::step_models(
             &mut self.world,
             std::slice::from_mut(&mut self.model),
-            self.dt_s,
+            self.frame.dt_s,
         );
-        self.steps += 1;
+        self.frame.steps += 1;
     }
 
     /// Runs until `t_s`.
     pub fn run_until(&mut self, t_s: f32) {
-        while self.time_s() + 0.5 * self.dt_s < t_s {
+        while self.frame.before(t_s) {
             self.step();
         }
     }
@@ -297,7 +277,7 @@ impl ModelScene {
         let c = s.iter().copied().sum::<Vec3>() / s.len().max(1) as f32;
         let far = s.iter().map(|p| p.distance(c)).fold(0.0f32, f32::max);
         let exploded =
-            !non_finite && (far > 2.0 * self.size_m || self.model.max_speed_mps() > 100.0);
+            !non_finite && (far > 2.0 * self.frame.size_m || self.model.max_speed_mps() > 100.0);
         let tunnelled = self.wall_far_x.is_some_and(|x| s.iter().any(|p| p.x > x));
         Sanity {
             non_finite,
