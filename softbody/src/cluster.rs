@@ -298,6 +298,27 @@ pub fn mean_edge_length(positions: &[Vec3], triangles: &[[u32; 3]]) -> f32 {
     }
 }
 
+/// The greedy cover shared by the closest-N and distance methods (thesis 3.2.1): in vertex
+/// order, each soft vertex not yet clustered anchors a particle whose (vertex, raw weight)
+/// list `gather` returns; `gather` marks the vertices it takes as clustered.
+fn greedy_clusters(
+    positions: &[Vec3],
+    soft: &[u32],
+    mut gather: impl FnMut(u32, &mut [bool]) -> Vec<(u32, f32)>,
+) -> (Vec<Vec<(u32, f32)>>, Vec<Vec3>) {
+    let mut members = Vec::new();
+    let mut anchors = Vec::new();
+    let mut clustered = vec![false; positions.len()];
+    for &v in soft {
+        if clustered[v as usize] {
+            continue;
+        }
+        members.push(gather(v, &mut clustered));
+        anchors.push(positions[v as usize]);
+    }
+    (members, anchors)
+}
+
 /// Clusters the soft vertices of `positions` into particles and builds the particle map.
 ///
 /// `soft_vertex[v]` false excludes vertex `v` (restricted soft region, thesis 3.5.2);
@@ -335,13 +356,9 @@ pub fn build_particle_map(
             let n = vertices_per_particle as usize;
             let cell = edge * (n as f32).sqrt().max(1.0);
             let mut grid = PointGrid::new(positions, soft.iter().copied(), cell);
-            let mut clustered = vec![false; positions.len()];
             let mut remaining = soft.len();
             let mut near = Vec::new();
-            for &v in &soft {
-                if clustered[v as usize] {
-                    continue;
-                }
+            (members, anchors) = greedy_clusters(positions, &soft, |v, clustered| {
                 clustered[v as usize] = true;
                 grid.remove(positions, v);
                 remaining -= 1;
@@ -359,17 +376,12 @@ pub fn build_particle_map(
                     remaining -= 1;
                     list.push((u, 1.0));
                 }
-                members.push(list);
-                anchors.push(positions[v as usize]);
-            }
+                list
+            });
         }
         ClusterMethod::Distance { radius_m } => {
             let mut grid = PointGrid::new(positions, soft.iter().copied(), radius_m);
-            let mut clustered = vec![false; positions.len()];
-            for &v in &soft {
-                if clustered[v as usize] {
-                    continue;
-                }
+            (members, anchors) = greedy_clusters(positions, &soft, |v, clustered| {
                 let mut list = Vec::new();
                 grid.within(positions, positions[v as usize], radius_m, |u, _| {
                     list.push((u, 1.0))
@@ -379,20 +391,15 @@ pub fn build_particle_map(
                     clustered[u as usize] = true;
                     grid.remove(positions, u);
                 }
-                members.push(list);
-                anchors.push(positions[v as usize]);
-            }
+                list
+            });
         }
         ClusterMethod::WeightedDistance {
             radius_m,
             soft_radius_m,
         } => {
             let grid = PointGrid::new(positions, soft.iter().copied(), soft_radius_m);
-            let mut clustered = vec![false; positions.len()];
-            for &v in &soft {
-                if clustered[v as usize] {
-                    continue;
-                }
+            (members, anchors) = greedy_clusters(positions, &soft, |v, clustered| {
                 let mut list = Vec::new();
                 grid.within(positions, positions[v as usize], soft_radius_m, |u, d| {
                     list.push((u, 1.0));
@@ -401,9 +408,8 @@ pub fn build_particle_map(
                     }
                 });
                 list.sort_unstable_by_key(|e| e.0);
-                members.push(list);
-                anchors.push(positions[v as usize]);
-            }
+                list
+            });
         }
         ClusterMethod::PoissonDisk { radius_m, seed } => {
             recenter = false;
