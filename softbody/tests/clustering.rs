@@ -11,6 +11,11 @@ fn icosphere4() -> (Vec<Vec3>, Vec<[u32; 3]>) {
     (w.positions, w.triangles)
 }
 
+/// The particle map of every vertex of `p` (all soft).
+fn map_all(p: &[Vec3], t: &[[u32; 3]], method: ClusterMethod, affect_range_m: f32) -> ParticleMap {
+    build_particle_map(p, t, &vec![true; p.len()], method, affect_range_m).unwrap()
+}
+
 fn methods() -> Vec<ClusterMethod> {
     vec![
         ClusterMethod::ClosestN {
@@ -50,7 +55,7 @@ fn check_cover(map: &ParticleMap, n: usize) {
 fn every_method_covers_every_vertex_with_unit_weights() {
     let (p, t) = icosphere4();
     for m in methods() {
-        let map = build_particle_map(&p, &t, &vec![true; p.len()], m, 0.03).unwrap();
+        let map = map_all(&p, &t, m, 0.03);
         check_cover(&map, p.len());
         assert!(
             map.len() > 50 && map.len() < p.len(),
@@ -65,16 +70,14 @@ fn every_method_covers_every_vertex_with_unit_weights() {
 fn closest_n_gives_n_vertices_per_particle_but_the_last() {
     let (p, t) = icosphere4();
     for n in [1u32, 3, 6, 10] {
-        let map = build_particle_map(
+        let map = map_all(
             &p,
             &t,
-            &vec![true; p.len()],
             ClusterMethod::ClosestN {
                 vertices_per_particle: n,
             },
             0.0,
-        )
-        .unwrap();
+        );
         let rows = map.particle_vertices.rows();
         for i in 0..rows - 1 {
             assert_eq!(
@@ -92,14 +95,7 @@ fn closest_n_gives_n_vertices_per_particle_but_the_last() {
 fn distance_clusters_respect_their_radius() {
     let (p, t) = icosphere4();
     let r = 0.012;
-    let map = build_particle_map(
-        &p,
-        &t,
-        &vec![true; p.len()],
-        ClusterMethod::Distance { radius_m: r },
-        0.0,
-    )
-    .unwrap();
+    let map = map_all(&p, &t, ClusterMethod::Distance { radius_m: r }, 0.0);
     for i in 0..map.len() {
         let (ids, _) = map.particle_vertices.row(i);
         // All members lie within r of the particle's anchor vertex, so within 2r of each other.
@@ -118,17 +114,15 @@ fn distance_clusters_respect_their_radius() {
 #[test]
 fn weighted_clusters_share_vertices_and_follow_figure_3_6() {
     let (p, t) = icosphere4();
-    let map = build_particle_map(
+    let map = map_all(
         &p,
         &t,
-        &vec![true; p.len()],
         ClusterMethod::WeightedDistance {
             radius_m: 0.01,
             soft_radius_m: 0.018,
         },
         0.0,
-    )
-    .unwrap();
+    );
     let shared = (0..p.len())
         .filter(|&v| map.vertex_particles.row(v).0.len() > 1)
         .count();
@@ -155,17 +149,15 @@ fn weighted_clusters_share_vertices_and_follow_figure_3_6() {
 fn poisson_anchors_keep_their_distance() {
     let (p, t) = icosphere4();
     let r = 0.015;
-    let map = build_particle_map(
+    let map = map_all(
         &p,
         &t,
-        &vec![true; p.len()],
         ClusterMethod::PoissonDisk {
             radius_m: r,
             seed: 3,
         },
         0.0,
-    )
-    .unwrap();
+    );
     for i in 0..map.len() {
         for j in 0..i {
             assert!(map.rest_particles[i].distance(map.rest_particles[j]) >= r - 1e-6);
@@ -177,8 +169,8 @@ fn poisson_anchors_keep_their_distance() {
 fn clustering_is_deterministic() {
     let (p, t) = icosphere4();
     for m in methods() {
-        let a = build_particle_map(&p, &t, &vec![true; p.len()], m, 0.03).unwrap();
-        let b = build_particle_map(&p, &t, &vec![true; p.len()], m, 0.03).unwrap();
+        let a = map_all(&p, &t, m, 0.03);
+        let b = map_all(&p, &t, m, 0.03);
         assert_eq!(a.rest_particles, b.rest_particles, "{}", m.name());
         assert_eq!(a.vertex_particles, b.vertex_particles, "{}", m.name());
         assert_eq!(a.neighbours, b.neighbours, "{}", m.name());
@@ -189,14 +181,7 @@ fn clustering_is_deterministic() {
 fn neighbour_weights_are_clamped_and_symmetric() {
     let (p, t) = icosphere4();
     let delta = 0.03;
-    let map = build_particle_map(
-        &p,
-        &t,
-        &vec![true; p.len()],
-        ClusterMethod::Distance { radius_m: 0.01 },
-        delta,
-    )
-    .unwrap();
+    let map = map_all(&p, &t, ClusterMethod::Distance { radius_m: 0.01 }, delta);
     for i in 0..map.len() {
         let (ids, ws) = map.neighbours.row(i);
         for (&j, &w) in ids.iter().zip(ws) {
@@ -279,7 +264,7 @@ proptest! {
             2 => ClusterMethod::WeightedDistance { radius_m: r, soft_radius_m: r * 1.5 },
             _ => ClusterMethod::PoissonDisk { radius_m: r, seed },
         };
-        let map = build_particle_map(&p, &t, &vec![true; p.len()], m, r * 2.0).unwrap();
+        let map = map_all(&p, &t, m, r * 2.0);
         check_cover(&map, p.len());
         prop_assert!(map.particle_extent_m.iter().all(|e| e.is_finite() && *e > 0.0));
     }

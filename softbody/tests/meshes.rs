@@ -97,17 +97,7 @@ fn obj_with_normals_negative_indices_and_quads() {
 #[test]
 fn gltf_with_data_uri_loads_with_node_transform() {
     // One triangle, positions as a base64 data URI, node translated by (0, 2, 0).
-    let pos: [f32; 9] = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
-    let bytes: Vec<u8> = pos.iter().flat_map(|f| f.to_le_bytes()).collect();
-    let b64 = base64(&bytes);
-    let json = format!(
-        r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0]}}],
-        "nodes":[{{"mesh":0,"translation":[0,2,0]}}],
-        "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}}}}]}}],
-        "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}}],
-        "bufferViews":[{{"buffer":0,"byteLength":36}}],
-        "buffers":[{{"byteLength":36,"uri":"data:application/octet-stream;base64,{b64}"}}]}}"#
-    );
+    let json = gltf_with(TRIANGLE_ACCESSOR, r#","translation":[0,2,0]"#);
     let p = tmp("tri.gltf", json.as_bytes());
     let m = Mesh::load(&p).unwrap();
     assert_eq!(m.positions.len(), 3);
@@ -205,6 +195,13 @@ fn gltf_buffer_uris_cannot_escape_the_folder() {
     assert!(e.contains("leaves the file's folder"), "{e}");
 }
 
+/// The accessor of [`gltf_with`]'s triangle as a valid document declares it.
+const TRIANGLE_ACCESSOR: &str =
+    r#"{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}"#;
+
+/// A glTF document of one triangle whose positions are a base64 data URI, with `accessor` as
+/// its only accessor (`STRIDE4` in it asks for a 4-byte stride) and `extra_nodes` appended to
+/// its node.
 fn gltf_with(accessor: &str, extra_nodes: &str) -> String {
     let pos: [f32; 9] = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
     let bytes: Vec<u8> = pos.iter().flat_map(|f| f.to_le_bytes()).collect();
@@ -229,7 +226,7 @@ fn gltf_with(accessor: &str, extra_nodes: &str) -> String {
 /// must be a typed error naming the file.
 #[test]
 fn hostile_gltf_accessors_and_node_graphs_are_errors_not_panics() {
-    let ok = r#"{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}"#;
+    let ok = TRIANGLE_ACCESSOR;
     assert!(Mesh::load(tmp("ok.gltf", gltf_with(ok, "").as_bytes())).is_ok());
     for (name, acc, nodes, expect) in [
         (

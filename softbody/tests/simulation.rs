@@ -19,6 +19,18 @@ fn distance_cfg() -> SoftBodyConfig {
     }
 }
 
+/// A world holding one local-mode [`sphere`] of [`distance_cfg`].
+fn local_sphere() -> (PhysicsWorld, SoftBodySet, SoftBodyHandle) {
+    let mut world = PhysicsWorld::new();
+    let mut set = SoftBodySet::new();
+    let cfg = SoftBodyConfig {
+        space: SimulationSpace::Local,
+        ..distance_cfg()
+    };
+    let h = set.insert(&sphere(), cfg, &mut world).unwrap();
+    (world, set, h)
+}
+
 #[test]
 fn ten_seconds_at_rest_do_not_drift() {
     for cfg in [SoftBodyConfig::default(), distance_cfg()] {
@@ -379,13 +391,7 @@ fn render_output_follows_the_welded_vertices() {
 #[test]
 fn regression_sleeping_particles_wake_when_a_kinematic_plate_arrives() {
     use softsync_softbody::rapier3d::prelude::{ColliderBuilder, RigidBodyBuilder};
-    let mut world = PhysicsWorld::new();
-    let mut set = SoftBodySet::new();
-    let cfg = SoftBodyConfig {
-        space: SimulationSpace::Local,
-        ..distance_cfg()
-    };
-    let h = set.insert(&sphere(), cfg, &mut world).unwrap();
+    let (mut world, mut set, h) = local_sphere();
     let plate = world.insert_body(
         RigidBodyBuilder::kinematic_position_based().translation(Vec3::new(0.0, 0.3, 0.0)),
     );
@@ -457,13 +463,7 @@ fn configs_from_json_refuse_unknown_fields_and_bad_values() {
 
 #[test]
 fn apply_state_moves_the_body_and_refuses_bad_states() {
-    let mut world = PhysicsWorld::new();
-    let mut set = SoftBodySet::new();
-    let cfg = SoftBodyConfig {
-        space: SimulationSpace::Local,
-        ..distance_cfg()
-    };
-    let h = set.insert(&sphere(), cfg, &mut world).unwrap();
+    let (mut world, mut set, h) = local_sphere();
     let b = set.get_mut(h).unwrap();
     let (c, q) = b.center_pose(&world);
     let mut particles = b.particle_positions(&world);
