@@ -7,24 +7,24 @@
 //! `docs/results/net/migration.csv`, prints markdown tables and ends with `RESULT` lines.
 #![allow(clippy::unwrap_used, clippy::print_stdout)]
 
-use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Duration;
 
 use glam::{Quat, Vec3};
-use plotters::prelude::*;
+use softsync_benchkit::plotters::style::{BLUE, GREEN, RED};
+use softsync_benchkit::thesis::{
+    RATES_HZ as RATES, TABLE10_AVATAR as THESIS_AVATAR, TABLE11_SOFT as THESIS_SOFT,
+    TABLE9_MAX as THESIS_T9_MAX, THRESHOLDS_M as THRESHOLDS,
+};
+use softsync_benchkit::trace::{Frame, Trace};
+use softsync_benchkit::{write_svg, ChartStyle, Csv, LineChart, ResultLine, Series, Summary};
 use softsync_net::harness::Harness;
 use softsync_net::stats::TRANSPORT_OVERHEAD_BYTES;
-use softsync_net::trace::Trace;
 use softsync_net::{
     ClassConfig, ClassId, ConditionerConfig, Instant, NetId, ObjectState, SendPolicy,
     SessionConfig, SoftBodyMode,
 };
 
-use softsync_net::thesis::{
-    RATES_HZ as RATES, TABLE10_AVATAR as THESIS_AVATAR, TABLE11_SOFT as THESIS_SOFT,
-    TABLE9_MAX as THESIS_T9_MAX, THRESHOLDS_M as THRESHOLDS,
-};
 const FRAME: Duration = Duration::from_micros(11_111); // 90 Hz VR frame
 
 #[derive(Clone, Copy, PartialEq)]
@@ -134,12 +134,13 @@ fn soft_state(t: f32, rest: &[Vec3]) -> ObjectState {
     }
 }
 
-fn percentile(sorted: &[f64], p: f64) -> f64 {
-    if sorted.is_empty() {
-        return 0.0;
+/// A recorded trace frame as the session's object state.
+fn object_state(f: Frame) -> ObjectState {
+    ObjectState {
+        pos: f.pos,
+        rot: f.rot,
+        particles: f.particles,
     }
-    let i = ((sorted.len() - 1) as f64 * p).round() as usize;
-    sorted[i.min(sorted.len() - 1)]
 }
 
 fn lan() -> ConditionerConfig {
@@ -212,7 +213,10 @@ fn run_on(
                     .spawn(
                         now,
                         ClassId(0),
-                        trace.map_or_else(|| soft_state(0.0, &rest), |tr| tr.state(0.0)),
+                        trace.map_or_else(
+                            || soft_state(0.0, &rest),
+                            |tr| object_state(tr.state(0.0)),
+                        ),
                     )
                     .unwrap()
                     .1,
@@ -249,7 +253,7 @@ fn run_on(
                 ObjectState::rigid(p, q)
             }
             Scenario::SoftBody => match trace {
-                Some(tr) => tr.state(s),
+                Some(tr) => object_state(tr.state(s)),
                 None => soft_state(s, &rest),
             },
         }
@@ -326,7 +330,8 @@ fn run_on(
     let l = st.links.get(&Harness::id(0)).cloned().unwrap_or_default();
     let dt = (h.now - tm).as_secs_f64();
     let packets = (l.up.packets - up_start.packets) as f64;
-    errors.sort_by(|a, b| a.total_cmp(b));
+    // no samples: zeros
+    let error = Summary::of(&errors).unwrap_or_default();
     Row {
         scenario: match scenario {
             Scenario::Avatar => "avatar",
@@ -341,9 +346,9 @@ fn run_on(
         },
         packets_per_s: packets / dt,
         down_bytes_per_s: (l.down.bytes - down_start.bytes) as f64 / dt,
-        p50_mm: percentile(&errors, 0.5) * 1000.0,
-        p95_mm: percentile(&errors, 0.95) * 1000.0,
-        max_mm: errors.last().copied().unwrap_or(0.0) * 1000.0,
+        p50_mm: error.median * 1000.0,
+        p95_mm: error.p95 * 1000.0,
+        max_mm: error.max * 1000.0,
         max_bytes_per_s: max_window,
         delay_ms: delays.iter().sum::<f64>() / delays.len().max(1) as f64 * 1000.0,
         mtu_fill: (st.mtu_fill_sum - fill_start) / ((st.up.packets - pk_start).max(1)) as f64,
@@ -424,56 +429,49 @@ fn migration(seed: u64) -> f64 {
 }
 
 fn chart(rows: &[Row], path: &Path) -> Result<(), Box<dyn std::error::Error>> {
-    let root = SVGBackend::new(path, (1100, 480)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let (left, right) = root.split_horizontally(550);
-    for (area, scen, title) in [
-        (left, "avatar", "VR avatar (head + 2 hands)"),
-        (
-            right,
-            "softbody60",
-            "60-particle soft body, squeeze/release",
-        ),
-    ] {
+    let panel = |scen: &str, title: &str| {
         let rs: Vec<&Row> = rows.iter().filter(|r| r.scenario == scen).collect();
         let xmax = rs.iter().map(|r| r.bytes_per_s).fold(10.0, f64::max) * 1.1;
         let ymax = rs.iter().map(|r| r.p95_mm).fold(1.0, f64::max) * 1.15;
-        let mut c = ChartBuilder::on(&area)
-            .caption(title, ("sans-serif", 18))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(50)
-            .build_cartesian_2d(0.0..xmax, 0.0..ymax)?;
-        c.configure_mesh()
-            .x_desc("bytes/s (our datagrams)")
-            .y_desc("p95 remote error (mm)")
-            .draw()?;
-        let colors = [RED, BLUE, GREEN];
-        for (k, thr) in THRESHOLDS.iter().enumerate() {
-            let color = colors[k];
-            let pts: Vec<(f64, f64)> = rs
-                .iter()
-                .filter(|r| (r.threshold_m - thr).abs() < 1e-6)
-                .map(|r| (r.bytes_per_s, r.p95_mm))
-                .collect();
-            c.draw_series(LineSeries::new(pts.clone(), color))?
-                .label(format!("threshold {} m", thr))
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
-            c.draw_series(pts.iter().map(|p| Circle::new(*p, 3, color.filled())))?;
-            for r in rs.iter().filter(|r| (r.threshold_m - thr).abs() < 1e-6) {
-                c.draw_series(std::iter::once(Text::new(
-                    format!("{}Hz", r.rate_hz),
-                    (r.bytes_per_s, r.p95_mm),
-                    ("sans-serif", 11),
-                )))?;
-            }
+        let series = THRESHOLDS
+            .iter()
+            .zip([RED, BLUE, GREEN])
+            .map(|(thr, color)| {
+                let at: Vec<&&Row> = rs
+                    .iter()
+                    .filter(|r| (r.threshold_m - thr).abs() < 1e-6)
+                    .collect();
+                let mut s = Series::new(
+                    format!("threshold {} m", thr),
+                    color,
+                    at.iter().map(|r| (r.bytes_per_s, r.p95_mm)).collect(),
+                );
+                s.notes = at
+                    .iter()
+                    .map(|r| (format!("{}Hz", r.rate_hz), (r.bytes_per_s, r.p95_mm)))
+                    .collect();
+                s
+            })
+            .collect();
+        LineChart {
+            title: title.to_owned(),
+            x_desc: "bytes/s (our datagrams)".to_owned(),
+            y_desc: "p95 remote error (mm)".to_owned(),
+            x_range: 0.0..xmax,
+            x_log: false,
+            y_range: 0.0..ymax,
+            series,
+            style: ChartStyle::PANEL,
         }
-        c.configure_series_labels()
-            .border_style(BLACK)
-            .background_style(WHITE.mix(0.8))
-            .draw()?;
-    }
-    root.present()?;
+    };
+    write_svg(
+        path,
+        (1100, 480),
+        &[
+            panel("avatar", "VR avatar (head + 2 hands)"),
+            panel("softbody60", "60-particle soft body, squeeze/release"),
+        ],
+    )?;
     Ok(())
 }
 
@@ -515,31 +513,42 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
         }
     }
-    let mut csv = String::from(
-        "scenario,rate_hz,threshold_m,bytes_per_s,packets_per_s,transport_overhead_bytes_per_s,bytes_per_s_with_transport,down_bytes_per_s,p50_mm,p95_mm,max_mm,interp_delay_ms,mtu_fill,max_1s_bytes_per_s\n",
-    );
+    let mut csv = Csv::new(&[
+        "scenario",
+        "rate_hz",
+        "threshold_m",
+        "bytes_per_s",
+        "packets_per_s",
+        "transport_overhead_bytes_per_s",
+        "bytes_per_s_with_transport",
+        "down_bytes_per_s",
+        "p50_mm",
+        "p95_mm",
+        "max_mm",
+        "interp_delay_ms",
+        "mtu_fill",
+        "max_1s_bytes_per_s",
+    ]);
     for r in &rows {
         let ovh = r.packets_per_s * TRANSPORT_OVERHEAD_BYTES as f64;
-        writeln!(
-            csv,
-            "{},{},{},{:.1},{:.2},{:.1},{:.1},{:.1},{:.3},{:.3},{:.3},{:.1},{:.4},{:.1}",
-            r.scenario,
-            r.rate_hz,
-            r.threshold_m,
-            r.bytes_per_s,
-            r.packets_per_s,
-            ovh,
-            r.bytes_per_s + ovh,
-            r.down_bytes_per_s,
-            r.p50_mm,
-            r.p95_mm,
-            r.max_mm,
-            r.delay_ms,
-            r.mtu_fill,
-            r.max_bytes_per_s
-        )?;
+        csv.row([
+            r.scenario.to_string(),
+            r.rate_hz.to_string(),
+            r.threshold_m.to_string(),
+            format!("{:.1}", r.bytes_per_s),
+            format!("{:.2}", r.packets_per_s),
+            format!("{:.1}", ovh),
+            format!("{:.1}", r.bytes_per_s + ovh),
+            format!("{:.1}", r.down_bytes_per_s),
+            format!("{:.3}", r.p50_mm),
+            format!("{:.3}", r.p95_mm),
+            format!("{:.3}", r.max_mm),
+            format!("{:.1}", r.delay_ms),
+            format!("{:.4}", r.mtu_fill),
+            format!("{:.1}", r.max_bytes_per_s),
+        ]);
     }
-    std::fs::write(out_dir.join("bandwidth.csv"), &csv)?;
+    csv.write(out_dir.join("bandwidth.csv"))?;
     chart(&rows, &out_dir.join("bandwidth.svg"))?;
 
     let mut report = String::new();
@@ -626,27 +635,34 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     } else {
         (1..=10).collect()
     };
-    let mut mig: Vec<f64> = seeds.iter().map(|s| migration(*s)).collect();
-    let mut mcsv = String::from("seed,resume_ms\n");
+    let mig: Vec<f64> = seeds.iter().map(|s| migration(*s)).collect();
+    let mut mcsv = Csv::new(&["seed", "resume_ms"]);
     for (s, m) in seeds.iter().zip(&mig) {
-        writeln!(mcsv, "{s},{m:.1}")?;
+        mcsv.row([s.to_string(), format!("{m:.1}")]);
     }
-    std::fs::write(out_dir.join("migration.csv"), &mcsv)?;
-    mig.sort_by(|a, b| a.total_cmp(b));
-    let mig_max = mig.last().copied().unwrap_or(f64::NAN);
+    mcsv.write(out_dir.join("migration.csv"))?;
+    let (mig_median, mig_max) = Summary::of(&mig).map_or((0.0, f64::NAN), |s| (s.median, s.max));
     outln!(
         "\nMigration resume (host's last datagram → new host relays), {} runs: median {:.0} ms, max {:.0} ms",
         mig.len(),
-        percentile(&mig, 0.5),
+        mig_median,
         mig_max
     );
 
     outln!("\n### Link sensitivity at 20 Hz, threshold 0.005 m (seeded conditioner: bursty loss, 2 % duplication, 3 % reordering)\n");
     outln!("| scenario | link | bytes/s | p50 mm | p95 mm | max mm | delay ms |");
     outln!("|---|---|---:|---:|---:|---:|---:|");
-    let mut lcsv = String::from(
-        "scenario,latency_ms,jitter_ms,loss,bytes_per_s,p50_mm,p95_mm,max_mm,interp_delay_ms\n",
-    );
+    let mut lcsv = Csv::new(&[
+        "scenario",
+        "latency_ms",
+        "jitter_ms",
+        "loss",
+        "bytes_per_s",
+        "p50_mm",
+        "p95_mm",
+        "max_mm",
+        "interp_delay_ms",
+    ]);
     for scenario in [Scenario::Avatar, Scenario::SoftBody] {
         for (lat, jit, loss) in [(20u64, 5u64, 0.0f64), (50, 20, 0.05), (150, 30, 0.20)] {
             let link = ConditionerConfig::rough(42, lat, jit, loss);
@@ -661,14 +677,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 r.max_mm,
                 r.delay_ms
             );
-            writeln!(
-                lcsv,
-                "{},{lat},{jit},{loss},{:.1},{:.3},{:.3},{:.3},{:.1}",
-                r.scenario, r.bytes_per_s, r.p50_mm, r.p95_mm, r.max_mm, r.delay_ms
-            )?;
+            lcsv.row([
+                r.scenario.to_string(),
+                lat.to_string(),
+                jit.to_string(),
+                loss.to_string(),
+                format!("{:.1}", r.bytes_per_s),
+                format!("{:.3}", r.p50_mm),
+                format!("{:.3}", r.p95_mm),
+                format!("{:.3}", r.max_mm),
+                format!("{:.1}", r.delay_ms),
+            ]);
         }
     }
-    std::fs::write(out_dir.join("link.csv"), &lcsv)?;
+    lcsv.write(out_dir.join("link.csv"))?;
     // continuous deformation for comparison (the trace has pauses between its scenarios)
     let synth = run(Scenario::SoftBody, 20.0, 0.005, secs, None);
     outln!(
@@ -688,18 +710,30 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .iter()
         .find(|r| r.scenario == "avatar" && r.rate_hz == 20.0 && r.threshold_m == 0.005)
         .unwrap();
+    let sb_line = ResultLine::new("net.softbody60")
+        .field("hz", 20)
+        .fixed("bytes_per_s", sb.bytes_per_s, 0)
+        .fixed("p95_mm", sb.p95_mm, 2)
+        .fixed("delay_ms", sb.delay_ms, 0);
+    println!("\n{sb_line}");
     println!(
-        "\nRESULT net.softbody60 hz=20 bytes_per_s={:.0} p95_mm={:.2} delay_ms={:.0}",
-        sb.bytes_per_s, sb.p95_mm, sb.delay_ms
+        "{}",
+        ResultLine::new("net.avatar")
+            .field("hz", 20)
+            .fixed("bytes_per_s", av.bytes_per_s, 0)
+            .fixed("p95_mm", av.p95_mm, 2)
     );
     println!(
-        "RESULT net.avatar hz=20 bytes_per_s={:.0} p95_mm={:.2}",
-        av.bytes_per_s, av.p95_mm
+        "{}",
+        ResultLine::new("net.softbody60_synthetic")
+            .field("hz", 20)
+            .fixed("bytes_per_s", synth.bytes_per_s, 0)
+            .fixed("p95_mm", synth.p95_mm, 2)
+            .fixed("delay_ms", synth.delay_ms, 0)
     );
     println!(
-        "RESULT net.softbody60_synthetic hz=20 bytes_per_s={:.0} p95_mm={:.2} delay_ms={:.0}",
-        synth.bytes_per_s, synth.p95_mm, synth.delay_ms
+        "{}",
+        ResultLine::new("net.migration").fixed("resume_ms", mig_max, 0)
     );
-    println!("RESULT net.migration resume_ms={mig_max:.0}");
     Ok(())
 }

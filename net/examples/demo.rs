@@ -16,14 +16,23 @@ use std::path::Path;
 use std::time::Duration;
 
 use glam::{Quat, Vec3};
+use softsync_benchkit::trace::{Frame, Trace};
 use softsync_net::harness::Harness;
-use softsync_net::trace::Trace;
 use softsync_net::{
     ClassConfig, ClassId, ConditionerConfig, Event, NetId, ObjectState, SendPolicy, SessionConfig,
     SoftBodyMode,
 };
 
 const FRAME: Duration = Duration::from_micros(11_111);
+
+/// A recorded trace frame as the session's object state.
+fn object_state(f: Frame) -> ObjectState {
+    ObjectState {
+        pos: f.pos,
+        rot: f.rot,
+        particles: f.particles,
+    }
+}
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -57,7 +66,7 @@ fn main() {
     let now = h.now;
     // The host spawns the soft body; each peer spawns its avatar head.
     h.session(0)
-        .spawn(now, ClassId(1), trace.state(0.0))
+        .spawn(now, ClassId(1), object_state(trace.state(0.0)))
         .unwrap();
     for i in 0..3 {
         h.session(i)
@@ -105,7 +114,7 @@ fn main() {
                     continue;
                 }
                 let state = if h.session(i).class_of(id) == Some(ClassId(1)) {
-                    trace.state(t)
+                    object_state(trace.state(t))
                 } else {
                     let a = t * 0.8 + i as f32;
                     ObjectState::rigid(

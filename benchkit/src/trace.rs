@@ -1,15 +1,26 @@
 //! Recorded object-state traces for benchmarks and demos (e.g. the soft-body crate's
 //! squeeze/poke/pull recording in `assets/traces/softbody60.sstr`): replaying them lets the
 //! network code be measured on real deformation without depending on the simulation.
+//! Frames are plain glam values so that neither the network nor the soft-body crate is needed
+//! here: the network benches turn a [`Frame`] into their object state.
 
 use glam::{Quat, Vec3};
-
-use crate::session::ObjectState;
 
 /// Shortest frame interval a trace may have (seconds).
 pub const MIN_DT_S: f32 = 1e-4;
 /// Longest frame interval a trace may have (seconds).
 pub const MAX_DT_S: f32 = 10.0;
+
+/// One recorded instant of the body.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Frame {
+    /// Center position.
+    pub pos: Vec3,
+    /// Center rotation.
+    pub rot: Quat,
+    /// Particle positions in world space.
+    pub particles: Vec<Vec3>,
+}
 
 /// A recorded soft-body trace (`assets/traces/softbody60.sstr`, written by
 /// `cargo run --release -p softsync-softbody --example trace`): magic `SSTR`, u32 version 1,
@@ -20,7 +31,7 @@ pub struct Trace {
     /// Seconds between frames.
     pub dt_s: f32,
     /// The frames.
-    pub frames: Vec<ObjectState>,
+    pub frames: Vec<Frame>,
     /// Per frame: the body is being interacted with (thesis: only that time was measured).
     pub active: Vec<bool>,
 }
@@ -57,7 +68,7 @@ impl Trace {
             let particles = (0..n)
                 .map(|i| Some(Vec3::new(v(7 + 3 * i)?, v(8 + 3 * i)?, v(9 + 3 * i)?)))
                 .collect::<Option<Vec<_>>>()?;
-            let st = ObjectState {
+            let st = Frame {
                 pos,
                 rot,
                 particles,
@@ -110,13 +121,13 @@ impl Trace {
     }
 
     /// State at `t` seconds, looping (the trace starts and ends at rest), interpolated.
-    pub fn state(&self, t: f32) -> ObjectState {
+    pub fn state(&self, t: f32) -> Frame {
         let x = (t.rem_euclid(self.duration_s())) / self.dt_s;
         let i = (x.floor() as usize).min(self.frames.len() - 1);
         let j = (i + 1) % self.frames.len();
         let f = (x - i as f32).clamp(0.0, 1.0);
         let (a, b) = (&self.frames[i], &self.frames[j]);
-        ObjectState {
+        Frame {
             pos: a.pos.lerp(b.pos, f),
             rot: a.rot.slerp(b.rot, f),
             particles: a
