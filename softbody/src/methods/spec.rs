@@ -97,8 +97,9 @@ pub struct MethodSpec {
     pub params: PbdParams,
     /// Material.
     pub material: Material,
-    /// Only this region (world coordinates of the mesh given to [`build_model`]) is soft; the
-    /// rest follows rigidly (thesis 3.5.2). Particle method only; `None` = all soft.
+    /// Only this region (world coordinates of the mesh given to
+    /// [`build_model`](crate::methods::build_model)) is soft; the rest follows rigidly (thesis
+    /// 3.5.2). Particle method only; `None` = all soft.
     #[serde(default)]
     pub soft_region: Option<SoftRegion>,
 }
