@@ -27,9 +27,7 @@ pub mod reliable;
 pub mod rng;
 pub mod session;
 pub mod stats;
-pub mod thesis;
 pub mod time;
-pub mod trace;
 pub mod transport;
 pub mod wire;
 
