@@ -5,13 +5,13 @@ mod common;
 
 use std::time::Duration;
 
-use glam::{Quat, Vec3};
+use glam::Vec3;
 use softsync_net::harness::Harness;
 use softsync_net::session::MAX_STRANGERS;
 use softsync_net::wire::{Control, SpawnInfo};
 use softsync_net::{
     AuthorityEpoch, AuthorityPolicy, ClassConfig, ClassId, ConditionerConfig, Event, Instant,
-    NetId, ObjectState, PeerId, SendPolicy, Session, SessionConfig, Term,
+    NetId, PeerId, SendPolicy, Session, SessionConfig, Term,
 };
 
 /// Delivers everything queued between `a` and the sessions in `bs` until quiet.
@@ -149,21 +149,11 @@ fn claim(id: u32, owner: PeerId, term: u32, grant: u32, particles: u32) -> Spawn
 #[test]
 fn hostile_resync_claims_take_nothing_and_create_boundedly() {
     let mut h = common::room(4, ConditionerConfig::default());
-    let now = h.now;
-    let a = h
-        .session(0)
-        .spawn(now, ClassId(0), ObjectState::rigid(Vec3::X, Quat::IDENTITY))
-        .unwrap()
-        .0;
-    let c = h
-        .session(0)
-        .spawn(now, ClassId(0), ObjectState::rigid(Vec3::Y, Quat::IDENTITY))
-        .unwrap()
-        .0;
+    let a = common::spawn_rigid(&mut h, 0, Vec3::X).0;
+    let c = common::spawn_rigid(&mut h, 0, Vec3::Y).0;
     h.advance(Duration::from_millis(300));
     // peer 1 (the heir) holds c
-    let now = h.now;
-    h.session(1).request_authority(now, c).unwrap();
+    common::request_authority(&mut h, 1, c);
     h.advance(Duration::from_millis(300));
     assert_eq!(h.peers[0].session.owner(c), Some(Harness::id(1)));
     let bad = Harness::id(3);

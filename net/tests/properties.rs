@@ -280,8 +280,7 @@ proptest! {
         }
         // feed a live host and a live client with objects
         let mut h = room(2, ConditionerConfig::default());
-        let now = h.now;
-        let (id, _) = h.session(0).spawn(now, SOFT, soft_state(Vec3::Y, Quat::IDENTITY, 0.0)).unwrap();
+        let (id, _) = spawn_soft(&mut h, 0, Vec3::Y);
         h.advance(Duration::from_millis(200));
         let now = h.now;
         h.session(0).handle_packet(now, Harness::id(1), &data);
@@ -356,11 +355,7 @@ proptest! {
         seed in any::<u64>(),
     ) {
         let mut h = room(5, ConditionerConfig::rough(seed, 15, 10, 0.05));
-        let now = h.now;
-        let mut ids = Vec::new();
-        for k in 0..3 {
-            ids.push(h.session(0).spawn(now, RIGID, ObjectState::rigid(Vec3::X * k as f32, Quat::IDENTITY)).unwrap().0);
-        }
+        let ids: Vec<NetId> = (0..3).map(|k| spawn_rigid(&mut h, 0, Vec3::X * k as f32).0).collect();
         h.advance(Duration::from_millis(500));
         let mut kills = 0;
         for (op, peer, obj, wait) in ops {
@@ -401,12 +396,10 @@ proptest! {
         msgs in prop::collection::vec((arb_hostile_control(), 0usize..2), 1..12),
     ) {
         let mut h = room(3, ConditionerConfig::default());
-        let now = h.now;
-        let a = h.session(0).spawn(now, RIGID, ObjectState::rigid(Vec3::X, Quat::IDENTITY)).unwrap().0;
-        let b = h.session(0).spawn(now, SOFT, soft_state(Vec3::Y, Quat::IDENTITY, 0.0)).unwrap().0;
+        let a = spawn_rigid(&mut h, 0, Vec3::X).0;
+        let b = spawn_soft(&mut h, 0, Vec3::Y).0;
         h.advance(Duration::from_millis(300));
-        let now = h.now;
-        h.session(1).request_authority(now, b).unwrap();
+        request_authority(&mut h, 1, b);
         h.advance(Duration::from_millis(300));
         let expect: Vec<_> = [a, b]
             .iter()

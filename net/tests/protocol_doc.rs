@@ -10,8 +10,8 @@ use softsync_net::bits::BitWriter;
 use softsync_net::quant::quantize_quat;
 use softsync_net::stats::TRANSPORT_OVERHEAD_BYTES;
 use softsync_net::wire::{
-    self, decode_packet, encode_refusal, tag, write_entry_id, ChunkEnc, Control,
-    EntryLayout, PacketHeader, PartBody, PosEnc, StateEntry,
+    self, decode_packet, encode_refusal, tag, write_entry_id, ChunkEnc, Control, EntryLayout,
+    PacketHeader, PartBody, PosEnc, StateEntry,
 };
 use softsync_net::{
     ClassConfig, ClassId, Instant, NetId, ObjectState, PeerId, SendPolicy, Session, SessionConfig,
