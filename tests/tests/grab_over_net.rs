@@ -1,81 +1,111 @@
-//! A grab across the network, in-process on virtual time: the host owns a soft body; a client's
-//! hand grips one of its particles, which asks for authority through the session; the hold
-//! starts only when the grant arrives; the client simulates and publishes, the host shows the
-//! pulled particle; after the release the body comes to rest, authority goes back, and both
-//! peers end with the same shape.
-#![allow(clippy::unwrap_used, clippy::needless_range_loop, missing_docs)]
+//! A grab across the network, in-process on virtual time, with the peer library the app runs:
+//! a host and a client (`softsync_peer::Peer`, the `bench-ball` scene: one soft ball on the
+//! table) on net's in-memory hub behind the seeded link conditioner. The client's hand grips
+//! one particle of the host-owned ball, which asks for authority; the hold starts only when the
+//! grant arrives (nothing moves before); the client simulates and publishes, the host shows the
+//! pulled particle; after the release the ball comes to rest, authority goes back to the host,
+//! and both peers show the same shape, back at rest.
+#![allow(clippy::unwrap_used, missing_docs)]
 
+use std::path::Path;
 use std::time::Duration;
 
 use glam::{Quat, Vec3};
-use softsync_interaction::{
-    HandConfig, HandInput, HandSample, Interaction, InteractionEvent, ObjectRef, Ownership,
-};
-use softsync_net::harness::Harness;
+use softsync_interaction::{HandConfig, HandInput, HandSample};
+use softsync_net::transport::HubEndpoint;
 use softsync_net::{
-    ClassConfig, ClassId, ConditionerConfig, Event, NetId, ObjectState, PeerId, SendPolicy,
-    SessionConfig, SoftBodyMode,
+    ConditionerConfig, Instant, LinkConditioner, MemoryHub, NetId, ObjectState, PeerId, SendPolicy,
+    Session, Transport,
 };
-use softsync_softbody::rapier3d::prelude::PhysicsWorld;
-use softsync_softbody::{
-    ClusterMethod, Mesh, SimulationSpace, SoftBodyConfig, SoftBodyHandle, SoftBodySet,
-};
+use softsync_peer::{session_config, Event, Kind, Peer, PeerConfig, Scene};
 
 const DT: f32 = 1.0 / 90.0;
+const HOST: PeerId = PeerId(100);
+const CLIENT: PeerId = PeerId(101);
+const RIGHT: usize = 1;
 
-/// One peer's simulation: its own rapier world with the same soft body.
-struct Peer {
-    world: PhysicsWorld,
-    soft: SoftBodySet,
-    body: SoftBodyHandle,
+/// One peer and the link it sends on, as a driver would hold them.
+struct Node {
+    peer: Peer,
+    link: LinkConditioner<HubEndpoint>,
+    /// Every event the peer said, with the time.
+    events: Vec<(Instant, Event)>,
 }
 
-impl Peer {
-    fn new() -> Self {
-        let mut world = PhysicsWorld::new();
-        let mut soft = SoftBodySet::new();
-        let cfg = SoftBodyConfig {
-            cluster: ClusterMethod::Distance { radius_m: 0.02 },
-            space: SimulationSpace::Local,
-            ..Default::default()
+impl Node {
+    fn new(hub: &MemoryHub, me: PeerId, seed: u64) -> Self {
+        let policy = SendPolicy::default();
+        let cfg = session_config(policy.clone(), policy.clone(), policy);
+        let (session, contact) = if me == HOST {
+            (Session::host(me, cfg, Instant::ZERO), None)
+        } else {
+            (Session::join(me, HOST, cfg, Instant::ZERO), Some(HOST))
         };
-        let body = soft
-            .insert(&Mesh::icosphere(0.1, 2), cfg, &mut world)
-            .unwrap();
-        world.step();
-        Peer { world, soft, body }
-    }
-
-    fn state(&self) -> ObjectState {
-        let b = self.soft.get(self.body).unwrap();
-        let (pos, rot) = b.center_pose(&self.world);
-        ObjectState {
-            pos,
-            rot,
-            particles: b.particle_positions(&self.world),
+        let scene = Scene::by_name("bench-ball", Path::new(".")).unwrap();
+        let config = PeerConfig {
+            hand: HandConfig {
+                // A hand that reaches exactly, as the app gives bots.
+                physical_controller: false,
+                hover_radius_m: 0.015,
+                ..HandConfig::default()
+            },
+            dt_s: DT,
+            ..PeerConfig::default()
+        };
+        let mut peer = Peer::new(Instant::ZERO, session, contact, scene, config).unwrap();
+        if me == HOST {
+            peer.open(Instant::ZERO).unwrap();
+        }
+        let link = ConditionerConfig {
+            seed,
+            latency: Duration::from_millis(20),
+            jitter: Duration::from_millis(5),
+            loss: 0.02,
+            ..ConditionerConfig::default()
+        };
+        Node {
+            peer,
+            link: LinkConditioner::new(hub.endpoint(me), link),
+            events: Vec::new(),
         }
     }
 
-    fn apply(&mut self, s: &ObjectState) {
-        let b = self.soft.get_mut(self.body).unwrap();
-        b.apply_state(&mut self.world, s.pos, s.rot, &s.particles)
-            .unwrap();
+    /// One frame of a driver: network in, timers, (hand input and) a fixed step, network out.
+    fn frame(&mut self, now: Instant, hand: Option<HandInput>) {
+        while let Some((from, bytes)) = self.link.recv(now) {
+            self.peer.handle_datagram(now, from, &bytes);
+        }
+        while let Some(e) = self.link.poll_peer_event() {
+            self.peer.handle_link_event(e);
+        }
+        self.peer.pump(now).unwrap();
+        if self.peer.joined() {
+            if let Some(input) = hand {
+                self.peer.set_hand_input(RIGHT, input);
+            }
+            self.peer.fixed_step(now);
+        }
+        while let Some(t) = self.peer.poll_transmit(now) {
+            self.link.send(now, &t);
+        }
+        while let Some(e) = self.peer.poll_event() {
+            assert!(!matches!(e, Event::Warning(_)), "{e:?}");
+            self.events.push((now, e));
+        }
     }
-}
 
-/// The app's answer to "may this peer move that object": its session says who owns it.
-struct SessionOwnership {
-    me: PeerId,
-    owner: Option<PeerId>,
-}
+    /// When the peer first said something matching `f`.
+    fn first(&self, f: impl Fn(&Event) -> bool) -> Option<Instant> {
+        self.events.iter().find(|(_, e)| f(e)).map(|(t, _)| *t)
+    }
 
-impl Ownership for SessionOwnership {
-    fn is_local(&self, _: ObjectRef) -> bool {
-        self.owner == Some(self.me)
+    fn ball(&mut self, now: Instant, id: NetId) -> ObjectState {
+        self.peer.shown_state(now, id).unwrap()
     }
 }
 
 fn max_distance(a: &[Vec3], b: &[Vec3]) -> f32 {
+    assert_eq!(a.len(), b.len());
     a.iter()
         .zip(b)
         .map(|(p, q)| p.distance(*q))
@@ -84,39 +114,32 @@ fn max_distance(a: &[Vec3], b: &[Vec3]) -> f32 {
 
 #[test]
 fn a_client_grabs_a_host_owned_soft_body_through_authority_and_the_host_sees_it() {
-    let mut class = ClassConfig::soft_body("soft", SendPolicy::default(), SoftBodyMode::Particles);
-    class.particle_extent_m = 0.25;
-    let cfg = SessionConfig {
-        classes: vec![class],
-        ..SessionConfig::default()
-    };
-    let link = ConditionerConfig {
-        seed: 3,
-        latency: Duration::from_millis(20),
-        jitter: Duration::from_millis(5),
-        loss: 0.02,
-        ..ConditionerConfig::default()
-    };
-    let mut h = Harness::new(2, cfg, link);
-    h.advance(Duration::from_millis(300));
-    let mut peers = [Peer::new(), Peer::new()];
-    let now = h.now;
-    h.session(0)
-        .spawn(now, ClassId(0), peers[0].state())
-        .unwrap();
-    h.advance(Duration::from_millis(300));
-    let id: NetId = h.session(1).object_ids()[0];
-    let me = Harness::id(1);
+    let hub = MemoryHub::new(1200);
+    let mut host = Node::new(&hub, HOST, 3);
+    let mut client = Node::new(&hub, CLIENT, 4);
+    let step = Duration::from_secs_f32(DT);
+    let mut now = Instant::ZERO;
 
-    // The client's hand, on the particle farthest along +x.
-    let mut hands = Interaction::new();
-    let hand = hands
-        .add_hand(HandConfig {
-            hover_radius_m: 0.015,
-            ..Default::default()
-        })
-        .unwrap();
-    let rest = peers[1].state();
+    // The client joins; the ball falls onto the table and settles.
+    for _ in 0..(2.0 / DT) as usize {
+        now += step;
+        host.frame(now, None);
+        client.frame(now, None);
+    }
+    assert!(client.peer.joined(), "the client never joined");
+    assert!(host
+        .first(|e| *e == Event::Room(softsync_net::Event::PeerJoined(CLIENT)))
+        .is_some());
+    let (&id, _) = client
+        .peer
+        .objects()
+        .iter()
+        .find(|(_, o)| o.kind == Kind::SoftBall)
+        .expect("the client has no ball");
+    assert_eq!(client.peer.session().owner(id), Some(HOST));
+
+    // The client's right hand, on the ball's particle farthest along +x.
+    let rest = client.ball(now, id);
     let (grabbed, start) = rest
         .particles
         .iter()
@@ -124,20 +147,19 @@ fn a_client_grabs_a_host_owned_soft_body_through_authority_and_the_host_sees_it(
         .max_by(|a, b| a.1.x.total_cmp(&b.1.x))
         .map(|(i, p)| (i, *p))
         .unwrap();
-    let object = ObjectRef::Soft(peers[1].body);
 
-    let mut t = 0.0f64;
-    let mut granted_at = None;
-    let mut released_at = None;
-    let mut returned_at = None;
+    let gripped_at = now;
+    let mut granted_at: Option<Instant> = None;
+    let mut released_at: Option<Instant> = None;
+    let mut returned_at: Option<Instant> = None;
     let mut host_saw_pull = 0.0f32;
     let mut moved_before_grant = 0.0f32;
-    for frame in 0..900 {
-        t += DT as f64;
-        // Hand script: grip at 0.1 s, pull out 5 cm over 0.5 s once held, hold, let go at 1.5 s.
-        let held_for: f64 = granted_at.map_or(0.0, |g: f64| t - g);
-        let out = (held_for / 0.5).min(1.0) as f32 * 0.05;
-        let grip = if t > 0.1 && released_at.is_none() && (granted_at.is_none() || held_for < 1.0) {
+    for _ in 0..900 {
+        now += step;
+        // Grip; once held, pull out 5 cm over 0.5 s, hold, let go after 1 s.
+        let held_for = granted_at.map_or(0.0, |g| now.saturating_since(g).as_secs_f32());
+        let out = (held_for / 0.5).min(1.0) * 0.05;
+        let grip = if released_at.is_none() && held_for < 1.0 {
             1.0
         } else {
             0.0
@@ -146,74 +168,55 @@ fn a_client_grabs_a_host_owned_soft_body_through_authority_and_the_host_sees_it(
             sample: HandSample {
                 position_m: start + Vec3::X * out,
                 rotation: Quat::IDENTITY,
-                time_s: t,
+                time_s: now.as_secs_f64(),
             },
             grip,
             trigger: 0.0,
         };
-        hands.set_input(hand, input).unwrap();
-        let ownership = SessionOwnership {
-            me,
-            owner: h.session(1).owner(id),
-        };
-        hands.update(&mut peers[1].world, &mut peers[1].soft, &ownership, DT);
-        while let Some(e) = hands.poll_event() {
-            match e {
-                InteractionEvent::AuthorityRequested { object: o, .. } => {
-                    assert_eq!(o, object);
-                    let now = h.now;
-                    h.session(1).request_authority(now, id).unwrap();
-                }
-                InteractionEvent::Released { .. } => released_at = Some(t),
-                InteractionEvent::CameToRest { .. } => {
-                    let now = h.now;
-                    h.session(1).release_authority(now, id).unwrap();
-                }
-                _ => {}
-            }
-        }
-        // Each peer simulates what it owns and shows what it does not.
-        for i in 0..2 {
-            let owner = h.session(i).owner(id);
-            if owner == Some(Harness::id(i)) {
-                peers[i].soft.step(&mut peers[i].world, DT);
-                let state = peers[i].state();
-                let now = h.now;
-                h.session(i).publish_state(now, id, &state).unwrap();
-            } else {
-                let now = h.now;
-                if let Some(d) = h.session(i).display_state(now, id) {
-                    peers[i].apply(&d.state);
-                }
-            }
-        }
+        host.frame(now, None);
+        client.frame(now, Some(input));
         if granted_at.is_none() {
-            moved_before_grant =
-                moved_before_grant.max(peers[1].state().particles[grabbed].distance(start));
+            granted_at = client.first(|e| *e == Event::AuthorityGained(id));
+            let shown = client.ball(now, id).particles[grabbed];
+            moved_before_grant = moved_before_grant.max(shown.distance(start));
         }
-        h.advance(Duration::from_micros(11_111));
-        for e in h.peers[1].events.drain(..) {
-            if let Event::AuthorityChanged { id: o, owner, .. } = e {
-                if o == id && owner == me && granted_at.is_none() {
-                    granted_at = Some(t);
-                    hands.grant(object);
-                } else if o == id && owner != me && granted_at.is_some() {
-                    returned_at = Some(t);
-                }
-            }
+        if released_at.is_none() {
+            released_at = client.first(|e| matches!(e, Event::GrabEnded { .. }));
         }
-        h.peers[0].events.clear();
         if granted_at.is_some() && released_at.is_none() {
-            let shown = peers[0].state().particles[grabbed];
+            let shown = host.ball(now, id).particles[grabbed];
             host_saw_pull = host_saw_pull.max(shown.x - start.x);
         }
-        if returned_at.is_some_and(|r| t > r + 1.0) {
-            assert!(frame > 100);
+        if released_at.is_some()
+            && returned_at.is_none()
+            && client.peer.session().owner(id) == Some(HOST)
+        {
+            returned_at = Some(now);
+        }
+        if returned_at.is_some_and(|r| now.saturating_since(r) > Duration::from_secs(1)) {
             break;
         }
     }
+
+    // The hand asked, then the grant came, and only then did it hold.
+    let asked = client.first(|e| *e == Event::AuthorityAsked(id));
+    let asked = asked.expect("the hand never asked for authority");
     let granted = granted_at.expect("authority never granted");
-    assert!(granted > 0.1, "held before asking");
+    let held = client.first(|e| matches!(e, Event::GrabStarted { id: o, .. } if *o == id));
+    let held = held.expect("the hand never held the ball");
+    assert!(gripped_at < asked && asked < granted && granted <= held);
+    assert!(
+        client
+            .first(|e| *e
+                == Event::GrabStarted {
+                    id,
+                    hand: RIGHT,
+                    particle: Some(grabbed as u32)
+                })
+            .is_some(),
+        "the hand held something else: {:?}",
+        client.events
+    );
     // Before the grant the client only shows the host's state (0.5 mm quantization grid).
     assert!(
         moved_before_grant < 1e-3,
@@ -223,19 +226,18 @@ fn a_client_grabs_a_host_owned_soft_body_through_authority_and_the_host_sees_it(
         host_saw_pull > 0.03,
         "the host never showed the pulled particle ({host_saw_pull} m)"
     );
+    // After the release the ball came to rest and went back to the host.
+    let released = client.first(|e| *e == Event::AuthorityReleased(id));
+    let released = released.expect("the client never gave the ball back");
+    assert!(released > released_at.unwrap());
     let returned = returned_at.expect("authority never went back after the body came to rest");
-    assert!(returned > released_at.unwrap());
-    assert_eq!(h.session(0).owner(id), Some(Harness::id(0)));
-    assert_eq!(h.session(1).owner(id), Some(Harness::id(0)));
+    assert!(returned >= released);
+    assert_eq!(host.peer.session().owner(id), Some(HOST));
+    assert_eq!(client.peer.session().owner(id), Some(HOST));
     // Both peers show the same shape, back at rest.
-    let (a, b) = (peers[0].state(), peers[1].state());
-    assert!(
-        max_distance(&a.particles, &b.particles) < 0.002,
-        "peers disagree by {} m",
-        max_distance(&a.particles, &b.particles)
-    );
-    assert!(
-        max_distance(&a.particles, &rest.particles) < 0.003,
-        "not back at rest"
-    );
+    let (a, b) = (host.ball(now, id), client.ball(now, id));
+    let apart = max_distance(&a.particles, &b.particles);
+    assert!(apart < 0.002, "peers disagree by {apart} m");
+    let off_rest = max_distance(&a.particles, &rest.particles);
+    assert!(off_rest < 0.003, "not back at rest ({off_rest} m off)");
 }
