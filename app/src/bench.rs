@@ -21,8 +21,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use plotters::prelude::*;
-use softsync_net::thesis;
+use softsync_benchkit::plotters::style::{Palette, Palette99, RGBColor};
+use softsync_benchkit::{
+    median, thesis, write_svg, ChartStyle, Csv, LineChart, ResultLine, Series, Summary,
+};
 
 use crate::report::{read_dump, DumpLine};
 
@@ -127,14 +129,6 @@ struct Row {
     p95_mm: f64,
     max_mm: f64,
     samples: usize,
-}
-
-fn percentile(v: &mut [f64], q: f64) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[((v.len() - 1) as f64 * q).round() as usize]
 }
 
 /// An object's points (center, particles) over its owner's time.
@@ -320,22 +314,22 @@ fn run_one(
         read_dump(&hd).map_err(|e| e.to_string())?,
         read_dump(&bd).map_err(|e| e.to_string())?,
     );
-    let (bytes_per_s, max_1s_bytes_per_s, mut errors) = measure(&h, &b, warm)?;
-    if errors.is_empty() {
+    let (bytes_per_s, max_1s_bytes_per_s, errors) = measure(&h, &b, warm)?;
+    let Some(error) = Summary::of(&errors) else {
         return Err(format!(
             "{scenario} {rate_hz} Hz: no error samples (see {})",
             dir.display()
         ));
-    }
+    };
     Ok(Row {
         scenario,
         rate_hz,
         threshold_m,
         bytes_per_s,
         max_1s_bytes_per_s,
-        p50_mm: percentile(&mut errors, 0.5),
-        p95_mm: percentile(&mut errors, 0.95),
-        max_mm: percentile(&mut errors, 1.0),
+        p50_mm: error.median,
+        p95_mm: error.p95,
+        max_mm: error.max,
         samples: errors.len(),
     })
 }
@@ -381,17 +375,7 @@ fn migration(dir: &Path, n: usize) -> Result<f64, String> {
 }
 
 fn chart(rows: &[Row], path: &Path, thresholds: &[f32]) -> Result<(), Box<dyn std::error::Error>> {
-    let root = SVGBackend::new(path, (1100, 480)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let (left, right) = root.split_horizontally(550);
-    for (area, scen, title) in [
-        (left, "avatar", "live: VR avatar (head + 2 hands)"),
-        (
-            right,
-            "softbody60",
-            "live: 60-particle soft body, dragged by a particle",
-        ),
-    ] {
+    let panel = |scen: &str, title: &str| {
         let rs: Vec<&Row> = rows.iter().filter(|r| r.scenario == scen).collect();
         let xmax = rs.iter().map(|r| r.bytes_per_s).fold(10.0, f64::max) * 1.1;
         let ymax = rs
@@ -400,34 +384,43 @@ fn chart(rows: &[Row], path: &Path, thresholds: &[f32]) -> Result<(), Box<dyn st
             .filter(|v| v.is_finite())
             .fold(1.0, f64::max)
             * 1.15;
-        let mut c = ChartBuilder::on(&area)
-            .caption(title, ("sans-serif", 18))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(50)
-            .build_cartesian_2d(0.0..xmax, 0.0..ymax)?;
-        c.configure_mesh()
-            .x_desc("bytes/s (our datagrams, WebRTC)")
-            .y_desc("p95 remote error (mm)")
-            .draw()?;
-        for (k, thr) in thresholds.iter().enumerate() {
-            let color = Palette99::pick(k).to_rgba();
-            let pts: Vec<(f64, f64)> = rs
-                .iter()
-                .filter(|r| (r.threshold_m - thr).abs() < 1e-6)
-                .map(|r| (r.bytes_per_s, r.p95_mm))
-                .collect();
-            c.draw_series(LineSeries::new(pts.clone(), color))?
-                .label(format!("threshold {thr} m"))
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
-            c.draw_series(pts.iter().map(|p| Circle::new(*p, 3, color.filled())))?;
+        let series = thresholds
+            .iter()
+            .enumerate()
+            .map(|(k, thr)| {
+                let (r, g, b) = Palette99::COLORS[k % Palette99::COLORS.len()];
+                Series::new(
+                    format!("threshold {thr} m"),
+                    RGBColor(r, g, b),
+                    rs.iter()
+                        .filter(|r| (r.threshold_m - thr).abs() < 1e-6)
+                        .map(|r| (r.bytes_per_s, r.p95_mm))
+                        .collect(),
+                )
+            })
+            .collect();
+        LineChart {
+            title: title.to_owned(),
+            x_desc: "bytes/s (our datagrams, WebRTC)".to_owned(),
+            y_desc: "p95 remote error (mm)".to_owned(),
+            x_range: 0.0..xmax,
+            x_log: false,
+            y_range: 0.0..ymax,
+            series,
+            style: ChartStyle::PANEL,
         }
-        c.configure_series_labels()
-            .border_style(BLACK)
-            .background_style(WHITE.mix(0.8))
-            .draw()?;
-    }
-    root.present()?;
+    };
+    write_svg(
+        path,
+        (1100, 480),
+        &[
+            panel("avatar", "live: VR avatar (head + 2 hands)"),
+            panel(
+                "softbody60",
+                "live: 60-particle soft body, dragged by a particle",
+            ),
+        ],
+    )?;
     Ok(())
 }
 
@@ -461,25 +454,31 @@ pub fn net_live(out: &Path, seconds: f64, quick: bool) -> Result<(), String> {
     for i in 0..if quick { 1 } else { 3 } {
         migs.push(migration(&scratch, i)?);
     }
-    let mut csv = String::from(
-        "scenario,rate_hz,threshold_m,bytes_per_s,max_1s_bytes_per_s,p50_mm,p95_mm,max_mm,samples\n",
-    );
+    let mut csv = Csv::new(&[
+        "scenario",
+        "rate_hz",
+        "threshold_m",
+        "bytes_per_s",
+        "max_1s_bytes_per_s",
+        "p50_mm",
+        "p95_mm",
+        "max_mm",
+        "samples",
+    ]);
     for r in &rows {
-        let _ = writeln!(
-            csv,
-            "{},{},{},{:.1},{:.1},{:.3},{:.3},{:.3},{}",
-            r.scenario,
-            r.rate_hz,
-            r.threshold_m,
-            r.bytes_per_s,
-            r.max_1s_bytes_per_s,
-            r.p50_mm,
-            r.p95_mm,
-            r.max_mm,
-            r.samples
-        );
+        csv.row([
+            r.scenario.to_string(),
+            r.rate_hz.to_string(),
+            r.threshold_m.to_string(),
+            format!("{:.1}", r.bytes_per_s),
+            format!("{:.1}", r.max_1s_bytes_per_s),
+            format!("{:.3}", r.p50_mm),
+            format!("{:.3}", r.p95_mm),
+            format!("{:.3}", r.max_mm),
+            r.samples.to_string(),
+        ]);
     }
-    std::fs::write(out.join("live.csv"), csv).map_err(|e| e.to_string())?;
+    csv.write(out.join("live.csv")).map_err(|e| e.to_string())?;
     chart(&rows, &out.join("live.svg"), thresholds).map_err(|e| e.to_string())?;
     let mut md = format!(
         "# softsync live network bench\n\nGenerated by `scripts/bench-net-live{}` (= `softsync bench net-live` inside a network namespace): real processes on real WebRTC data channels over loopback, {seconds} s measured per cell. Bytes: every byte of the interacting bot's datagrams (no IP/UDP/DTLS/SCTP). Error: host's shown state vs the bot's own state at the shown time, center and every particle.\n\n",
@@ -542,15 +541,13 @@ pub fn net_live(out: &Path, seconds: f64, quick: bool) -> Result<(), String> {
         }
         md.push('\n');
     }
-    let mut c = connects.clone();
-    let mut m = migs.clone();
     let _ = writeln!(
         md,
         "Connect (signaling → first data channel, {} joins): median {:.0} ms. Migration (host SIGKILLed, earliest joiner announces itself; heartbeat timeout 1 s; {} runs): median {:.0} ms.",
-        c.len(),
-        percentile(&mut c, 0.5),
-        m.len(),
-        percentile(&mut m, 0.5)
+        connects.len(),
+        median(&connects),
+        migs.len(),
+        median(&migs)
     );
     std::fs::write(out.join("tables.md"), &md).map_err(|e| e.to_string())?;
     print!("{md}");
@@ -559,27 +556,28 @@ pub fn net_live(out: &Path, seconds: f64, quick: bool) -> Result<(), String> {
             r.scenario == scen && r.rate_hz == 20.0 && (r.threshold_m - 0.005).abs() < 1e-6
         })
     };
-    if let Some(r) = pick("softbody60") {
-        println!(
-            "RESULT live.softbody60 hz=20 bytes_per_s={:.0} p95_mm={:.2}",
-            r.bytes_per_s, r.p95_mm
-        );
-    }
-    if let Some(r) = pick("avatar") {
-        println!(
-            "RESULT live.avatar hz=20 bytes_per_s={:.0} p95_mm={:.2}",
-            r.bytes_per_s, r.p95_mm
-        );
+    for scen in ["softbody60", "avatar"] {
+        if let Some(r) = pick(scen) {
+            println!(
+                "{}",
+                ResultLine::new(format!("live.{scen}"))
+                    .field("hz", 20)
+                    .fixed("bytes_per_s", r.bytes_per_s, 0)
+                    .fixed("p95_mm", r.p95_mm, 2)
+            );
+        }
     }
     println!(
-        "RESULT live.connect median_ms={:.0} joins={}",
-        percentile(&mut c, 0.5),
-        c.len()
+        "{}",
+        ResultLine::new("live.connect")
+            .fixed("median_ms", median(&connects), 0)
+            .field("joins", connects.len())
     );
     println!(
-        "RESULT live.migration median_ms={:.0} runs={}",
-        percentile(&mut m, 0.5),
-        m.len()
+        "{}",
+        ResultLine::new("live.migration")
+            .fixed("median_ms", median(&migs), 0)
+            .field("runs", migs.len())
     );
     let _ = std::fs::remove_dir_all(&scratch);
     Ok(())
@@ -738,26 +736,31 @@ pub fn room_load(out: &Path, seconds: f64, sizes: &[usize]) -> Result<(), String
     std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
     let scratch = std::env::temp_dir().join(format!("softsync-load-{}", std::process::id()));
     std::fs::create_dir_all(&scratch).map_err(|e| e.to_string())?;
-    let mut csv = String::from(
-        "peers,host_up_bytes_per_s,host_down_bytes_per_s,bot_up_bytes_per_s,grabs,refused_grabs,slowest_join_ms,agree\n",
-    );
+    let mut csv = Csv::new(&[
+        "peers",
+        "host_up_bytes_per_s",
+        "host_down_bytes_per_s",
+        "bot_up_bytes_per_s",
+        "grabs",
+        "refused_grabs",
+        "slowest_join_ms",
+        "agree",
+    ]);
     let mut md = format!(
         "# softsync room load\n\nGenerated by `scripts/bench-net-live --load` (= `softsync bench room-load` in a network namespace): a host and bots in one room on real WebRTC over loopback, {seconds} s measured; every bot loops reach → grab (authority requests contend) → squeeze → release → sway. One machine runs every peer (2 cores here).\n\n| peers | host up B/s | host down B/s | bot up B/s | grabs taken | grabs refused | all joined after ms | members and owners agree |\n|---:|---:|---:|---:|---:|---:|---:|:---:|\n"
     );
     for &n in sizes {
         let r = load_one(&scratch, n, seconds)?;
-        let _ = writeln!(
-            csv,
-            "{},{:.0},{:.0},{:.0},{},{},{:.0},{}",
-            r.peers,
-            r.host_up,
-            r.host_down,
-            r.bot_up,
-            r.grabs,
-            r.failed_grabs,
-            r.slowest_join_ms,
-            r.agree
-        );
+        csv.row([
+            r.peers.to_string(),
+            format!("{:.0}", r.host_up),
+            format!("{:.0}", r.host_down),
+            format!("{:.0}", r.bot_up),
+            r.grabs.to_string(),
+            r.failed_grabs.to_string(),
+            format!("{:.0}", r.slowest_join_ms),
+            r.agree.to_string(),
+        ]);
         let _ = writeln!(
             md,
             "| {} | {:.0} | {:.0} | {:.0} | {} | {} | {:.0} | {} |",
@@ -771,11 +774,19 @@ pub fn room_load(out: &Path, seconds: f64, sizes: &[usize]) -> Result<(), String
             if r.agree { "yes" } else { "NO" }
         );
         println!(
-            "RESULT live.load peers={} host_up_bytes_per_s={:.0} host_down_bytes_per_s={:.0} bot_up_bytes_per_s={:.0} grabs={} refused={} join_ms={:.0} agree={}",
-            r.peers, r.host_up, r.host_down, r.bot_up, r.grabs, r.failed_grabs, r.slowest_join_ms, r.agree
+            "{}",
+            ResultLine::new("live.load")
+                .field("peers", r.peers)
+                .fixed("host_up_bytes_per_s", r.host_up, 0)
+                .fixed("host_down_bytes_per_s", r.host_down, 0)
+                .fixed("bot_up_bytes_per_s", r.bot_up, 0)
+                .field("grabs", r.grabs)
+                .field("refused", r.failed_grabs)
+                .fixed("join_ms", r.slowest_join_ms, 0)
+                .field("agree", r.agree)
         );
     }
-    std::fs::write(out.join("load.csv"), csv).map_err(|e| e.to_string())?;
+    csv.write(out.join("load.csv")).map_err(|e| e.to_string())?;
     std::fs::write(out.join("load.md"), &md).map_err(|e| e.to_string())?;
     print!("{md}");
     let _ = std::fs::remove_dir_all(&scratch);

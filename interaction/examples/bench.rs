@@ -11,20 +11,17 @@
 use std::time::Instant;
 
 use glam::{Quat, Vec3};
+use softsync_benchkit::{median, Csv, ResultLine};
 use softsync_interaction::*;
 use softsync_softbody::rapier3d::prelude::{ColliderBuilder, PhysicsWorld, RigidBodyBuilder};
 use softsync_softbody::{ClusterMethod, Mesh, SimulationSpace, SoftBodyConfig, SoftBodySet};
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
 
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
     let reps = if quick { 300 } else { 3000 };
     let dt = 1.0 / 90.0;
     let mut lines = Vec::new();
+    let mut csv = Csv::new(&["case", "us_per_hand_step"]);
     for n in [1usize, 10, 100] {
         let mut world = PhysicsWorld::new();
         world.gravity = Vec3::ZERO;
@@ -60,9 +57,14 @@ fn main() {
             times.push(t.elapsed().as_secs_f64() * 1e6);
         }
         assert_eq!(hands.hovered(hand).len(), n);
-        let us = median(times);
+        let us = median(&times);
         println!("| hovered {n:>3} | {us:.2} µs |");
-        lines.push(format!("RESULT interaction.step hovered={n} us={us:.2}"));
+        lines.push(
+            ResultLine::new("interaction.step")
+                .field("hovered", n)
+                .fixed("us", us, 2),
+        );
+        csv.row([format!("hovered={n}"), format!("{us:.2}")]);
     }
     // Holding one particle of a 2562-vertex soft body (the hold itself, without the body's step).
     let mut world = PhysicsWorld::new();
@@ -112,25 +114,21 @@ fn main() {
         step_times.push(t.elapsed().as_secs_f64() * 1e6);
     }
     assert!(hands.held(hand).is_some());
-    let us = median(times);
-    let body_us = median(step_times);
+    let us = median(&times);
+    let body_us = median(&step_times);
     println!("| holding a soft-body particle | {us:.2} µs (body step {body_us:.0} µs) |");
-    lines.push(format!("RESULT interaction.step held=soft_particle us={us:.2} soft_step_us={body_us:.0} frame_share_90hz={:.5}", us / 11_111.0));
+    lines.push(
+        ResultLine::new("interaction.step")
+            .field("held", "soft_particle")
+            .fixed("us", us, 2)
+            .fixed("soft_step_us", body_us, 0)
+            .fixed("frame_share_90hz", us / 11_111.0, 5),
+    );
+    csv.row(["held=soft_particle".to_string(), format!("{us:.2}")]);
     let out =
         std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../docs/results/interaction");
     std::fs::create_dir_all(&out).unwrap();
-    let mut csv = String::from("case,us_per_hand_step\n");
-    for l in &lines {
-        // "RESULT interaction.step hovered=N us=X ..." → "hovered=N,X"
-        let mut parts = l.split_whitespace().skip(2);
-        let case = parts.next().unwrap_or("");
-        let us = parts
-            .next()
-            .and_then(|p| p.strip_prefix("us="))
-            .unwrap_or("");
-        csv.push_str(&format!("{case},{us}\n"));
-    }
-    std::fs::write(out.join("step.csv"), csv).unwrap();
+    csv.write(out.join("step.csv")).unwrap();
     for l in lines {
         println!("{l}");
     }

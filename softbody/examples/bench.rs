@@ -17,26 +17,17 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use glam::Vec3;
-use plotters::prelude::*;
+use softsync_benchkit::plotters::style::{BLUE, GREEN, MAGENTA, RED};
+use softsync_benchkit::{write_svg, ChartStyle, Csv, LineChart, ResultLine, Series, Summary};
 use softsync_softbody::rapier3d::prelude::{
     ColliderBuilder, PhysicsWorld, RigidBodyBuilder, SoftBodyBuilder,
 };
 use softsync_softbody::scenario::{Scenario, ScenarioKind};
 use softsync_softbody::{build_particle_map, ClusterMethod, Mesh, SoftBodyConfig};
 
-struct Stats {
-    min: f64,
-    median: f64,
-    max: f64,
-}
-
-fn stats(mut v: Vec<f64>) -> Stats {
-    v.sort_by(f64::total_cmp);
-    Stats {
-        min: v[0],
-        median: v[v.len() / 2],
-        max: v[v.len() - 1],
-    }
+/// Min, median and max of timings (there is always at least one run).
+fn stats(v: Vec<f64>) -> Summary {
+    Summary::of(&v).unwrap()
 }
 
 fn welded(mesh: &Mesh) -> (Vec<Vec3>, Vec<[u32; 3]>) {
@@ -105,7 +96,15 @@ fn main() {
     let mut results = Vec::new();
 
     // ---- Tables 2–4: init time per clustering method.
-    let mut csv = String::from("mesh,vertices,method,target,particles,cluster_ms,insert_ms\n");
+    let mut csv = Csv::new(&[
+        "mesh",
+        "vertices",
+        "method",
+        "target",
+        "particles",
+        "cluster_ms",
+        "insert_ms",
+    ]);
     writeln!(
         md,
         "## Init time per clustering method (thesis Tables 2–4)\n"
@@ -145,14 +144,15 @@ fn main() {
                         })
                         .collect(),
                 );
-                writeln!(
-                    csv,
-                    "{mname},{},{kind},{target},{n},{:.3},{:.3}",
-                    p.len(),
-                    cl.median,
-                    ins.median
-                )
-                .unwrap();
+                csv.row([
+                    mname.to_string(),
+                    p.len().to_string(),
+                    kind.to_string(),
+                    target.to_string(),
+                    n.to_string(),
+                    format!("{:.3}", cl.median),
+                    format!("{:.3}", ins.median),
+                ]);
                 writeln!(
                     md,
                     "| {mname} | {} | {kind} | {n} | {:.2} | {:.2} |",
@@ -168,22 +168,29 @@ fn main() {
             }
         }
     }
-    std::fs::write(out.join("init.csv"), &csv).unwrap();
-    results.push(format!(
-        "RESULT softbody.init icosphere4 {}",
+    csv.write(out.join("init.csv")).unwrap();
+    results.push(
         init_max
             .iter()
-            .map(|(k, v)| format!("{k}_ms={v:.2}"))
-            .collect::<Vec<_>>()
-            .join(" ")
-    ));
+            .fold(ResultLine::new("softbody.init icosphere4"), |l, (k, v)| {
+                l.fixed(&format!("{k}_ms"), *v, 2)
+            }),
+    );
 
     // ---- Tables 5–8: step time, and accuracy against a dense reference.
     let steps = if quick { 90 } else { 270 };
     let dt = 1.0 / 90.0;
-    let mut csv = String::from(
-        "mesh,vertices,method,particles,min_ms,median_ms,max_ms,poke_rms_mm,squeeze_rms_mm\n",
-    );
+    let mut csv = Csv::new(&[
+        "mesh",
+        "vertices",
+        "method",
+        "particles",
+        "min_ms",
+        "median_ms",
+        "max_ms",
+        "poke_rms_mm",
+        "squeeze_rms_mm",
+    ]);
     writeln!(
         md,
         "\n## Step time incl. deformation of all vertices (thesis Tables 5–8)\n"
@@ -248,15 +255,17 @@ fn main() {
                 let (_, sq) = trace(ScenarioKind::Squeeze, mesh, cfg, steps);
                 let st = stats(times);
                 let (e1, e2) = (err(&poke, &ref_poke), err(&sq, &ref_sq));
-                writeln!(
-                    csv,
-                    "{mname},{},{kind},{n},{:.4},{:.4},{:.4},{e1:.3},{e2:.3}",
-                    p.len(),
-                    st.min,
-                    st.median,
-                    st.max
-                )
-                .unwrap();
+                csv.row([
+                    mname.to_string(),
+                    p.len().to_string(),
+                    kind.to_string(),
+                    n.to_string(),
+                    format!("{:.4}", st.min),
+                    format!("{:.4}", st.median),
+                    format!("{:.4}", st.max),
+                    format!("{e1:.3}"),
+                    format!("{e2:.3}"),
+                ]);
                 if target != 120 {
                     writeln!(
                         md,
@@ -284,7 +293,7 @@ fn main() {
             }
         }
     }
-    std::fs::write(out.join("step.csv"), &csv).unwrap();
+    csv.write(out.join("step.csv")).unwrap();
 
     // ---- Where the 860-particle step goes: restoring velocities, rapier, deformation.
     let breakdown = {
@@ -342,7 +351,7 @@ fn main() {
 
     // ---- rapier 0.36's own soft bodies on the same mesh, same run.
     let native_steps = if quick { 15 } else { 45 };
-    let mut csv = String::from("body,particles,min_ms,median_ms,max_ms\n");
+    let mut csv = Csv::new(&["body", "particles", "min_ms", "median_ms", "max_ms"]);
     writeln!(
         md,
         "\n## rapier 0.36's own soft bodies (outside baseline), same run\n"
@@ -390,12 +399,13 @@ fn main() {
         let h = w.insert_soft_body(builder.can_sleep(false));
         let n = w.soft_bodies.get(h).map(|b| b.num_particles()).unwrap_or(0);
         let st = stats((0..native_steps).map(|_| time_ms(|| w.step())).collect());
-        writeln!(
-            csv,
-            "{name},{n},{:.3},{:.3},{:.3}",
-            st.min, st.median, st.max
-        )
-        .unwrap();
+        csv.row([
+            name.to_string(),
+            n.to_string(),
+            format!("{:.3}", st.min),
+            format!("{:.3}", st.median),
+            format!("{:.3}", st.max),
+        ]);
         writeln!(
             md,
             "| {name} | {n} | {:.2} | {:.2} | {:.2} |",
@@ -406,75 +416,55 @@ fn main() {
             native_shell = st.median;
         }
     }
-    std::fs::write(out.join("native.csv"), &csv).unwrap();
+    csv.write(out.join("native.csv")).unwrap();
     writeln!(
         md,
         "\nBare rapier world of 860 free spheres drifting at 1 cm/s, with our particles' rapier settings and no soft-body code: median {bare:.3} ms/step (rapier's cost depends on how bodies move; our particles mostly hold still relative to the broad phase)."
     )
     .unwrap();
-    results.push(format!(
-        "RESULT softbody.step icosphere4_p860 median_ms={p860_median:.3} rapier_native_ratio={:.1} bare_rapier_ms={bare:.3} sleeping_allowed_median_ms={p860_sleep_median:.3}",
-        native_shell / p860_median
-    ));
+    results.push(
+        ResultLine::new("softbody.step icosphere4_p860")
+            .fixed("median_ms", p860_median, 3)
+            .fixed("rapier_native_ratio", native_shell / p860_median, 1)
+            .fixed("bare_rapier_ms", bare, 3)
+            .fixed("sleeping_allowed_median_ms", p860_sleep_median, 3),
+    );
 
     // ---- Chart: step time against accuracy.
-    let svg = out.join("accuracy.svg");
-    {
-        let root = SVGBackend::new(&svg, (820, 560)).into_drawing_area();
-        root.fill(&WHITE).unwrap();
-        let xmax = curves
+    let xmax = curves
+        .iter()
+        .flat_map(|c| c.1.iter().map(|p| p.0))
+        .fold(0.0, f64::max)
+        * 1.15;
+    let ymax = curves
+        .iter()
+        .flat_map(|c| c.1.iter().map(|p| p.1))
+        .fold(0.0, f64::max)
+        * 1.15;
+    let chart = LineChart {
+        title: "icosphere4 (2562 v): step time vs error to the dense reference".to_owned(),
+        x_desc: "median step ms (incl. deformation)".to_owned(),
+        y_desc: "RMS error mm (poke+squeeze)".to_owned(),
+        x_range: 0.0..xmax.max(1e-3),
+        x_log: false,
+        y_range: 0.0..ymax.max(1e-3),
+        series: curves
             .iter()
-            .flat_map(|c| c.1.iter().map(|p| p.0))
-            .fold(0.0, f64::max)
-            * 1.15;
-        let ymax = curves
-            .iter()
-            .flat_map(|c| c.1.iter().map(|p| p.1))
-            .fold(0.0, f64::max)
-            * 1.15;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(
-                "icosphere4 (2562 v): step time vs error to the dense reference",
-                ("sans-serif", 18),
-            )
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(56)
-            .build_cartesian_2d(0.0..xmax.max(1e-3), 0.0..ymax.max(1e-3))
-            .unwrap();
-        chart
-            .configure_mesh()
-            .x_desc("median step ms (incl. deformation)")
-            .y_desc("RMS error mm (poke+squeeze)")
-            .draw()
-            .unwrap();
-        let colors = [RED, BLUE, GREEN, MAGENTA];
-        for ((name, pts), col) in curves.iter().zip(colors) {
-            chart
-                .draw_series(LineSeries::new(pts.iter().copied(), col.stroke_width(2)))
-                .unwrap()
-                .label(name.as_str())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], col));
-            chart
-                .draw_series(pts.iter().map(|p| Circle::new(*p, 4, col.filled())))
-                .unwrap();
-        }
-        chart
-            .configure_series_labels()
-            .border_style(BLACK)
-            .background_style(WHITE)
-            .draw()
-            .unwrap();
-        root.present().unwrap();
-    }
-    let mut acc = String::from("method,median_ms,rms_mm\n");
+            .zip([RED, BLUE, GREEN, MAGENTA])
+            .map(|((name, pts), col)| Series::new(name.as_str(), col, pts.clone()))
+            .collect(),
+        style: ChartStyle::FIGURE,
+    };
+    write_svg(out.join("accuracy.svg"), (820, 560), &[chart]).unwrap();
+    let mut acc = Csv::new(&["method", "median_ms", "rms_mm"]);
     for (name, pts) in &curves {
         for p in pts {
-            writeln!(acc, "{name},{:.4},{:.3}", p.0, p.1).unwrap();
+            acc.row([name.clone(), format!("{:.4}", p.0), format!("{:.3}", p.1)]);
         }
     }
-    std::fs::write(out.join("accuracy.csv"), acc).unwrap();
+    acc.write(out.join("accuracy.csv")).unwrap();
     writeln!(md, "\n![step time vs error](accuracy.svg)\n").unwrap();
+    let results: Vec<String> = results.iter().map(ResultLine::to_string).collect();
     writeln!(md, "```\n{}\n```", results.join("\n")).unwrap();
     let header = format!(
         "# Soft-body benchmark results\n\nGenerated by `cargo run --release -p softsync-softbody --example bench{}` on a {}-core machine. Do not edit by hand.\n\n",

@@ -20,7 +20,8 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use glam::{Quat, Vec3};
-use plotters::prelude::*;
+use softsync_benchkit::plotters::prelude::*;
+use softsync_benchkit::{percentile, write_svg, ChartStyle, Csv, LineChart, ResultLine, Series};
 use softsync_softbody::methods::builders::plain_pbd;
 use softsync_softbody::methods::choice::{choose, pareto_front, Candidate, ObjectNeeds};
 use softsync_softbody::methods::ispc::{ispc_links, punch_holes};
@@ -67,16 +68,8 @@ struct Trace {
 
 /// The step time reported: the 25th percentile, robust to the other processes of a shared
 /// machine taking the core for a while (a median moves with them, the lower quartile much less).
-fn cost_ms(v: Vec<f64>) -> f64 {
+fn cost_ms(v: &[f64]) -> f64 {
     percentile(v, 0.25)
-}
-
-fn percentile(mut v: Vec<f64>, q: f64) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[((v.len() - 1) as f64 * q).round() as usize]
 }
 
 fn run(kind: ScenarioKind, mesh: &Mesh, spec: &MethodSpec) -> Option<Trace> {
@@ -191,7 +184,7 @@ fn measure_curves(
     quick: bool,
 ) -> (Vec<Point>, f64) {
     let reference = run(kind, mesh, &reference_spec(quick)).unwrap();
-    let ref_ms = cost_ms(reference.step_ms.clone());
+    let ref_ms = cost_ms(&reference.step_ms);
     let mut out = Vec::new();
     for spec in specs {
         let Some(t) = run(kind, mesh, spec) else {
@@ -204,7 +197,7 @@ fn measure_curves(
             method: spec.kind.name(),
             label,
             particles: t.particles,
-            ms: cost_ms(t.step_ms),
+            ms: cost_ms(&t.step_ms),
             rms_mm,
             max_mm,
             raw_mm,
@@ -234,8 +227,6 @@ const COLORS: [RGBColor; 7] = [
 ];
 
 fn chart(path: &PathBuf, title: &str, points: &[Point]) {
-    let root = SVGBackend::new(path, (900, 600)).into_drawing_area();
-    root.fill(&WHITE).unwrap();
     let xmax = points.iter().map(|p| p.ms).fold(0.0, f64::max) * 1.5;
     let xmin = points.iter().map(|p| p.ms).fold(f64::MAX, f64::min) * 0.7;
     let ymax = points
@@ -244,59 +235,44 @@ fn chart(path: &PathBuf, title: &str, points: &[Point]) {
         .filter(|v| v.is_finite())
         .fold(0.0, f64::max)
         * 1.15;
-    let mut c = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 18))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(56)
-        .build_cartesian_2d(
-            (xmin.max(1e-3)..xmax.max(1e-2)).log_scale(),
-            0.0..ymax.max(1.0),
-        )
-        .unwrap();
-    c.configure_mesh()
-        .x_desc("step ms, 25th percentile (log)")
-        .y_desc("RMS shape error to the dense tet reference, mm")
-        .draw()
-        .unwrap();
     let mut by: BTreeMap<&str, Vec<&Point>> = BTreeMap::new();
     for p in points {
         by.entry(p.method).or_default().push(p);
     }
-    for (i, (name, pts)) in by.iter().enumerate() {
-        let col = COLORS[i % COLORS.len()];
-        let mut line: Vec<(f64, f64)> = pts.iter().map(|p| (p.ms, p.rms_mm as f64)).collect();
-        line.sort_by(|a, b| a.0.total_cmp(&b.0));
-        c.draw_series(LineSeries::new(line.clone(), col.stroke_width(2)))
-            .unwrap()
-            .label(*name)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], col));
-        c.draw_series(line.iter().map(|p| Circle::new(*p, 4, col.filled())))
-            .unwrap();
-    }
-    // Operating points: the thesis's particle method as configured by default, and the ISPC
-    // paper's model (surface + links, a few iterations).
-    for p in points {
-        let mark = match p.label.as_str() {
-            "particle_c0.060" => Some("thesis"),
-            "ispc_s2i4" => Some("ISPC paper"),
-            _ => None,
-        };
-        if let Some(m) = mark {
-            c.draw_series(std::iter::once(Text::new(
-                format!("← {m}"),
-                (p.ms * 1.08, p.rms_mm as f64),
-                ("sans-serif", 13),
-            )))
-            .unwrap();
-        }
-    }
-    c.configure_series_labels()
-        .border_style(BLACK)
-        .background_style(WHITE)
-        .draw()
-        .unwrap();
-    root.present().unwrap();
+    let series = by
+        .iter()
+        .enumerate()
+        .map(|(i, (name, pts))| {
+            let mut line: Vec<(f64, f64)> = pts.iter().map(|p| (p.ms, p.rms_mm as f64)).collect();
+            line.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let mut s = Series::new(*name, COLORS[i % COLORS.len()], line);
+            // Operating points: the thesis's particle method as configured by default, and the
+            // ISPC paper's model (surface + links, a few iterations).
+            s.notes = pts
+                .iter()
+                .filter_map(|p| {
+                    let mark = match p.label.as_str() {
+                        "particle_c0.060" => "thesis",
+                        "ispc_s2i4" => "ISPC paper",
+                        _ => return None,
+                    };
+                    Some((format!("← {mark}"), (p.ms * 1.08, p.rms_mm as f64)))
+                })
+                .collect();
+            s
+        })
+        .collect();
+    let chart = LineChart {
+        title: title.to_owned(),
+        x_desc: "step ms, 25th percentile (log)".to_owned(),
+        y_desc: "RMS shape error to the dense tet reference, mm".to_owned(),
+        x_range: xmin.max(1e-3)..xmax.max(1e-2),
+        x_log: true,
+        y_range: 0.0..ymax.max(1.0),
+        series,
+        style: ChartStyle::FIGURE,
+    };
+    write_svg(path, (900, 600), &[chart]).unwrap();
 }
 
 fn bunny() -> Mesh {
@@ -314,7 +290,7 @@ fn main() {
     let ico = Mesh::icosphere(0.1, 3);
     let soft_box = Mesh::cuboid(Vec3::new(0.08, 0.05, 0.06), 6);
     let mut md = String::new();
-    let mut results: Vec<String> = Vec::new();
+    let mut results: Vec<ResultLine> = Vec::new();
     let specs = specs(quick);
     let rs = reference_spec(quick);
 
@@ -327,7 +303,21 @@ fn main() {
     )
     .unwrap();
     writeln!(md, "Error: distance of each method's surface vertices to the dense tetrahedral reference (`{}`, XPBD edges + tet volume on parry's `volume_mesh`, surface embedded) at the same times, sampled every {} steps over the whole scenario, after the best rigid fit of the reference onto the model at each sample (*shape* error: a different bounce height, slide or roll is not deformation error): RMS over vertices and samples, and the largest. `raw mm`: the same without the fit (trajectory included). `min vol`: smallest volume ratio seen; `rest mm`: RMS distance to the rest shape (after the best rigid fit) at the end of the scenario, after release. `sane`: stability verdict over the run. Timings: 25th-percentile wall-clock per step (robust to other processes on the shared 2-core machine) while the body is awake (steps where it slept are not counted), single thread, all work of the step (props, rapier, the method).\n", rs.label(), SAMPLE_EVERY).unwrap();
-    let mut csv = String::from("scenario,label,method,particles,p25_ms,shape_rms_mm,shape_max_mm,raw_rms_mm,min_volume,end_volume,rest_mm,max_inverted,sane\n");
+    let mut csv = Csv::new(&[
+        "scenario",
+        "label",
+        "method",
+        "particles",
+        "p25_ms",
+        "shape_rms_mm",
+        "shape_max_mm",
+        "raw_rms_mm",
+        "min_volume",
+        "end_volume",
+        "rest_mm",
+        "max_inverted",
+        "sane",
+    ]);
     let mut all: BTreeMap<&str, Vec<Point>> = BTreeMap::new();
     // The restricted soft region (thesis 3.5.2) where only one side is touched: the poke.
     let poke_region = {
@@ -356,24 +346,21 @@ fn main() {
         let (points, ref_ms) = measure_curves(kind, &bunny, &specs, quick);
         writeln!(md, "### {}\n\nReference `{}`: {ref_ms:.2} ms/step.\n\n![{}]({}.svg)\n\n| method | particles | ms/step | shape RMS mm | shape max mm | raw RMS mm | min vol | end vol | rest mm | max inverted tets | sane |\n|---|---|---|---|---|---|---|---|---|---|---|", kind.name(), rs.label(), kind.name(), kind.name()).unwrap();
         for p in &points {
-            writeln!(
-                csv,
-                "{},{},{},{},{:.4},{:.3},{:.3},{:.3},{:.4},{:.4},{:.3},{},{}",
-                kind.name(),
-                p.label,
-                p.method,
-                p.particles,
-                p.ms,
-                p.rms_mm,
-                p.max_mm,
-                p.raw_mm,
-                p.min_volume,
-                p.end_volume,
-                p.rest_mm,
-                p.max_inverted,
-                p.verdict
-            )
-            .unwrap();
+            csv.row([
+                kind.name().to_string(),
+                p.label.clone(),
+                p.method.to_string(),
+                p.particles.to_string(),
+                format!("{:.4}", p.ms),
+                format!("{:.3}", p.rms_mm),
+                format!("{:.3}", p.max_mm),
+                format!("{:.3}", p.raw_mm),
+                format!("{:.4}", p.min_volume),
+                format!("{:.4}", p.end_volume),
+                format!("{:.3}", p.rest_mm),
+                p.max_inverted.to_string(),
+                p.verdict.to_string(),
+            ]);
             writeln!(
                 md,
                 "| `{}` | {} | {:.3} | {:.2} | {:.1} | {:.1} | {:.3} | {:.3} | {:.2} | {} | {} |",
@@ -390,14 +377,12 @@ fn main() {
                 p.verdict
             )
             .unwrap();
-            results.push(format!(
-                "RESULT methods.{} {} ms={:.3} rms_mm={:.2} volume={:.3}",
-                kind.name(),
-                p.label,
-                p.ms,
-                p.rms_mm,
-                p.min_volume
-            ));
+            results.push(
+                ResultLine::new(format!("methods.{} {}", kind.name(), p.label))
+                    .fixed("ms", p.ms, 3)
+                    .fixed("rms_mm", p.rms_mm, 2)
+                    .fixed("volume", p.min_volume, 3),
+            );
         }
         let front = pareto_front(
             &points
@@ -434,7 +419,7 @@ fn main() {
         );
         all.insert(kind.name(), points);
     }
-    std::fs::write(out.join("speed_accuracy.csv"), &csv).unwrap();
+    csv.write(out.join("speed_accuracy.csv")).unwrap();
 
     // ---- 2. The ISPC paper's FPS comparison: ISPC vs tets on the same bunny, same budget.
     writeln!(md, "## 2. ISPC against the tetrahedral model on the same bunny (the paper: 2.15× the frame rate)\n").unwrap();
@@ -459,10 +444,11 @@ fn main() {
         }) {
             let ratio = q.ms / p.ms;
             writeln!(md, "| `{}` ({} nodes) | `{}` ({} nodes) | {:.3} | {:.3} | **{ratio:.2}×** | {:.2} | {:.2} |", p.label, p.particles, q.label, q.particles, p.ms, q.ms, p.rms_mm, q.rms_mm).unwrap();
-            results.push(format!(
-                "RESULT methods.fps_ratio {}_vs_{} tet_over_ispc={ratio:.2} paper=2.15",
-                p.label, q.label
-            ));
+            results.push(
+                ResultLine::new(format!("methods.fps_ratio {}_vs_{}", p.label, q.label))
+                    .fixed("tet_over_ispc", ratio, 2)
+                    .field("paper", 2.15),
+            );
         }
     }
     // The paper's own warnings, measured.
@@ -484,13 +470,13 @@ fn main() {
     let closed = ispc_links(&w.positions, &w.triangles).unwrap();
     let open = ispc_links(&hp, &ht).unwrap();
     writeln!(md, "## 3. ISPC links on a bunny with holes\n\nTwo holes of radius 4 cm punched in the bunny (back and bottom): {} of {} triangles left.\n\n| mesh | rays | links | misses | own faces stepped over | duplicates dropped |\n|---|---|---|---|---|---|\n| closed | {} | {} | {} | {} | {} |\n| holed | {} | {} | {} | {} | {} |\n", ht.len(), w.triangles.len(), closed.rays, closed.links.len(), closed.misses, closed.own_faces_skipped, closed.duplicates, open.rays, open.links.len(), open.misses, open.own_faces_skipped, open.duplicates).unwrap();
-    results.push(format!(
-        "RESULT methods.ispc_holes rays={} links={} misses={} closed_links={}",
-        open.rays,
-        open.links.len(),
-        open.misses,
-        closed.links.len()
-    ));
+    results.push(
+        ResultLine::new("methods.ispc_holes")
+            .field("rays", open.rays)
+            .field("links", open.links.len())
+            .field("misses", open.misses)
+            .field("closed_links", closed.links.len()),
+    );
 
     // ---- 4. XPBD against plain PBD: cantilever sag over the solver budget.
     let budgets = [
@@ -502,7 +488,7 @@ fn main() {
         (15, 2),
         (30, 1),
     ];
-    let mut csv = String::from("solver,young_pa,substeps,iterations,sag_m\n");
+    let mut csv = Csv::new(&["solver", "young_pa", "substeps", "iterations", "sag_m"]);
     let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
     writeln!(md, "## 4. XPBD against plain PBD: a 0.4 m tet cantilever's tip sag over (substeps, iterations) with 30 projections per step\n\n![beam](xpbd_beam.svg)\n\n| solver | E Pa | {} | spread |\n|---|---|{}---|", budgets.iter().map(|(s, i)| format!("({s},{i})")).collect::<Vec<_>>().join(" | "), "---|".repeat(budgets.len())).unwrap();
     for (solver, e) in [
@@ -518,7 +504,13 @@ fn main() {
         let hi = sags.iter().copied().fold(f32::MIN, f32::max);
         let name = format!("{solver:?} E={e:.0e}");
         for (&(s, i), sag) in budgets.iter().zip(&sags) {
-            writeln!(csv, "{solver:?},{e},{s},{i},{sag:.5}").unwrap();
+            csv.row([
+                format!("{solver:?}"),
+                e.to_string(),
+                s.to_string(),
+                i.to_string(),
+                format!("{sag:.5}"),
+            ]);
         }
         writeln!(
             md,
@@ -530,9 +522,10 @@ fn main() {
             (hi - lo) / hi * 100.0
         )
         .unwrap();
-        results.push(format!(
-            "RESULT methods.beam {name} spread_pct={:.1}",
-            (hi - lo) / hi * 100.0
+        results.push(ResultLine::new(format!("methods.beam {name}")).fixed(
+            "spread_pct",
+            (hi - lo) / hi * 100.0,
+            1,
         ));
         series.push((
             name,
@@ -544,47 +537,29 @@ fn main() {
         ));
     }
     writeln!(md, "\nXPBD keeps the sag where the solver converges (E = 2e5); at E = 5e5 one substep of 30 Gauss–Seidel iterations has not converged and sags more — substeps, not iterations, are what make XPBD stiff (Macklin et al. 2019, \"small steps\"). Plain PBD's stiffness is a per-iteration factor, so the same material sags by an order of magnitude differently.\n").unwrap();
-    std::fs::write(out.join("xpbd_beam.csv"), &csv).unwrap();
-    {
-        let path = out.join("xpbd_beam.svg");
-        let root = SVGBackend::new(&path, (820, 520)).into_drawing_area();
-        root.fill(&WHITE).unwrap();
-        let ymax = series
+    csv.write(out.join("xpbd_beam.csv")).unwrap();
+    let ymax = series
+        .iter()
+        .flat_map(|s| s.1.iter().map(|p| p.1))
+        .fold(0.0, f64::max)
+        * 1.15;
+    let beam = LineChart {
+        title: "cantilever tip sag vs substeps (iterations = 30 / substeps)".to_owned(),
+        x_desc: "substeps per step (log)".to_owned(),
+        y_desc: "tip sag m".to_owned(),
+        x_range: 1.0..30.0,
+        x_log: true,
+        y_range: 0.0..ymax,
+        series: series
             .iter()
-            .flat_map(|s| s.1.iter().map(|p| p.1))
-            .fold(0.0, f64::max)
-            * 1.15;
-        let mut c = ChartBuilder::on(&root)
-            .caption(
-                "cantilever tip sag vs substeps (iterations = 30 / substeps)",
-                ("sans-serif", 18),
-            )
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(56)
-            .build_cartesian_2d((1.0f64..30.0).log_scale(), 0.0..ymax)
-            .unwrap();
-        c.configure_mesh()
-            .x_desc("substeps per step (log)")
-            .y_desc("tip sag m")
-            .draw()
-            .unwrap();
-        for (i, (name, pts)) in series.iter().enumerate() {
-            let col = COLORS[i % COLORS.len()];
-            c.draw_series(LineSeries::new(pts.clone(), col.stroke_width(2)))
-                .unwrap()
-                .label(name.as_str())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], col));
-            c.draw_series(pts.iter().map(|p| Circle::new(*p, 4, col.filled())))
-                .unwrap();
-        }
-        c.configure_series_labels()
-            .border_style(BLACK)
-            .background_style(WHITE)
-            .draw()
-            .unwrap();
-        root.present().unwrap();
-    }
+            .enumerate()
+            .map(|(i, (name, pts))| {
+                Series::new(name.as_str(), COLORS[i % COLORS.len()], pts.clone())
+            })
+            .collect(),
+        style: ChartStyle::FIGURE,
+    };
+    write_svg(out.join("xpbd_beam.svg"), (820, 520), &[beam]).unwrap();
 
     // ---- 5. Stability maps: stiffness × step rate × impact speed against a thin wall.
     let small = Mesh::icosphere(0.1, 2);
@@ -600,7 +575,13 @@ fn main() {
         MethodSpec::new(MethodKind::ShapeMatching).budget(2, 1),
         MethodSpec::new(MethodKind::RapierNative),
     ];
-    let mut csv = String::from("method,stiffness_factor,rate_hz,speed_mps,verdict\n");
+    let mut csv = Csv::new(&[
+        "method",
+        "stiffness_factor",
+        "rate_hz",
+        "speed_mps",
+        "verdict",
+    ]);
     let mut maps: Vec<(String, Vec<(usize, usize, bool)>)> = Vec::new();
     writeln!(md, "## 5. Stability maps\n\nIcosphere (162 vertices, 0.2 m) thrown weightless at a fixed wall 1 cm thick for 1 s; stiffness factor × the default material (Young's modulus for the position-based methods, restoring rate for the particle method, spring frequency² for rapier's); sane = no NaN, no vertex beyond 2 sizes from the centroid or faster than 100 m/s, no inverted tet at any step, no vertex past the wall.\n\n![stability](stability.svg)\n\n| method | sane runs | failing cases |\n|---|---|---|").unwrap();
     for m in &methods {
@@ -632,7 +613,13 @@ fn main() {
                         }
                         Err(_) => "build_error",
                     };
-                    writeln!(csv, "{},{k},{hz},{v},{verdict}", spec.label()).unwrap();
+                    csv.row([
+                        spec.label(),
+                        k.to_string(),
+                        hz.to_string(),
+                        v.to_string(),
+                        verdict.to_string(),
+                    ]);
                     let ok = verdict == "ok";
                     okc += ok as usize;
                     if !ok {
@@ -657,13 +644,13 @@ fn main() {
             }
         )
         .unwrap();
-        results.push(format!(
-            "RESULT methods.stability {} sane={okc}/{total}",
-            label.replace(' ', "_")
-        ));
+        results.push(
+            ResultLine::new(format!("methods.stability {}", label.replace(' ', "_")))
+                .field("sane", format_args!("{okc}/{total}")),
+        );
         maps.push((label, cells));
     }
-    std::fs::write(out.join("stability.csv"), &csv).unwrap();
+    csv.write(out.join("stability.csv")).unwrap();
     // Failing cases seen in the scenarios of section 1, per method.
     writeln!(md, "\nFailing cases in the scenarios of section 1 (bunny), per method: the smallest volume ratio seen (a surface turned inside out has a negative volume) and the runs that were not sane.\n\n| method | worst volume ratio (run) | not sane |\n|---|---|---|").unwrap();
     for k in MethodKind::ALL {
@@ -901,10 +888,26 @@ fn main() {
         box_asleep_steps += models[2].is_sleeping() as usize;
     }
     let _ = step_models; // the same order as `step_models`, timed per model
-    let per: Vec<f64> = per_model.into_iter().map(cost_ms).collect();
+    let per: Vec<f64> = per_model.iter().map(|v| cost_ms(v)).collect();
     let names = ["bunny", "icosphere", "box"];
-    writeln!(md, "Scene run ({} steps at {:.0} Hz, one world, floor, a ball poking the bunny): per-model step ms (25th percentile) {}; total step incl. rapier {:.3} ms; the box slept in {box_asleep_steps} of {steps} steps.\n", steps, 1.0 / DT, names.iter().zip(&per).map(|(n, v)| format!("{n} {v:.3}")).collect::<Vec<_>>().join(", "), cost_ms(totals.clone())).unwrap();
-    results.push(format!("RESULT methods.choice planned_ms={:.3} scene_total_ms={:.3} bunny={} icosphere={} box=asleep({box_asleep_steps}/{steps}) box_ms={:.4} meets_budgets={}", plan.total_ms, cost_ms(totals), plan.choices[0].picked.as_ref().map(|c| c.spec.label().replace(' ', "_")).unwrap_or_default(), plan.choices[1].picked.as_ref().map(|c| c.spec.label().replace(' ', "_")).unwrap_or_default(), per[2], plan.meets_budgets()));
+    writeln!(md, "Scene run ({} steps at {:.0} Hz, one world, floor, a ball poking the bunny): per-model step ms (25th percentile) {}; total step incl. rapier {:.3} ms; the box slept in {box_asleep_steps} of {steps} steps.\n", steps, 1.0 / DT, names.iter().zip(&per).map(|(n, v)| format!("{n} {v:.3}")).collect::<Vec<_>>().join(", "), cost_ms(&totals)).unwrap();
+    let picked = |i: usize| {
+        plan.choices[i]
+            .picked
+            .as_ref()
+            .map(|c| c.spec.label().replace(' ', "_"))
+            .unwrap_or_default()
+    };
+    results.push(
+        ResultLine::new("methods.choice")
+            .fixed("planned_ms", plan.total_ms, 3)
+            .fixed("scene_total_ms", cost_ms(&totals), 3)
+            .field("bunny", picked(0))
+            .field("icosphere", picked(1))
+            .field("box", format_args!("asleep({box_asleep_steps}/{steps})"))
+            .fixed("box_ms", per[2], 4)
+            .field("meets_budgets", plan.meets_budgets()),
+    );
     writeln!(md, "The restricted soft region (only the touched side soft, thesis 3.5.2) is a candidate of the bunny's poke curve (`particle c0.060 region`: a ball of half the size around the poked side); the choice may pick it. Only the particle method supports a region; the position-based methods simulate the whole body. The bunny is anchored in the room (the particle method's local mode; the position-based methods are held by the floor) so its poke curve applies.\n").unwrap();
 
     let header = format!(
@@ -913,6 +916,7 @@ fn main() {
         std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
         t_start.elapsed().as_secs_f64()
     );
+    let results: Vec<String> = results.iter().map(ResultLine::to_string).collect();
     writeln!(md, "## RESULT lines\n\n```\n{}\n```", results.join("\n")).unwrap();
     std::fs::write(out.join("README.md"), header + &md).unwrap();
     for r in &results {
