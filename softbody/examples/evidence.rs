@@ -5,6 +5,8 @@
 //! `cargo run --release -p softsync-softbody --example evidence -- [--quick]`
 //!
 //! Writes `docs/results/methods/{README.md,*.csv,*.svg}` and prints `RESULT` lines.
+//!
+//! Over 800 lines: one generated report of six sections that read top to bottom like it.
 #![allow(
     clippy::disallowed_methods,
     clippy::unwrap_used,
