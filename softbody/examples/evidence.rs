@@ -277,6 +277,18 @@ fn chart(path: &PathBuf, title: &str, points: &[Point]) {
     write_svg(path, (900, 600), &[chart]).unwrap();
 }
 
+/// The measured points as candidates of the per-object choice.
+fn candidates(points: &[Point]) -> Vec<Candidate> {
+    points
+        .iter()
+        .map(|p| Candidate {
+            spec: p.spec,
+            cost_ms: p.ms as f32,
+            error_mm: p.rms_mm,
+        })
+        .collect()
+}
+
 fn bunny() -> Mesh {
     Mesh::load(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets/bunny.obj"))
         .unwrap()
@@ -386,16 +398,7 @@ fn main() {
                     .fixed("volume", p.min_volume, 3),
             );
         }
-        let front = pareto_front(
-            &points
-                .iter()
-                .map(|p| Candidate {
-                    spec: p.spec,
-                    cost_ms: p.ms as f32,
-                    error_mm: p.rms_mm,
-                })
-                .collect::<Vec<_>>(),
-        );
+        let front = pareto_front(&candidates(&points));
         writeln!(
             md,
             "\nPareto front (nothing else is both cheaper and more accurate): {}.\n",
@@ -738,14 +741,7 @@ fn main() {
     // ---- 6. Automatic choice on a thesis-room-like scene.
     writeln!(md, "\n## 6. Model no more than the scene needs\n").unwrap();
     let budget_frame_ms = 4.0f32;
-    let poke_bunny: Vec<Candidate> = all["poke"]
-        .iter()
-        .map(|p| Candidate {
-            spec: p.spec,
-            cost_ms: p.ms as f32,
-            error_mm: p.rms_mm,
-        })
-        .collect();
+    let poke_bunny = candidates(&all["poke"]);
     let choice_specs: Vec<MethodSpec> = specs
         .iter()
         .copied()
@@ -753,14 +749,7 @@ fn main() {
         .collect();
     println!("drop (icosphere) for the choice:");
     let (ico_points, _) = measure_curves(ScenarioKind::Drop, &ico, &choice_specs, quick);
-    let drop_ico: Vec<Candidate> = ico_points
-        .iter()
-        .map(|p| Candidate {
-            spec: p.spec,
-            cost_ms: p.ms as f32,
-            error_mm: p.rms_mm,
-        })
-        .collect();
+    let drop_ico = candidates(&ico_points);
     let objects = vec![
         ObjectNeeds {
             name: "bunny (poked)".into(),
