@@ -9,107 +9,20 @@
 
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::process::Command;
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
 mod common;
-use common::{field, require_netns, scratch, signal_url, standalone_signal, Proc};
+use common::dump::{assert_agree, dist, nearest, objects, read_dump, vec3, wait_for_rest};
+use common::{
+    embedded_host, field, peer_on, require_netns, scratch, send_signal, signal_url,
+    standalone_signal, Proc,
+};
 
-fn read_dump(path: &Path) -> Vec<Value> {
-    std::fs::read_to_string(path)
-        .unwrap_or_default()
-        .lines()
-        .filter_map(|l| serde_json::from_str(l).ok())
-        .collect()
-}
-
-/// The last dump line at or before wall time `wall_ms` (a peer's final line is written just
-/// before it says `Leave`; lines of others after that no longer show its avatar).
-fn nearest(lines: &[Value], wall_ms: u64) -> &Value {
-    lines
-        .iter()
-        .filter(|l| l["wall_ms"].as_u64().unwrap() <= wall_ms)
-        .max_by_key(|l| l["wall_ms"].as_u64().unwrap())
-        .expect("no dump line before that time")
-}
-
-fn vec3(v: &Value) -> [f64; 3] {
-    let a = v.as_array().unwrap();
-    [
-        a[0].as_f64().unwrap(),
-        a[1].as_f64().unwrap(),
-        a[2].as_f64().unwrap(),
-    ]
-}
-
-fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
-}
-
-fn angle_deg(a: &Value, b: &Value) -> f64 {
-    let a = a.as_array().unwrap();
-    let b = b.as_array().unwrap();
-    let dot: f64 = (0..4)
-        .map(|i| a[i].as_f64().unwrap() * b[i].as_f64().unwrap())
-        .sum();
-    2.0 * dot.abs().min(1.0).acos().to_degrees()
-}
-
-fn objects(line: &Value) -> BTreeMap<u64, &Value> {
-    line["objects"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|o| (o["id"].as_u64().unwrap(), o))
-        .collect()
-}
-
-/// Every object of `a` is in `b` within 1 mm and 0.5°, every particle within 1 mm, same owner.
-fn assert_agree(a: &Value, b: &Value, what: &str) {
-    let (oa, ob) = (objects(a), objects(b));
-    assert_eq!(
-        oa.keys().collect::<Vec<_>>(),
-        ob.keys().collect::<Vec<_>>(),
-        "{what}: different objects"
-    );
-    let mut worst = (0.0f64, 0.0f64, 0.0f64);
-    for (id, x) in &oa {
-        let y = ob[id];
-        assert_eq!(x["owner"], y["owner"], "{what}: object {id} has two owners");
-        let d = dist(vec3(&x["pos"]), vec3(&y["pos"]));
-        let ang = angle_deg(&x["rot"], &y["rot"]);
-        assert!(d < 1e-3, "{what}: object {id} ({}) {d} m apart", x["kind"]);
-        assert!(
-            ang < 0.5,
-            "{what}: object {id} ({}) {ang}° apart",
-            x["kind"]
-        );
-        let (px, py) = (
-            x["particles"].as_array().cloned().unwrap_or_default(),
-            y["particles"].as_array().cloned().unwrap_or_default(),
-        );
-        assert_eq!(px.len(), py.len(), "{what}: object {id} particle count");
-        let dp = px
-            .iter()
-            .zip(&py)
-            .map(|(p, q)| dist(vec3(p), vec3(q)))
-            .fold(0.0, f64::max);
-        assert!(
-            dp < 1e-3,
-            "{what}: object {id} ({}) particles {dp} m apart",
-            x["kind"]
-        );
-        worst = (worst.0.max(d), worst.1.max(ang), worst.2.max(dp));
-    }
-    println!(
-        "{what}: {} objects agree, worst {:.3} mm, {:.3}°, particles {:.3} mm",
-        oa.len(),
-        worst.0 * 1e3,
-        worst.1,
-        worst.2 * 1e3
-    );
+/// Arguments built as owned strings, borrowed for a command line.
+fn strs(a: &[String]) -> Vec<&str> {
+    a.iter().map(String::as_str).collect()
 }
 
 const SQUEEZE: &str = "wait 1; reach right softbox in 1; grab right; squeeze right 0.02 in 0.6; \
@@ -208,47 +121,34 @@ fn b_host_killed_mid_interaction_earliest_joiner_takes_over() {
     require_netns();
     let dir = scratch("kill");
     let (_signal, url) = standalone_signal(&dir);
-    let mut host = Proc::spawn(
-        &dir,
-        "host",
-        &[
-            "host", "--room", "mig", "--signal", &url, "--bot", "wave", "--quiet",
-        ],
-    );
+    let mut host = peer_on(&dir, "host", "host", &url, "mig", &["--bot", "wave"]);
     let host_id = host.peer_id();
     let b1d = dir.join("b1.jsonl");
-    let b1 = Proc::spawn(
-        &dir,
-        "bot1",
-        &[
-            "join", "--room", "mig", "--signal", &url, "--quiet", "--duration", "40", "--dump-hz", "5",
-            "--dump", b1d.to_str().unwrap(), "--bot",
-            "wait 0.5; reach right bunny in 0.5; grab right; squeeze right 0.02 in 0.5; wait 0.3; release right; offset right 0 0.1 0 in 0.3; loop",
-        ],
-    );
-    let b1_id = b1.peer_id();
-    b1.wait_line("joined", Duration::from_secs(20));
-    let b2d = dir.join("b2.jsonl");
-    let b2 = Proc::spawn(
-        &dir,
-        "bot2",
-        &[
-            "join",
-            "--room",
-            "mig",
-            "--signal",
-            &url,
-            "--quiet",
+    let dumped = |dump: &Path, secs: &'static str| {
+        [
             "--duration",
-            "40",
+            secs,
             "--dump-hz",
             "5",
             "--dump",
-            b2d.to_str().unwrap(),
-            "--bot",
-            "wave",
-        ],
-    );
+            dump.to_str().unwrap(),
+        ]
+        .map(String::from)
+    };
+    let with = |mut a: Vec<String>, more: &[&str]| {
+        a.extend(more.iter().map(|m| m.to_string()));
+        a
+    };
+    let squeeze_loop =
+        "wait 0.5; reach right bunny in 0.5; grab right; squeeze right 0.02 in 0.5; \
+                        wait 0.3; release right; offset right 0 0.1 0 in 0.3; loop";
+    let b1_args = with(dumped(&b1d, "40").to_vec(), &["--bot", squeeze_loop]);
+    let b1 = peer_on(&dir, "bot1", "join", &url, "mig", &strs(&b1_args));
+    let b1_id = b1.peer_id();
+    b1.wait_line("joined", Duration::from_secs(20));
+    let b2d = dir.join("b2.jsonl");
+    let b2_args = with(dumped(&b2d, "40").to_vec(), &["--bot", "wave"]);
+    let b2 = peer_on(&dir, "bot2", "join", &url, "mig", &strs(&b2_args));
     let b2_id = b2.peer_id();
     b2.wait_line("joined", Duration::from_secs(20));
     b1.wait_line("grabbed object", Duration::from_secs(20));
@@ -272,24 +172,8 @@ fn b_host_killed_mid_interaction_earliest_joiner_takes_over() {
     // A fourth peer joins the migrated room.
     std::thread::sleep(Duration::from_secs(2));
     let lated = dir.join("late.jsonl");
-    let mut late = Proc::spawn(
-        &dir,
-        "late",
-        &[
-            "join",
-            "--room",
-            "mig",
-            "--signal",
-            &url,
-            "--quiet",
-            "--duration",
-            "5",
-            "--dump-hz",
-            "5",
-            "--dump",
-            lated.to_str().unwrap(),
-        ],
-    );
+    let late_args = dumped(&lated, "5");
+    let mut late = peer_on(&dir, "late", "join", &url, "mig", &strs(&late_args));
     let late_id = late.peer_id();
     assert_eq!(
         late.wait_exit(Duration::from_secs(40)),
@@ -363,56 +247,36 @@ fn c_late_joiner_after_ten_seconds_gets_the_same_state() {
     require_netns();
     let dir = scratch("late");
     let hd = dir.join("host.jsonl");
-    let mut host = Proc::spawn(
-        &dir,
-        "host",
-        &[
-            "host",
-            "--room",
-            "late",
-            "--bind",
-            "127.0.0.1:0",
+    let dumped = |dump: &Path, secs: &'static str| {
+        [
             "--duration",
-            "19",
-            "--quiet",
+            secs,
             "--dump-hz",
             "10",
             "--dump",
-            hd.to_str().unwrap(),
-        ],
-    );
-    let url = signal_url(&host);
-    let _b1 = Proc::spawn(
+            dump.to_str().unwrap(),
+        ]
+        .map(String::from)
+    };
+    let host_args = dumped(&hd, "19");
+    let (mut host, url) = embedded_host(&dir, "late", &strs(&host_args));
+    let script = "wait 0.5; reach right bunny in 0.7; grab right; squeeze right 0.02 in 0.5; \
+                  wait 0.3; release right; offset right 0 0.12 0 in 0.3; reach left softbox in 0.7; \
+                  grab left; squeeze left 0.02 in 0.5; release left; offset left 0 0.12 0 in 0.3; \
+                  reach right block in 0.7; grab right; offset right 0 0.05 0 in 0.4; release right; \
+                  wait 0.5";
+    let _b1 = peer_on(
         &dir,
         "bot1",
-        &[
-            "join", "--room", "late", "--signal", &url, "--quiet", "--duration", "18", "--bot",
-            "wait 0.5; reach right bunny in 0.7; grab right; squeeze right 0.02 in 0.5; wait 0.3; release right; \
-             offset right 0 0.12 0 in 0.3; reach left softbox in 0.7; grab left; squeeze left 0.02 in 0.5; \
-             release left; offset left 0 0.12 0 in 0.3; reach right block in 0.7; grab right; offset right 0 0.05 0 in 0.4; \
-             release right; wait 0.5",
-        ],
+        "join",
+        &url,
+        "late",
+        &["--duration", "18", "--bot", script],
     );
     std::thread::sleep(Duration::from_secs(10));
     let ld = dir.join("late.jsonl");
-    let mut late = Proc::spawn(
-        &dir,
-        "late",
-        &[
-            "join",
-            "--room",
-            "late",
-            "--signal",
-            &url,
-            "--quiet",
-            "--duration",
-            "6",
-            "--dump-hz",
-            "10",
-            "--dump",
-            ld.to_str().unwrap(),
-        ],
-    );
+    let late_args = dumped(&ld, "6");
+    let mut late = peer_on(&dir, "late", "join", &url, "late", &strs(&late_args));
     assert_eq!(
         late.wait_exit(Duration::from_secs(40)),
         0,
@@ -517,37 +381,10 @@ fn f_a_host_that_leaves_is_replaced_at_once() {
     require_netns();
     let dir = scratch("leave");
     let (_signal, url) = standalone_signal(&dir);
-    let mut host = Proc::spawn(
-        &dir,
-        "host",
-        &[
-            "host",
-            "--room",
-            "bye",
-            "--signal",
-            &url,
-            "--quiet",
-            "--duration",
-            "6",
-        ],
-    );
+    let mut host = peer_on(&dir, "host", "host", &url, "bye", &["--duration", "6"]);
     host.peer_id();
-    let bot = Proc::spawn(
-        &dir,
-        "bot",
-        &[
-            "join",
-            "--room",
-            "bye",
-            "--signal",
-            &url,
-            "--quiet",
-            "--duration",
-            "12",
-            "--bot",
-            "wave",
-        ],
-    );
+    let bot_args = ["--duration", "12", "--bot", "wave"];
+    let bot = peer_on(&dir, "bot", "join", &url, "bye", &bot_args);
     let bot_id = bot.peer_id();
     bot.wait_line("joined", Duration::from_secs(20));
     assert_eq!(
@@ -575,39 +412,11 @@ fn f_a_host_that_leaves_is_replaced_at_once() {
 fn g_simultaneous_joiners_all_get_in() {
     require_netns();
     let dir = scratch("crowd");
-    let host = Proc::spawn(
-        &dir,
-        "host",
-        &[
-            "host",
-            "--room",
-            "crowd",
-            "--bind",
-            "127.0.0.1:0",
-            "--quiet",
-            "--duration",
-            "25",
-        ],
-    );
-    let url = signal_url(&host);
+    let (host, url) = embedded_host(&dir, "crowd", &["--duration", "25"]);
     let bots: Vec<Proc> = (0..4)
         .map(|i| {
-            Proc::spawn(
-                &dir,
-                &format!("bot{i}"),
-                &[
-                    "join",
-                    "--room",
-                    "crowd",
-                    "--signal",
-                    &url,
-                    "--quiet",
-                    "--duration",
-                    "20",
-                    "--bot",
-                    "wave",
-                ],
-            )
+            let extra = ["--duration", "20", "--bot", "wave"];
+            peer_on(&dir, &format!("bot{i}"), "join", &url, "crowd", &extra)
         })
         .collect();
     for b in &bots {
@@ -637,36 +446,12 @@ fn g_simultaneous_joiners_all_get_in() {
 fn h_sigterm_is_a_clean_leave() {
     require_netns();
     let dir = scratch("term");
-    let host = Proc::spawn(
-        &dir,
-        "host",
-        &[
-            "host",
-            "--room",
-            "term",
-            "--bind",
-            "127.0.0.1:0",
-            "--quiet",
-            "--duration",
-            "20",
-        ],
-    );
-    let url = signal_url(&host);
-    let mut bot = Proc::spawn(
-        &dir,
-        "bot",
-        &[
-            "join", "--room", "term", "--signal", &url, "--quiet", "--bot", "wave",
-        ],
-    );
+    let (host, url) = embedded_host(&dir, "term", &["--duration", "20"]);
+    let mut bot = peer_on(&dir, "bot", "join", &url, "term", &["--bot", "wave"]);
     let bot_id = bot.peer_id();
     host.wait_line(&format!("peer-joined {bot_id}"), Duration::from_secs(15));
     std::thread::sleep(Duration::from_millis(500));
-    let status = Command::new("kill")
-        .args(["-TERM", &bot.child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
+    send_signal("-TERM", &bot);
     let sent = Instant::now();
     assert_eq!(
         bot.wait_exit(Duration::from_secs(10)),
@@ -683,48 +468,10 @@ fn h_sigterm_is_a_clean_leave() {
     );
 }
 
-/// Waits (bounded) until the dump at `path` (5 lines a second) shows no object that moved
-/// more than 0.2 mm or 0.05° over its last second.
-fn wait_for_rest(path: &Path, within: Duration) -> Duration {
-    let start = Instant::now();
-    loop {
-        let d = read_dump(path);
-        if d.len() > 5 {
-            let (now, before) = (&d[d.len() - 1], &d[d.len() - 6]);
-            let (a, b) = (objects(now), objects(before));
-            let still = a.len() == b.len()
-                && a.iter().all(|(id, x)| {
-                    b.get(id).is_some_and(|y| {
-                        dist(vec3(&x["pos"]), vec3(&y["pos"])) < 2e-4
-                            && angle_deg(&x["rot"], &y["rot"]) < 0.05
-                    })
-                });
-            if still {
-                return start.elapsed();
-            }
-        }
-        assert!(
-            start.elapsed() < within,
-            "nothing came to rest within {within:?}"
-        );
-        std::thread::sleep(Duration::from_millis(200));
-    }
-}
-
 /// `softsync host|join --room ROOM --signal URL --quiet EXTRA…`, named "host" or "bot".
 fn peer(dir: &Path, command: &str, url: &str, room: &str, extra: &[&str]) -> Proc {
-    let mut args = vec![command, "--room", room, "--signal", url, "--quiet"];
-    args.extend_from_slice(extra);
     let name = if command == "host" { "host" } else { "bot" };
-    Proc::spawn(dir, name, &args)
-}
-
-fn send_signal(sig: &str, p: &Proc) {
-    let status = Command::new("kill")
-        .args([sig, &p.child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success(), "kill {sig}");
+    peer_on(dir, name, command, url, room, extra)
 }
 
 /// A host whose process stalls (SIGSTOP) past the peer timeout is replaced; when it runs

@@ -14,7 +14,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{field, require_netns, scratch, signal_url, Proc};
+use common::{embedded_host, field, require_netns, scratch, Proc};
 
 /// An Xvfb server on a free display, killed when dropped.
 struct Xvfb {
@@ -92,22 +92,7 @@ impl Xvfb {
 
 /// A host with embedded signaling on a free port, and its URL.
 fn host(dir: &Path, room: &str) -> (Proc, String) {
-    let p = Proc::spawn(
-        dir,
-        "host",
-        &[
-            "host",
-            "--room",
-            room,
-            "--bind",
-            "127.0.0.1:0",
-            "--duration",
-            "150",
-            "--quiet",
-        ],
-    );
-    let url = signal_url(&p);
-    (p, url)
+    embedded_host(dir, room, &["--duration", "150"])
 }
 
 impl Drop for Xvfb {

@@ -27,7 +27,8 @@ use std::time::{Duration, Instant};
 use serde_json::Value;
 
 mod common;
-use common::{binary, field, require_netns, scratch, signal_url, Proc};
+use common::dump::{dist, pos, read_dump as dump};
+use common::{binary, embedded_host, field, require_netns, scratch, Proc};
 
 fn vr_root() -> PathBuf {
     std::env::var_os("SOFTSYNC_VR_ROOT")
@@ -38,23 +39,6 @@ fn vr_root() -> PathBuf {
 fn xyz(s: &str) -> [f64; 3] {
     let v: Vec<f64> = s.split(',').map(|x| x.parse().unwrap()).collect();
     [v[0], v[1], v[2]]
-}
-
-fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
-}
-
-fn pos(o: &Value) -> [f64; 3] {
-    let a = o["pos"].as_array().unwrap();
-    [0, 1, 2].map(|i| a[i].as_f64().unwrap())
-}
-
-fn dump(path: &Path) -> Vec<Value> {
-    std::fs::read_to_string(path)
-        .unwrap_or_default()
-        .lines()
-        .filter_map(|l| serde_json::from_str(l).ok())
-        .collect()
 }
 
 /// A host (dumping 5 times a second) for a VR test in room `room`: its scratch folder, dump
@@ -70,21 +54,14 @@ fn vr_room(test: &str, room: &str) -> (PathBuf, PathBuf, Proc, String) {
     let dir = scratch(test);
     let dump = dir.join("host.jsonl");
     let args = [
-        "host",
-        "--room",
-        room,
-        "--bind",
-        "127.0.0.1:0",
         "--duration",
         "150",
         "--dump",
         dump.to_str().unwrap(),
         "--dump-hz",
         "5",
-        "--quiet",
     ];
-    let host = Proc::spawn(&dir, "host", &args);
-    let url = signal_url(&host);
+    let (host, url) = embedded_host(&dir, room, &args);
     (dir, dump, host, url)
 }
 

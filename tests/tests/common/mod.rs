@@ -7,6 +7,8 @@
     missing_docs
 )]
 
+pub mod dump;
+
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -178,4 +180,37 @@ pub fn standalone_signal(dir: &Path) -> (Proc, String) {
 pub fn signal_url(p: &Proc) -> String {
     let l = p.wait_line("signaling on ", Duration::from_secs(10));
     l.trim_start_matches("signaling on ").trim().to_owned()
+}
+
+/// `softsync host --room ROOM --bind 127.0.0.1:0 --quiet EXTRA…` (signaling embedded), named
+/// "host", and the signaling URL it prints.
+pub fn embedded_host(dir: &Path, room: &str, extra: &[&str]) -> (Proc, String) {
+    let mut args = vec!["host", "--room", room, "--bind", "127.0.0.1:0", "--quiet"];
+    args.extend_from_slice(extra);
+    let p = Proc::spawn(dir, "host", &args);
+    let url = signal_url(&p);
+    (p, url)
+}
+
+/// `softsync host|join --room ROOM --signal URL --quiet EXTRA…`, named `name`.
+pub fn peer_on(
+    dir: &Path,
+    name: &str,
+    command: &str,
+    url: &str,
+    room: &str,
+    extra: &[&str],
+) -> Proc {
+    let mut args = vec![command, "--room", room, "--signal", url, "--quiet"];
+    args.extend_from_slice(extra);
+    Proc::spawn(dir, name, &args)
+}
+
+/// Send `sig` (`-TERM`, `-STOP`, …) to a child process.
+pub fn send_signal(sig: &str, p: &Proc) {
+    let status = Command::new("kill")
+        .args([sig, &p.child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success(), "kill {sig}");
 }
