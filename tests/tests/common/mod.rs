@@ -158,7 +158,23 @@ impl Proc {
 }
 
 impl Drop for Proc {
+    /// A process still running when its test ends is asked to stop (SIGTERM), so that what it
+    /// started stops too (`scripts/vr-sim` stops Monado on TERM, which a SIGKILL left running
+    /// orphaned after every VR test), and killed if it is not gone within 8 s. A test that
+    /// means a crash calls [`Proc::kill`].
     fn drop(&mut self) {
+        if matches!(self.child.try_wait(), Ok(None)) {
+            let _ = Command::new("kill")
+                .args(["-TERM", &self.child.id().to_string()])
+                .status();
+            let start = Instant::now();
+            while start.elapsed() < Duration::from_secs(8) {
+                if !matches!(self.child.try_wait(), Ok(None)) {
+                    return;
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        }
         self.kill();
     }
 }
