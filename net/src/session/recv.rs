@@ -9,6 +9,7 @@ use std::time::Duration;
 
 use super::delta::PartQ;
 use super::liveness::DropWhy;
+use super::send::Refresh;
 use super::{Event, Role, Session, Transmit, MAX_STRANGERS};
 use crate::error::NetError;
 use crate::ids::{NetId, PeerId};
@@ -185,7 +186,7 @@ impl Session {
                             .get(id)
                             .is_some_and(|o| o.info.owner == self.local || self.role == Role::Host);
                         if sends {
-                            self.queue_entries(now, from, id, false, true);
+                            self.queue_entries(now, from, id, Refresh::Keyframe);
                         }
                     }
                 }
@@ -239,7 +240,15 @@ impl Session {
                         .entry(class.name.clone())
                         .or_default() += body_bits as f64 / 8.0;
                 }
-                self.apply_entry(now, from, e, arrival.fresh, &mut touched);
+                let (id, part, seq) = (e.id, e.part(), e.seq);
+                if let Applied::Dropped =
+                    self.apply_entry(now, from, e, arrival.fresh, &mut touched)
+                {
+                    // its datagram is still acknowledged: see DeltaBases::forget_entry
+                    if let Some(l) = self.links.get_mut(&from) {
+                        l.recv.forget_entry(&(id, part), seq);
+                    }
+                }
             }
         }
         // acknowledge the datagram (its entries become delta bases at the sender) unless
@@ -274,7 +283,7 @@ impl Session {
         if self.role == Role::Host {
             for id in acked {
                 if self.owner(id) != Some(from) {
-                    self.queue_entries(now, from, id, false, true);
+                    self.queue_entries(now, from, id, Refresh::Keyframe);
                 }
             }
         }
@@ -290,25 +299,9 @@ impl Session {
         }
     }
 
-    /// Applies one entry; an entry dropped is forgotten in its ring slot (see
-    /// [`super::delta::DeltaBases::forget_entry`]).
+    /// Applies one entry against its delta base (or as a keyframe), if it comes from the
+    /// object's source with the current epoch tag.
     fn apply_entry(
-        &mut self,
-        now: Instant,
-        from: PeerId,
-        e: StateEntry,
-        fresh: bool,
-        touched: &mut BTreeSet<NetId>,
-    ) {
-        let (id, part, seq) = (e.id, e.part(), e.seq);
-        if let Applied::Dropped = self.try_apply_entry(now, from, e, fresh, touched) {
-            if let Some(l) = self.links.get_mut(&from) {
-                l.recv.forget_entry(&(id, part), seq);
-            }
-        }
-    }
-
-    fn try_apply_entry(
         &mut self,
         now: Instant,
         from: PeerId,
@@ -449,7 +442,7 @@ impl Session {
                 .filter(|p| *p != self.local && *p != from)
                 .collect();
             for p in targets {
-                if self.queue_entries(now, p, id, false, false) {
+                if self.queue_entries(now, p, id, Refresh::Relay) {
                     self.last_relay_at = Some(now);
                 }
             }

@@ -54,6 +54,17 @@ impl SendSchedule {
     }
 }
 
+/// Why entries for an object are queued for a link.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Refresh {
+    /// Our own object's send tick: the class's thresholds apply while it moves.
+    Owner,
+    /// Relaying (or repeating) another peer's state: any grid change goes.
+    Relay,
+    /// Everything, absolute (a joiner learned the object, or asked for a keyframe).
+    Keyframe,
+}
+
 /// What [`plan_entries`] needs to know about the link.
 pub(crate) struct LinkView<'a> {
     /// The link's sending side.
@@ -354,64 +365,50 @@ impl Session {
                     }
                 }
             }
-            let sampled = self.objects.get(id).map_or(now, |o| o.published_at);
+            let how = if mine { Refresh::Owner } else { Refresh::Relay };
             for &p in &targets {
-                let entries = self.build_entries(now, p, id, mine, false);
-                if let Some(l) = self.links.get_mut(&p) {
-                    if mine && !entries.is_empty() {
-                        l.pending_sample =
-                            Some(l.pending_sample.map_or(sampled, |t| t.max(sampled)));
-                    }
-                    l.pending.extend(entries);
-                }
+                self.queue_entries(now, p, id, how);
             }
         }
     }
 
-    /// Entries that bring link `to`'s view of `id` up to date (see [`plan_entries`]); none
-    /// while the peer does not know the object yet.
-    pub(super) fn build_entries(
-        &mut self,
-        now: Instant,
-        to: PeerId,
-        id: NetId,
-        owner_thresholds: bool,
-        force_key: bool,
-    ) -> Vec<StateEntry> {
-        let Some(o) = self.objects.get(id) else {
-            return Vec::new();
-        };
-        let Some(class) = self.cfg.classes.get(usize::from(o.info.class.0)) else {
-            return Vec::new();
-        };
-        let Some(link) = self.links.get_mut(&to) else {
-            return Vec::new();
-        };
-        if link.spawn_pending.contains_key(&id) {
-            return Vec::new(); // the peer does not know the object yet
-        }
-        let view = LinkView {
-            ack_wait: link.rtt.ack_wait(),
-            parts: &mut link.send,
-        };
-        plan_entries(o, class, view, now, owner_thresholds, force_key)
-    }
-
-    /// Queue entries for `to` that bring its view of `id` up to date.
+    /// Queue for `to` the entries that bring its view of `id` up to date (see
+    /// [`plan_entries`]); none while the peer does not know the object yet. True if any.
     pub(super) fn queue_entries(
         &mut self,
         now: Instant,
         to: PeerId,
         id: NetId,
-        owner_thresholds: bool,
-        force_key: bool,
+        how: Refresh,
     ) -> bool {
-        let entries = self.build_entries(now, to, id, owner_thresholds, force_key);
-        let any = !entries.is_empty();
-        if let Some(l) = self.links.get_mut(&to) {
-            l.pending.extend(entries);
+        let Some(o) = self.objects.get(id) else {
+            return false;
+        };
+        let Some(class) = self.cfg.classes.get(usize::from(o.info.class.0)) else {
+            return false;
+        };
+        let Some(link) = self.links.get_mut(&to) else {
+            return false;
+        };
+        if link.spawn_pending.contains_key(&id) {
+            return false; // the peer does not know the object yet
         }
-        any
+        let view = LinkView {
+            ack_wait: link.rtt.ack_wait(),
+            parts: &mut link.send,
+        };
+        let owner = how == Refresh::Owner;
+        let entries = plan_entries(o, class, view, now, owner, how == Refresh::Keyframe);
+        if entries.is_empty() {
+            return false;
+        }
+        if owner {
+            // the datagram is stamped with the time the owner's samples describe
+            let sampled = o.published_at;
+            link.pending_sample = Some(link.pending_sample.map_or(sampled, |t| t.max(sampled)));
+        }
+        link.pending.extend(entries);
+        true
     }
 
     /// Everything due for `to` in one datagram: acks, pong, ping, keyframe requests, reliable
