@@ -175,3 +175,85 @@ impl Session {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::super::testkit::{config, Wire};
+    use super::super::{Event, ObjectState};
+    use super::*;
+    use crate::ids::ClassId;
+    use glam::{Quat, Vec3};
+
+    fn room() -> Wire {
+        let mut w = Wire::new();
+        w.add(Session::host(PeerId(1), config(), w.now));
+        w.add(Session::join(PeerId(2), PeerId(1), config(), w.now));
+        w.settle();
+        w
+    }
+
+    #[test]
+    fn the_host_is_a_client_of_itself_its_requests_take_the_members_path() {
+        let mut w = room();
+        let now = w.now;
+        let st = ObjectState::rigid(Vec3::Y, Quat::IDENTITY);
+        let (id, _) = w.get(2).spawn(now, ClassId(0), st).unwrap();
+        assert_eq!(id.0, 0, "a member's spawn is a request");
+        w.settle();
+        let id = w.get(1).object_ids()[0];
+        assert_eq!(w.get(1).owner(id), Some(PeerId(2)));
+        // the member's object is held: the host's own request is denied like anyone's
+        w.get(1).request_authority(now, id).unwrap();
+        assert!(w
+            .events(1)
+            .iter()
+            .any(|e| matches!(e, Event::AuthorityDenied { .. })));
+        // released, the object comes back to the host; its own request is then granted
+        w.get(2).release_authority(now, id).unwrap();
+        w.settle();
+        assert_eq!(w.get(1).owner(id), Some(PeerId(1)));
+        w.get(1).request_authority(now, id).unwrap();
+        w.settle();
+        assert_eq!(w.get(2).owner(id), Some(PeerId(1)));
+        // and the host may despawn any object, a member only its own
+        assert!(matches!(
+            w.get(2).despawn(now, id),
+            Err(NetError::NotOwner(_, _))
+        ));
+        w.get(1).despawn(now, id).unwrap();
+        w.settle();
+        assert!(w.get(2).object_ids().is_empty());
+    }
+
+    #[test]
+    fn a_joiner_cannot_ask_the_host_for_anything_yet() {
+        let mut s = Session::join(PeerId(2), PeerId(1), config(), Instant::ZERO);
+        let st = ObjectState::rigid(Vec3::Y, Quat::IDENTITY);
+        assert_eq!(
+            s.spawn(Instant::ZERO, ClassId(0), st),
+            Err(NetError::NotConnected)
+        );
+        assert_eq!(
+            s.ask_host(Instant::ZERO, Control::Leave),
+            Err(NetError::NotConnected)
+        );
+    }
+
+    #[test]
+    fn requests_at_the_host_from_a_non_member_are_ignored() {
+        let mut w = room();
+        let now = w.now;
+        w.add(Session::join(PeerId(9), PeerId(1), config(), now));
+        // before it is a member (its Hello not delivered yet), a spawn request does nothing
+        let req = Control::SpawnRequest {
+            request: 0,
+            class: ClassId(0),
+            particles: 0,
+            pos: [0.0, 1.0, 0.0],
+            rot: [0.0, 0.0, 0.0, 1.0],
+        };
+        w.get(1).handle_control(now, PeerId(9), req);
+        assert!(w.get(1).object_ids().is_empty());
+    }
+}

@@ -154,3 +154,64 @@ impl Session {
         self.forget_asks_of(p);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::super::testkit::{config, Wire};
+    use super::*;
+
+    #[test]
+    fn the_host_welcomes_a_joiner_and_a_member_redirects_the_next_one_to_the_host() {
+        let mut w = Wire::new();
+        w.add(Session::host(PeerId(1), config(), w.now));
+        w.add(Session::join(PeerId(2), PeerId(1), config(), w.now));
+        w.settle();
+        assert!(w.events(2).contains(&Event::Joined {
+            host: PeerId(1),
+            term: Term(1)
+        }));
+        // the third asks the member, which answers Redirect; it follows to the host
+        w.add(Session::join(PeerId(3), PeerId(2), config(), w.now));
+        w.settle();
+        assert!(w.get(3).is_connected());
+        assert_eq!(w.get(3).host_id(), Some(PeerId(1)));
+        assert_eq!(w.get(1).members().len(), 3);
+        assert!(w.events(2).contains(&Event::PeerJoined(PeerId(3))));
+    }
+
+    #[test]
+    fn another_class_table_or_a_full_room_is_refused_with_a_reason() {
+        let mut w = Wire::new();
+        let mut small = config();
+        small.max_members = 2;
+        w.add(Session::host(PeerId(1), small.clone(), w.now));
+        let mut other = small.clone();
+        other.classes.pop();
+        w.add(Session::join(PeerId(2), PeerId(1), other, w.now));
+        w.add(Session::join(PeerId(3), PeerId(1), small.clone(), w.now));
+        w.settle();
+        assert!(
+            matches!(&w.events(2)[..], [Event::Refused { reason }] if reason.contains("class"))
+        );
+        w.add(Session::join(PeerId(4), PeerId(1), small, w.now));
+        w.settle();
+        assert!(matches!(&w.events(4)[..], [Event::Refused { reason }] if reason.contains("full")));
+        assert!(!w.get(4).is_connected());
+    }
+
+    #[test]
+    fn a_member_that_leaves_is_gone_for_everyone_at_once() {
+        let mut w = Wire::new();
+        w.add(Session::host(PeerId(1), config(), w.now));
+        for p in [2, 3] {
+            w.add(Session::join(PeerId(p), PeerId(1), config(), w.now));
+            w.settle();
+        }
+        let now = w.now;
+        w.get(3).leave(now);
+        w.settle();
+        assert!(!w.get(1).members().contains_key(&PeerId(3)));
+        assert!(w.events(2).contains(&Event::PeerLeft(PeerId(3))));
+    }
+}

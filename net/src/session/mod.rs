@@ -32,6 +32,8 @@ mod recv;
 pub mod registry;
 mod send;
 mod spawn;
+#[cfg(test)]
+mod testkit;
 
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;

@@ -449,3 +449,104 @@ impl Session {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::super::testkit::{config, Wire};
+    use super::*;
+    use crate::ids::Term;
+    use crate::wire::{PacketWriter, PROTOCOL_VERSION};
+
+    #[test]
+    fn another_protocol_version_is_counted_and_answered_with_a_reliable_refusal() {
+        let mut host = Session::host(PeerId(1), config(), Instant::ZERO);
+        let mut bytes = vec![PROTOCOL_VERSION + 1];
+        bytes.extend_from_slice(&[0, 0, 0, 0]);
+        host.handle_packet(Instant::ZERO, PeerId(5), &bytes);
+        assert_eq!(host.stats().decode_errors, 1);
+        let t = host.poll_transmit(Instant::ZERO).unwrap();
+        assert!(t.reliable && t.to == PeerId(5));
+        let r = crate::wire::decode_refusal(&t.payload).unwrap();
+        assert!(
+            r.reason.contains("protocol version mismatch"),
+            "{}",
+            r.reason
+        );
+        // garbage is only counted
+        host.handle_packet(Instant::ZERO, PeerId(5), &[PROTOCOL_VERSION, 0xFF]);
+        assert_eq!(host.stats().decode_errors, 2);
+        assert!(host.poll_transmit(Instant::ZERO).is_none());
+    }
+
+    #[test]
+    fn a_refusal_from_our_host_ends_a_joining_session_and_one_from_a_stranger_does_not() {
+        let mut j = Session::join(PeerId(2), PeerId(1), config(), Instant::ZERO);
+        let refusal = encode_refusal("full", Term(1));
+        j.handle_packet(Instant::ZERO, PeerId(7), &refusal);
+        assert!(j.poll_event().is_none(), "not from our contact");
+        j.handle_packet(Instant::ZERO, PeerId(1), &refusal);
+        assert_eq!(
+            j.poll_event(),
+            Some(Event::Refused {
+                reason: "full".into()
+            })
+        );
+        assert!(j.poll_timeout().is_none(), "done");
+    }
+
+    #[test]
+    fn a_departed_peers_late_datagrams_and_an_older_terms_are_ignored() {
+        let mut w = Wire::new();
+        w.add(Session::host(PeerId(1), config(), w.now));
+        w.add(Session::join(PeerId(2), PeerId(1), config(), w.now));
+        w.settle();
+        // a member's datagram of an older term is dropped and counted
+        let old = PacketHeader {
+            term: Term(0),
+            seq: 200,
+            time_ms: 0,
+        };
+        let mut stale = PacketWriter::new(
+            &PacketHeader {
+                term: Term(1),
+                ..old
+            },
+            1200,
+        );
+        stale.ping(1);
+        let (ok, _) = stale.finish();
+        let now = w.now;
+        w.get(1).term = Term(2);
+        w.get(1).handle_packet(now, PeerId(2), &ok);
+        assert_eq!(w.get(1).stats().dropped_old_term, 1);
+        // after Leave, nothing from the peer is heard
+        w.get(1).term = Term(1);
+        let now = w.now;
+        w.get(2).leave(now);
+        w.settle();
+        let down = w.get(1).stats().down.packets;
+        w.get(1).handle_packet(now, PeerId(2), &ok);
+        assert_eq!(w.get(1).stats().down.packets, down);
+    }
+
+    #[test]
+    fn strangers_beyond_the_bound_cost_no_state() {
+        let mut host = Session::host(PeerId(1), config(), Instant::ZERO);
+        let mut w = PacketWriter::new(
+            &PacketHeader {
+                term: Term(0),
+                seq: 0,
+                time_ms: 0,
+            },
+            1200,
+        );
+        w.ping(1);
+        let (bytes, _) = w.finish();
+        for p in 0..(MAX_STRANGERS as u64 + 10) {
+            host.handle_packet(Instant::ZERO, PeerId(1000 + p), &bytes);
+        }
+        assert_eq!(host.stats().dropped_strangers, 10);
+        assert!(host.links.len() <= MAX_STRANGERS);
+    }
+}
