@@ -6,11 +6,13 @@ use rapier3d::prelude::PhysicsWorld;
 
 use crate::cluster::build_particle_map;
 use crate::methods::ispc::ispc_links;
+use crate::methods::lattice::lattice_tets;
 use crate::methods::model::DeformableModel;
 use crate::methods::native::NativeModel;
 use crate::methods::particle::ParticleModel;
 use crate::methods::pbd::{
-    BendingGroup, DistanceGroup, PbdBody, ShapeClusters, SolverKind, SurfaceMap, VolumeGroup,
+    BendingGroup, DistanceGroup, NeoHookeanGroup, PbdBody, ShapeClusters, SolverKind, SurfaceMap,
+    VolumeGroup,
 };
 use crate::methods::tets::{tet_edges, tetrahedralize};
 use crate::{ClusterMethod, Mesh, SimulationSpace, SoftBodyConfig, SoftBodyError};
@@ -146,6 +148,45 @@ pub fn build_pbd_welded(
                 m.bulk_pa,
                 m.pbd_stiffness,
             ));
+            Ok(body)
+        }
+        MethodKind::NeoHookean => {
+            let lt = lattice_tets(positions, triangles, spec.cell_frac * size)?;
+            let material_nodes = lt.material_nodes();
+            let tm = lt.mesh;
+            let mut masses = vec![0.0f32; tm.nodes.len()];
+            let mut material_m3 = 0.0f32;
+            // Mass follows the material too, but not below a share of a full tet's: a node of
+            // the fringe with almost no mass would take all of every contact's and hold's
+            // correction (they split by inverse mass) and crush its tets.
+            let mass_floor = 0.3f32;
+            for (t, w) in tm.tets.iter().zip(&lt.inside_fraction) {
+                let v = crate::methods::pbd::tet_volume(t.map(|i| tm.nodes[i as usize])).abs();
+                material_m3 += v * w.max(mass_floor);
+                for &i in t {
+                    masses[i as usize] += m.density_kg_m3 * v * w.max(mass_floor) / 4.0;
+                }
+            }
+            // Keep the body's own mass, like every other method.
+            let scale = volume / material_m3.max(1e-12);
+            masses.iter_mut().for_each(|m| *m *= scale);
+            let mut body = PbdBody::new(
+                name,
+                spec.params,
+                tm.nodes.clone(),
+                &masses,
+                SurfaceMap::Embedded(tm.embedding),
+                triangles.to_vec(),
+            );
+            body.neo_hookean = Some(NeoHookeanGroup::new(
+                tm.tets,
+                &tm.nodes,
+                &lt.inside_fraction,
+                m.young_pa,
+                m.bulk_pa,
+            ));
+            body.colliding_nodes = Some(material_nodes);
+            body.pin_surface = true;
             Ok(body)
         }
         MethodKind::ShapeMatching => {

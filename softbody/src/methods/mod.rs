@@ -6,7 +6,9 @@
 //! |---|---|
 //! | [`pbd`] | the XPBD / PBD solver core (ISPC paper Algorithm 1): distance (eq. 1–3), dihedral bending (eq. 4), tet volume, shape-matching clusters, contacts against the rapier world |
 //! | [`ispc`] | internal shape-preserving links (ISPC paper Algorithm 2) |
-//! | [`tets`] | tetrahedral reference: parry's `volume_mesh` cover (Apache-2.0), surface embedded |
+//! | [`tets`] | XPBD tets on parry's `volume_mesh` cover (Apache-2.0), surface embedded |
+//! | [`lattice`] | a well-shaped Kuhn lattice of tets weighted by inside fraction (the reference's mesh) |
+//! | [`reference`] | the verified accuracy reference: stable Neo-Hookean tets, its spec and convergence |
 //! | [`spec`] | what a method is: [`MethodKind`], [`MethodSpec`] (resolution, budget), [`spec::Material`] |
 //! | [`builders`] | one constructor per method and resolution ([`build_model`]) |
 //! | [`particle`] | the thesis's particle method ([`crate::SoftBodySet`]) as a model |
@@ -17,10 +19,12 @@
 pub mod builders;
 pub mod choice;
 pub mod ispc;
+pub mod lattice;
 pub mod model;
 pub mod native;
 pub mod particle;
 pub mod pbd;
+pub mod reference;
 pub mod scene;
 pub mod spec;
 pub mod tets;

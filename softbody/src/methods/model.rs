@@ -3,6 +3,8 @@
 use glam::Vec3;
 use rapier3d::prelude::PhysicsWorld;
 
+use crate::methods::pbd::Energy;
+
 /// A deformable object simulated by some method, seen from outside: it steps around
 /// `world.step()`, exposes its welded surface in world space, and says when it is asleep.
 ///
@@ -41,6 +43,16 @@ pub trait DeformableModel {
     fn pin_region(&mut self, world: &mut PhysicsWorld, min_m: Vec3, max_m: Vec3) -> usize;
     /// Gives every particle the velocity `v_mps` (a throw).
     fn set_velocity(&mut self, world: &mut PhysicsWorld, v_mps: Vec3);
+    /// The body's kinetic, gravitational and elastic energy under `gravity`, if the method
+    /// defines one (default: none).
+    fn energy(&self, _gravity: Vec3) -> Option<Energy> {
+        None
+    }
+    /// How often a hard floor on an element's volume engaged, in all elements and in those at
+    /// least half material (the reference's tets; zeros for the others).
+    fn volume_floor_hits(&self) -> (u64, u64) {
+        (0, 0)
+    }
 }
 
 /// One fixed step of a world holding several models: every model's `pre_physics`, one

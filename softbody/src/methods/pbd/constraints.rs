@@ -35,8 +35,19 @@ impl Sweep {
         }
     }
 
+    /// The same sweep in the XPBD form whatever the body's solver (a material energy has no
+    /// plain-PBD form).
+    pub(super) fn xpbd(self) -> Self {
+        Self { xpbd: true, ..self }
+    }
+
+    /// `α̃ = α / h²`: a compliance scaled to this sweep's substep.
+    pub(super) fn scaled_compliance(&self, compliance: f32) -> f32 {
+        compliance * self.inv_h2
+    }
+
     /// The constraint visited `kk`-th of `n` in this sweep's direction.
-    fn index(&self, kk: usize, n: usize) -> usize {
+    pub(super) fn index(&self, kk: usize, n: usize) -> usize {
         if self.reverse {
             n - 1 - kk
         } else {
@@ -47,7 +58,7 @@ impl Sweep {
     /// The multiplier step for a constraint of value `c` and weighted gradient norm `wsum`:
     /// XPBD with `compliance` (accumulating into `lambda`), or plain PBD scaled by
     /// `pbd_stiffness`.
-    fn correction(
+    pub(super) fn correction(
         &self,
         c: f32,
         wsum: f32,

@@ -69,6 +69,8 @@ pub(super) struct ContactPoints<'a> {
     pub(super) inv_mass: &'a [f32],
     /// Contact thickness of the surface points, metres.
     pub(super) radius_m: f32,
+    /// Which tet nodes of an embedded surface collide too (`None`: all).
+    pub(super) nodes: Option<&'a [u32]>,
 }
 
 impl ContactPoints<'_> {
@@ -79,7 +81,9 @@ impl ContactPoints<'_> {
     fn len(&self) -> usize {
         match self.map {
             SurfaceMap::Direct => self.x.len(),
-            SurfaceMap::Embedded(e) => e.nodes.len() + self.x.len(),
+            SurfaceMap::Embedded(e) => {
+                e.nodes.len() + self.nodes.map_or(self.x.len(), <[u32]>::len)
+            }
         }
     }
 
@@ -90,16 +94,25 @@ impl ContactPoints<'_> {
             let (p, p0) = self.map.point(self.x, self.prev, c);
             (p, p0, self.radius_m)
         } else {
-            (self.x[c - s], self.prev[c - s], 0.0)
+            let i = self.node(c - s);
+            (self.x[i], self.prev[i], 0.0)
         }
+    }
+
+    /// The particle of the `k`-th colliding node.
+    fn node(&self, k: usize) -> usize {
+        self.nodes.map_or(k, |l| l[k] as usize)
     }
 
     fn move_point(&mut self, c: usize, delta: Vec3) {
         let s = self.surface_len();
         if c < s {
             self.map.move_point(self.x, self.inv_mass, c, delta);
-        } else if self.inv_mass[c - s] > 0.0 {
-            self.x[c - s] += delta;
+        } else {
+            let i = self.node(c - s);
+            if self.inv_mass[i] > 0.0 {
+                self.x[i] += delta;
+            }
         }
     }
 

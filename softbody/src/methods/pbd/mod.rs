@@ -15,6 +15,7 @@
 
 mod constraints;
 mod contacts;
+mod neohookean;
 mod surface;
 
 use glam::Vec3;
@@ -24,6 +25,7 @@ use crate::methods::model::DeformableModel;
 use constraints::{inverse_or_zero, Sweep};
 pub use constraints::{tet_volume, BendingGroup, DistanceGroup, ShapeClusters, VolumeGroup};
 use contacts::{near_colliders, Contact, ContactPoints};
+pub use neohookean::NeoHookeanGroup;
 pub use surface::{Embedding, SurfaceMap};
 
 /// Which projection the solver uses.
@@ -74,6 +76,24 @@ impl Default for PbdParams {
     }
 }
 
+/// A body's energy split by kind, J.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Energy {
+    /// ½ m v² over the free particles.
+    pub kinetic_j: f32,
+    /// −m g·x over the free particles (zero at the origin's height).
+    pub potential_j: f32,
+    /// Stored elastic energy.
+    pub elastic_j: f32,
+}
+
+impl Energy {
+    /// The sum.
+    pub fn total_j(&self) -> f32 {
+        self.kinetic_j + self.potential_j + self.elastic_j
+    }
+}
+
 /// A position-based body: particles, constraint groups, a surface, contacts with the world.
 #[derive(Clone, Debug)]
 pub struct PbdBody {
@@ -92,6 +112,20 @@ pub struct PbdBody {
     pub volume: Option<VolumeGroup>,
     /// Shape-matching clusters, if any.
     pub clusters: Option<ShapeClusters>,
+    /// Stable Neo-Hookean tets, if any (the accuracy reference).
+    pub neo_hookean: Option<NeoHookeanGroup>,
+    /// Which tet nodes of an embedded surface collide besides the surface (`None`, the
+    /// default: all). A cover's nodes outside the surface would otherwise pass into a wall the
+    /// surface stopped at and crush their tets. A lattice weighted by inside fraction leaves
+    /// the fringe fictitious material: only its surface and the nodes deep in the material
+    /// collide, so its contact envelope is the surface at every resolution and a small prop
+    /// that slips between surface points is still stopped inside.
+    pub colliding_nodes: Option<Vec<u32>>,
+    /// [`Self::pin_box`] holds the surface vertices in the box (the same material at every
+    /// resolution of an embedding) instead of pinning the particles in it (default false).
+    pub pin_surface: bool,
+    /// Surface vertices held at a position: (vertex, position).
+    held: Vec<(u32, Vec3)>,
     surface_map: SurfaceMap,
     surface: Vec<Vec3>,
     triangles: Vec<[u32; 3]>,
@@ -130,6 +164,10 @@ impl PbdBody {
             bending: None,
             volume: None,
             clusters: None,
+            neo_hookean: None,
+            colliding_nodes: None,
+            pin_surface: false,
+            held: Vec::new(),
             surface_map,
             surface: Vec::new(),
             triangles,
@@ -168,7 +206,8 @@ impl PbdBody {
     pub fn solves_per_step(&self) -> u64 {
         let per_iter = self.distance.iter().map(|g| g.len()).sum::<usize>()
             + self.bending.as_ref().map_or(0, |b| b.quads.len())
-            + self.volume.as_ref().map_or(0, |v| v.tets.len());
+            + self.volume.as_ref().map_or(0, |v| v.tets.len())
+            + 2 * self.neo_hookean.as_ref().map_or(0, |g| g.len());
         let sm = self.clusters.as_ref().map_or(0, |c| c.members.len());
         let contacts = self.surface.len();
         (self.params.substeps as u64)
@@ -256,6 +295,10 @@ impl PbdBody {
             }
             // Contacts once more, last, so the final positions are collision-free.
             self.contact_points().0.collide(&near, h);
+            // A contact may have crushed a tet of the reference: its floor has the last word.
+            if let Some(g) = &mut self.neo_hookean {
+                g.enforce_floor(&mut self.x, &self.inv_mass);
+            }
             // Lines 16–17: velocities from positions.
             for i in 0..self.x.len() {
                 if !self.x[i].is_finite() {
@@ -300,6 +343,9 @@ impl PbdBody {
         if let Some(v) = &mut self.volume {
             v.reset();
         }
+        if let Some(g) = &mut self.neo_hookean {
+            g.reset();
+        }
     }
 
     /// One Gauss–Seidel sweep over the distance, bending and volume constraints, in that
@@ -315,6 +361,14 @@ impl PbdBody {
         if let Some(g) = &mut self.volume {
             g.project(&mut self.x, &self.inv_mass, sweep);
         }
+        if let Some(g) = &mut self.neo_hookean {
+            g.project(&mut self.x, &self.inv_mass, sweep);
+        }
+        for &(s, at) in &self.held {
+            let (p, _) = self.surface_map.point(&self.x, &self.prev, s as usize);
+            self.surface_map
+                .move_point(&mut self.x, &self.inv_mass, s as usize, at - p);
+        }
     }
 
     /// The points that collide, over the particles as they are, and this substep's contacts.
@@ -326,6 +380,7 @@ impl PbdBody {
                 prev: &self.prev,
                 inv_mass: &self.inv_mass,
                 radius_m: self.params.contact_radius_m,
+                nodes: self.colliding_nodes.as_deref(),
             },
             &mut self.contacts,
         )
@@ -336,9 +391,41 @@ impl PbdBody {
         self.volume
             .as_ref()
             .map_or(0, |g| g.count_inverted(&self.x))
+            + self
+                .neo_hookean
+                .as_ref()
+                .map_or(0, |g| g.count_inverted(&self.x))
+    }
+
+    /// Kinetic, gravitational (height above y = 0 under `gravity`) and elastic energy of
+    /// the body now, J. The elastic part is the stable Neo-Hookean energy (0 for bodies
+    /// without those tets: their constraints are not an energy of a material).
+    pub fn energy_j(&self, gravity: Vec3) -> Energy {
+        let mut e = Energy::default();
+        for ((x, v), w) in self.x.iter().zip(&self.v).zip(&self.inv_mass) {
+            if *w > 0.0 {
+                let m = 1.0 / w;
+                e.kinetic_j += 0.5 * m * v.length_squared();
+                e.potential_j -= m * gravity.dot(*x);
+            }
+        }
+        e.elastic_j = self
+            .neo_hookean
+            .as_ref()
+            .map_or(0.0, |g| g.energy_j(&self.x));
+        e
     }
     /// Pins particles inside a box; returns the count.
     pub fn pin_box(&mut self, lo: Vec3, hi: Vec3) -> usize {
+        if self.pin_surface {
+            let before = self.held.len();
+            for (i, p) in self.surface.iter().enumerate() {
+                if p.cmpge(lo).all() && p.cmple(hi).all() {
+                    self.held.push((i as u32, *p));
+                }
+            }
+            return self.held.len() - before;
+        }
         let mut n = 0;
         for (i, p) in self.x.iter().enumerate() {
             if p.cmpge(lo).all() && p.cmple(hi).all() {
@@ -406,5 +493,13 @@ impl DeformableModel for PbdBody {
 
     fn set_velocity(&mut self, _world: &mut PhysicsWorld, v_mps: Vec3) {
         self.set_all_velocities(v_mps);
+    }
+
+    fn energy(&self, gravity: Vec3) -> Option<Energy> {
+        Some(self.energy_j(gravity))
+    }
+
+    fn volume_floor_hits(&self) -> (u64, u64) {
+        self.neo_hookean.as_ref().map_or((0, 0), |g| g.floor_hits())
     }
 }

@@ -1,0 +1,151 @@
+//! The accuracy reference (stable Neo-Hookean tets on a weighted Kuhn lattice): its mesh holds
+//! the body's volume, its rest shape is a fixed point of the solver at any step, it never
+//! inverts a tet in any scenario of the evidence (even stepped far too coarsely, where the
+//! volume floor has work to do), and refining it in time moves the answer less than a stated
+//! tolerance on a quick case. The full convergence study is `examples/reference.rs`.
+#![allow(clippy::unwrap_used, missing_docs)]
+
+use glam::Vec3;
+use softsync_softbody::methods::builders::build_pbd;
+use softsync_softbody::methods::lattice::lattice_tets;
+use softsync_softbody::methods::reference::{record, reference_spec, shape_change};
+use softsync_softbody::rapier3d::prelude::PhysicsWorld;
+use softsync_softbody::scenario::ScenarioKind;
+use softsync_softbody::Mesh;
+
+fn bunny() -> Mesh {
+    Mesh::load(concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/bunny.obj"))
+        .unwrap()
+        .fit_size(0.2)
+}
+
+/// The weighted lattice models the body's own volume (the inside fractions), whatever the
+/// cell, while its tets cover more than the body.
+#[test]
+fn lattice_fractions_add_up_to_the_enclosed_volume() {
+    let mesh = bunny().weld(1e-6);
+    let volume = softsync_softbody::mesh::enclosed_volume(&mesh.positions, &mesh.triangles);
+    for cell in [0.04f32, 0.02] {
+        let lt = lattice_tets(&mesh.positions, &mesh.triangles, cell).unwrap();
+        let tet_volume = |t: &[u32; 4]| {
+            softsync_softbody::methods::pbd::tet_volume(t.map(|i| lt.mesh.nodes[i as usize]))
+        };
+        let cover: f32 = lt.mesh.tets.iter().map(tet_volume).sum();
+        let weighted: f32 = lt
+            .mesh
+            .tets
+            .iter()
+            .zip(&lt.inside_fraction)
+            .map(|(t, w)| tet_volume(t) * w)
+            .sum();
+        println!("cell {cell}: body {volume:.6} m³, cover {cover:.6}, weighted {weighted:.6}");
+        assert!(cover > 1.2 * volume, "the cover should exceed the body");
+        assert!(
+            (weighted - volume).abs() < 0.05 * volume,
+            "weighted lattice volume {weighted} vs the body's {volume}"
+        );
+        // Every surface vertex sits inside its tet (weights in [0, 1]).
+        let worst = lt
+            .mesh
+            .embedding
+            .weights
+            .iter()
+            .map(|w| w.iter().copied().fold(f32::MAX, f32::min))
+            .fold(f32::MAX, f32::min);
+        assert!(
+            worst > -1e-4,
+            "a surface vertex lies outside its tet: {worst}"
+        );
+    }
+}
+
+/// Solved together, the two constraints of each tet keep the rest shape at rest even with
+/// one iteration per substep (solved one after the other they pull it in and push it
+/// out, and it drifts until Gauss–Seidel converges).
+#[test]
+fn rest_shape_is_a_fixed_point_at_any_step() {
+    let mesh = Mesh::icosphere(0.1, 2);
+    let mut world = PhysicsWorld::new();
+    world.gravity = Vec3::ZERO;
+    let mut body = build_pbd(&reference_spec(0.2, 20).budget(20, 1), &mesh).unwrap();
+    let rest = body.positions().to_vec();
+    for _ in 0..60 {
+        body.step(&world, 1.0 / 60.0);
+    }
+    let drift = body
+        .positions()
+        .iter()
+        .zip(&rest)
+        .map(|(a, b)| a.distance(*b))
+        .fold(0.0f32, f32::max);
+    assert!(drift < 1e-4, "rest shape drifted {drift} m");
+}
+
+/// The reference never turns a tet inside out in any scenario of the evidence — checked
+/// stepped ten times too coarsely, where the crushing is real and the floor engages.
+#[test]
+fn reference_never_inverts_in_any_evidence_scenario() {
+    let bunny = bunny();
+    let ico = Mesh::icosphere(0.1, 2);
+    let spec = reference_spec(0.2, 8);
+    let mut engaged = 0;
+    for (mesh, kind) in [
+        (&bunny, ScenarioKind::Drop),
+        (&bunny, ScenarioKind::Squeeze),
+        (&bunny, ScenarioKind::Poke),
+        (&ico, ScenarioKind::Drop),
+    ] {
+        let r = record(kind, mesh, &spec, 1.0 / 60.0).unwrap();
+        println!(
+            "{}: inverted {} floor {:?} volume {:.3}..{:.3} {}",
+            kind.name(),
+            r.max_inverted,
+            r.floor_hits,
+            r.min_volume,
+            r.max_volume,
+            r.verdict
+        );
+        assert_eq!(r.max_inverted, 0, "{}: inverted tets", kind.name());
+        assert_eq!(r.verdict, "ok", "{}", kind.name());
+        engaged += r.floor_hits.0;
+    }
+    assert!(
+        engaged > 0,
+        "the floor never engaged: the test lost its point"
+    );
+}
+
+/// Refining the reference in time (substeps doubled) moves the answer of a quick case — the
+/// dropped icosphere at a coarse cell — by less than [`QUICK_TOLERANCE_MM`] shape RMS, and the
+/// drop never gains energy. The quick case's tolerance is not the reference's 0.5 mm: the full
+/// study (every scenario at the reference's own resolution) is `examples/reference.rs`.
+#[test]
+fn reference_time_refinement_moves_a_quick_case_less_than_its_tolerance() {
+    let ico = Mesh::icosphere(0.1, 2);
+    let run = |substeps| {
+        record(
+            ScenarioKind::Drop,
+            &ico,
+            &reference_spec(0.2, substeps),
+            1.0 / 60.0,
+        )
+        .unwrap()
+    };
+    let (coarse, fine) = (run(40), run(80));
+    let change = shape_change(&coarse.samples, &fine.samples);
+    println!("drop s40 -> s80: {change:?}");
+    assert!(
+        change.rms_mm < QUICK_TOLERANCE_MM,
+        "time refinement moved the answer {change:?}"
+    );
+    for r in [&coarse, &fine] {
+        let e = softsync_softbody::methods::reference::energy_summary(r);
+        assert!(
+            e.max_j <= e.first_j * 1.001,
+            "the drop gained energy: {e:?}"
+        );
+    }
+}
+
+/// Tolerance of the quick refinement case, mm (measured 1.2 mm when written).
+const QUICK_TOLERANCE_MM: f32 = 2.0;
