@@ -288,8 +288,8 @@ fn stability_sweep() {
     }
 }
 
-/// The thesis's scheme overshoots where k·dt²·90 > 1 (k = 100 at 60 Hz: 2.5) and oscillates
-/// with growing amplitude; ours stays monotone at the same setting.
+/// The thesis's scheme at k = 100 and 60 Hz (α = k·dt²·90 = 2.5, and neighbour weights
+/// summing past 1) oscillates with growing amplitude; ours stays monotone at the same setting.
 #[test]
 fn thesis_scheme_fails_where_ours_holds() {
     let mesh = Mesh::icosphere(0.1, 2);
@@ -318,6 +318,69 @@ fn thesis_scheme_fails_where_ours_holds() {
         thesis > 10.0 * ours.max(1e-4),
         "thesis scheme settled too ({thesis} m): the limit test lost its point"
     );
+}
+
+/// Where the thesis's scheme fails, as its docs now say (`RestoringScheme::Thesis`): with the
+/// neighbour term at the default affection range each particle's raw weights sum well past 1,
+/// the uniform displacement mode grows by `1 + α(Σw − 1)` per step and it diverges at *every*
+/// stiffness and rate (k = 2/s at 60 Hz and at 144 Hz here); without neighbours the per-step
+/// fraction `α = k·dt²·90` decides: it settles at α ≤ 0.5 and keeps swinging at α ≥ 2.5.
+/// Ours settles at every one of these settings.
+#[test]
+fn thesis_scheme_fails_exactly_where_its_docs_say() {
+    let mesh = Mesh::icosphere(0.1, 2);
+    let late_motion = |stiffness: f32, rate_hz: f32, neighbours: bool, restoring| {
+        let cfg = SoftBodyConfig {
+            stiffness,
+            restoring,
+            cluster: ClusterMethod::Distance { radius_m: 0.02 },
+            // 0 derives the default range (2.5 × the particle spacing); a range below the
+            // spacing leaves every particle without neighbours.
+            affect_range_m: if neighbours { 0.0 } else { 1e-4 },
+            ..Default::default()
+        };
+        let mut s = Scenario::new(ScenarioKind::Pull, &mesh, cfg, 1.0 / rate_hz).unwrap();
+        s.run_until(ScenarioKind::Pull.release_s() + 0.01);
+        let mut worst_late = 0.0f32;
+        while s.time_s() < 2.5 {
+            s.step();
+            if s.time_s() > 1.8 {
+                worst_late = worst_late.max(s.metrics().max_displacement_m);
+            }
+        }
+        worst_late
+    };
+    // (k 1/s, rate Hz, neighbours, thesis fails): α = k·dt²·90.
+    for (k, hz, neighbours, fails) in [
+        (2.0f32, 60.0f32, true, true),
+        (2.0, 144.0, true, true),
+        (20.0, 60.0, false, false),
+        (100.0, 144.0, false, false),
+        (100.0, 60.0, false, true),
+        (50.0, 30.0, false, true),
+    ] {
+        let alpha = k * 90.0 / (hz * hz);
+        let thesis = late_motion(k, hz, neighbours, RestoringScheme::Thesis);
+        let ours = late_motion(k, hz, neighbours, RestoringScheme::Exact);
+        println!(
+            "k {k} at {hz} Hz, neighbours {neighbours}: α {alpha:.2}, thesis {thesis:.4} m, ours {ours:.4} m"
+        );
+        assert!(
+            ours < 5e-3,
+            "ours did not settle (k {k}, {hz} Hz): {ours} m"
+        );
+        if fails {
+            assert!(
+                thesis > 2e-2,
+                "thesis scheme settled (k {k}, {hz} Hz): {thesis} m"
+            );
+        } else {
+            assert!(
+                thesis < 5e-3,
+                "thesis scheme failed (k {k}, {hz} Hz): {thesis} m"
+            );
+        }
+    }
 }
 
 #[test]

@@ -241,9 +241,11 @@ impl SoftBody {
     /// The restoring step of thesis 3.2.2 / Appendix A.6–A.7, made sound.
     ///
     /// Thesis: `v = MoveTowards(v, (dest − x − Σ w·(dest_j − x_j)) · k · dt/(1/90), 10)`. Its
-    /// per-step displacement fraction is `k·dt²·90`: it grows with the step size and passes 1
-    /// (overshoot) at k·dt > 1/(90·dt), i.e. k > 90 at 90 Hz and k > 40 at 60 Hz, and diverges at
-    /// twice that. Here the fraction is `α = 1 − exp(−k·dt)`, which matches the thesis for small
+    /// per-step displacement fraction is `α = k·dt²·90`: it grows with the step size and passes
+    /// 1 (overshoot) at k·dt > 1/(90·dt), i.e. k > 90 at 90 Hz and k > 40 at 60 Hz, and diverges
+    /// at twice that. Worse, its raw neighbour term amplifies a uniform displacement by
+    /// `1 + α(Σw − 1)` per step: where the weights sum past 1 (the default range) it diverges at
+    /// every k and dt. Here the fraction is `α = 1 − exp(−k·dt)`, which matches the thesis for small
     /// k·dt and never reaches 1. The neighbour term follows neighbours' displacement *relative*
     /// to the particle's own, with shares summing to `neighbour_share ≤ 0.5`; by Gershgorin the
     /// update `u ← u − α(I + L)u` then contracts for every α < 1 — no stiffness or step rate

@@ -235,11 +235,19 @@ pub fn build_model(
             // The material's stiffness relative to the default scales the restoring rate.
             let stiffness =
                 (20.0 * spec.material.young_pa / Material::default().young_pa).clamp(0.1, 1e4);
+            // The material's density relative to the default scales the particles' and the
+            // center's masses (the defaults model the default density).
+            let defaults = SoftBodyConfig::default();
+            let heavier = spec.material.density_kg_m3 / Material::default().density_kg_m3;
             let cfg = SoftBodyConfig {
                 cluster: ClusterMethod::Distance {
                     radius_m: spec.cell_frac * size,
                 },
                 stiffness,
+                particle_mass_kg: (defaults.particle_mass_kg * heavier).clamp(1e-4, 1e3),
+                center_mass_kg: (defaults.center_mass_kg * heavier).clamp(1e-4, 1e5),
+                restoring: spec.restoring,
+                self_collisions: spec.self_collisions,
                 soft_region: spec.soft_region,
                 space: if anchored {
                     SimulationSpace::Local

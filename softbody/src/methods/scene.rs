@@ -66,7 +66,10 @@ pub struct ModelScene {
     top_plate: Option<RigidBodyHandle>,
     bottom_plate: Option<RigidBodyHandle>,
     poker: Option<RigidBodyHandle>,
-    wall_far_x: Option<f32>,
+    /// Half-spaces `p · n > d` a vertex must never reach (the far side of a thin wall).
+    beyond: Vec<(Vec3, f32)>,
+    /// Seconds the squeeze's plates take to close.
+    close_s: f32,
     rest_surface: Vec<Vec3>,
     rest_volume_m3: f32,
 }
@@ -153,7 +156,8 @@ impl ModelScene {
             top_plate,
             bottom_plate,
             poker,
-            wall_far_x: None,
+            beyond: Vec::new(),
+            close_s: 0.8,
             rest_surface,
             rest_volume_m3,
         };
@@ -181,8 +185,65 @@ impl ModelScene {
                 .friction(0.5),
             Some(wall),
         );
-        s.wall_far_x = Some(near + 2.0 * half_t);
+        s.beyond.push((Vec3::X, near + 2.0 * half_t));
         s.model.set_velocity(&mut s.world, Vec3::X * speed_mps);
+        Ok(s)
+    }
+
+    /// A throw into a corner: under gravity, the body (2 cm over a fixed floor 1 cm thick) flies at `speed_mps` diagonally into the corner of two fixed walls 1 cm thick
+    /// (+x and +z, 2 cm beyond the body). Nothing may end beyond a wall or below the floor.
+    pub fn corner_throw(
+        mesh: &Mesh,
+        spec: &MethodSpec,
+        dt_s: f32,
+        speed_mps: f32,
+    ) -> Result<Self, SoftBodyError> {
+        let mut s = Self::setup(ScenarioKind::Rest, mesh, spec, dt_s, false)?;
+        let floor_top = s.frame.lo.y - 0.02;
+        s.world.gravity = Vec3::new(0.0, -9.81, 0.0);
+        let half_t = 0.005;
+        let size = s.frame.size_m;
+        let slab = |world: &mut PhysicsWorld, at: Vec3, half: Vec3| {
+            let b = world.insert_body(RigidBodyBuilder::fixed().translation(at));
+            world.insert_collider(
+                ColliderBuilder::cuboid(half.x, half.y, half.z).friction(0.5),
+                Some(b),
+            );
+        };
+        slab(
+            &mut s.world,
+            Vec3::new(0.0, floor_top - half_t, 0.0),
+            Vec3::new(3.0 * size, half_t, 3.0 * size),
+        );
+        let near_x = s.frame.hi.x + 0.02;
+        let near_z = s.frame.hi.z + 0.02;
+        slab(
+            &mut s.world,
+            Vec3::new(near_x + half_t, floor_top + size, 0.0),
+            Vec3::new(half_t, 2.0 * size, 3.0 * size),
+        );
+        slab(
+            &mut s.world,
+            Vec3::new(0.0, floor_top + size, near_z + half_t),
+            Vec3::new(3.0 * size, 2.0 * size, half_t),
+        );
+        s.beyond.push((Vec3::X, near_x + 2.0 * half_t));
+        s.beyond.push((Vec3::Z, near_z + 2.0 * half_t));
+        s.beyond.push((-Vec3::Y, -(floor_top - 2.0 * half_t)));
+        let dir = Vec3::new(1.0, 0.0, 1.0).normalize();
+        s.model.set_velocity(&mut s.world, dir * speed_mps);
+        Ok(s)
+    }
+
+    /// The squeeze with plates that close in `close_s` instead of 0.8 s (a fast squeeze).
+    pub fn fast_squeeze(
+        mesh: &Mesh,
+        spec: &MethodSpec,
+        dt_s: f32,
+        close_s: f32,
+    ) -> Result<Self, SoftBodyError> {
+        let mut s = Self::new(ScenarioKind::Squeeze, mesh, spec, dt_s)?;
+        s.close_s = close_s.max(dt_s);
         Ok(s)
     }
 
@@ -195,7 +256,7 @@ impl ModelScene {
         match frame.kind {
             ScenarioKind::Squeeze => {
                 // Close over 0.8 s until the surfaces are at 30 % of the height, hold, open.
-                let close = ramp(t, 0.0, 0.8) - ramp(t, release, 0.3);
+                let close = ramp(t, 0.0, self.close_s) - ramp(t, release, 0.3);
                 let full = frame.half_height_m * 0.7 + 0.01 * frame.size_m;
                 for (h, sign) in [(self.top_plate, 1.0f32), (self.bottom_plate, -1.0)] {
                     if let Some(b) = h.and_then(|h| self.world.bodies.get_mut(h)) {
@@ -278,7 +339,10 @@ impl ModelScene {
         let far = s.iter().map(|p| p.distance(c)).fold(0.0f32, f32::max);
         let exploded =
             !non_finite && (far > 2.0 * self.frame.size_m || self.model.max_speed_mps() > 100.0);
-        let tunnelled = self.wall_far_x.is_some_and(|x| s.iter().any(|p| p.x > x));
+        let tunnelled = self
+            .beyond
+            .iter()
+            .any(|&(n, d)| s.iter().any(|p| p.dot(n) > d));
         Sanity {
             non_finite,
             exploded,

@@ -5,7 +5,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::methods::pbd::PbdParams;
-use crate::{SoftBodyError, SoftRegion};
+use crate::{RestoringScheme, SoftBodyError, SoftRegion};
 
 /// The methods compared.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, PartialOrd, Ord)]
@@ -108,6 +108,18 @@ pub struct MethodSpec {
     /// 3.5.2). Particle method only; `None` = all soft.
     #[serde(default)]
     pub soft_region: Option<SoftRegion>,
+    /// The particle method's restoring scheme (thesis 3.2.2; default ours, `Thesis` the
+    /// original kept to compare). Particle method only.
+    #[serde(default = "exact_restoring")]
+    pub restoring: RestoringScheme,
+    /// The particle method's particles collide with each other (thesis 3.5.3 turns this off;
+    /// default off). Particle method only.
+    #[serde(default)]
+    pub self_collisions: bool,
+}
+
+fn exact_restoring() -> RestoringScheme {
+    RestoringScheme::Exact
 }
 
 impl MethodSpec {
@@ -122,7 +134,28 @@ impl MethodSpec {
             params: PbdParams::default(),
             material: Material::default(),
             soft_region: None,
+            restoring: RestoringScheme::Exact,
+            self_collisions: false,
         }
+    }
+
+    /// With the particle method's restoring scheme.
+    pub fn restoring(mut self, scheme: RestoringScheme) -> Self {
+        self.restoring = scheme;
+        self
+    }
+
+    /// With the particle method's self-collisions on or off.
+    pub fn self_collisions(mut self, on: bool) -> Self {
+        self.self_collisions = on;
+        self
+    }
+
+    /// With the body's total mass set to `mass_kg` (the density that gives it, for `mesh`'s
+    /// enclosed volume `volume_m3`).
+    pub fn total_mass(mut self, mass_kg: f32, volume_m3: f32) -> Self {
+        self.material.density_kg_m3 = mass_kg / volume_m3.abs().max(1e-12);
+        self
     }
 
     /// With substeps and iterations.
@@ -186,11 +219,17 @@ impl MethodSpec {
     /// A label such as `tet c0.08 s4i8`.
     pub fn label(&self) -> String {
         let p = &self.params;
-        let region = if self.soft_region.is_some() {
-            " region"
+        let mut region = if self.soft_region.is_some() {
+            " region".to_string()
         } else {
-            ""
+            String::new()
         };
+        if self.restoring == RestoringScheme::Thesis {
+            region += " thesis";
+        }
+        if self.self_collisions {
+            region += " selfcol";
+        }
         match self.kind {
             MethodKind::Surface | MethodKind::Ispc => {
                 format!("{} s{}i{}", self.kind.name(), p.substeps, p.iterations)

@@ -4,9 +4,14 @@
 //!
 //! `cargo run --release -p softsync-softbody --example evidence -- [--quick]`
 //!
-//! Writes `docs/results/methods/{README.md,*.csv,*.svg}` and prints `RESULT` lines.
+//! Writes `docs/results/methods/{README.md,*.csv,*.svg}` and prints `RESULT` lines. Errors are
+//! against the verified reference (`methods::reference`; its convergence study is
+//! `examples/reference.rs`) and, to say which conclusions changed, against the former one.
+//! `--quick` runs the same methods and timings against a coarse reference and says so: its
+//! errors are not the reference's (its RESULT lines name them `rms_mm_vs_coarse_reference`).
 //!
-//! Over 800 lines: one generated report of six sections that read top to bottom like it.
+//! Section 5 (where every method fails) is `stability.rs`; what changed with the reference is
+//! `changes.rs`.
 #![allow(
     clippy::disallowed_methods,
     clippy::unwrap_used,
@@ -16,22 +21,27 @@
     missing_docs
 )]
 
+mod changes;
+mod stability;
+
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use glam::{Quat, Vec3};
+use glam::Vec3;
 use softsync_benchkit::plotters::prelude::*;
 use softsync_benchkit::{percentile, write_svg, ChartStyle, Csv, LineChart, ResultLine, Series};
-use softsync_softbody::methods::builders::plain_pbd;
 use softsync_softbody::methods::choice::{choose, pareto_front, Candidate, ObjectNeeds};
 use softsync_softbody::methods::ispc::{ispc_links, punch_holes};
 use softsync_softbody::methods::pbd::SolverKind;
-use softsync_softbody::methods::scene::{cantilever_sag_m, surface_distance_m, ModelScene};
+use softsync_softbody::methods::reference::{
+    reference_spec as neo_hookean_spec, shape_change, verified_reference, REFERENCE_CELL,
+    REFERENCE_SUBSTEPS,
+};
+use softsync_softbody::methods::scene::{cantilever_sag_m, ModelScene};
 use softsync_softbody::methods::{build_model, step_models, DeformableModel};
 use softsync_softbody::methods::{MethodKind, MethodSpec};
-use softsync_softbody::metrics::rigid_fit_error;
 use softsync_softbody::rapier3d::prelude::{ColliderBuilder, PhysicsWorld, RigidBodyBuilder};
 use softsync_softbody::scenario::ScenarioKind;
 use softsync_softbody::{Mesh, SoftRegion};
@@ -54,6 +64,8 @@ struct Point {
     rest_mm: f32,
     max_inverted: usize,
     verdict: &'static str,
+    /// Shape RMS against the former reference (`tet c0.050 s10i10`), full runs only.
+    old_rms_mm: Option<f32>,
 }
 
 struct Trace {
@@ -66,6 +78,11 @@ struct Trace {
     rest_mm: f32,
     particles: usize,
     verdict: &'static str,
+    /// Total energy (kinetic + gravitational + elastic) at the first sample, its largest value
+    /// after, at the last sample, and the largest elastic energy, J (models that report one).
+    energy: Option<[f32; 4]>,
+    /// Times the volume floor engaged (all tets, tets mostly material).
+    floor_hits: (u64, u64),
 }
 
 /// The step time reported: the 25th percentile, robust to the other processes of a shared
@@ -93,6 +110,8 @@ fn run(kind: ScenarioKind, mesh: &Mesh, spec: &MethodSpec) -> Option<Trace> {
         rest_mm: 0.0,
         particles: s.model.num_particles(),
         verdict: "ok",
+        energy: None,
+        floor_hits: (0, 0),
     };
     for i in 0..steps {
         let was_asleep = s.model.is_sleeping();
@@ -108,6 +127,13 @@ fn run(kind: ScenarioKind, mesh: &Mesh, spec: &MethodSpec) -> Option<Trace> {
         if i % SAMPLE_EVERY == SAMPLE_EVERY - 1 {
             t.samples.push(s.model.surface().to_vec());
             t.min_volume = t.min_volume.min(s.volume_ratio());
+            if let Some(e) = s.model.energy(s.world.gravity) {
+                let (total, elastic) = (e.total_j(), e.elastic_j);
+                t.energy = Some(match t.energy {
+                    None => [total, total, total, elastic],
+                    Some([first, max, _, el]) => [first, max.max(total), total, el.max(elastic)],
+                });
+            }
         }
         t.max_inverted = t.max_inverted.max(s.model.inverted_elements());
         if !s.sanity().ok() && t.verdict == "ok" {
@@ -116,28 +142,8 @@ fn run(kind: ScenarioKind, mesh: &Mesh, spec: &MethodSpec) -> Option<Trace> {
     }
     t.end_volume = s.volume_ratio();
     t.rest_mm = s.rest_error_m().0 * 1e3;
+    t.floor_hits = s.model.volume_floor_hits();
     Some(t)
-}
-
-/// Shape error (each sample's reference surface rigidly fitted onto the model's first, so a
-/// different bounce height or roll is not counted as deformation error): RMS over samples and
-/// vertices, and the largest; then the raw (trajectory) RMS without the fit. Millimetres.
-fn compare(a: &[Vec<Vec3>], b: &[Vec<Vec3>]) -> (f32, f32, f32) {
-    let mut sum = 0.0f64;
-    let mut raw = 0.0f64;
-    let mut max = 0.0f32;
-    let n = a.len().min(b.len()).max(1);
-    for (x, y) in a.iter().zip(b) {
-        let (r, m) = rigid_fit_error(x, y, Quat::IDENTITY);
-        sum += (r as f64).powi(2);
-        max = max.max(m);
-        raw += (surface_distance_m(x, y).0 as f64).powi(2);
-    }
-    (
-        ((sum / n as f64).sqrt() * 1e3) as f32,
-        max * 1e3,
-        ((raw / n as f64).sqrt() * 1e3) as f32,
-    )
 }
 
 fn specs(quick: bool) -> Vec<MethodSpec> {
@@ -171,12 +177,26 @@ fn specs(quick: bool) -> Vec<MethodSpec> {
     v
 }
 
+/// The reference: the verified one, or for `--quick` the quick study's (cells twice as
+/// coarse, a quarter of the substeps).
 fn reference_spec(quick: bool) -> MethodSpec {
     if quick {
-        MethodSpec::new(MethodKind::Tet).cell(0.08).budget(8, 8)
+        neo_hookean_spec(REFERENCE_CELL * 2.0, REFERENCE_SUBSTEPS / 4)
     } else {
-        MethodSpec::new(MethodKind::Tet).cell(0.05).budget(10, 10)
+        verified_reference()
     }
+}
+
+/// The reference of the previous evidence (a dense XPBD tet cover), kept to say what changed.
+fn former_reference() -> MethodSpec {
+    MethodSpec::new(MethodKind::Tet).cell(0.05).budget(10, 10)
+}
+
+/// The reference's own run, as its table row shows it.
+struct ReferenceRow {
+    label: String,
+    trace: Trace,
+    ms: f64,
 }
 
 fn measure_curves(
@@ -184,15 +204,29 @@ fn measure_curves(
     mesh: &Mesh,
     specs: &[MethodSpec],
     quick: bool,
-) -> (Vec<Point>, f64) {
-    let reference = run(kind, mesh, &reference_spec(quick)).unwrap();
+) -> (Vec<Point>, ReferenceRow) {
+    let rs = reference_spec(quick);
+    let reference = run(kind, mesh, &rs).unwrap();
     let ref_ms = cost_ms(&reference.step_ms);
+    println!(
+        "  reference {} {:.1} ms/step, inverted {}, floor {:?}, {}",
+        rs.label(),
+        ref_ms,
+        reference.max_inverted,
+        reference.floor_hits,
+        reference.verdict
+    );
+    let former = (!quick).then(|| run(kind, mesh, &former_reference()).unwrap());
     let mut out = Vec::new();
     for spec in specs {
         let Some(t) = run(kind, mesh, spec) else {
             continue;
         };
-        let (rms_mm, max_mm, raw_mm) = compare(&t.samples, &reference.samples);
+        let change = shape_change(&t.samples, &reference.samples);
+        let (rms_mm, max_mm, raw_mm) = (change.rms_mm, change.max_mm, change.raw_rms_mm);
+        let old_rms_mm = former
+            .as_ref()
+            .map(|f| shape_change(&t.samples, &f.samples).rms_mm);
         let label = spec.label().replace(' ', "_");
         let p = Point {
             spec: *spec,
@@ -208,6 +242,7 @@ fn measure_curves(
             rest_mm: t.rest_mm,
             max_inverted: t.max_inverted,
             verdict: t.verdict,
+            old_rms_mm,
         };
         println!(
             "  {:<32} {:>6} particles {:>8.3} ms  shape rms {:>6.2} mm  max {:>6.1} mm  raw {:>6.1} mm  vol {:.3} rest {:.2} mm {}",
@@ -215,7 +250,14 @@ fn measure_curves(
         );
         out.push(p);
     }
-    (out, ref_ms)
+    (
+        out,
+        ReferenceRow {
+            label: rs.label().replace(' ', "_"),
+            trace: reference,
+            ms: ref_ms,
+        },
+    )
 }
 
 const COLORS: [RGBColor; 7] = [
@@ -267,7 +309,7 @@ fn chart(path: &PathBuf, title: &str, points: &[Point]) {
     let chart = LineChart {
         title: title.to_owned(),
         x_desc: "step ms, 25th percentile (log)".to_owned(),
-        y_desc: "RMS shape error to the dense tet reference, mm".to_owned(),
+        y_desc: "RMS shape error to the Neo-Hookean reference, mm".to_owned(),
         x_range: xmin.max(1e-3)..xmax.max(1e-2),
         x_log: true,
         y_range: 0.0..ymax.max(1.0),
@@ -316,7 +358,8 @@ fn main() {
         1.0 / DT
     )
     .unwrap();
-    writeln!(md, "Error: distance of each method's surface vertices to the dense tetrahedral reference (`{}`, XPBD edges + tet volume on parry's `volume_mesh`, surface embedded) at the same times, sampled every {} steps over the whole scenario, after the best rigid fit of the reference onto the model at each sample (*shape* error: a different bounce height, slide or roll is not deformation error): RMS over vertices and samples, and the largest. `raw mm`: the same without the fit (trajectory included). `min vol`: smallest volume ratio seen; `rest mm`: RMS distance to the rest shape (after the best rigid fit) at the end of the scenario, after release. `sane`: stability verdict over the run. Timings: 25th-percentile wall-clock per step (robust to other processes on the shared 2-core machine) while the body is awake (steps where it slept are not counted), single thread, all work of the step (props, rapier, the method).\n", rs.label(), SAMPLE_EVERY).unwrap();
+    let uncertainty = changes::uncertainty(&out);
+    writeln!(md, "Error: distance of each method's surface vertices to the reference (`{}`: stable Neo-Hookean XPBD tets on a weighted Kuhn lattice, surface embedded, never inverted — how far it is from converged is in [reference.md](reference.md) and under each table) at the same times, sampled every {} steps over the whole scenario, after the best rigid fit of the reference onto the model at each sample (*shape* error: a different bounce height, slide or roll is not deformation error): RMS over vertices and samples, and the largest. `raw mm`: the same without the fit (trajectory included). `min vol`: smallest volume ratio seen; `rest mm`: RMS distance to the rest shape (after the best rigid fit) at the end of the scenario, after release. `sane`: stability verdict over the run. Timings: 25th-percentile wall-clock per step (robust to other processes on the shared 2-core machine) while the body is awake (steps where it slept are not counted), single thread, all work of the step (props, rapier, the method). `old ref mm`: the shape RMS against the former reference (`{}`, XPBD edges + tet volume on parry's `volume_mesh`), which inverted tets in every scenario.{}\n", rs.label(), SAMPLE_EVERY, former_reference().label(), if quick { "\n\n**Quick run: the errors are against a coarse reference (the quick study's), not the verified one; they are not the full run's figures. The step times are measured the same way.**" } else { "" }).unwrap();
     let mut csv = Csv::new(&[
         "scenario",
         "label",
@@ -331,6 +374,7 @@ fn main() {
         "rest_mm",
         "max_inverted",
         "sane",
+        "old_reference_rms_mm",
     ]);
     let mut all: BTreeMap<&str, Vec<Point>> = BTreeMap::new();
     // The restricted soft region (thesis 3.5.2) where only one side is touched: the poke.
@@ -357,8 +401,10 @@ fn main() {
                     .region(Some(poke_region)),
             );
         }
-        let (points, ref_ms) = measure_curves(kind, &bunny, &specs, quick);
-        writeln!(md, "### {}\n\nReference `{}`: {ref_ms:.2} ms/step.\n\n![{}]({}.svg)\n\n| method | particles | ms/step | shape RMS mm | shape max mm | raw RMS mm | min vol | end vol | rest mm | max inverted tets | sane |\n|---|---|---|---|---|---|---|---|---|---|---|", kind.name(), rs.label(), kind.name(), kind.name()).unwrap();
+        let (points, reference) = measure_curves(kind, &bunny, &specs, quick);
+        let case = format!("bunny {}", kind.name());
+        writeln!(md, "### {}\n\n{}\n\n![{}]({}.svg)\n\n| method | particles | ms/step | shape RMS mm | shape max mm | raw RMS mm | min vol | end vol | rest mm | max inverted tets | sane | old ref mm |\n|---|---|---|---|---|---|---|---|---|---|---|---|", kind.name(), changes::reference_note(&reference, uncertainty.get(&case), quick), kind.name(), kind.name()).unwrap();
+        writeln!(md, "{}", changes::reference_row(&reference)).unwrap();
         for p in &points {
             csv.row([
                 kind.name().to_string(),
@@ -374,10 +420,11 @@ fn main() {
                 format!("{:.3}", p.rest_mm),
                 p.max_inverted.to_string(),
                 p.verdict.to_string(),
+                p.old_rms_mm.map_or(String::new(), |v| format!("{v:.3}")),
             ]);
             writeln!(
                 md,
-                "| `{}` | {} | {:.3} | {:.2} | {:.1} | {:.1} | {:.3} | {:.3} | {:.2} | {} | {} |",
+                "| `{}` | {} | {:.3} | {:.2} | {:.1} | {:.1} | {:.3} | {:.3} | {:.2} | {} | {} | {} |",
                 p.label,
                 p.particles,
                 p.ms,
@@ -388,13 +435,22 @@ fn main() {
                 p.end_volume,
                 p.rest_mm,
                 p.max_inverted,
-                p.verdict
+                p.verdict,
+                p.old_rms_mm.map_or("–".to_string(), |v| format!("{v:.2}"))
             )
             .unwrap();
             results.push(
                 ResultLine::new(format!("methods.{} {}", kind.name(), p.label))
                     .fixed("ms", p.ms, 3)
-                    .fixed("rms_mm", p.rms_mm, 2)
+                    .fixed(
+                        if quick {
+                            "rms_mm_vs_coarse_reference"
+                        } else {
+                            "rms_mm"
+                        },
+                        p.rms_mm,
+                        2,
+                    )
                     .fixed("volume", p.min_volume, 3),
             );
         }
@@ -417,7 +473,7 @@ fn main() {
         chart(
             &out.join(format!("{}.svg", kind.name())),
             &format!(
-                "bunny, {}: step time vs error to the dense tet reference",
+                "bunny, {}: step time vs error to the Neo-Hookean reference",
                 kind.name()
             ),
             &points,
@@ -566,98 +622,11 @@ fn main() {
     };
     write_svg(out.join("xpbd_beam.svg"), (820, 520), &[beam]).unwrap();
 
-    // ---- 5. Stability maps: stiffness × step rate × impact speed against a thin wall.
-    let small = Mesh::icosphere(0.1, 2);
-    let stiff = [0.2f32, 1.0, 5.0, 25.0];
-    let rates = [30.0f32, 60.0, 90.0, 144.0];
-    let speeds = [0.0f32, 2.5, 5.0, 10.0];
-    let methods: Vec<MethodSpec> = vec![
-        MethodSpec::new(MethodKind::Particle),
-        MethodSpec::new(MethodKind::Surface).budget(2, 4),
-        MethodSpec::new(MethodKind::Ispc).budget(2, 4),
-        plain_pbd(MethodSpec::new(MethodKind::Ispc).budget(2, 4)),
-        MethodSpec::new(MethodKind::Tet).budget(2, 4),
-        MethodSpec::new(MethodKind::ShapeMatching).budget(2, 1),
-        MethodSpec::new(MethodKind::RapierNative),
-    ];
-    let mut csv = Csv::new(&[
-        "method",
-        "stiffness_factor",
-        "rate_hz",
-        "speed_mps",
-        "verdict",
-    ]);
-    let mut maps: Vec<(String, Vec<(usize, usize, bool)>)> = Vec::new();
-    writeln!(md, "## 5. Stability maps\n\nIcosphere (162 vertices, 0.2 m) thrown weightless at a fixed wall 1 cm thick for 1 s; stiffness factor × the default material (Young's modulus for the position-based methods, restoring rate for the particle method, spring frequency² for rapier's); sane = no NaN, no vertex beyond 2 sizes from the centroid or faster than 100 m/s, no inverted tet at any step, no vertex past the wall.\n\n![stability](stability.svg)\n\n| method | sane runs | failing cases |\n|---|---|---|").unwrap();
-    for m in &methods {
-        let mut cells = Vec::new();
-        let mut fails: Vec<String> = Vec::new();
-        let mut okc = 0;
-        for (si, &k) in stiff.iter().enumerate() {
-            for (ri, &hz) in rates.iter().enumerate() {
-                for (vi, &v) in speeds.iter().enumerate() {
-                    let mut spec = *m;
-                    spec.material.young_pa *= k;
-                    spec.material.bulk_pa *= k;
-                    spec.material.shape_rate_per_s *= k.sqrt();
-                    let verdict = match ModelScene::impact(&small, &spec, 1.0 / hz, v) {
-                        Ok(mut s) => {
-                            let mut verdict = "ok";
-                            for _ in 0..hz as usize {
-                                s.step();
-                                let san = s.sanity();
-                                if !san.ok() {
-                                    verdict = san.verdict();
-                                    break;
-                                }
-                            }
-                            if verdict == "ok" {
-                                verdict = s.sanity().verdict();
-                            }
-                            verdict
-                        }
-                        Err(_) => "build_error",
-                    };
-                    csv.row([
-                        spec.label(),
-                        k.to_string(),
-                        hz.to_string(),
-                        v.to_string(),
-                        verdict.to_string(),
-                    ]);
-                    let ok = verdict == "ok";
-                    okc += ok as usize;
-                    if !ok {
-                        fails.push(format!("k×{k} {hz:.0} Hz {v} m/s: {verdict}"));
-                    }
-                    cells.push((si * rates.len() + ri, vi, ok));
-                }
-            }
-        }
-        let total = stiff.len() * rates.len() * speeds.len();
-        let label = match m.params.solver {
-            SolverKind::Pbd => format!("{} (plain PBD)", m.label()),
-            SolverKind::Xpbd => m.label(),
-        };
-        writeln!(
-            md,
-            "| `{label}` | {okc}/{total} | {} |",
-            if fails.is_empty() {
-                "none".to_string()
-            } else {
-                fails.join("; ")
-            }
-        )
-        .unwrap();
-        results.push(
-            ResultLine::new(format!("methods.stability {}", label.replace(' ', "_")))
-                .field("sane", format_args!("{okc}/{total}")),
-        );
-        maps.push((label, cells));
-    }
-    csv.write(out.join("stability.csv")).unwrap();
+    // ---- 5. Where every method fails: stability maps and boundaries.
+    println!("stability maps:");
+    stability::section(&mut md, &mut results, &out);
     // Failing cases seen in the scenarios of section 1, per method.
-    writeln!(md, "\nFailing cases in the scenarios of section 1 (bunny), per method: the smallest volume ratio seen (a surface turned inside out has a negative volume) and the runs that were not sane.\n\n| method | worst volume ratio (run) | not sane |\n|---|---|---|").unwrap();
+    writeln!(md, "\n### In the scenarios of section 1\n\nFailing cases in the scenarios of section 1 (bunny), per method: the smallest volume ratio seen (a surface turned inside out has a negative volume) and the runs that were not sane.\n\n| method | worst volume ratio (run) | not sane |\n|---|---|---|").unwrap();
     for k in MethodKind::ALL {
         let mut worst: Option<(f32, String)> = None;
         let mut bad: Vec<String> = Vec::new();
@@ -688,55 +657,6 @@ fn main() {
             .unwrap();
         }
     }
-    {
-        let path = out.join("stability.svg");
-        let cols = 4;
-        let rows_n = maps.len().div_ceil(cols);
-        let root = SVGBackend::new(&path, (1100, 330 * rows_n as u32)).into_drawing_area();
-        root.fill(&WHITE).unwrap();
-        let panels = root.split_evenly((rows_n, cols));
-        for (panel, (name, cells)) in panels.iter().zip(&maps) {
-            let mut c = ChartBuilder::on(panel)
-                .caption(name.as_str(), ("sans-serif", 13))
-                .margin(6)
-                .x_label_area_size(30)
-                .y_label_area_size(70)
-                .build_cartesian_2d(0..speeds.len(), 0..stiff.len() * rates.len())
-                .unwrap();
-            c.configure_mesh()
-                .disable_mesh()
-                .x_labels(speeds.len())
-                .x_label_formatter(&|i| {
-                    speeds
-                        .get(*i)
-                        .map(|v| format!("{v} m/s"))
-                        .unwrap_or_default()
-                })
-                .y_labels(stiff.len() * rates.len())
-                .y_label_formatter(&|j| {
-                    let (si, ri) = (j / rates.len(), j % rates.len());
-                    match (stiff.get(si), rates.get(ri)) {
-                        (Some(k), Some(r)) => format!("k×{k} {r:.0}Hz"),
-                        _ => String::new(),
-                    }
-                })
-                .label_style(("sans-serif", 10))
-                .draw()
-                .unwrap();
-            c.draw_series(cells.iter().map(|&(row, col, ok)| {
-                Rectangle::new(
-                    [(col, row), (col + 1, row + 1)],
-                    if ok {
-                        RGBColor(120, 200, 120).filled()
-                    } else {
-                        RGBColor(220, 80, 80).filled()
-                    },
-                )
-            }))
-            .unwrap();
-        }
-        root.present().unwrap();
-    }
 
     // ---- 6. Automatic choice on a thesis-room-like scene.
     writeln!(md, "\n## 6. Model no more than the scene needs\n").unwrap();
@@ -749,6 +669,7 @@ fn main() {
         .collect();
     println!("drop (icosphere) for the choice:");
     let (ico_points, _) = measure_curves(ScenarioKind::Drop, &ico, &choice_specs, quick);
+    let ico_drop_points = ico_points.clone();
     let drop_ico = candidates(&ico_points);
     let objects = vec![
         ObjectNeeds {
@@ -771,7 +692,14 @@ fn main() {
         },
     ];
     let plan = choose(&objects, budget_frame_ms);
-    writeln!(md, "Budgets: frame {budget_frame_ms} ms for the soft bodies; error 3.5 mm for the poked bunny, 7 mm for the dropped icosphere (shape RMS to the tet reference, from the curves above, measured in this run). The box is untouched and asleep: it is not simulated.\n\n| object | chosen | measured ms | measured RMS mm | within error budget |\n|---|---|---|---|---|").unwrap();
+    // The same choice from the errors against the former reference: did it change?
+    let former_plan = (!quick).then(|| {
+        let mut o = objects.clone();
+        o[0].candidates = changes::former_candidates(&all["poke"]);
+        o[1].candidates = changes::former_candidates(&ico_drop_points);
+        choose(&o, budget_frame_ms)
+    });
+    writeln!(md, "Budgets: frame {budget_frame_ms} ms for the soft bodies; error 3.5 mm for the poked bunny, 7 mm for the dropped icosphere (shape RMS to the reference, from the curves above, measured in this run). The box is untouched and asleep: it is not simulated.\n\n| object | chosen | measured ms | measured RMS mm | within error budget |\n|---|---|---|---|---|").unwrap();
     for ch in &plan.choices {
         match &ch.picked {
             Some(c) => writeln!(
@@ -900,6 +828,10 @@ fn main() {
             .field("meets_budgets", plan.meets_budgets()),
     );
     writeln!(md, "The restricted soft region (only the touched side soft, thesis 3.5.2) is a candidate of the bunny's poke curve (`particle c0.060 region`: a ball of half the size around the poked side); the choice may pick it. Only the particle method supports a region; the position-based methods simulate the whole body. The bunny is anchored in the room (the particle method's local mode; the position-based methods are held by the floor) so its poke curve applies.\n").unwrap();
+
+    if let Some(former) = &former_plan {
+        changes::section(&mut md, &all, &ico_drop_points, &plan, former, &uncertainty);
+    }
 
     let header = format!(
         "# Soft-body methods: speed against accuracy\n\nGenerated by `cargo run --release -p softsync-softbody --example evidence{}` on a {}-core machine in {:.0} s. Do not edit by hand.\n\nMethods (all behind `softsync_softbody::methods::DeformableModel`): `particle` — the thesis's particle method on rapier (knob: cluster radius / size); `surface_pbd` — XPBD on mesh edges + dihedral bending (ISPC paper Alg. 1); `ispc` — the same plus internal shape-preserving links (Alg. 2); `tet` — XPBD edges + tet volume on parry's Apache-2.0 `volume_mesh` cover, surface embedded (knob: cell size / size); `shape_matching` — Müller 2005 on overlapping clusters from the particle map plus one global cluster; `rapier_native` — rapier 0.36's `SoftBodyBuilder::volumetric`. Labels: `c` = cell or cluster size as a fraction of the object's size, `sNiM` = N substeps × M iterations.\n\n",
