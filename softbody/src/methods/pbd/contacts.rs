@@ -6,13 +6,23 @@ use glam::Vec3;
 use parry3d::math::Pose;
 use parry3d::query::Ray;
 use parry3d::shape::Shape;
-use rapier3d::prelude::{Aabb, PhysicsWorld, QueryFilter};
+use rapier3d::prelude::{Aabb, ColliderHandle, PhysicsWorld, QueryFilter, RigidBodyHandle};
 
 use super::surface::SurfaceMap;
 
 /// A collider near the body for this step.
 pub(super) struct NearCollider<'a> {
+    /// The collider.
+    pub(super) handle: ColliderHandle,
+    /// Its rigid body if that is dynamic: the contacts push it back (two-way coupling).
+    pub(super) dynamic_body: Option<RigidBodyHandle>,
+    /// Its inverse mass in the contacts (0: immovable).
+    pub(super) inv_mass: f32,
     pose: Pose,
+    /// How far a dynamic body's collider moved in the rapier step just taken: the substeps
+    /// see it move there gradually (at the start of the step it was `lag` behind), so a body
+    /// it runs into is pushed at its speed, not at its travel over one substep.
+    lag: Vec3,
     shape: &'a dyn Shape,
     aabb_lo: Vec3,
     aabb_hi: Vec3,
@@ -20,19 +30,40 @@ pub(super) struct NearCollider<'a> {
     velocity: Vec3,
 }
 
-/// The colliders (sensors aside) whose bounds meet the box `[lo, hi]`, as they are now.
-pub(super) fn near_colliders(world: &PhysicsWorld, lo: Vec3, hi: Vec3) -> Vec<NearCollider<'_>> {
+/// The colliders (sensors aside) whose bounds meet the box `[lo, hi]`, as they are now; with
+/// `sweep_dynamic`, dynamic bodies' colliders are swept over the step of `dt_s` just taken.
+pub(super) fn near_colliders(
+    world: &PhysicsWorld,
+    lo: Vec3,
+    hi: Vec3,
+    sweep_dynamic: bool,
+    dt_s: f32,
+) -> Vec<NearCollider<'_>> {
     world
         .intersect_aabb_conservative(Aabb::new(lo, hi), QueryFilter::default())
         .filter(|(_, co)| !co.is_sensor())
-        .map(|(_, co)| {
+        .map(|(handle, co)| {
             let aabb = co.compute_aabb();
-            let velocity = co
+            let parent = co
                 .parent()
-                .and_then(|p| world.bodies.get(p))
-                .map(|b| b.linvel())
-                .unwrap_or(Vec3::ZERO);
+                .and_then(|p| world.bodies.get(p).map(|b| (p, b)));
+            let velocity = parent.map_or(Vec3::ZERO, |(_, b)| b.linvel());
+            let dynamic = parent.filter(|(_, b)| b.is_dynamic());
+            let dynamic_body = dynamic.map(|(h, _)| h);
+            let inv_mass = match dynamic {
+                Some((_, b)) if sweep_dynamic && b.mass() > 0.0 => 1.0 / b.mass(),
+                _ => 0.0,
+            };
+            let lag = if sweep_dynamic && dynamic_body.is_some() {
+                velocity * dt_s
+            } else {
+                Vec3::ZERO
+            };
             NearCollider {
+                handle,
+                dynamic_body,
+                inv_mass,
+                lag,
                 pose: *co.position(),
                 shape: co.shape(),
                 aabb_lo: aabb.mins,
@@ -49,6 +80,11 @@ pub(super) fn near_colliders(world: &PhysicsWorld, lo: Vec3, hi: Vec3) -> Vec<Ne
 pub(super) struct Contact {
     /// The contact point (see [`ContactPoints`]).
     point: u32,
+    /// The near collider that pushed it most.
+    collider: u32,
+    /// Where that collider had been moved by the contacts when the half-space was made: the
+    /// half-space moves on with it.
+    moved_at: Vec3,
     /// Outward normal of the half-space.
     normal: Vec3,
     /// A point on its plane.
@@ -71,6 +107,44 @@ pub(super) struct ContactPoints<'a> {
     pub(super) radius_m: f32,
     /// Which tet nodes of an embedded surface collide too (`None`: all).
     pub(super) nodes: Option<&'a [u32]>,
+    /// What the contacts did to each near collider this step.
+    pub(super) reactions: &'a mut [Reaction],
+    /// Each near collider's inverse mass in the contacts (a dynamic body's when coupled, else 0:
+    /// immovable).
+    pub(super) collider_inv_mass: &'a [f32],
+}
+
+/// What the body's contacts did to one near collider over a step: the impulse they gave it
+/// (the opposite of what it gave the body's points) and that impulse's moment about the
+/// origin, N·s and N·m·s.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Reaction {
+    /// Linear impulse on the collider.
+    pub impulse: Vec3,
+    /// Moment of the impulse about the world origin.
+    pub moment: Vec3,
+    /// How far the contacts moved a coupled collider during the step (its share of every
+    /// push, by inverse mass).
+    pub shift: Vec3,
+    /// How far it travelled within the step at the velocity those pushes gave it.
+    pub drift: Vec3,
+    /// Its velocity change so far (the pushes of earlier substeps over their substep).
+    dv: Vec3,
+    /// `shift` at the start of the substep.
+    shift_before: Vec3,
+}
+
+impl Reaction {
+    /// Start of a substep of `h`: the collider moves on at its changed velocity.
+    pub(super) fn advance(&mut self, h: f32) {
+        self.drift += self.dv * h;
+        self.shift_before = self.shift;
+    }
+
+    /// End of a substep of `h`: this substep's pushes become velocity (XPBD's `v = Δx / h`).
+    pub(super) fn close_substep(&mut self, h: f32) {
+        self.dv += (self.shift - self.shift_before) / h;
+    }
 }
 
 impl ContactPoints<'_> {
@@ -116,19 +190,79 @@ impl ContactPoints<'_> {
         }
     }
 
+    /// The inverse of the mass a push on contact point `c` moves: a particle's, or for an
+    /// embedded point `Σ w_k² / m_k` over its tet's nodes (what [`SurfaceMap::move_point`]
+    /// moves).
+    fn inverse_mass(&self, c: usize) -> f32 {
+        let s = self.surface_len();
+        if c < s {
+            self.map.point_inverse_mass(self.inv_mass, c)
+        } else {
+            self.inv_mass[self.node(c - s)]
+        }
+    }
+
+    /// How far the contacts have moved near collider `k` so far this step.
+    fn collider_moved(&self, k: usize) -> Vec3 {
+        self.reactions
+            .get(k)
+            .map_or(Vec3::ZERO, |r| r.shift + r.drift)
+    }
+
+    /// Splits a push `d` of contact point `c` (at `at`) out of near collider `k` by inverse
+    /// mass: a coupled dynamic collider takes its share as a shift, the point the rest;
+    /// books the momentum the point gained (over a substep of `h`) as the collider's reaction.
+    /// Returns the point's move.
+    fn split(&mut self, k: usize, c: usize, at: Vec3, d: Vec3, h: f32) -> Vec3 {
+        let wp = self.inverse_mass(c);
+        let wb = self.collider_inv_mass.get(k).copied().unwrap_or(0.0);
+        let Some(r) = self.reactions.get_mut(k) else {
+            return d;
+        };
+        let share = if wb > 0.0 && wp > 0.0 {
+            wp / (wp + wb)
+        } else {
+            1.0
+        };
+        let moved = d * share;
+        r.shift -= d - moved;
+        if wp > 0.0 {
+            let j = -moved / (wp * h);
+            r.impulse += j;
+            r.moment += at.cross(j);
+        }
+        moved
+    }
+
     /// This substep's contact half-spaces against `near`, into `contacts`.
-    pub(super) fn generate(&self, near: &[NearCollider], h: f32, contacts: &mut Vec<Contact>) {
+    /// `at`: the fraction of the step done at the end of this substep.
+    pub(super) fn generate(
+        &self,
+        near: &[NearCollider],
+        h: f32,
+        at: f32,
+        contacts: &mut Vec<Contact>,
+    ) {
         contacts.clear();
         if near.is_empty() {
             return;
         }
+        let mut pushes = Vec::new();
         for c in 0..self.len() {
             let (p, p0, r) = self.point(c);
-            if let Some(target) = resolve_point(near, p0, p, r, h) {
+            pushes.clear();
+            if let Some(target) = resolve_point(near, self.reactions, p0, p, r, h, at, &mut pushes)
+            {
                 let n = (target - p).normalize_or_zero();
+                let collider = pushes
+                    .iter()
+                    .max_by(|a, b| a.1.length_squared().total_cmp(&b.1.length_squared()))
+                    .map_or(0, |&(k, _)| k);
                 if n != Vec3::ZERO {
                     contacts.push(Contact {
                         point: c as u32,
+                        collider,
+                        moved_at: self.collider_moved(collider as usize),
                         normal: n,
                         on_plane: target,
                     });
@@ -138,17 +272,21 @@ impl ContactPoints<'_> {
     }
 
     /// Pushes every contact point back onto its half-space.
-    pub(super) fn project(&mut self, contacts: &[Contact]) {
+    pub(super) fn project(&mut self, contacts: &[Contact], h: f32) {
         for &Contact {
             point: i,
+            collider,
+            moved_at,
             normal: n,
             on_plane: q,
         } in contacts
         {
+            let q = q + self.collider_moved(collider as usize) - moved_at;
             let (p, _, _) = self.point(i as usize);
             let c = n.dot(p - q);
             if c < 0.0 {
-                self.move_point(i as usize, -n * c);
+                let moved = self.split(collider as usize, i as usize, p, -n * c, h);
+                self.move_point(i as usize, moved);
             }
         }
     }
@@ -156,30 +294,54 @@ impl ContactPoints<'_> {
     /// Each contact point is swept from its previous position (a ray, so no wall is crossed
     /// within a substep) and pushed out of every collider to its contact thickness, with
     /// Coulomb friction relative to the collider's motion.
-    pub(super) fn collide(&mut self, near: &[NearCollider], h: f32) {
+    pub(super) fn collide(&mut self, near: &[NearCollider], h: f32, at: f32) {
         if near.is_empty() {
             return;
         }
+        let mut pushes = Vec::new();
         for c in 0..self.len() {
             let (p, p0, r) = self.point(c);
-            if let Some(target) = resolve_point(near, p0, p, r, h) {
-                self.move_point(c, target - p);
+            pushes.clear();
+            if resolve_point(near, self.reactions, p0, p, r, h, at, &mut pushes).is_some() {
+                let mut moved = Vec3::ZERO;
+                for &(k, d) in &pushes {
+                    moved += self.split(k as usize, c, p, d, h);
+                }
+                self.move_point(c, moved);
             }
         }
     }
 }
 
 /// Where `p` (coming from `p0`) must go to be outside every collider by `r`, or `None` if
-/// it already is.
-fn resolve_point(near: &[NearCollider], p0: Vec3, p: Vec3, r: f32, h: f32) -> Option<Vec3> {
+/// it already is; `pushes` gets each collider's share of the move (near index, displacement).
+/// A collider is where it was `1 − at` of the step ago (see `lag`), plus the shift the
+/// contacts gave it so far (`reactions`).
+#[allow(clippy::too_many_arguments)]
+fn resolve_point(
+    near: &[NearCollider],
+    reactions: &[Reaction],
+    p0: Vec3,
+    p: Vec3,
+    r: f32,
+    h: f32,
+    at: f32,
+    pushes: &mut Vec<(u32, Vec3)>,
+) -> Option<Vec3> {
     let mut q = p;
     let mut moved = false;
-    for c in near {
+    for (k, c) in near.iter().enumerate() {
+        let back = c.lag * (1.0 - at) - reactions.get(k).map_or(Vec3::ZERO, |r| r.shift + r.drift);
         let lo = q.min(p0) - Vec3::splat(r);
         let hi = q.max(p0) + Vec3::splat(r);
-        if lo.cmpgt(c.aabb_hi).any() || hi.cmplt(c.aabb_lo).any() {
+        if lo.cmpgt(c.aabb_hi - back.min(Vec3::ZERO)).any()
+            || hi.cmplt(c.aabb_lo - back.max(Vec3::ZERO)).any()
+        {
             continue;
         }
+        let mut pose = c.pose;
+        pose.translation -= back;
+        let c = NearCollider { pose, ..*c };
         let before = q;
         // Sweep: a point that was outside and is now past the surface stops at the entry.
         let d = q - p0;
@@ -212,6 +374,7 @@ fn resolve_point(near: &[NearCollider], p0: Vec3, p: Vec3, r: f32, h: f32) -> Op
         } else {
             if q != before {
                 moved = true;
+                pushes.push((k as u32, q - before));
             }
             continue;
         };
@@ -229,6 +392,7 @@ fn resolve_point(near: &[NearCollider], p0: Vec3, p: Vec3, r: f32, h: f32) -> Op
         };
         q = pushed - fric;
         moved = true;
+        pushes.push((k as u32, q - before));
     }
     moved.then_some(q)
 }

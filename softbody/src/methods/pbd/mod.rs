@@ -19,11 +19,12 @@ mod neohookean;
 mod surface;
 
 use glam::Vec3;
-use rapier3d::prelude::{Aabb, PhysicsWorld, QueryFilter};
+use rapier3d::prelude::{Aabb, ColliderHandle, PhysicsWorld, QueryFilter, RigidBodyHandle};
 
 use crate::methods::model::DeformableModel;
 use constraints::{inverse_or_zero, Sweep};
 pub use constraints::{tet_volume, BendingGroup, DistanceGroup, ShapeClusters, VolumeGroup};
+pub use contacts::Reaction;
 use contacts::{near_colliders, Contact, ContactPoints};
 pub use neohookean::NeoHookeanGroup;
 pub use surface::{Embedding, SurfaceMap};
@@ -59,6 +60,16 @@ pub struct PbdParams {
     pub sleep_speed_mps: f32,
     /// Seconds of stillness before sleeping; 0 disables sleeping.
     pub sleep_after_s: f32,
+    /// Two-way coupling: the momentum the body's contacts take from a dynamic rapier body's
+    /// collider is given back to that body after the step (a box dropped on the body rests on
+    /// it). Fixed and kinematic colliders are not moved either way. Default on; the
+    /// scenarios' props are all fixed or kinematic, so no figure changes with it.
+    #[serde(default = "two_way_default")]
+    pub two_way: bool,
+}
+
+fn two_way_default() -> bool {
+    true
 }
 
 impl Default for PbdParams {
@@ -72,6 +83,7 @@ impl Default for PbdParams {
             friction: 0.5,
             sleep_speed_mps: 0.02,
             sleep_after_s: 0.5,
+            two_way: true,
         }
     }
 }
@@ -126,6 +138,11 @@ pub struct PbdBody {
     pub pin_surface: bool,
     /// Surface vertices held at a position: (vertex, position).
     held: Vec<(u32, Vec3)>,
+    /// What the last step's contacts did to each near collider, and which they were.
+    reactions: Vec<Reaction>,
+    reaction_targets: Vec<(ColliderHandle, Option<RigidBodyHandle>)>,
+    collider_inv_mass: Vec<f32>,
+    last_dt_s: f32,
     surface_map: SurfaceMap,
     surface: Vec<Vec3>,
     triangles: Vec<[u32; 3]>,
@@ -168,6 +185,10 @@ impl PbdBody {
             colliding_nodes: None,
             pin_surface: false,
             held: Vec::new(),
+            reactions: Vec::new(),
+            reaction_targets: Vec::new(),
+            collider_inv_mass: Vec::new(),
+            last_dt_s: 0.0,
             surface_map,
             surface: Vec::new(),
             triangles,
@@ -250,6 +271,10 @@ impl PbdBody {
         } else {
             return;
         };
+        self.reactions.clear();
+        self.reaction_targets.clear();
+        self.collider_inv_mass.clear();
+        self.last_dt_s = dt;
         if self.sleeping {
             if self.intruder(world) {
                 self.sleeping = false;
@@ -265,9 +290,19 @@ impl PbdBody {
         let (lo, hi) = self.bounds();
         let travel = (self.max_speed + gravity.length() * dt) * dt;
         let grow = Vec3::splat(travel + self.params.contact_radius_m + 0.02);
-        let near = near_colliders(world, lo - grow, hi + grow);
+        let near = near_colliders(world, lo - grow, hi + grow, self.params.two_way, dt);
+        self.reactions.resize(near.len(), Reaction::default());
+        self.reaction_targets
+            .extend(near.iter().map(|c| (c.handle, c.dynamic_body)));
+        self.collider_inv_mass
+            .extend(near.iter().map(|c| c.inv_mass));
         let damp = (-self.params.damping_per_s.max(0.0) * h).exp();
-        for _ in 0..substeps {
+        for sub in 0..substeps {
+            let at = (sub + 1) as f32 / substeps as f32;
+            // A coupled body keeps moving at the velocity the earlier substeps' pushes gave it.
+            for r in &mut self.reactions {
+                r.advance(h);
+            }
             // Algorithm 1 lines 8–10: external forces, damping, prediction.
             for i in 0..self.x.len() {
                 self.prev[i] = self.x[i];
@@ -280,7 +315,7 @@ impl PbdBody {
             }
             // Line 11: contact constraints (half-spaces) for this substep.
             let (points, contacts) = self.contact_points();
-            points.generate(&near, h, contacts);
+            points.generate(&near, h, at, contacts);
             // Lines 12–14: Gauss–Seidel projection, contacts with the other constraints.
             self.reset_multipliers();
             // Symmetric Gauss–Seidel: odd iterations sweep backwards, so a load travels the
@@ -288,16 +323,19 @@ impl PbdBody {
             for it in 0..self.params.iterations.max(1) {
                 self.project_constraints(h, it % 2 == 1);
                 let (mut points, contacts) = self.contact_points();
-                points.project(contacts);
+                points.project(contacts, h);
             }
             if let Some(clusters) = &mut self.clusters {
                 clusters.match_shapes(&mut self.x, &self.inv_mass, h);
             }
             // Contacts once more, last, so the final positions are collision-free.
-            self.contact_points().0.collide(&near, h);
+            self.contact_points().0.collide(&near, h, at);
             // A contact may have crushed a tet of the reference: its floor has the last word.
             if let Some(g) = &mut self.neo_hookean {
                 g.enforce_floor(&mut self.x, &self.inv_mass);
+            }
+            for r in &mut self.reactions {
+                r.close_substep(h);
             }
             // Lines 16–17: velocities from positions.
             for i in 0..self.x.len() {
@@ -381,9 +419,49 @@ impl PbdBody {
                 inv_mass: &self.inv_mass,
                 radius_m: self.params.contact_radius_m,
                 nodes: self.colliding_nodes.as_deref(),
+                reactions: &mut self.reactions,
+                collider_inv_mass: &self.collider_inv_mass,
             },
             &mut self.contacts,
         )
+    }
+
+    /// The force each collider the body touched took from its contacts over the last step
+    /// (impulse / dt), N: what a hand holding or lifting the body feels.
+    pub fn contact_forces(&self) -> impl Iterator<Item = (ColliderHandle, Vec3)> + '_ {
+        let dt = self.last_dt_s.max(1e-9);
+        self.reaction_targets
+            .iter()
+            .zip(&self.reactions)
+            .filter(|(_, r)| r.impulse != Vec3::ZERO)
+            .map(move |((h, _), r)| (*h, r.impulse / dt))
+    }
+
+    /// Gives the last step's contact momentum back to the dynamic bodies it came from (the
+    /// other half of two-way coupling; see [`PbdParams::two_way`]).
+    pub fn push_back(&self, world: &mut PhysicsWorld) {
+        if !self.params.two_way {
+            return;
+        }
+        for ((_, body), r) in self.reaction_targets.iter().zip(&self.reactions) {
+            let Some(b) = body.and_then(|h| world.bodies.get_mut(h)) else {
+                continue;
+            };
+            if r.impulse == Vec3::ZERO || !r.impulse.is_finite() || !r.moment.is_finite() {
+                continue;
+            }
+            // The moment about the origin, moved to the body's center of mass.
+            let torque = r.moment - b.center_of_mass().cross(r.impulse);
+            b.apply_impulse(r.impulse, true);
+            b.apply_torque_impulse(torque, true);
+            // Its share of the pushes and the motion they gave it within the step, so it ends
+            // the step where the contacts left it.
+            let moved = r.shift + r.drift;
+            if moved.is_finite() && moved != Vec3::ZERO {
+                let at = b.translation() + moved;
+                b.set_translation(at, true);
+            }
+        }
     }
 
     /// Number of tets with non-positive volume.
@@ -457,6 +535,7 @@ impl DeformableModel for PbdBody {
 
     fn post_physics(&mut self, world: &mut PhysicsWorld, dt_s: f32) {
         self.step(world, dt_s);
+        self.push_back(world);
     }
 
     fn surface(&self) -> &[Vec3] {

@@ -61,6 +61,20 @@ impl SurfaceMap {
         }
     }
 
+    /// The inverse of the mass a push on surface point `s` moves (see [`Self::move_point`]):
+    /// the particle's, or `Σ w_k² / m_k` over an embedded point's tet nodes.
+    pub(super) fn point_inverse_mass(&self, inv_mass: &[f32], s: usize) -> f32 {
+        match self {
+            SurfaceMap::Direct => inv_mass[s],
+            SurfaceMap::Embedded(e) => {
+                let (nodes, w) = (e.nodes[s], e.weights[s]);
+                (0..4)
+                    .map(|k| inv_mass[nodes[k] as usize] * w[k] * w[k])
+                    .sum()
+            }
+        }
+    }
+
     /// Moves surface point `s` by `delta` (an embedded point through its tet's nodes, each in
     /// proportion to its weight and inverse mass, so the point moves by exactly `delta`).
     pub(super) fn move_point(&self, x: &mut [Vec3], inv_mass: &[f32], s: usize, delta: Vec3) {
