@@ -1,6 +1,17 @@
-//! The thesis's replication measurements (Tables 9-11), the reference the benchmarks print
-//! beside their own figures: bytes/s of UNet traffic for a VR avatar and a 60-particle soft
-//! body, per send rate and ignore threshold.
+//! The thesis's replication measurements, the reference the benchmarks print beside their own
+//! figures: step times per particle count (Tables 5-8) and bytes/s of UNet traffic for a VR
+//! avatar and a 60-particle soft body, per send rate and ignore threshold (Tables 9-11).
+
+/// One row of Tables 5-8: particles, minimum and maximum step time (ms).
+pub type StepRow = (u32, f32, f32);
+/// Table 5: 1731 vertices, hard clustering (closest vertices or distance).
+pub const TABLE5: [StepRow; 3] = [(248, 1.1, 2.9), (433, 1.2, 3.2), (865, 1.5, 5.1)];
+/// Table 6: 1731 vertices, soft clustering (weights by distance).
+pub const TABLE6: [StepRow; 3] = [(215, 1.2, 3.5), (445, 1.3, 4.1), (872, 1.6, 6.3)];
+/// Table 7: 2562 vertices, hard clustering.
+pub const TABLE7: [StepRow; 3] = [(257, 1.2, 3.2), (427, 1.3, 3.6), (854, 1.6, 5.6)];
+/// Table 8: 2562 vertices, soft clustering.
+pub const TABLE8: [StepRow; 3] = [(224, 1.3, 3.5), (452, 1.4, 3.9), (863, 1.7, 6.2)];
 
 /// Send rates of the tables (Hz).
 pub const RATES_HZ: [f32; 5] = [5.0, 10.0, 15.0, 20.0, 25.0];

@@ -22,7 +22,9 @@ use std::time::Instant;
 
 use glam::Vec3;
 use softsync_benchkit::plotters::style::{BLUE, GREEN, MAGENTA, RED};
-use softsync_benchkit::{write_svg, ChartStyle, Csv, LineChart, ResultLine, Series, Summary};
+use softsync_benchkit::{
+    thesis, write_svg, ChartStyle, Csv, LineChart, ResultLine, Series, Summary,
+};
 use softsync_softbody::rapier3d::prelude::{
     ColliderBuilder, PhysicsWorld, RigidBodyBuilder, SoftBodyBuilder,
 };
@@ -233,6 +235,8 @@ fn main() {
     };
     let mut curves: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
     let mut p860_median = 0.0;
+    // (mesh, method, particles, min, median, max) of every timed row, for Tables 5-8.
+    let mut step_rows: Vec<(&str, &str, usize, f64, f64, f64)> = Vec::new();
     let mut p860_sleep_median = 0.0;
     // --quick: the step table on icosphere4 only (the RESULT lines and the chart use it).
     let step_meshes = if quick { &meshes[1..] } else { &meshes[..] };
@@ -262,6 +266,7 @@ fn main() {
                 let (times, poke) = trace(ScenarioKind::Poke, mesh, cfg.clone(), steps);
                 let (_, sq) = trace(ScenarioKind::Squeeze, mesh, cfg, steps);
                 let st = stats(times);
+                step_rows.push((mname, kind, n, st.min, st.median, st.max));
                 let (e1, e2) = (err(&poke, &ref_poke), err(&sq, &ref_sq));
                 csv.row([
                     mname.to_string(),
@@ -302,6 +307,33 @@ fn main() {
         }
     }
     csv.write(out.join("step.csv")).unwrap();
+
+    // ---- Tables 5-8 side by side with the thesis's figures.
+    writeln!(md, "\n## Tables 5–8 beside the thesis\n\nThe thesis's step times (Unity + PhysX, its machine) and ours (rapier, this machine, every particle awake), the nearest of our particle counts to each of its rows. The thesis's 1731-vertex mesh is replaced by the nearest we have, the bunny (1839 vertices); its 2562-vertex sphere is our icosphere4 (2562 vertices). Hard clustering = ours by distance, soft = weights by distance. Our times are of the whole step (restoring velocities, rapier, deformation of every vertex); the thesis's are its simulation time.\n\n| table | mesh (vertices) | clustering | thesis particles | thesis min ms | thesis max ms | our particles | our min ms | our median ms | our max ms | thesis min / our median |\n|---|---|---|---|---|---|---|---|---|---|---|").unwrap();
+    for (table, mesh, kind, rows) in [
+        (5, "bunny", "distance", thesis::TABLE5),
+        (6, "bunny", "weighted", thesis::TABLE6),
+        (7, "icosphere4", "distance", thesis::TABLE7),
+        (8, "icosphere4", "weighted", thesis::TABLE8),
+    ] {
+        let ours: Vec<_> = step_rows
+            .iter()
+            .filter(|r| r.0 == mesh && r.1 == kind)
+            .collect();
+        let vertices = if mesh == "bunny" { 1839 } else { 2562 };
+        for (tp, tmin, tmax) in rows {
+            let Some(o) = ours.iter().min_by_key(|r| r.2.abs_diff(tp as usize)) else {
+                writeln!(md, "| {table} | {mesh} ({vertices}) | {kind} | {tp} | {tmin} | {tmax} | not run (--quick) | | | | |").unwrap();
+                continue;
+            };
+            writeln!(
+                md,
+                "| {table} | {mesh} ({vertices}) | {kind} | {tp} | {tmin} | {tmax} | {} | {:.3} | {:.3} | {:.3} | {:.0}× |",
+                o.2, o.3, o.4, o.5, tmin as f64 / o.4
+            )
+            .unwrap();
+        }
+    }
 
     // ---- Where the 860-particle step goes: restoring velocities, rapier, deformation.
     let breakdown = {

@@ -128,7 +128,12 @@ fn ispc_links_are_created_on_a_bunny_with_holes() {
 #[test]
 fn every_method_survives_squash_and_recover() {
     let mesh = Mesh::icosphere(0.1, 2);
-    for kind in MethodKind::ALL {
+    // Not the strain tets (the ISPC paper's baseline): Green's strain `FᵀF` cannot tell a tet
+    // from its mirror image, so a tet squashed inside out stays so — measured in the evidence.
+    for kind in MethodKind::ALL
+        .into_iter()
+        .filter(|k| *k != MethodKind::StrainTet)
+    {
         // The reference is a small-steps method: it needs many substeps of few iterations.
         let spec = match kind {
             MethodKind::NeoHookean => MethodSpec::new(kind).cell(0.2).budget(20, 1),

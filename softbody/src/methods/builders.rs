@@ -11,8 +11,8 @@ use crate::methods::model::DeformableModel;
 use crate::methods::native::NativeModel;
 use crate::methods::particle::ParticleModel;
 use crate::methods::pbd::{
-    BendingGroup, DistanceGroup, NeoHookeanGroup, PbdBody, ShapeClusters, SolverKind, SurfaceMap,
-    VolumeGroup,
+    BendingGroup, DistanceGroup, NeoHookeanGroup, PbdBody, ShapeClusters, SolverKind, StrainGroup,
+    SurfaceMap, VolumeGroup,
 };
 use crate::methods::tets::{tet_edges, tetrahedralize};
 use crate::{ClusterMethod, Mesh, SimulationSpace, SoftBodyConfig, SoftBodyError};
@@ -108,7 +108,7 @@ pub fn build_pbd_welded(
             ));
             Ok(body)
         }
-        MethodKind::Tet => {
+        MethodKind::Tet | MethodKind::StrainTet => {
             let tm = tetrahedralize(positions, triangles, spec.cell_frac * size)?;
             let mut masses = vec![0.0f32; tm.nodes.len()];
             for t in &tm.tets {
@@ -142,12 +142,24 @@ pub fn build_pbd_welded(
                 cover_volume,
                 m.pbd_stiffness,
             ));
-            body.volume = Some(VolumeGroup::new(
-                tm.tets,
-                &tm.nodes,
-                m.bulk_pa,
-                m.pbd_stiffness,
-            ));
+            if spec.kind == MethodKind::StrainTet {
+                // Shear modulus from E and K (ν = (3K − E) / 6K).
+                let nu = ((3.0 * m.bulk_pa - m.young_pa) / (6.0 * m.bulk_pa)).clamp(0.0, 0.49);
+                body.strain = Some(StrainGroup::new(
+                    tm.tets,
+                    &tm.nodes,
+                    m.young_pa,
+                    m.young_pa / (2.0 * (1.0 + nu)),
+                    m.pbd_stiffness,
+                ));
+            } else {
+                body.volume = Some(VolumeGroup::new(
+                    tm.tets,
+                    &tm.nodes,
+                    m.bulk_pa,
+                    m.pbd_stiffness,
+                ));
+            }
             Ok(body)
         }
         MethodKind::NeoHookean => {

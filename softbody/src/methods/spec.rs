@@ -27,11 +27,14 @@ pub enum MethodKind {
     /// inside fraction, surface embedded: the accuracy reference. A small-steps method: it
     /// needs about 20 or more substeps per 60 Hz step (fewer, and a step can overshoot).
     NeoHookean,
+    /// The ISPC paper's tetrahedral baseline (its eqs. 5–11): strain constraints (stretch and
+    /// shear of Green's strain) plus tet-edge distances on the same tet cover as [`Self::Tet`].
+    StrainTet,
 }
 
 impl MethodKind {
     /// All methods.
-    pub const ALL: [MethodKind; 7] = [
+    pub const ALL: [MethodKind; 8] = [
         MethodKind::Particle,
         MethodKind::Surface,
         MethodKind::Ispc,
@@ -39,6 +42,7 @@ impl MethodKind {
         MethodKind::ShapeMatching,
         MethodKind::RapierNative,
         MethodKind::NeoHookean,
+        MethodKind::StrainTet,
     ];
 
     /// Short name.
@@ -51,6 +55,7 @@ impl MethodKind {
             MethodKind::ShapeMatching => "shape_matching",
             MethodKind::RapierNative => "rapier_native",
             MethodKind::NeoHookean => "neo_hookean",
+            MethodKind::StrainTet => "strain_tet",
         }
     }
 }

@@ -16,6 +16,7 @@
 mod constraints;
 mod contacts;
 mod neohookean;
+mod strain;
 mod surface;
 
 use glam::Vec3;
@@ -27,6 +28,7 @@ pub use constraints::{tet_volume, BendingGroup, DistanceGroup, ShapeClusters, Vo
 pub use contacts::Reaction;
 use contacts::{near_colliders, Contact, ContactPoints};
 pub use neohookean::NeoHookeanGroup;
+pub use strain::StrainGroup;
 pub use surface::{Embedding, SurfaceMap};
 
 /// Which projection the solver uses.
@@ -126,6 +128,8 @@ pub struct PbdBody {
     pub clusters: Option<ShapeClusters>,
     /// Stable Neo-Hookean tets, if any (the accuracy reference).
     pub neo_hookean: Option<NeoHookeanGroup>,
+    /// Strain constraints on tets, if any (the ISPC paper's tetrahedral baseline).
+    pub strain: Option<StrainGroup>,
     /// Which tet nodes of an embedded surface collide besides the surface (`None`, the
     /// default: all). A cover's nodes outside the surface would otherwise pass into a wall the
     /// surface stopped at and crush their tets. A lattice weighted by inside fraction leaves
@@ -182,6 +186,7 @@ impl PbdBody {
             volume: None,
             clusters: None,
             neo_hookean: None,
+            strain: None,
             colliding_nodes: None,
             pin_surface: false,
             held: Vec::new(),
@@ -228,7 +233,8 @@ impl PbdBody {
         let per_iter = self.distance.iter().map(|g| g.len()).sum::<usize>()
             + self.bending.as_ref().map_or(0, |b| b.quads.len())
             + self.volume.as_ref().map_or(0, |v| v.tets.len())
-            + 2 * self.neo_hookean.as_ref().map_or(0, |g| g.len());
+            + 2 * self.neo_hookean.as_ref().map_or(0, |g| g.len())
+            + 6 * self.strain.as_ref().map_or(0, |g| g.len());
         let sm = self.clusters.as_ref().map_or(0, |c| c.members.len());
         let contacts = self.surface.len();
         (self.params.substeps as u64)
@@ -384,6 +390,9 @@ impl PbdBody {
         if let Some(g) = &mut self.neo_hookean {
             g.reset();
         }
+        if let Some(g) = &mut self.strain {
+            g.reset();
+        }
     }
 
     /// One Gauss–Seidel sweep over the distance, bending and volume constraints, in that
@@ -400,6 +409,9 @@ impl PbdBody {
             g.project(&mut self.x, &self.inv_mass, sweep);
         }
         if let Some(g) = &mut self.neo_hookean {
+            g.project(&mut self.x, &self.inv_mass, sweep);
+        }
+        if let Some(g) = &mut self.strain {
             g.project(&mut self.x, &self.inv_mass, sweep);
         }
         for &(s, at) in &self.held {
@@ -471,6 +483,10 @@ impl PbdBody {
             .map_or(0, |g| g.count_inverted(&self.x))
             + self
                 .neo_hookean
+                .as_ref()
+                .map_or(0, |g| g.count_inverted(&self.x))
+            + self
+                .strain
                 .as_ref()
                 .map_or(0, |g| g.count_inverted(&self.x))
     }
