@@ -14,8 +14,9 @@ use softsync_softbody::Mesh;
 const DT: f32 = 1.0 / 60.0;
 
 /// The position-based methods at their default budget (4 substeps × 4 iterations). The
-/// reference (`NeoHookean`, many substeps) is not here: at 20 and more substeps the coupling
-/// overshoots and the box is thrown off (measured; see docs/results/methods/coupling.md).
+/// reference (`NeoHookean`, 20 substeps and more) is not here: with more substeps the coupled
+/// box gains energy at every bounce and is thrown off (measured in
+/// docs/results/methods/coupling.md; an open problem).
 fn position_based() -> Vec<MethodSpec> {
     vec![
         MethodSpec::new(MethodKind::Surface).budget(4, 4),
