@@ -64,7 +64,7 @@ pub struct PbdParams {
     pub sleep_after_s: f32,
     /// Two-way coupling: the momentum the body's contacts take from a dynamic rapier body's
     /// collider is given back to that body after the step (a box dropped on the body rests on
-    /// it). Fixed and kinematic colliders are not moved either way. Default on; the
+    /// it; linear momentum only, see [`PbdBody::push_back`]). Fixed and kinematic colliders are not moved either way. Default on; the
     /// scenarios' props are all fixed or kinematic, so no figure changes with it.
     #[serde(default = "two_way_default")]
     pub two_way: bool,
@@ -450,7 +450,8 @@ impl PbdBody {
     }
 
     /// Gives the last step's contact momentum back to the dynamic bodies it came from (the
-    /// other half of two-way coupling; see [`PbdParams::two_way`]).
+    /// other half of two-way coupling; see [`PbdParams::two_way`]): its linear impulse and
+    /// displacement, not its torque.
     pub fn push_back(&self, world: &mut PhysicsWorld) {
         if !self.params.two_way {
             return;
@@ -462,10 +463,11 @@ impl PbdBody {
             if r.impulse == Vec3::ZERO || !r.impulse.is_finite() || !r.moment.is_finite() {
                 continue;
             }
-            // The moment about the origin, moved to the body's center of mass.
-            let torque = r.moment - b.center_of_mass().cross(r.impulse);
+            // Linear only: the contacts' torque is not given back. Given back after the step
+            // without the rotation it causes being followed within the step (as the
+            // translation is), it gained energy with every substep and threw a resting box off
+            // at 8 substeps and more (measured).
             b.apply_impulse(r.impulse, true);
-            b.apply_torque_impulse(torque, true);
             // Its share of the pushes and the motion they gave it within the step, so it ends
             // the step where the contacts left it.
             let moved = r.shift + r.drift;
