@@ -309,10 +309,13 @@ fn boundary(wall: &Map, hard: &Map, stiff: &[f32], rates: &[f32], speeds: &[f32]
             .map(|(c, v)| format!("{c} ({v})"))
             .unwrap_or_default();
         match fastest {
-            Some(v) => format!(
+            Some(v) if v > 0.0 => format!(
                 "at the wall, sane at every stiffness and rate up to {v} m/s; first failure {first}"
             ),
-            None => format!("at the wall, fails even at rest or the slowest throw ({first})"),
+            Some(_) => format!(
+                "at the wall, sane only at rest: any throw fails somewhere ({first} first)"
+            ),
+            None => format!("at the wall, fails even at rest ({first})"),
         }
     };
     if all_hard {
