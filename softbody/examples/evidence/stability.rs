@@ -312,9 +312,9 @@ fn boundary(wall: &Map, hard: &Map, stiff: &[f32], rates: &[f32], speeds: &[f32]
             Some(v) if v > 0.0 => format!(
                 "at the wall, sane at every stiffness and rate up to {v} m/s; first failure {first}"
             ),
-            Some(_) => format!(
-                "at the wall, sane only at rest: any throw fails somewhere ({first} first)"
-            ),
+            Some(_) => {
+                format!("at the wall, sane only at rest: any throw fails somewhere ({first} first)")
+            }
             None => format!("at the wall, fails even at rest ({first})"),
         }
     };
