@@ -6,6 +6,7 @@
 
 mod body;
 pub mod cluster;
+pub mod cut;
 mod config;
 mod error;
 pub mod mesh;
