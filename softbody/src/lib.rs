@@ -6,8 +6,8 @@
 
 mod body;
 pub mod cluster;
-pub mod cut;
 mod config;
+pub mod cut;
 mod error;
 pub mod mesh;
 pub mod methods;
