@@ -329,3 +329,298 @@ fn a_plane_through_vertices_is_nudged_off_them() {
         "cuboid",
     );
 }
+
+// ---- tears ----
+
+use softsync_softbody::cut::{TearMesh, TearSegment};
+
+/// A stroke of `n` segments over the surface of `m`: starts at a random vertex, moves along a
+/// random tangent, the blade standing along the outward normal, the tip `depth` inside.
+fn stroke(m: &Mesh, rng: &mut Rng, n: usize, step: f32, depth: f32) -> Vec<TearSegment> {
+    let v = (rng.next() % m.positions.len() as u64) as usize;
+    let normal = m
+        .normals
+        .as_ref()
+        .map(|ns| ns[v])
+        .unwrap_or(m.positions[v].normalize());
+    let mut dir = rng.direction();
+    dir = (dir - normal * dir.dot(normal)).normalize_or_zero();
+    if dir == Vec3::ZERO {
+        dir = normal.any_orthonormal_vector();
+    }
+    let mut at = m.positions[v] - normal * depth;
+    let mut out = Vec::new();
+    for _ in 0..n {
+        // Wander a little.
+        let turn = (rng.direction() - normal * rng.direction().dot(normal)) * 0.3;
+        dir = (dir + turn).normalize_or_zero();
+        if dir == Vec3::ZERO {
+            dir = normal.any_orthonormal_vector();
+        }
+        let next = at + dir * step;
+        out.push(TearSegment {
+            from: at,
+            to: next,
+            blade: normal * (depth + 0.02),
+        });
+        at = next;
+    }
+    out
+}
+
+fn assert_sound_torn(m: &Mesh, what: &str) {
+    let r = MeshReport::of(m);
+    if !r.is_sound() || r.non_manifold_edges > 0 {
+        let w = m.weld(1e-6);
+        for tri in &w.triangles {
+            let [a, b, c] = tri.map(|k| w.positions[k as usize]);
+            if tri[0] == tri[1]
+                || tri[1] == tri[2]
+                || tri[0] == tri[2]
+                || (b - a).cross(c - a) == Vec3::ZERO
+            {
+                eprintln!("degenerate {tri:?} {a} {b} {c}");
+            }
+        }
+        let mut uses: std::collections::HashMap<(u32, u32), Vec<usize>> = Default::default();
+        for (t, tri) in w.triangles.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                uses.entry((a.min(b), a.max(b))).or_default().push(t);
+            }
+        }
+        for (e, ts) in uses.iter().filter(|(_, ts)| ts.len() > 2) {
+            eprintln!(
+                "edge {e:?} {} {} used by",
+                w.positions[e.0 as usize], w.positions[e.1 as usize]
+            );
+            for &t in ts {
+                eprintln!(
+                    "   {:?} {:?}",
+                    w.triangles[t],
+                    w.triangles[t].map(|k| w.positions[k as usize])
+                );
+            }
+        }
+    }
+    assert!(r.is_sound(), "{what}: {r:?}");
+    assert_eq!(r.non_manifold_edges, 0, "{what}: {r:?}");
+}
+
+#[test]
+fn a_tear_across_a_sphere_opens_a_slot_and_keeps_the_mesh_sound() {
+    let m = Mesh::icosphere(0.1, 4);
+    let mut t = TearMesh::new(&m, 0.004).unwrap();
+    let before = t.face_count();
+    // Across the top, the blade standing up, tip 1 cm deep.
+    let segs = [
+        (Vec3::new(-0.04, 0.09, 0.0), Vec3::new(-0.01, 0.09, 0.005)),
+        (Vec3::new(-0.01, 0.09, 0.005), Vec3::new(0.02, 0.09, 0.0)),
+        (Vec3::new(0.02, 0.09, 0.0), Vec3::new(0.04, 0.09, -0.01)),
+    ];
+    let mut added = 0;
+    for (from, to) in segs {
+        let s = t
+            .tear(&TearSegment {
+                from,
+                to,
+                blade: Vec3::Y * 0.05,
+            })
+            .unwrap();
+        assert!(s.faces_clipped > 0);
+        assert!(
+            s.faces_searched < before / 2,
+            "sections searched {}",
+            s.faces_searched
+        );
+        added += s.faces_added;
+    }
+    assert!(added > 0);
+    let torn = t.to_mesh();
+    assert_sound_torn(&torn, "sphere");
+    let r = MeshReport::of(&torn);
+    assert!(r.boundary_edges > 20, "a slot has a rim: {r:?}");
+    // Nothing is left inside the slot: no vertex within the tear's half width of the line
+    // (tip region), away from the ends.
+    for p in &torn.positions {
+        // The middle segment runs from (-0.01, 0.005) to (0.02, 0.0) in (x, z).
+        if p.y > 0.0905 && p.x > -0.005 && p.x < 0.015 {
+            let z_line = 0.005 - (p.x + 0.01) / 0.03 * 0.005;
+            let across = (p.z - z_line).abs() * (1.0f32 / (1.0 + 1.0 / 36.0)).sqrt();
+            assert!(
+                across >= 0.0019,
+                "vertex {p} inside the slot ({across} from its middle)"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_small_tear_inside_one_face_cuts_a_hole_in_it() {
+    // One big face on each side of the box: the tear box lies inside a face.
+    let m = Mesh::cuboid(Vec3::splat(0.05), 1);
+    let faces = m.triangles.len();
+    let mut t = TearMesh::new(&m, 0.004).unwrap();
+    let s = t
+        .tear(&TearSegment {
+            from: Vec3::new(-0.01, 0.05 - 0.003, 0.012),
+            to: Vec3::new(0.01, 0.05 - 0.003, 0.012),
+            blade: Vec3::Y * 0.02,
+        })
+        .unwrap();
+    assert!(s.faces_clipped >= 1);
+    let torn = t.to_mesh();
+    assert!(torn.triangles.len() > faces);
+    assert_sound_torn(&torn, "cuboid hole");
+    let r = MeshReport::of(&torn);
+    assert_eq!(r.boundary_edges, 4, "a rectangular hole: {r:?}");
+}
+
+#[test]
+fn a_hundred_random_tears_keep_every_mesh_sound() {
+    let meshes = [
+        ("icosphere", Mesh::icosphere(0.1, 3)),
+        ("cuboid", Mesh::cuboid(Vec3::new(0.1, 0.06, 0.04), 6)),
+        ("bunny", bunny()),
+    ];
+    let mut rng = Rng(0x7ea5);
+    for (name, m) in meshes {
+        let mut t = TearMesh::new(&m, 0.003).unwrap();
+        let mut done = 0;
+        while done < 100 {
+            for seg in stroke(&m, &mut rng, 5, 0.01, 0.005) {
+                if done == 100 {
+                    break;
+                }
+                t.tear(&seg).unwrap();
+                done += 1;
+            }
+            t.lift();
+        }
+        assert_sound_torn(&t.to_mesh(), name);
+    }
+}
+
+#[test]
+fn the_same_tears_give_the_same_mesh() {
+    let m = bunny();
+    let mut rng = Rng(42);
+    let segs = stroke(&m, &mut rng, 20, 0.008, 0.004);
+    let run = || {
+        let mut t = TearMesh::new(&m, 0.002).unwrap();
+        for s in &segs {
+            t.tear(s).unwrap();
+        }
+        t.to_mesh()
+    };
+    let (a, b) = (run(), run());
+    assert_eq!(a, b);
+    assert_eq!(topology_hash(&a, 1e-5), topology_hash(&b, 1e-5));
+    assert_ne!(topology_hash(&a, 1e-5), topology_hash(&m, 1e-5));
+}
+
+#[test]
+fn hostile_tears_are_refused_and_change_nothing() {
+    let m = Mesh::icosphere(0.1, 2);
+    assert!(TearMesh::new(&m, f32::NAN).is_err());
+    assert!(TearMesh::new(&m, 0.0).is_err());
+    assert!(TearMesh::new(&m, 1.0).is_err());
+    let mut t = TearMesh::new(&m, 0.003).unwrap();
+    let h0 = topology_hash(&t.to_mesh(), 1e-5);
+    let bad = [
+        TearSegment {
+            from: Vec3::NAN,
+            to: Vec3::ZERO,
+            blade: Vec3::Y,
+        },
+        TearSegment {
+            from: Vec3::ZERO,
+            to: Vec3::ZERO,
+            blade: Vec3::Y * 0.1,
+        },
+        TearSegment {
+            from: Vec3::ZERO,
+            to: Vec3::X * 100.0,
+            blade: Vec3::Y * 0.1,
+        },
+        TearSegment {
+            from: Vec3::ZERO,
+            to: Vec3::X * 0.01,
+            blade: Vec3::X * 0.1,
+        },
+        TearSegment {
+            from: Vec3::ZERO,
+            to: Vec3::X * 0.01,
+            blade: Vec3::new(0.0, f32::INFINITY, 0.0),
+        },
+    ];
+    for s in &bad {
+        assert!(t.tear(s).is_err(), "{s:?}");
+    }
+    // Far outside the object: accepted, changes nothing.
+    let s = t
+        .tear(&TearSegment {
+            from: Vec3::splat(0.5),
+            to: Vec3::splat(0.51),
+            blade: Vec3::Y * 0.05,
+        })
+        .unwrap();
+    assert_eq!(s.faces_clipped, 0);
+    assert_eq!(topology_hash(&t.to_mesh(), 1e-5), h0);
+}
+
+/// The random tears and cuts above over 40 seeds (20 strokes of 5 segments and 10 cuts per
+/// mesh each): `cargo test --release -p softsync-softbody --test cut -- --ignored`. Known: one
+/// of the 120 torn meshes (seed 30, cuboid) still ends with one degenerate triangle.
+#[test]
+#[ignore = "a soak: 40 seeds, ~6 s in release"]
+fn stress_many_seeds() {
+    let meshes = [
+        ("icosphere", Mesh::icosphere(0.1, 3)),
+        ("cuboid", Mesh::cuboid(Vec3::new(0.1, 0.06, 0.04), 6)),
+        ("bunny", bunny()),
+    ];
+    let mut bad = 0;
+    for seed in 0..40u64 {
+        let mut rng = Rng(seed);
+        for (name, m) in &meshes {
+            let mut t = TearMesh::new(m, 0.003).unwrap();
+            for _ in 0..20 {
+                for seg in stroke(m, &mut rng, 5, 0.01, 0.005) {
+                    t.tear(&seg).unwrap();
+                }
+                t.lift();
+            }
+            let r = MeshReport::of(&t.to_mesh());
+            if !r.is_sound() || r.non_manifold_edges > 0 {
+                bad += 1;
+                eprintln!("seed {seed} {name}: {r:?}");
+            }
+        }
+        // cuts
+        for (name, m) in &meshes {
+            let mut pieces = vec![m.clone()];
+            for _ in 0..10 {
+                let i = (0..pieces.len())
+                    .max_by_key(|&i| pieces[i].triangles.len())
+                    .unwrap();
+                let (lo, hi) = softsync_softbody::mesh::bounds(&pieces[i].positions);
+                let at = lo
+                    + (hi - lo)
+                        * (Vec3::new(rng.unit(), rng.unit(), rng.unit()) * 0.6 + Vec3::splat(0.2));
+                if let Ok(c) = cut_mesh(&pieces[i], &CutPlane::new(at, rng.direction()).unwrap()) {
+                    pieces.swap_remove(i);
+                    for p in c.pieces {
+                        let r = MeshReport::of(&p.mesh);
+                        if !r.is_closed_solid() {
+                            bad += 1;
+                            eprintln!("seed {seed} cut {name}: {r:?}");
+                        }
+                        pieces.push(p.mesh);
+                    }
+                }
+            }
+        }
+    }
+    assert_eq!(bad, 0);
+}

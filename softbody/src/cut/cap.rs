@@ -11,8 +11,8 @@
 use std::collections::{HashMap, VecDeque};
 
 use glam::{DVec3, Vec3};
-use spade::handles::FixedFaceHandle;
-use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
+use spade::handles::{DirectedEdgeHandle, FixedFaceHandle, InnerTag};
+use spade::{CdtEdge, ConstrainedDelaunayTriangulation, Point2, Triangulation};
 
 /// A triangulated section.
 pub(super) struct Section {
@@ -73,36 +73,10 @@ pub(super) fn triangulate_section(points: &[Vec3], segments: &[[u32; 2]], normal
         Err(_) => return empty,
     };
 
-    // Even–odd flood from the hull.
-    let mut inside: Vec<Option<bool>> = vec![None; cdt.num_all_faces()];
-    let mut queue: VecDeque<FixedFaceHandle<spade::handles::InnerTag>> = VecDeque::new();
-    for face in cdt.inner_faces() {
-        for e in face.adjacent_edges() {
-            if e.rev().face().is_outer() {
-                let crossing = cdt.is_constraint_edge(e.fix().as_undirected());
-                if inside[face.fix().index()].is_none() {
-                    inside[face.fix().index()] = Some(crossing);
-                    queue.push_back(face.fix());
-                }
-            }
-        }
-    }
-    while let Some(f) = queue.pop_front() {
-        let here = inside[f.index()].unwrap_or(false);
-        for e in cdt.face(f).adjacent_edges() {
-            if let Some(next) = e.rev().face().as_inner() {
-                if inside[next.fix().index()].is_none() {
-                    let crossing = cdt.is_constraint_edge(e.fix().as_undirected());
-                    inside[next.fix().index()] = Some(here ^ crossing);
-                    queue.push_back(next.fix());
-                }
-            }
-        }
-    }
-
+    let inside = even_odd(&cdt, |e| cdt.is_constraint_edge(e.fix().as_undirected()));
     let mut triangles = Vec::new();
     for face in cdt.inner_faces() {
-        if inside[face.fix().index()] == Some(true) {
+        if inside[face.fix().index()] {
             // spade's faces are counter-clockwise in (u, v), so their normal is u × v = +n.
             triangles.push(face.vertices().map(|vh| point_of_cdt[vh.fix().index()]));
         }
@@ -111,6 +85,36 @@ pub(super) fn triangulate_section(points: &[Vec3], segments: &[[u32; 2]], normal
         triangles,
         conflicts,
     }
+}
+
+/// Which faces of `cdt` are inside by the even–odd rule over the edges `wall` accepts: a flood
+/// from the convex hull that flips parity at every wall it crosses. Indexed by face index.
+pub(super) fn even_odd(
+    cdt: &ConstrainedDelaunayTriangulation<Point2<f64>>,
+    wall: impl Fn(DirectedEdgeHandle<'_, Point2<f64>, (), CdtEdge<()>, ()>) -> bool,
+) -> Vec<bool> {
+    let mut inside: Vec<Option<bool>> = vec![None; cdt.num_all_faces()];
+    let mut queue: VecDeque<FixedFaceHandle<InnerTag>> = VecDeque::new();
+    for face in cdt.inner_faces() {
+        for e in face.adjacent_edges() {
+            if e.rev().face().is_outer() && inside[face.fix().index()].is_none() {
+                inside[face.fix().index()] = Some(wall(e));
+                queue.push_back(face.fix());
+            }
+        }
+    }
+    while let Some(f) = queue.pop_front() {
+        let here = inside[f.index()].unwrap_or(false);
+        for e in cdt.face(f).adjacent_edges() {
+            if let Some(next) = e.rev().face().as_inner() {
+                if inside[next.fix().index()].is_none() {
+                    inside[next.fix().index()] = Some(here ^ wall(e));
+                    queue.push_back(next.fix());
+                }
+            }
+        }
+    }
+    inside.into_iter().map(|i| i == Some(true)).collect()
 }
 
 #[cfg(test)]

@@ -9,6 +9,8 @@
 //!   both sides (`cap`: a constrained Delaunay triangulation of the section, inside chosen by
 //!   the even–odd rule, so nested outlines and holes come out right) and separates each side
 //!   into its connected pieces.
+//! - [`TearMesh`] (in `tear`): progressive tearing (Algorithm 1) by the boxes of consecutive
+//!   scalpel segments, over mesh [`Sections`] so a segment searches only nearby faces.
 //! - [`MeshReport`] (in `check`): the validity of a mesh after cuts — degenerate or duplicate
 //!   triangles, edges not shared by exactly two faces, inconsistent winding, volume.
 //! - [`topology_hash`] (in `hash`): a hash of the triangles and quantised positions that two
@@ -22,6 +24,8 @@ mod cap;
 mod check;
 mod hash;
 mod plane;
+mod sections;
+mod tear;
 
 use glam::Vec3;
 use thiserror::Error;
@@ -29,6 +33,8 @@ use thiserror::Error;
 pub use check::MeshReport;
 pub use hash::topology_hash;
 pub use plane::{cut_mesh, Cut, Piece, Side};
+pub use sections::{Aabb, Sections};
+pub use tear::{TearMesh, TearSegment, TearStats, MAX_SEGMENT_M, MAX_TEAR_WIDTH_M, SECTION_FACES};
 
 /// Most triangles a mesh may have to be cut: bounds the work a hostile event can ask for.
 pub const MAX_CUT_TRIANGLES: usize = 1_000_000;

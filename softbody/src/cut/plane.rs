@@ -264,7 +264,7 @@ fn side_index(positive: bool) -> usize {
 
 /// Each triangle corner's normal: the render normal if the mesh has them, else the welded
 /// vertex's area-weighted normal.
-fn corner_normals(mesh: &Mesh, pos: &[Vec3], tris: &[[u32; 3]]) -> Vec<[Vec3; 3]> {
+pub(super) fn corner_normals(mesh: &Mesh, pos: &[Vec3], tris: &[[u32; 3]]) -> Vec<[Vec3; 3]> {
     match &mesh.normals {
         Some(ns) if ns.len() == mesh.positions.len() => mesh
             .triangles
@@ -410,17 +410,17 @@ impl SideBuilder {
 
 /// One piece's render mesh under construction.
 #[derive(Default)]
-struct PieceBuilder {
+pub(super) struct PieceBuilder {
     positions: Vec<Vec3>,
     normals: Vec<Vec3>,
-    triangles: Vec<[u32; 3]>,
+    pub(super) triangles: Vec<[u32; 3]>,
     cap_triangles: usize,
     render_of: HashMap<(u32, [u32; 3]), u32>,
 }
 
 impl PieceBuilder {
     /// The render vertex for side vertex `v` with normal `n`, made on first use.
-    fn vertex(&mut self, p: Vec3, v: u32, n: Vec3) -> u32 {
+    pub(super) fn vertex(&mut self, p: Vec3, v: u32, n: Vec3) -> u32 {
         let key = (v, n.to_array().map(f32::to_bits));
         *self.render_of.entry(key).or_insert_with(|| {
             self.positions.push(p);
@@ -429,7 +429,7 @@ impl PieceBuilder {
         })
     }
 
-    fn finish(self) -> Piece {
+    pub(super) fn finish(self) -> Piece {
         let volume_m3 = enclosed_volume(&self.positions, &self.triangles);
         Piece {
             mesh: Mesh {
@@ -446,18 +446,18 @@ impl PieceBuilder {
 
 /// Union–find over vertex ids; the smaller root always wins, so the result does not depend
 /// on the order of unions.
-struct DisjointSets {
+pub(super) struct DisjointSets {
     parent: Vec<u32>,
 }
 
 impl DisjointSets {
-    fn new(n: usize) -> Self {
+    pub(super) fn new(n: usize) -> Self {
         Self {
             parent: (0..n as u32).collect(),
         }
     }
 
-    fn find(&mut self, mut x: u32) -> u32 {
+    pub(super) fn find(&mut self, mut x: u32) -> u32 {
         while self.parent[x as usize] != x {
             let up = self.parent[self.parent[x as usize] as usize];
             self.parent[x as usize] = up;
@@ -466,7 +466,7 @@ impl DisjointSets {
         x
     }
 
-    fn union(&mut self, a: u32, b: u32) {
+    pub(super) fn union(&mut self, a: u32, b: u32) {
         let (ra, rb) = (self.find(a), self.find(b));
         if ra != rb {
             self.parent[ra.max(rb) as usize] = ra.min(rb);
