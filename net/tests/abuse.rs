@@ -140,6 +140,7 @@ fn claim(id: u32, owner: PeerId, term: u32, grant: u32, particles: u32) -> Spawn
         pos: [0.0; 3],
         rot: [0.0, 0.0, 0.0, 1.0],
         request: None,
+        topology: 0,
     }
 }
 

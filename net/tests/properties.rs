@@ -121,6 +121,7 @@ fn arb_hostile_control() -> impl Strategy<Value = Control> {
             pos: [0.0; 3],
             rot: [0.0, 0.0, 0.0, 1.0],
             request: None,
+            topology: 0,
         },
     );
     prop_oneof![
@@ -188,6 +189,7 @@ fn arb_control() -> impl Strategy<Value = Control> {
             pos: p,
             rot: [0.0, 0.0, 0.0, 1.0],
             request,
+            topology: n % 7,
         });
     prop_oneof![
         (any::<u8>(), any::<u64>()).prop_map(|(p, d)| Control::Hello {
@@ -214,6 +216,39 @@ fn arb_control() -> impl Strategy<Value = Control> {
                 agree,
             }
         }),
+        (
+            arb_id(),
+            prop::array::uniform3(-1_000_000i32..=1_000_000),
+            prop::array::uniform3(-32767i16..=32767),
+            0u8..16,
+            prop::collection::vec(0u32..=65_536, 0..16)
+        )
+            .prop_filter("a normal is not zero", |t| t.2 != [0; 3])
+            .prop_map(|(i, p, n, keep, pieces)| Control::TopologyRequest {
+                id: NetId(i),
+                epoch: AuthorityEpoch::default(),
+                event: softsync_net::wire::TopologyEvent::Cut {
+                    point: p,
+                    normal: n,
+                    keep
+                },
+                pieces,
+            }),
+        (
+            arb_id(),
+            any::<u32>(),
+            prop::array::uniform3(-1_000_000i32..=1_000_000),
+            prop::array::uniform3(-1_000_000i32..=1_000_000)
+        )
+            .prop_map(|(i, seq, a, b)| Control::Topology {
+                id: NetId(i),
+                seq,
+                event: softsync_net::wire::TopologyEvent::Tear {
+                    from: a,
+                    to: b,
+                    blade: a
+                },
+            }),
     ]
 }
 

@@ -291,6 +291,7 @@ fn render() -> String {
                 pos: [0.0, 1.0, 0.4],
                 rot: [0.0, 0.0, 0.0, 1.0],
                 request: Some(3),
+                topology: 2,
             }),
         ),
         ("Despawn", Control::Despawn { id: NetId(4) }),
@@ -354,6 +355,44 @@ fn render() -> String {
         ),
         ("Resync", Control::Resync { claims: vec![] }),
         ("Leave", Control::Leave),
+        (
+            "TopologyRequest (a tear segment)",
+            Control::TopologyRequest {
+                id: NetId(4),
+                epoch: Default::default(),
+                event: wire::TopologyEvent::Tear {
+                    from: [-1200, 9000, 500],
+                    to: [-200, 9000, 520],
+                    blade: [0, 3000, 0],
+                },
+                pieces: vec![],
+            },
+        ),
+        (
+            "TopologyRequest (a cut into two pieces)",
+            Control::TopologyRequest {
+                id: NetId(4),
+                epoch: Default::default(),
+                event: wire::TopologyEvent::Cut {
+                    point: [0, 4000, 0],
+                    normal: [0, 32767, 0],
+                    keep: 0,
+                },
+                pieces: vec![31, 29],
+            },
+        ),
+        (
+            "Topology",
+            Control::Topology {
+                id: NetId(4),
+                seq: 17,
+                event: wire::TopologyEvent::Tear {
+                    from: [-1200, 9000, 500],
+                    to: [-200, 9000, 520],
+                    blade: [0, 3000, 0],
+                },
+            },
+        ),
     ];
     writeln!(
         w,

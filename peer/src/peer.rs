@@ -321,6 +321,7 @@ impl Peer {
                     }
                 }
             }
+            SessionEvent::Topology { .. } => self.events.push_back(Event::Room(e)),
             SessionEvent::AuthorityAsked { id, by } => {
                 // Not while one of our hands holds it.
                 let held = self.mirror.object_ref(id).is_some_and(|r| self.is_held(r));

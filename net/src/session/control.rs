@@ -117,6 +117,9 @@ impl Session {
                 self.on_denied(id, reason);
             }
             Control::AuthorityAsk { id, by } if from_host => self.on_asked(id, by),
+            Control::Topology { id, seq, event } if from_host => {
+                self.on_topology_from_host(id, seq, event);
+            }
             // ---- migration (migration.rs)
             Control::NewHost {
                 term,
@@ -131,6 +134,7 @@ impl Session {
             | Control::AuthorityRequest { .. }
             | Control::AuthorityAnswer { .. }
             | Control::AuthorityRelease { .. }
+            | Control::TopologyRequest { .. }
             | Control::Resync { .. })
                 if self.is_member_client(from) =>
             {
@@ -161,6 +165,12 @@ impl Session {
                 self.host_authority_answer(now, from, id, by, agree);
             }
             Control::AuthorityRelease { id } => self.host_release(now, from, id),
+            Control::TopologyRequest {
+                id,
+                epoch,
+                event,
+                pieces,
+            } => self.host_topology_request(now, from, id, epoch, event, pieces),
             // claims are answers to our NewHost: only shortly after we took over
             Control::Resync { claims } => {
                 if self.succession.resync_open(now) {

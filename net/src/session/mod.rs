@@ -20,6 +20,7 @@
 //! | `liveness` | heartbeats, timeouts, our own stalls, peers told they were dropped |
 //! | `migration` | electing the next host, taking over, following a new host |
 //! | `control` | routing control messages; the host as a client of itself |
+//! | [`topology`] | tears and cuts: the owner's requests, the host's checks, per-object logs |
 
 mod authority;
 mod control;
@@ -34,6 +35,7 @@ mod send;
 mod spawn;
 #[cfg(test)]
 mod testkit;
+pub mod topology;
 
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
@@ -133,6 +135,18 @@ pub enum Event {
         /// Why.
         reason: DenyReason,
     },
+    /// Entry `seq` of object `id`'s topology log (a tear segment, a lift, or the cut that made
+    /// this piece): apply it to the object's mesh. If `seq` is not the next entry you applied
+    /// (after a migration the new host's log replaced ours from there), rebuild the mesh from
+    /// the class's and [`Session::topology_log`].
+    Topology {
+        /// Object.
+        id: NetId,
+        /// Its position in the log.
+        seq: u32,
+        /// The change.
+        event: crate::wire::TopologyEvent,
+    },
     /// Request to the application: `by` wants our object; answer with
     /// [`Session::answer_authority`].
     AuthorityAsked {
@@ -184,6 +198,8 @@ pub struct Session {
     /// Datagrams written outside the per-link assembly (refusals).
     raw_out: VecDeque<Transmit>,
     stats: Stats,
+    /// Host: topology requests refused, by reason.
+    topology_refused: topology::TopologyRefusals,
     last_relay_at: Option<Instant>,
 }
 
@@ -211,6 +227,7 @@ impl Session {
             events: VecDeque::new(),
             raw_out: VecDeque::new(),
             stats: Stats::default(),
+            topology_refused: topology::TopologyRefusals::default(),
             last_relay_at: None,
         }
     }

@@ -90,6 +90,8 @@ pub(crate) struct Object {
     pub buffer: SnapshotBuffer,
     /// The peer whose updates we apply (its owner, or the host relaying them).
     pub source: Option<PeerId>,
+    /// Its topology log (tears and cuts), see `topology`.
+    pub topology: super::topology::TopologyLog,
 }
 
 impl Object {
@@ -112,6 +114,7 @@ impl Object {
             published_at: now,
             buffer: SnapshotBuffer::default(),
             source: None,
+            topology: Default::default(),
         }
     }
 
@@ -341,6 +344,7 @@ mod tests {
             pos: [0.5, 1.0, -0.25],
             rot: [0.0, 0.0, 0.0, 1.0],
             request: None,
+            topology: 0,
         }
     }
 

@@ -554,6 +554,7 @@ mod tests {
             pos: [0.0, 1.0, 0.0],
             rot: [0.0, 0.0, 0.0, 1.0],
             request: None,
+            topology: 0,
         };
         reg.insert(Instant::ZERO, info, class);
         reg

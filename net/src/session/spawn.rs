@@ -137,6 +137,7 @@ impl Session {
             pos: state.pos.to_array(),
             rot: state.rot.to_array(),
             request: None,
+            topology: 0,
         };
         self.insert_object(now, info.clone(), Some(request));
         let _ = self.publish_state(now, id, state);
@@ -190,6 +191,7 @@ impl Session {
             pos,
             rot,
             request: Some(request),
+            topology: 0,
         };
         self.insert_object(now, info.clone(), None);
         self.broadcast(now, &Control::Spawn(info.clone()), Some(from));
@@ -241,6 +243,7 @@ impl Session {
             .iter()
             .map(|o| {
                 let mut i = o.info.clone();
+                i.topology = o.topology.entries.len() as u32;
                 if let Some(class) = self.class(o.info.class) {
                     let st = o.compose(class);
                     i.pos = st.pos.to_array();
@@ -250,12 +253,14 @@ impl Session {
             })
             .collect();
         for info in infos {
+            let id = info.id;
             self.send_spawn(now, to, info);
+            self.send_topology_log(now, to, id);
         }
     }
 
     /// Add a replica of `info`; `request`: our spawn request it answers.
-    fn insert_object(&mut self, now: Instant, info: SpawnInfo, request: Option<u32>) {
+    pub(super) fn insert_object(&mut self, now: Instant, info: SpawnInfo, request: Option<u32>) {
         let Some(class) = self.cfg.classes.get(usize::from(info.class.0)) else {
             return;
         };

@@ -134,9 +134,121 @@ pub enum Control {
         /// Claims.
         claims: Vec<SpawnInfo>,
     },
+    /// Owner → host: apply `event` to my object `id`, which I hold at `epoch`. A cut names
+    /// the particle count of every piece it makes, in the cut's piece order: the object keeps
+    /// the first, the host spawns the others (owned by the cutter).
+    TopologyRequest {
+        /// Object.
+        id: NetId,
+        /// The authority epoch the requester holds it at (a stale one is refused).
+        epoch: AuthorityEpoch,
+        /// The change.
+        event: TopologyEvent,
+        /// Particle counts of the pieces (a cut only; at most [`MAX_CUT_PIECES`]).
+        pieces: Vec<u32>,
+    },
+    /// Host → all: entry `seq` of object `id`'s topology log (live, in the late-join snapshot
+    /// and after a migration). Applied in order to the class's mesh, the log gives every peer
+    /// the identical torn or cut mesh.
+    Topology {
+        /// Object.
+        id: NetId,
+        /// Position in the log, from 0.
+        seq: u32,
+        /// The change.
+        event: TopologyEvent,
+    },
     /// Any member → the others: I am leaving now. The receivers treat the sender as gone at
     /// once instead of after `peer_timeout` (authority returns, a host is replaced).
     Leave,
+}
+
+/// One change of an object's mesh topology, in the object's rest frame (the frame of its
+/// class's mesh), quantised to [`TOPOLOGY_QUANTUM_M`]: the owner applies the quantised event
+/// too, so every peer starts from bit-identical input.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum TopologyEvent {
+    /// One tear segment (tear paper Algorithm 1): the blade's tip moved from `from` to `to`;
+    /// the blade's back end is at tip + `blade`.
+    Tear {
+        /// Tip at the previous sample.
+        from: [i32; 3],
+        /// Tip now.
+        to: [i32; 3],
+        /// Tip to back end.
+        blade: [i32; 3],
+    },
+    /// The scalpel left the object: the next tear starts a new stroke.
+    Lift,
+    /// A plane cut (tear paper Algorithm 2) through `point` with normal `normal` (a unit vector
+    /// times 32767); the object keeps piece `keep` of the cut's pieces.
+    Cut {
+        /// A point of the plane.
+        point: [i32; 3],
+        /// The plane's normal.
+        normal: [i16; 3],
+        /// Which piece this object is.
+        keep: u8,
+    },
+}
+
+/// The unit of [`TopologyEvent`] coordinates, metres (10 µm).
+pub const TOPOLOGY_QUANTUM_M: f32 = 1e-5;
+/// Largest coordinate of a topology event, in quanta (10 m).
+pub const MAX_TOPOLOGY_COORD: i32 = 1_000_000;
+/// Most pieces one cut may make.
+pub const MAX_CUT_PIECES: usize = 16;
+
+impl TopologyEvent {
+    /// Within bounds: coordinates at most [`MAX_TOPOLOGY_COORD`], a non-zero normal, a piece
+    /// index below [`MAX_CUT_PIECES`].
+    pub fn valid(&self) -> bool {
+        let small = |a: &[i32; 3]| {
+            a.iter()
+                .all(|c| c.unsigned_abs() <= MAX_TOPOLOGY_COORD as u32)
+        };
+        match self {
+            TopologyEvent::Tear { from, to, blade } => small(from) && small(to) && small(blade),
+            TopologyEvent::Lift => true,
+            TopologyEvent::Cut {
+                point,
+                normal,
+                keep,
+            } => {
+                small(point)
+                    && normal.iter().any(|&n| n != 0)
+                    && usize::from(*keep) < MAX_CUT_PIECES
+            }
+        }
+    }
+
+    /// Quantises metres to quanta (`None` if not finite or out of range).
+    pub fn quantise(v: [f32; 3]) -> Option<[i32; 3]> {
+        let mut out = [0i32; 3];
+        for (o, c) in out.iter_mut().zip(v) {
+            let q = (c / TOPOLOGY_QUANTUM_M).round();
+            if !q.is_finite() || q.abs() > MAX_TOPOLOGY_COORD as f32 {
+                return None;
+            }
+            *o = q as i32;
+        }
+        Some(out)
+    }
+
+    /// Quanta back to metres.
+    pub fn metres(q: [i32; 3]) -> [f32; 3] {
+        q.map(|c| c as f32 * TOPOLOGY_QUANTUM_M)
+    }
+
+    /// Quantises a direction to a normal (`None` if zero or not finite).
+    pub fn quantise_normal(n: [f32; 3]) -> Option<[i16; 3]> {
+        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        if !len.is_finite() || len < 1e-12 {
+            return None;
+        }
+        let q = n.map(|c| (c / len * 32767.0).round() as i16);
+        q.iter().any(|&c| c != 0).then_some(q)
+    }
 }
 
 /// Why authority was denied.
@@ -176,6 +288,9 @@ pub struct SpawnInfo {
     /// The `SpawnRequest` number of the client that asked for the object (its first
     /// owner), if one did: the requester matches its request exactly, also after a migration.
     pub request: Option<u32>,
+    /// Length of the object's topology log, whose entries follow as [`Control::Topology`]
+    /// messages: a replica is complete (its mesh known) once it has them all.
+    pub topology: u32,
 }
 
 fn bincode_config() -> impl bincode::config::Config {
@@ -218,6 +333,12 @@ impl Control {
                 members.len() <= MAX_MEMBERS
             }
             Control::Refused { reason } => reason.len() <= 512,
+            Control::TopologyRequest { event, pieces, .. } => {
+                event.valid()
+                    && pieces.len() <= MAX_CUT_PIECES
+                    && pieces.iter().all(|&p| p <= MAX_PARTICLES)
+            }
+            Control::Topology { event, .. } => event.valid(),
             _ => true,
         };
         if ok {

@@ -11,7 +11,10 @@
 mod control;
 mod state;
 
-pub use control::{Control, DenyReason, SpawnInfo};
+pub use control::{
+    Control, DenyReason, SpawnInfo, TopologyEvent, MAX_CUT_PIECES, MAX_TOPOLOGY_COORD,
+    TOPOLOGY_QUANTUM_M,
+};
 pub use state::{
     decode_state_block, decode_state_block_sized, entry_id_bits, write_entry_id, ChunkEnc,
     EntryLayout, PartBody, PosEnc, Pushed, SizedEntry, StateBlockWriter, StateEntry,
@@ -22,7 +25,7 @@ use crate::error::{decode_err, NetError};
 use crate::ids::{NetId, Term};
 
 /// Version byte at offset 0 of every datagram.
-pub const PROTOCOL_VERSION: u8 = 2;
+pub const PROTOCOL_VERSION: u8 = 3;
 /// First byte of the version-independent refusal datagram.
 pub const REFUSAL_MARKER: u8 = 0;
 /// Largest reliable control message (bytes), also the bincode decode limit.
