@@ -569,3 +569,58 @@ impl SplitMix64 {
         (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
     }
 }
+
+/// The particle weights of a vertex at `p` that joins the mesh after clustering (a tear's new
+/// vertex: tear paper Algorithm 4 line 1, "as in Line 9 of" Algorithm 3), by `method`'s own
+/// scheme over the particle rest positions `particles`:
+/// - closest-N and distance (a partition: one particle per vertex): the nearest particle;
+/// - weighted distance: every particle within `soft_radius_m`, weights of Figure 3.6;
+/// - Poisson disk: every particle within `radius_m`, the smooth falloff, normalised.
+///
+/// With no particle in range the nearest one takes it alone. Ties go to the lower index; the
+/// result is sorted by particle and its weights sum to 1 (empty only without particles).
+pub fn weights_for_point(method: ClusterMethod, particles: &[Vec3], p: Vec3) -> Vec<(u32, f32)> {
+    let nearest = || {
+        particles
+            .iter()
+            .enumerate()
+            .map(|(i, q)| (q.distance_squared(p), i as u32))
+            .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)))
+            .map(|(_, i)| vec![(i, 1.0)])
+            .unwrap_or_default()
+    };
+    let within = |r: f32| -> Vec<(u32, f32)> {
+        particles
+            .iter()
+            .enumerate()
+            .filter_map(|(i, q)| {
+                let d = q.distance(p);
+                (d <= r).then_some((i as u32, d))
+            })
+            .collect()
+    };
+    let mut out: Vec<(u32, f32)> = match method {
+        ClusterMethod::ClosestN { .. } | ClusterMethod::Distance { .. } => return nearest(),
+        ClusterMethod::WeightedDistance { soft_radius_m, .. } => {
+            let near = within(soft_radius_m);
+            // Figure 3.6, as in `build_particle_map`.
+            let total: f32 = near.iter().map(|e| e.1).sum();
+            near.into_iter()
+                .map(|(i, d)| (i, if total > 0.0 { 1.0 - d / total } else { 1.0 }))
+                .collect()
+        }
+        ClusterMethod::PoissonDisk { radius_m, .. } => within(radius_m)
+            .into_iter()
+            .map(|(i, d)| {
+                let x = d / radius_m;
+                (i, (1.0 - x * x).powi(2) + 1e-3)
+            })
+            .collect(),
+    };
+    let sum: f32 = out.iter().map(|e| e.1).sum();
+    if out.is_empty() || !(sum > 0.0 && sum.is_finite()) {
+        return nearest();
+    }
+    out.iter_mut().for_each(|e| e.1 /= sum);
+    out
+}

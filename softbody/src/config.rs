@@ -156,6 +156,9 @@ pub struct SoftBodyConfig {
     pub friction: f32,
     /// Distance below which vertices are welded, metres. Default 1e-6.
     pub weld_epsilon_m: f32,
+    /// Width of the slit a tear cuts (tear paper §3.1, the box's width), metres, in
+    /// [0.1 mm, 5 cm]. Default 3 mm.
+    pub tear_width_m: f32,
 }
 
 impl Default for SoftBodyConfig {
@@ -183,6 +186,7 @@ impl Default for SoftBodyConfig {
             continuous_collision: ContinuousCollision::Soft { prediction_m: 0.05 },
             friction: 0.5,
             weld_epsilon_m: 1e-6,
+            tear_width_m: 0.003,
         }
     }
 }
@@ -215,6 +219,12 @@ impl SoftBodyConfig {
         )?;
         check("friction", self.friction, 0.0, 100.0)?;
         check("weld_epsilon_m", self.weld_epsilon_m, 0.0, 1.0)?;
+        check(
+            "tear_width_m",
+            self.tear_width_m,
+            1e-4,
+            crate::cut::MAX_TEAR_WIDTH_M,
+        )?;
         Ok(())
     }
 }

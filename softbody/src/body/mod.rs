@@ -8,11 +8,12 @@
 
 pub(crate) mod handle;
 pub(crate) mod set;
+mod topology;
 
 use glam::{Quat, Vec3};
 use rapier3d::prelude::{
     Aabb, ColliderBuilder, ColliderHandle, Group, InteractionGroups, InteractionTestMode,
-    PhysicsWorld, QueryFilter, RigidBodyBuilder, RigidBodyHandle,
+    PhysicsWorld, Pose, QueryFilter, RigidBodyBuilder, RigidBodyHandle,
 };
 
 use crate::cluster::{build_particle_map, ParticleMap};
@@ -20,6 +21,8 @@ use crate::config::{
     CenterCollider, ContinuousCollision, ParticleCollider, RestoringScheme, SimulationSpace,
     SoftBodyConfig,
 };
+use crate::cut::particles::ParticleUpdateStats;
+use crate::cut::{TearBoxPlanes, TearMesh};
 use crate::mesh::{enclosed_volume, Mesh, WeldedMesh};
 use crate::SoftBodyError;
 
@@ -29,8 +32,18 @@ pub struct SoftBody {
     config: SoftBodyConfig,
     welded: WeldedMesh,
     render_triangles: Vec<[u32; 3]>,
-    /// Welded rest vertices relative to the rest center.
+    /// Welded rest vertices relative to the rest center: the *rest frame*, the center body's
+    /// local frame, in which tears and cuts are given.
     rest_vertices: Vec<Vec3>,
+    /// The rest center in the frame the mesh was built in (the world at insertion).
+    rest_center: Vec3,
+    /// The render mesh at rest, in the rest frame: what tears and cuts act on.
+    rest_mesh: Mesh,
+    /// The rest mesh being torn, made at the first tear.
+    tear: Option<TearMesh>,
+    /// Every tear box applied so far, in the rest frame.
+    tear_boxes: Vec<TearBoxPlanes>,
+    last_particle_update: ParticleUpdateStats,
     map: ParticleMap,
     /// Particle rest positions relative to the rest center.
     rest_offsets: Vec<Vec3>,
@@ -79,6 +92,66 @@ impl SoftBody {
         world: &mut PhysicsWorld,
         bit: u32,
     ) -> Result<Self, SoftBodyError> {
+        let plan = BodyPlan::new(mesh, config)?;
+        Ok(plan.instantiate(world, bit, &Spawn::AT_REST))
+    }
+}
+
+/// Where a new body's bodies go: the point `origin` of the mesh's (baked) frame goes to
+/// `translation`, turned by `rotation`, and everything moves with the rigid velocity
+/// `linvel + angvel × (x − translation)`. Particles may start displaced from their targets.
+#[derive(Clone, Debug)]
+pub(crate) struct Spawn {
+    pub(crate) origin: Vec3,
+    pub(crate) translation: Vec3,
+    pub(crate) rotation: Quat,
+    pub(crate) linvel: Vec3,
+    pub(crate) angvel: Vec3,
+    /// Per particle, world space; empty for none.
+    pub(crate) displacement: Vec<Vec3>,
+}
+
+impl Spawn {
+    /// The mesh's frame is the world, at rest.
+    const AT_REST: Spawn = Spawn {
+        origin: Vec3::ZERO,
+        translation: Vec3::ZERO,
+        rotation: Quat::IDENTITY,
+        linvel: Vec3::ZERO,
+        angvel: Vec3::ZERO,
+        displacement: Vec::new(),
+    };
+
+    fn place(&self, p: Vec3) -> Vec3 {
+        self.translation + self.rotation * (p - self.origin)
+    }
+
+    fn velocity_at(&self, x: Vec3) -> Vec3 {
+        self.linvel + self.angvel.cross(x - self.translation)
+    }
+}
+
+/// Everything a body needs that can fail, computed before anything enters the world: a cut
+/// plans all its pieces first, so a refused piece leaves the world untouched.
+pub(crate) struct BodyPlan {
+    pub(crate) config: SoftBodyConfig,
+    welded: WeldedMesh,
+    render_triangles: Vec<[u32; 3]>,
+    pub(crate) rest_mesh: Mesh,
+    pub(crate) rest_center: Vec3,
+    pub(crate) rest_vertices: Vec<Vec3>,
+    pub(crate) map: ParticleMap,
+    rest_offsets: Vec<Vec3>,
+    neighbour_scale: Vec<f32>,
+    center_shape: Option<ColliderBuilder>,
+    rest_volume_m3: f32,
+    size_m: f32,
+}
+
+impl BodyPlan {
+    /// Welds and clusters `mesh` (baked: the body's local frame is the world's at rest) and
+    /// builds the center's collider shape.
+    pub(crate) fn new(mesh: &Mesh, config: SoftBodyConfig) -> Result<Self, SoftBodyError> {
         let welded = mesh.weld(config.weld_epsilon_m);
         let soft: Vec<bool> = match &config.soft_region {
             Some(r) => welded.positions.iter().map(|p| r.contains(*p)).collect(),
@@ -116,26 +189,8 @@ impl SoftBody {
             .map(|p| *p - rest_center)
             .collect();
         let rest_vertices: Vec<Vec3> = welded.positions.iter().map(|p| *p - rest_center).collect();
-        let neighbour_scale = (0..map.len())
-            .map(|i| {
-                let (_, w) = map.neighbours.row(i);
-                let s: f32 = w.iter().sum();
-                if s > 0.0 {
-                    config.neighbour_share / s
-                } else {
-                    0.0
-                }
-            })
-            .collect();
-        let (pg, cg) = groups(bit, config.self_collisions);
-
-        let center_builder = match config.space {
-            SimulationSpace::Local => RigidBodyBuilder::fixed(),
-            SimulationSpace::World => RigidBodyBuilder::dynamic().can_sleep(true),
-        }
-        .translation(rest_center);
-        let center = world.insert_body(center_builder);
-        let center_collider = match config.space {
+        let neighbour_scale = neighbour_scale(&map, config.neighbour_share);
+        let center_shape = match config.space {
             SimulationSpace::Local => None,
             SimulationSpace::World => {
                 let builder = match config.center_collider {
@@ -152,20 +207,75 @@ impl SoftBody {
                         ColliderBuilder::convex_hull(&pts)
                     }
                 };
-                let builder = builder.ok_or_else(|| {
+                Some(builder.ok_or_else(|| {
                     SoftBodyError::Config("the mesh has no convex hull (flat or degenerate)".into())
-                })?;
-                Some(
-                    world.insert_collider(
-                        builder
-                            .mass(config.center_mass_kg)
-                            .friction(config.friction)
-                            .collision_groups(cg),
-                        Some(center),
-                    ),
-                )
+                })?)
             }
         };
+        // The rest mesh as the tear and the cut see it: render vertices at their welded rest
+        // positions, in the rest frame.
+        let rest_mesh = Mesh {
+            positions: welded
+                .render_to_welded
+                .iter()
+                .map(|&w| rest_vertices[w as usize])
+                .collect(),
+            normals: mesh.normals.clone(),
+            triangles: mesh.triangles.clone(),
+        };
+        let rest_volume_m3 = enclosed_volume(&welded.positions, &welded.triangles);
+        Ok(BodyPlan {
+            render_triangles: mesh.triangles.clone(),
+            welded,
+            rest_mesh,
+            rest_center,
+            rest_vertices,
+            map,
+            rest_offsets,
+            neighbour_scale,
+            center_shape,
+            rest_volume_m3,
+            size_m,
+            config,
+        })
+    }
+
+    /// Inserts the body's rigid bodies and colliders into `world`, placed by `spawn`.
+    pub(crate) fn instantiate(self, world: &mut PhysicsWorld, bit: u32, spawn: &Spawn) -> SoftBody {
+        let BodyPlan {
+            config,
+            welded,
+            render_triangles,
+            rest_mesh,
+            rest_center,
+            rest_vertices,
+            map,
+            rest_offsets,
+            neighbour_scale,
+            center_shape,
+            rest_volume_m3,
+            size_m,
+        } = self;
+        let (pg, cg) = groups(bit, config.self_collisions);
+        let center_at = spawn.place(rest_center);
+        let center_builder = match config.space {
+            SimulationSpace::Local => RigidBodyBuilder::fixed(),
+            SimulationSpace::World => RigidBodyBuilder::dynamic()
+                .can_sleep(true)
+                .linvel(spawn.velocity_at(center_at))
+                .angvel(spawn.angvel),
+        }
+        .pose(Pose::from_parts(center_at, spawn.rotation));
+        let center = world.insert_body(center_builder);
+        let center_collider = center_shape.map(|builder| {
+            world.insert_collider(
+                builder
+                    .mass(config.center_mass_kg)
+                    .friction(config.friction)
+                    .collision_groups(cg),
+                Some(center),
+            )
+        });
 
         let mut particles = Vec::with_capacity(map.len());
         let mut particle_colliders = Vec::with_capacity(map.len());
@@ -176,11 +286,13 @@ impl SoftBody {
                 ContinuousCollision::Soft { prediction_m } => (prediction_m.max(0.0), false),
                 ContinuousCollision::Full => (0.0, true),
             };
+            let at = spawn.place(*p) + spawn.displacement.get(i).copied().unwrap_or(Vec3::ZERO);
             let h = world.insert_body(
                 RigidBodyBuilder::dynamic()
                     .soft_ccd_prediction(soft_ccd)
                     .ccd_enabled(full_ccd)
-                    .translation(*p)
+                    .translation(at)
+                    .linvel(spawn.velocity_at(at))
                     .gravity_scale(0.0)
                     .can_sleep(config.particles_can_sleep)
                     .angular_damping(config.angular_damping)
@@ -209,15 +321,19 @@ impl SoftBody {
             particle_radius_m.push(r);
         }
         let n = map.len();
-        let rest_volume_m3 = enclosed_volume(&welded.positions, &welded.triangles);
         let mut body = SoftBody {
-            render_triangles: mesh.triangles.clone(),
+            render_triangles,
             vertices: welded.positions.clone(),
             render_positions: vec![Vec3::ZERO; welded.render_to_welded.len()],
             render_normals: vec![Vec3::ZERO; welded.render_to_welded.len()],
             slot_normals: vec![Vec3::ZERO; welded.normal_slots],
             welded,
             rest_vertices,
+            rest_center,
+            rest_mesh,
+            tear: None,
+            tear_boxes: Vec::new(),
+            last_particle_update: ParticleUpdateStats::default(),
             map,
             rest_offsets,
             neighbour_scale,
@@ -235,9 +351,26 @@ impl SoftBody {
             non_finite_recoveries: 0,
         };
         body.deform(world);
-        Ok(body)
+        body
     }
+}
 
+/// Per particle: `neighbour_share / Σ w` over its neighbour weights (0 without neighbours).
+pub(crate) fn neighbour_scale(map: &ParticleMap, share: f32) -> Vec<f32> {
+    (0..map.len())
+        .map(|i| {
+            let (_, w) = map.neighbours.row(i);
+            let s: f32 = w.iter().sum();
+            if s > 0.0 {
+                share / s
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+impl SoftBody {
     /// The restoring step of thesis 3.2.2 / Appendix A.6–A.7, made sound.
     ///
     /// Thesis: `v = MoveTowards(v, (dest − x − Σ w·(dest_j − x_j)) · k · dt/(1/90), 10)`. Its
@@ -568,9 +701,32 @@ impl SoftBody {
         &self.vertices
     }
 
-    /// Welded rest vertices relative to the rest center.
+    /// Welded rest vertices in the rest frame: relative to the rest center, in the center
+    /// body's local frame (a vertex is at `center + rotation · rest` when undeformed).
     pub fn rest_vertices(&self) -> &[Vec3] {
         &self.rest_vertices
+    }
+
+    /// The rest center in the frame the mesh was given in at insertion (the world then); the
+    /// rest frame is that frame moved to this point.
+    pub fn rest_center(&self) -> Vec3 {
+        self.rest_center
+    }
+
+    /// The render mesh at rest, in the rest frame, after every tear so far: the mesh tears
+    /// and cuts act on and peers compare (`cut::topology_hash`).
+    pub fn rest_mesh(&self) -> &Mesh {
+        &self.rest_mesh
+    }
+
+    /// Every tear box applied so far (those that removed or split a face), in the rest frame.
+    pub fn tear_boxes(&self) -> &[TearBoxPlanes] {
+        &self.tear_boxes
+    }
+
+    /// What the particle update of the last tear did.
+    pub fn last_particle_update(&self) -> ParticleUpdateStats {
+        self.last_particle_update
     }
 
     /// Deformed render vertex positions, ready for a renderer.

@@ -5,6 +5,7 @@ use rapier3d::prelude::{PhysicsWorld, RigidBodyHandle};
 
 use super::handle::SoftBodyHandle;
 use super::SoftBody;
+use crate::cut::{CutError, CutPlane, TearSegment, TearStats};
 use crate::{Mesh, SoftBodyConfig, SoftBodyError};
 
 /// A set of soft bodies in the rapier style: generational handles, one pipeline step.
@@ -42,9 +43,20 @@ impl SoftBodySet {
     ) -> Result<SoftBodyHandle, SoftBodyError> {
         config.validate()?;
         mesh.validate("<soft body mesh>")?;
+        let bit = self.next_group_bit();
+        let body = SoftBody::build(mesh, config, world, bit)?;
+        Ok(self.insert_built(body))
+    }
+
+    /// The collision-group bit pair of the next body.
+    fn next_group_bit(&mut self) -> u32 {
         let bit = 1 + 2 * (self.groups_used % 15);
         self.groups_used += 1;
-        let body = SoftBody::build(mesh, config, world, bit)?;
+        bit
+    }
+
+    /// Gives a built body a slot and a handle.
+    fn insert_built(&mut self, body: SoftBody) -> SoftBodyHandle {
         let index = match self.free.pop() {
             Some(i) => {
                 let slot = &mut self.slots[i as usize];
@@ -67,7 +79,71 @@ impl SoftBodySet {
                 self.owners.insert(p, (handle, Some(i as u32)));
             }
         }
-        Ok(handle)
+        handle
+    }
+
+    /// Tears body `handle` along `segment`, given in the body's rest frame (see
+    /// [`SoftBody::rest_vertices`]: relative to the rest center, in the center body's local
+    /// frame, so the same event means the same on every peer whatever the body's pose).
+    ///
+    /// The body's rest mesh is torn (tear paper Algorithm 1, a slit `tear_width_m` wide) and
+    /// its welded and render meshes rebuilt; then its particle map follows (Algorithm 4):
+    /// new vertices join particles as in clustering, neighbour links through the tear box go,
+    /// and particles let go of vertices across the tear (weights renormalised). The particles
+    /// and their rapier bodies stay; the body keeps simulating. Consecutive segments continue
+    /// one slit until [`end_tear_stroke`](Self::end_tear_stroke). Refused (changing nothing)
+    /// for an unknown handle or a segment [`TearMesh::tear`](crate::cut::TearMesh::tear)
+    /// refuses. The particle update's figures: [`SoftBody::last_particle_update`].
+    pub fn tear(
+        &mut self,
+        handle: SoftBodyHandle,
+        world: &mut PhysicsWorld,
+        segment: &TearSegment,
+    ) -> Result<TearStats, CutError> {
+        self.get_mut(handle)
+            .ok_or_else(|| unknown(handle))?
+            .tear_rest(world, segment)
+    }
+
+    /// Ends body `handle`'s current tear stroke (the scalpel lifted); false for an unknown
+    /// handle.
+    pub fn end_tear_stroke(&mut self, handle: SoftBodyHandle) -> bool {
+        match self.get_mut(handle) {
+            Some(b) => {
+                b.lift_tear();
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Cuts body `handle` by `plane`, given in its rest frame (as for [`tear`](Self::tear)),
+    /// into new soft bodies, one per piece (tear paper Algorithm 2, capped: `cut::cut_mesh`),
+    /// positive side first. Each piece has its own center body and particles, clustered with
+    /// the old body's config (finer for a piece under 4 particles: radii, or closest-N's
+    /// count, halved up to 6 times); it starts where its part of the body was (the old
+    /// center's pose, its particles displaced by the mean displacement of their old
+    /// vertices), moving with the old center's rigid velocity (linear velocity at its own
+    /// center, same angular velocity). The old body is removed. A refused cut (unknown handle,
+    /// a plane that is not finite or misses, a piece that cannot be a body) changes nothing.
+    pub fn cut(
+        &mut self,
+        handle: SoftBodyHandle,
+        world: &mut PhysicsWorld,
+        plane: &CutPlane,
+    ) -> Result<Vec<SoftBodyHandle>, CutError> {
+        let plans = self
+            .get(handle)
+            .ok_or_else(|| unknown(handle))?
+            .plan_cut(world, plane)?;
+        self.remove(handle, world);
+        let mut out = Vec::with_capacity(plans.len());
+        for (plan, spawn) in plans {
+            let bit = self.next_group_bit();
+            let body = plan.instantiate(world, bit, &spawn);
+            out.push(self.insert_built(body));
+        }
+        Ok(out)
     }
 
     /// Which soft body (and which part of it) a rapier body belongs to, if any.
@@ -163,4 +239,9 @@ impl SoftBodySet {
         world.step();
         self.post_physics(world);
     }
+}
+
+/// The refusal for a handle not in the set.
+fn unknown(handle: SoftBodyHandle) -> CutError {
+    CutError::Mesh(format!("soft body {handle:?} is not in this set"))
 }

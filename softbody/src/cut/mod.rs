@@ -23,6 +23,7 @@
 mod cap;
 mod check;
 mod hash;
+pub mod particles;
 mod plane;
 mod sections;
 mod tear;
@@ -32,6 +33,7 @@ use thiserror::Error;
 
 pub use check::MeshReport;
 pub use hash::topology_hash;
+pub use particles::TearBoxPlanes;
 pub use plane::{cut_mesh, Cut, Piece, Side};
 pub use sections::{Aabb, Sections};
 pub use tear::{TearMesh, TearSegment, TearStats, MAX_SEGMENT_M, MAX_TEAR_WIDTH_M, SECTION_FACES};

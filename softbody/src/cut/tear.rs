@@ -243,6 +243,17 @@ impl TearMesh {
         Ok(stats)
     }
 
+    /// The box that [`tear`](Self::tear)ing `seg` now would clip (before the planes move out
+    /// by the clearance of at most a fraction of a millimetre), for the particle update of
+    /// Algorithm 4. Refused like `tear`; changes nothing.
+    pub fn box_for(&self, seg: &TearSegment) -> Result<super::particles::TearBoxPlanes, CutError> {
+        let b = self.make_box(seg)?;
+        Ok(super::particles::TearBoxPlanes {
+            normals: b.planes.map(|h| h.normal),
+            offsets_m: b.planes.map(|h| h.offset),
+        })
+    }
+
     fn make_box(&self, seg: &TearSegment) -> Result<TearBox, CutError> {
         if !(seg.from.is_finite() && seg.to.is_finite() && seg.blade.is_finite()) {
             return Err(CutError::NonFinite("tear segment"));

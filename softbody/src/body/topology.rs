@@ -1,0 +1,283 @@
+//! Tears and cuts of a soft body (issue 14 point 3; tear paper §3.3.3): the rest mesh is torn
+//! or cut in the rest frame, the welded and render meshes are rebuilt from it and the particle
+//! map follows (Algorithm 4, in `cut::particles`); a cut's pieces are planned as new bodies.
+//!
+//! Everything here is a function of the rest mesh, the particle map and the event, never of
+//! the simulated state, so every peer applying the same events gets the same topology and map.
+//! Only a cut's *placement* of the pieces reads the state (the old center's pose and velocity
+//! and the particles' displacement).
+
+use std::collections::HashMap;
+
+use glam::Vec3;
+use rapier3d::prelude::PhysicsWorld;
+
+use super::{neighbour_scale, BodyPlan, SoftBody, Spawn};
+use crate::cluster::ClusterMethod;
+use crate::cut::particles::{update_after_tear, TornVertices};
+use crate::cut::{cut_mesh, CutError, CutPlane, TearMesh, TearSegment, TearStats};
+use crate::mesh::{enclosed_volume, Mesh, WeldedMesh};
+use crate::{SoftBodyConfig, SoftBodyError};
+
+/// A cut's piece that would get fewer particles than this is clustered finer (see
+/// [`finer`]), at most [`MAX_REFINEMENTS`] times.
+pub const MIN_PIECE_PARTICLES: usize = 4;
+
+/// Most halvings of the clustering scale for one small piece.
+pub const MAX_REFINEMENTS: u32 = 6;
+
+fn position_key(p: Vec3) -> [u32; 3] {
+    p.to_array().map(f32::to_bits)
+}
+
+/// The old welded vertex at each exact rest position: tears and cuts copy the positions of the
+/// vertices they keep bit for bit, so this finds every kept vertex.
+fn vertex_index(rest_vertices: &[Vec3]) -> HashMap<[u32; 3], u32> {
+    rest_vertices
+        .iter()
+        .enumerate()
+        .map(|(i, p)| (position_key(*p), i as u32))
+        .collect()
+}
+
+impl SoftBody {
+    /// Tears the rest mesh along `seg` (rest frame), rebuilds the meshes and updates the
+    /// particle map (Algorithm 4). A refused segment changes nothing; a segment that meets no
+    /// face changes nothing but the stroke (the next segment's box touches this one's).
+    pub(crate) fn tear_rest(
+        &mut self,
+        world: &PhysicsWorld,
+        seg: &TearSegment,
+    ) -> Result<TearStats, CutError> {
+        if self.tear.is_none() {
+            self.tear = Some(TearMesh::new(&self.rest_mesh, self.config.tear_width_m)?);
+        }
+        let Some(tear) = self.tear.as_mut() else {
+            return Err(CutError::Mesh("the tear mesh could not be made".into()));
+        };
+        let planes = tear.box_for(seg)?;
+        let stats = tear.tear(seg)?;
+        if stats.faces_clipped == 0 {
+            return Ok(stats);
+        }
+        let mesh = tear.to_mesh();
+        self.tear_boxes.push(planes);
+        if let Err(e) = self.retopologise(mesh, world) {
+            // Cannot happen (the update's input is built right here); if it did, the body
+            // keeps its last mesh and map, and the next tear starts from that mesh.
+            self.tear_boxes.pop();
+            self.tear = None;
+            return Err(e);
+        }
+        Ok(stats)
+    }
+
+    /// Ends the current tear stroke: the next segment starts a new slit.
+    pub(crate) fn lift_tear(&mut self) {
+        if let Some(t) = self.tear.as_mut() {
+            t.lift();
+        }
+    }
+
+    /// Makes `mesh` (rest frame, just torn by the last of `tear_boxes`) the body's mesh.
+    fn retopologise(&mut self, mesh: Mesh, world: &PhysicsWorld) -> Result<(), CutError> {
+        let welded = mesh.weld(self.config.weld_epsilon_m);
+        let old = vertex_index(&self.rest_vertices);
+        let source: Vec<Option<u32>> = welded
+            .positions
+            .iter()
+            .map(|p| old.get(&position_key(*p)).copied())
+            .collect();
+        let soft: Vec<bool> = welded
+            .positions
+            .iter()
+            .zip(&source)
+            .map(|(p, s)| match (s, &self.config.soft_region) {
+                (Some(s), _) => self.map.soft_vertex[*s as usize],
+                (None, Some(region)) => region.contains(*p + self.rest_center),
+                (None, None) => true,
+            })
+            .collect();
+        let (map, stats) = update_after_tear(
+            &self.map,
+            &self.rest_offsets,
+            self.config.cluster,
+            &TornVertices {
+                positions: &welded.positions,
+                source: &source,
+                soft: &soft,
+            },
+            &self.tear_boxes,
+            1,
+            0.25 * self.config.tear_width_m,
+        )?;
+        self.neighbour_scale = neighbour_scale(&map, self.config.neighbour_share);
+        self.map = map;
+        self.last_particle_update = stats;
+        // Open along the slit: the volume is that of the surface closed across it.
+        self.rest_volume_m3 = enclosed_volume(&welded.positions, &welded.triangles);
+        let n = welded.positions.len();
+        self.vertices = vec![Vec3::ZERO; n];
+        self.render_positions = vec![Vec3::ZERO; welded.render_to_welded.len()];
+        self.render_normals = vec![Vec3::ZERO; welded.render_to_welded.len()];
+        self.slot_normals = vec![Vec3::ZERO; welded.normal_slots];
+        self.render_triangles = mesh.triangles.clone();
+        self.rest_vertices = welded.positions.clone();
+        let rest_center = self.rest_center;
+        self.welded = WeldedMesh {
+            positions: welded.positions.iter().map(|p| *p + rest_center).collect(),
+            ..welded
+        };
+        self.rest_mesh = mesh;
+        self.deform(world);
+        Ok(())
+    }
+
+    /// Plans the bodies `plane` (rest frame) cuts this body into: each piece clustered with
+    /// this body's config (finer if small, see [`finer`]), placed where its part of this body
+    /// is now and moving with it. Nothing changes here; a refused cut or piece refuses all.
+    pub(crate) fn plan_cut(
+        &self,
+        world: &PhysicsWorld,
+        plane: &CutPlane,
+    ) -> Result<Vec<(BodyPlan, Spawn)>, CutError> {
+        let cut = cut_mesh(&self.rest_mesh, plane)?;
+        let center = world
+            .bodies
+            .get(self.center)
+            .ok_or_else(|| CutError::Mesh("the body's center is not in this world".into()))?;
+        let (c, r) = (center.translation(), *center.rotation());
+        let (vc, wc) = (center.linvel(), center.angvel());
+        if !(c.is_finite() && r.is_finite() && vc.is_finite() && wc.is_finite()) {
+            return Err(CutError::NonFinite("the body's center state"));
+        }
+        let old = vertex_index(&self.rest_vertices);
+        // Each old vertex's displacement from where the center's rigid motion puts it.
+        let displaced = |v: usize| {
+            let d = self.vertices[v] - (c + r * self.rest_vertices[v]);
+            if d.is_finite() {
+                d
+            } else {
+                Vec3::ZERO
+            }
+        };
+        let mut out = Vec::with_capacity(cut.pieces.len());
+        for (k, piece) in cut.pieces.iter().enumerate() {
+            // Back into the frame the body was built in, so its soft region still applies;
+            // the piece's rest frame is this body's moved to the piece's own rest center.
+            let baked = Mesh {
+                positions: piece
+                    .mesh
+                    .positions
+                    .iter()
+                    .map(|p| *p + self.rest_center)
+                    .collect(),
+                normals: piece.mesh.normals.clone(),
+                triangles: piece.mesh.triangles.clone(),
+            };
+            let plan = plan_piece(&baked, &self.config)
+                .map_err(|e| CutError::Mesh(format!("piece {k} cannot be a soft body: {e}")))?;
+            // The old vertex behind each of the piece's welded vertices (none for the cap's).
+            let mut first_render = vec![usize::MAX; plan.rest_vertices.len()];
+            for (ri, &w) in plan.welded.render_to_welded.iter().enumerate() {
+                let slot = &mut first_render[w as usize];
+                if *slot == usize::MAX {
+                    *slot = ri;
+                }
+            }
+            let source: Vec<Option<u32>> = first_render
+                .iter()
+                .map(|&ri| {
+                    piece
+                        .mesh
+                        .positions
+                        .get(ri)
+                        .and_then(|p| old.get(&position_key(*p)).copied())
+                })
+                .collect();
+            // A new particle starts displaced by the weighted mean displacement of its old
+            // vertices, so the piece keeps (a smoothed copy of) its deformation.
+            let displacement = (0..plan.map.len())
+                .map(|i| {
+                    let (ids, ws) = plan.map.particle_vertices.row(i);
+                    let (mut sum, mut total) = (Vec3::ZERO, 0.0f32);
+                    for (&v, &w) in ids.iter().zip(ws) {
+                        if let Some(o) = source[v as usize] {
+                            sum += displaced(o as usize) * w;
+                            total += w;
+                        }
+                    }
+                    if total > 0.0 {
+                        sum / total
+                    } else {
+                        Vec3::ZERO
+                    }
+                })
+                .collect();
+            let spawn = Spawn {
+                origin: self.rest_center,
+                translation: c,
+                rotation: r,
+                linvel: vc,
+                angvel: wc,
+                displacement,
+            };
+            out.push((plan, spawn));
+        }
+        Ok(out)
+    }
+}
+
+/// Plans one piece with `config`; with fewer than [`MIN_PIECE_PARTICLES`] particles, tries
+/// [`finer`] configs (up to [`MAX_REFINEMENTS`]) and keeps the one with the most particles.
+fn plan_piece(mesh: &Mesh, config: &SoftBodyConfig) -> Result<BodyPlan, SoftBodyError> {
+    mesh.validate("<cut piece>")?;
+    let mut plan = BodyPlan::new(mesh, config.clone())?;
+    let mut cfg = config.clone();
+    for _ in 0..MAX_REFINEMENTS {
+        if plan.map.len() >= MIN_PIECE_PARTICLES {
+            break;
+        }
+        let Some(next) = finer(&cfg) else { break };
+        match BodyPlan::new(mesh, next.clone()) {
+            Ok(p) if p.map.len() > plan.map.len() => plan = p,
+            Ok(_) => {}
+            Err(_) => break,
+        }
+        cfg = next;
+    }
+    Ok(plan)
+}
+
+/// The clustering of a piece too small for its particles: every radius and an explicit
+/// neighbour range halved, closest-N's vertices per particle halved (down to 1); `None` when
+/// nothing can get finer.
+pub fn finer(config: &SoftBodyConfig) -> Option<SoftBodyConfig> {
+    let cluster = match config.cluster {
+        ClusterMethod::ClosestN {
+            vertices_per_particle,
+        } if vertices_per_particle > 1 => ClusterMethod::ClosestN {
+            vertices_per_particle: vertices_per_particle / 2,
+        },
+        ClusterMethod::ClosestN { .. } => return None,
+        ClusterMethod::Distance { radius_m } => ClusterMethod::Distance {
+            radius_m: 0.5 * radius_m,
+        },
+        ClusterMethod::WeightedDistance {
+            radius_m,
+            soft_radius_m,
+        } => ClusterMethod::WeightedDistance {
+            radius_m: 0.5 * radius_m,
+            soft_radius_m: 0.5 * soft_radius_m,
+        },
+        ClusterMethod::PoissonDisk { radius_m, seed } => ClusterMethod::PoissonDisk {
+            radius_m: 0.5 * radius_m,
+            seed,
+        },
+    };
+    Some(SoftBodyConfig {
+        cluster,
+        affect_range_m: 0.5 * config.affect_range_m,
+        ..config.clone()
+    })
+}
