@@ -26,6 +26,13 @@ pub const MIN_PIECE_PARTICLES: usize = 4;
 /// Most halvings of the clustering scale for one small piece.
 pub const MAX_REFINEMENTS: u32 = 6;
 
+/// How far beyond a tear box's ends and depth a vertex still counts as beside the slit: the
+/// tear moves a box's planes out by 20–60 µm where they graze a vertex (0.5 mm at the very
+/// most), and the rim's vertices lie on the moved planes. Consecutive boxes share their end
+/// plane, so their zones tile the cut; a larger margin would make them overlap at a bend,
+/// where a vertex is then on opposite sides of the two tear planes.
+pub const ZONE_TOLERANCE_M: f32 = 1e-4;
+
 fn position_key(p: Vec3) -> [u32; 3] {
     p.to_array().map(f32::to_bits)
 }
@@ -81,7 +88,7 @@ impl SoftBody {
 
     /// Makes `mesh` (rest frame, just torn by the last of `tear_boxes`) the body's mesh.
     fn retopologise(&mut self, mesh: Mesh, world: &PhysicsWorld) -> Result<(), CutError> {
-        let welded = mesh.weld(self.config.weld_epsilon_m);
+        let welded = weld_exact(&mesh);
         let old = vertex_index(&self.rest_vertices);
         let source: Vec<Option<u32>> = welded
             .positions
@@ -109,7 +116,7 @@ impl SoftBody {
             },
             &self.tear_boxes,
             1,
-            0.25 * self.config.tear_width_m,
+            ZONE_TOLERANCE_M,
         )?;
         self.neighbour_scale = neighbour_scale(&map, self.config.neighbour_share);
         self.map = map;
@@ -228,6 +235,61 @@ impl SoftBody {
     }
 }
 
+/// [`Mesh::weld`] for a mesh whose render vertices of one vertex share its position exactly
+/// (the rest mesh: each render vertex sits at its welded position; a tear copies positions
+/// and keeps its new vertices 20 µm from any other): one hash lookup per render vertex
+/// instead of a search of the neighbouring cells (about 2 ms on the torn bunny), the same
+/// normal slots.
+fn weld_exact(mesh: &Mesh) -> WeldedMesh {
+    let mut index: HashMap<[u32; 3], u32> = HashMap::with_capacity(mesh.positions.len());
+    let mut positions: Vec<Vec3> = Vec::new();
+    let mut render_to_welded = Vec::with_capacity(mesh.positions.len());
+    let mut render_to_normal_slot = Vec::with_capacity(mesh.positions.len());
+    // As in `Mesh::weld`: render vertices of one welded vertex share a normal slot when their
+    // normals are within ~30°.
+    let mut slots_of: Vec<Vec<(Vec3, u32)>> = Vec::new();
+    let mut slot_count = 0u32;
+    for (r, &p) in mesh.positions.iter().enumerate() {
+        let w = *index.entry(position_key(p)).or_insert_with(|| {
+            positions.push(p);
+            slots_of.push(Vec::new());
+            (positions.len() - 1) as u32
+        });
+        render_to_welded.push(w);
+        let n = mesh
+            .normals
+            .as_ref()
+            .and_then(|ns| ns.get(r))
+            .copied()
+            .unwrap_or(Vec3::ZERO);
+        let slots = &mut slots_of[w as usize];
+        let hit = slots
+            .iter()
+            .find(|(sn, _)| n == Vec3::ZERO || *sn == Vec3::ZERO || sn.dot(n) > 0.866);
+        let s = match hit {
+            Some(&(_, s)) => s,
+            None => {
+                slot_count += 1;
+                slots.push((n, slot_count - 1));
+                slot_count - 1
+            }
+        };
+        render_to_normal_slot.push(s);
+    }
+    let triangles = mesh
+        .triangles
+        .iter()
+        .map(|t| t.map(|i| render_to_welded[i as usize]))
+        .collect();
+    WeldedMesh {
+        positions,
+        triangles,
+        render_to_welded,
+        render_to_normal_slot,
+        normal_slots: slot_count as usize,
+    }
+}
+
 /// Plans one piece with `config`; with fewer than [`MIN_PIECE_PARTICLES`] particles, tries
 /// [`finer`] configs (up to [`MAX_REFINEMENTS`]) and keeps the one with the most particles.
 fn plan_piece(mesh: &Mesh, config: &SoftBodyConfig) -> Result<BodyPlan, SoftBodyError> {
@@ -280,4 +342,31 @@ pub fn finer(config: &SoftBodyConfig) -> Option<SoftBodyConfig> {
         affect_range_m: 0.5 * config.affect_range_m,
         ..config.clone()
     })
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use crate::cut::TearMesh;
+
+    #[test]
+    fn the_exact_weld_of_a_torn_mesh_is_the_weld() {
+        let m = Mesh::cuboid(Vec3::splat(0.05), 4);
+        let mut t = TearMesh::new(&m, 0.003).unwrap();
+        t.tear(&TearSegment {
+            from: Vec3::new(-0.02, 0.045, 0.01),
+            to: Vec3::new(0.02, 0.045, -0.01),
+            blade: Vec3::Y * 0.03,
+        })
+        .unwrap();
+        let torn = t.to_mesh();
+        let (a, b) = (weld_exact(&torn), torn.weld(1e-6));
+        assert_eq!(a.positions, b.positions);
+        assert_eq!(a.triangles, b.triangles);
+        assert_eq!(a.render_to_welded, b.render_to_welded);
+        assert_eq!(a.render_to_normal_slot, b.render_to_normal_slot);
+        assert_eq!(a.normal_slots, b.normal_slots);
+        assert!(a.positions.len() > 100 && torn.positions.len() > a.positions.len());
+    }
 }

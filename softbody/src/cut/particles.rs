@@ -13,8 +13,9 @@
 //!    the tear plane inside that zone (Figure 10's red segments). A particle beyond the end
 //!    of a slit keeps vertices on both sides: the material there still joins them.
 //!
-//! A vertex left with no particle takes the nearest one it can reach without crossing a box
-//! (not separated by any tear plane, its line not through any box), or else the nearest.
+//! A vertex left with no particle takes the nearest one it can reach without crossing a tear
+//! (no box separates them), among its 64 nearest; failing that (a vertex in the narrow wedge
+//! where two slits meet at a sharp angle, with no particle in it), the nearest.
 //!
 //! Work per tear is incremental: pairs already checked against older boxes are checked only
 //! against the new ones; a new vertex is checked against every box near it. Everything runs
@@ -190,9 +191,10 @@ pub struct ParticleUpdateStats {
 ///
 /// `anchors` are the particles' rest positions in the frame of `vertices` and `boxes`;
 /// `boxes` holds every tear box applied to the body so far, the last `new_boxes` of them this
-/// tear's; `tolerance_m` grows each box's zone (a quarter of the tear width is right: it
-/// covers the box planes' clearance moves and the seams where consecutive boxes meet at an
-/// angle). Particle rest positions, extents and the particle count are kept. Refused for
+/// tear's; `tolerance_m` grows each box's zone along the cut and in depth (enough for the
+/// clearance moves of the box planes, 0.1 mm: consecutive boxes share their end plane, so
+/// their zones already tile the slit, and a crossing segment crosses the tear plane of the
+/// box it passes through). Particle rest positions, extents and the particle count are kept. Refused for
 /// inconsistent lengths or indices, never panics.
 pub fn update_after_tear(
     map: &ParticleMap,
@@ -231,51 +233,66 @@ pub fn update_after_tear(
     let pos = vertices.positions;
     let mut stats = ParticleUpdateStats::default();
 
-    // Line 1: carried rows, and new vertices weighted as in clustering.
-    let mut rows: Vec<Vec<(u32, f32)>> = Vec::with_capacity(n);
+    // Line 1: carried rows, and new vertices weighted as in clustering. Flat rows; a removed
+    // entry gets the id `GONE` and is dropped at the end.
+    const GONE: u32 = u32::MAX;
+    let mut offsets: Vec<usize> = Vec::with_capacity(n + 1);
+    let mut ids: Vec<u32> = Vec::with_capacity(map.vertex_particles.ids.len() + n);
+    let mut weights: Vec<f32> = Vec::with_capacity(ids.capacity());
     let mut is_new = vec![false; n];
+    offsets.push(0);
     for v in 0..n {
-        if !vertices.soft[v] {
-            rows.push(Vec::new());
-            continue;
-        }
-        let carried = vertices.source[v]
-            .map(|s| {
-                let (ids, ws) = map.vertex_particles.row(s as usize);
-                ids.iter()
-                    .copied()
-                    .zip(ws.iter().copied())
-                    .collect::<Vec<_>>()
-            })
-            .filter(|r| !r.is_empty());
-        match carried {
-            Some(r) => {
-                stats.vertices_carried += 1;
-                rows.push(r);
-            }
-            None => {
-                stats.vertices_added += 1;
-                is_new[v] = true;
-                rows.push(weights_for_point(method, anchors, pos[v]));
+        if vertices.soft[v] {
+            let carried = vertices.source[v]
+                .map(|s| map.vertex_particles.row(s as usize))
+                .filter(|r| !r.0.is_empty());
+            match carried {
+                Some((i, w)) => {
+                    stats.vertices_carried += 1;
+                    ids.extend_from_slice(i);
+                    weights.extend_from_slice(w);
+                }
+                None => {
+                    stats.vertices_added += 1;
+                    is_new[v] = true;
+                    for (i, w) in weights_for_point(method, anchors, pos[v]) {
+                        ids.push(i);
+                        weights.push(w);
+                    }
+                }
             }
         }
+        offsets.push(ids.len());
     }
 
     let first_new = boxes.len() - new_boxes;
     let bounds: Vec<Option<(Vec3, Vec3)>> = boxes.iter().map(|b| b.bounds()).collect();
+    let near = |k: usize, p: Vec3, r: f32| match bounds[k] {
+        Some((lo, hi)) => p.cmpge(lo - Vec3::splat(r)).all() && p.cmple(hi + Vec3::splat(r)).all(),
+        // A degenerate box: checked everywhere (the predicates stay exact).
+        None => true,
+    };
 
-    // Line 2: neighbour links through a new box.
+    // Line 2: neighbour links through a new box. A link is no longer than `longest`, so a
+    // particle further than that from a box's bounds keeps all of its links.
+    let longest = (0..map.len())
+        .flat_map(|i| {
+            let a = anchors[i];
+            map.neighbours
+                .row(i)
+                .0
+                .iter()
+                .map(move |&j| a.distance(anchors[j as usize]))
+        })
+        .fold(0.0f32, f32::max);
     let mut cut_links: Vec<(u32, u32)> = Vec::new();
-    for (b, bb) in boxes[first_new..].iter().zip(&bounds[first_new..]) {
-        let Some((lo, hi)) = *bb else { continue };
-        for i in 0..map.len() {
-            let (ids, _) = map.neighbours.row(i);
-            for &j in ids.iter().filter(|&&j| j as usize > i) {
-                let (a, c) = (anchors[i], anchors[j as usize]);
-                if a.min(c).cmpgt(hi).any() || a.max(c).cmplt(lo).any() {
-                    continue;
-                }
-                if b.meets_segment(a, c, 0.0) {
+    for (k, b) in boxes.iter().enumerate().skip(first_new) {
+        for (i, &a) in anchors.iter().enumerate() {
+            if !near(k, a, longest) {
+                continue;
+            }
+            for &j in map.neighbours.row(i).0.iter().filter(|&&j| j as usize > i) {
+                if b.meets_segment(a, anchors[j as usize], 0.0) {
                     cut_links.push((i as u32, j));
                 }
             }
@@ -284,41 +301,39 @@ pub fn update_after_tear(
     cut_links.sort_unstable();
     cut_links.dedup();
     stats.links_removed = cut_links.len();
-    let neighbours = {
-        let mut lists: Vec<Vec<(u32, f32)>> = Vec::with_capacity(map.len());
+    let neighbours = if cut_links.is_empty() {
+        map.neighbours.clone()
+    } else {
+        let mut r = WeightedRows {
+            offsets: Vec::with_capacity(map.len() + 1),
+            ..Default::default()
+        };
+        r.offsets.push(0);
         for i in 0..map.len() {
-            let (ids, ws) = map.neighbours.row(i);
-            lists.push(
-                ids.iter()
-                    .zip(ws)
-                    .filter(|(&j, _)| {
-                        let key = (i.min(j as usize) as u32, i.max(j as usize) as u32);
-                        cut_links.binary_search(&key).is_err()
-                    })
-                    .map(|(&j, &w)| (j, w))
-                    .collect(),
-            );
+            let (js, ws) = map.neighbours.row(i);
+            for (&j, &w) in js.iter().zip(ws) {
+                let key = (i.min(j as usize) as u32, i.max(j as usize) as u32);
+                if cut_links.binary_search(&key).is_err() {
+                    r.ids.push(j);
+                    r.weights.push(w);
+                }
+            }
+            r.offsets.push(r.ids.len() as u32);
         }
-        rows_from_lists(&lists)
+        r
     };
 
     // Line 4: influences across a tear plane. A vertex further than `reach` from a box's
     // bounds cannot be separated by it from any of its particles.
-    let reach = rows
-        .iter()
-        .enumerate()
-        .flat_map(|(v, r)| r.iter().map(move |&(p, _)| (v, p)))
+    let reach = (0..n)
+        .flat_map(|v| ids[offsets[v]..offsets[v + 1]].iter().map(move |&p| (v, p)))
         .map(|(v, p)| pos[v].distance(anchors[p as usize]))
         .fold(0.0f32, f32::max)
         + tolerance_m;
-    let near = |k: usize, p: Vec3, r: f32| match bounds[k] {
-        Some((lo, hi)) => p.cmpge(lo - Vec3::splat(r)).all() && p.cmple(hi + Vec3::splat(r)).all(),
-        // A degenerate box: checked everywhere (the predicates stay exact).
-        None => true,
-    };
     let mut touched = vec![false; n];
     for v in 0..n {
-        if rows[v].is_empty() {
+        let row = offsets[v]..offsets[v + 1];
+        if row.is_empty() {
             continue;
         }
         // Old vertices against the new boxes; new vertices against every box.
@@ -327,29 +342,36 @@ pub fn update_after_tear(
             if !near(k, pos[v], reach) {
                 continue;
             }
-            let before = rows[v].len();
-            rows[v].retain(|&(p, _)| !b.separates(anchors[p as usize], pos[v], tolerance_m));
-            if rows[v].len() != before {
-                stats.influences_removed += before - rows[v].len();
-                touched[v] = true;
+            for e in row.clone() {
+                if ids[e] != GONE && b.separates(anchors[ids[e] as usize], pos[v], tolerance_m) {
+                    ids[e] = GONE;
+                    stats.influences_removed += 1;
+                    touched[v] = true;
+                }
             }
         }
     }
 
-    // Renormalise; a vertex left with none takes the nearest reachable particle.
+    // Renormalise; a vertex left with none takes the nearest reachable particle among the
+    // `SEARCH` nearest (no tear plane between them), else the nearest.
+    const SEARCH: usize = 64;
     let mut order: Vec<(f32, u32)> = Vec::with_capacity(anchors.len());
+    let by_distance = |a: &(f32, u32), b: &(f32, u32)| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1));
     for v in 0..n {
         if !touched[v] {
             continue;
         }
-        if !rows[v].is_empty() {
-            let sum: f32 = rows[v].iter().map(|e| e.1).sum();
-            if sum > 0.0 && sum.is_finite() {
-                rows[v].iter_mut().for_each(|e| e.1 /= sum);
-                continue;
+        let row = offsets[v]..offsets[v + 1];
+        let kept = row.clone().filter(|&e| ids[e] != GONE);
+        let (count, sum) = kept.fold((0usize, 0.0f32), |(c, s), e| (c + 1, s + weights[e]));
+        if count > 0 {
+            for e in row.filter(|&e| ids[e] != GONE) {
+                weights[e] = if sum > 0.0 && sum.is_finite() {
+                    weights[e] / sum
+                } else {
+                    1.0 / count as f32
+                };
             }
-            let share = 1.0 / rows[v].len() as f32;
-            rows[v].iter_mut().for_each(|e| e.1 = share);
             continue;
         }
         let p = pos[v];
@@ -360,9 +382,7 @@ pub fn update_after_tear(
                 .enumerate()
                 .map(|(i, a)| (a.distance_squared(p), i as u32)),
         );
-        let by_distance = |a: &(f32, u32), b: &(f32, u32)| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1));
-        // The nearest few first (almost always one of them is reachable), then the rest.
-        let head = order.len().min(16);
+        let head = order.len().min(SEARCH);
         if head < order.len() {
             order.select_nth_unstable_by(head, by_distance);
         }
@@ -370,33 +390,43 @@ pub fn update_after_tear(
         let reachable = |i: u32| {
             let a = anchors[i as usize];
             let r = a.distance(p) + tolerance_m;
-            (0..boxes.len()).all(|k| {
-                !near(k, p, r)
-                    || !(boxes[k].separates(a, p, tolerance_m)
-                        || boxes[k].meets_segment(a, p, -0.1 * boxes[k].width_m()))
-            })
+            (0..boxes.len()).all(|k| !near(k, p, r) || !boxes[k].separates(a, p, tolerance_m))
         };
-        let mut found = order[..head].iter().map(|e| e.1).find(|&i| reachable(i));
-        if found.is_none() && head < order.len() {
-            order[head..].sort_unstable_by(by_distance);
-            found = order[head..].iter().map(|e| e.1).find(|&i| reachable(i));
-        }
-        match found {
+        let found = order[..head].iter().map(|e| e.1).find(|&i| reachable(i));
+        let chosen = match found {
             Some(i) => {
                 stats.orphans_reattached += 1;
-                rows[v].push((i, 1.0));
+                i
             }
             None => {
-                if let Some(&(_, i)) = order.first() {
-                    stats.orphans_unreachable += 1;
-                    rows[v].push((i, 1.0));
-                }
+                stats.orphans_unreachable += 1;
+                order[0].1
             }
-        }
+        };
+        // The row had an entry (all removed): it takes the one particle.
+        ids[row.start] = chosen;
+        weights[row.start] = 1.0;
     }
 
-    let vertex_particles = rows_from_lists(&rows);
-    let particle_vertices = vertex_particles.transpose(map.len());
+    // Compact, then the transpose by counting.
+    let mut vertex_particles = WeightedRows {
+        offsets: Vec::with_capacity(n + 1),
+        ids: Vec::with_capacity(ids.len()),
+        weights: Vec::with_capacity(ids.len()),
+    };
+    vertex_particles.offsets.push(0);
+    for v in 0..n {
+        for e in offsets[v]..offsets[v + 1] {
+            if ids[e] != GONE {
+                vertex_particles.ids.push(ids[e]);
+                vertex_particles.weights.push(weights[e]);
+            }
+        }
+        vertex_particles
+            .offsets
+            .push(vertex_particles.ids.len() as u32);
+    }
+    let particle_vertices = transpose(&vertex_particles, map.len());
     Ok((
         ParticleMap {
             rest_particles: map.rest_particles.clone(),
@@ -410,21 +440,33 @@ pub fn update_after_tear(
     ))
 }
 
-/// Compressed rows from per-row lists.
-fn rows_from_lists(lists: &[Vec<(u32, f32)>]) -> WeightedRows {
-    let mut r = WeightedRows {
-        offsets: Vec::with_capacity(lists.len() + 1),
-        ..Default::default()
-    };
-    r.offsets.push(0);
-    for l in lists {
-        for &(i, w) in l {
-            r.ids.push(i);
-            r.weights.push(w);
-        }
-        r.offsets.push(r.ids.len() as u32);
+/// The transpose of `rows` (ids below `cols`), rows in order: what
+/// [`WeightedRows::transpose`] gives, by counting instead of a list per column.
+fn transpose(rows: &WeightedRows, cols: usize) -> WeightedRows {
+    let mut offsets = vec![0u32; cols + 1];
+    for &j in &rows.ids {
+        offsets[j as usize + 1] += 1;
     }
-    r
+    for c in 0..cols {
+        offsets[c + 1] += offsets[c];
+    }
+    let mut fill: Vec<u32> = offsets[..cols].to_vec();
+    let mut ids = vec![0u32; rows.ids.len()];
+    let mut weights = vec![0.0f32; rows.ids.len()];
+    for i in 0..rows.rows() {
+        let (js, ws) = rows.row(i);
+        for (&j, &w) in js.iter().zip(ws) {
+            let at = &mut fill[j as usize];
+            ids[*at as usize] = i as u32;
+            weights[*at as usize] = w;
+            *at += 1;
+        }
+    }
+    WeightedRows {
+        offsets,
+        ids,
+        weights,
+    }
 }
 
 #[cfg(test)]
@@ -432,6 +474,44 @@ mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
     use crate::cluster::build_particle_map;
+
+    /// Compressed rows from per-row lists.
+    fn rows_from_lists(lists: &[Vec<(u32, f32)>]) -> WeightedRows {
+        let mut r = WeightedRows {
+            offsets: Vec::with_capacity(lists.len() + 1),
+            ..Default::default()
+        };
+        r.offsets.push(0);
+        for l in lists {
+            for &(i, w) in l {
+                r.ids.push(i);
+                r.weights.push(w);
+            }
+            r.offsets.push(r.ids.len() as u32);
+        }
+        r
+    }
+
+    #[test]
+    fn transpose_by_counting_matches_the_map_s_own() {
+        let (pos, tris) = grid(7);
+        let map = map_of(
+            &pos,
+            &tris,
+            ClusterMethod::WeightedDistance {
+                radius_m: 0.012,
+                soft_radius_m: 0.025,
+            },
+        );
+        assert_eq!(
+            transpose(&map.vertex_particles, map.len()),
+            map.vertex_particles.transpose(map.len())
+        );
+        assert_eq!(
+            transpose(&map.vertex_particles, map.len()),
+            map.particle_vertices
+        );
+    }
 
     /// The box of a scalpel moving along +x from `x0` to `x1` at y = 0, blade along +z from
     /// `z0` to `z1`, `width` wide.
