@@ -4,7 +4,10 @@
 //! closed-form (drift-free) deformation.
 //!
 //! This module is the body itself; `set` holds the bodies of a world (it depends on this
-//! module, not the other way round) and `handle` names one of them.
+//! module, not the other way round) and `handle` names one of them; `topology` tears a body's
+//! rest mesh and updates its particle map (tear paper Algorithm 4), and plans the bodies a
+//! cut makes of it. Tears and cuts are given in the *rest frame*: relative to the rest center,
+//! in the center body's local frame (see [`SoftBody::rest_vertices`]).
 
 pub(crate) mod handle;
 pub(crate) mod set;
