@@ -29,6 +29,14 @@ pub struct DumpObject {
     /// For objects we do not own: the owner's clock time (s) the shown state stands for.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub src: Option<f64>,
+    /// Soft bodies: entries of the object's topology log (tears, cuts) applied.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub log: Option<u32>,
+    /// Soft bodies: hash of the rest mesh's triangles and quantised vertices
+    /// (`softbody::cut::topology_hash`, 10 µm): equal on two peers when they hold the
+    /// identical torn or cut mesh.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub topology: Option<String>,
 }
 
 /// One dump line.
@@ -87,6 +95,12 @@ pub fn snapshot(now: Instant, peer: &mut Peer) -> DumpLine {
             rot: s.rot.to_array(),
             particles: s.particles.iter().map(|p| p.to_array()).collect(),
             src,
+            log: peer
+                .objects()
+                .get(&id)
+                .filter(|o| o.kind.is_soft())
+                .map(|o| o.topology),
+            topology: peer.topology_hash(id).map(|h| format!("{h:016x}")),
         });
     }
     let session = peer.session();

@@ -143,6 +143,8 @@ struct ObjView {
     material: Handle<StandardMaterial>,
     /// Soft bodies: the mesh rewritten every frame.
     soft_mesh: Option<Handle<Mesh>>,
+    /// Topology log entries the mesh's triangles reflect.
+    topology: u32,
     tint: Tint,
 }
 
@@ -334,6 +336,7 @@ fn sync_objects(
                         base,
                         material,
                         soft_mesh: soft,
+                        topology: o.topology,
                         tint: Tint::Plain,
                     },
                 ))
@@ -347,12 +350,20 @@ fn sync_objects(
         debug_assert_eq!(view.id, id);
         let hidden = (o.kind.is_avatar() && cfg.hide_avatars)
             || (o.kind == Kind::Head && cfg.hide_own_head && o.avatar_of == Some(me));
-        // Soft bodies: rewrite positions and normals (world space, identity transform).
+        // Soft bodies: rewrite positions and normals (world space, identity transform), and
+        // the triangles too after a tear or cut changed them.
         if let (LocalBody::Soft(h), Some(handle)) = (o.body, &view.soft_mesh) {
             if let (Some(b), Some(mut m)) = (peer.soft_bodies().get(h), meshes.get_mut(handle)) {
                 m.insert_attribute(Mesh::ATTRIBUTE_POSITION, to_arrays(b.render_positions()));
                 m.insert_attribute(Mesh::ATTRIBUTE_NORMAL, to_arrays(b.render_normals()));
+                let indices = m.indices().map_or(0, |i| i.len());
+                if view.topology != o.topology || indices != b.render_triangles().len() * 3 {
+                    m.insert_indices(Indices::U32(
+                        b.render_triangles().iter().flatten().copied().collect(),
+                    ));
+                }
             }
+            view.topology = o.topology;
         } else if let Some((p, r)) = drawn_pose(now, peer, id) {
             if p.is_finite() && r.is_finite() {
                 *tf = Transform::from_translation(to_bevy(p)).with_rotation(to_bevy_quat(r));

@@ -17,6 +17,15 @@
 //! release HAND                  open the grip
 //! wave HAND AMPLITUDE PERIOD S  move sinusoidally (load runs); HAND may be `all` (head
 //!                               and both hands at once, out of phase)
+//! own TARGET [timeout S]        ask for authority over the object (nearest of its kind to
+//!                               the right hand) and wait until ours (default 3 s)
+//! tear HAND TARGET DX DY DZ [DX DY DZ]… [in S]
+//!                               a scalpel in HAND goes through the points (offsets from
+//!                               TARGET's center when the stroke starts, room axes), S per
+//!                               step (default 0.15); each step tears TARGET (ours) from the
+//!                               last point to this one, the blade upright 4 cm above the
+//!                               tip; the stroke ends with a lift
+//! cut TARGET NX NY NZ           cut TARGET (ours) through its center, plane normal N (room)
 //! loop                          start again from the top (last line)
 //! ```
 //!
@@ -34,7 +43,7 @@ use std::collections::VecDeque;
 
 use glam::{Quat, Vec3};
 use softsync_interaction::{HandInput, HandSample};
-use softsync_net::Instant;
+use softsync_net::{Instant, NetId};
 
 use crate::device::{clamp01, DeviceFrame};
 use crate::peer::Peer;
@@ -59,6 +68,12 @@ pub enum Cmd {
     Release(usize),
     /// Sinusoidal motion.
     Wave(usize, f32, f64, f64),
+    /// Ask for authority over an object and wait.
+    Own(Option<Kind>, f64),
+    /// Tear along points (offsets from the target's center, room axes), seconds per step.
+    Tear(usize, Option<Kind>, Vec<Vec3>, f64),
+    /// Cut through the center with a normal (room frame).
+    Cut(Option<Kind>, Vec3),
     /// Restart.
     Loop,
 }
@@ -120,6 +135,34 @@ fn dur(w: &[&str], at: usize, default: f64) -> Result<f64, String> {
     }
 }
 
+fn target_kind(t: &str) -> Result<Option<Kind>, String> {
+    if t == "nearest" {
+        return Ok(None);
+    }
+    Kind::from_name(t)
+        .filter(|k| !k.is_avatar())
+        .map(Some)
+        .ok_or_else(|| {
+            format!("unknown object {t:?}: bunny, softball, softbox, plate, block, can, ball or nearest")
+        })
+}
+
+/// `X Y Z [X Y Z]… [in S]` from `at`: at least two points.
+fn path(w: &[&str], at: usize) -> Result<(Vec<Vec3>, f64), String> {
+    let end = w.iter().position(|x| *x == "in").unwrap_or(w.len());
+    let coords = &w[at.min(end)..end];
+    if coords.len() < 6 || coords.len() % 3 != 0 {
+        return Err("expected two or more points X Y Z".into());
+    }
+    if coords.len() / 3 > 256 {
+        return Err("at most 256 points".into());
+    }
+    let pts = (0..coords.len() / 3)
+        .map(|k| vec3(coords, 3 * k))
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok((pts, dur(w, end, 0.15)?))
+}
+
 fn vec3(w: &[&str], at: usize) -> Result<Vec3, String> {
     if w.len() < at + 3 {
         return Err("expected X Y Z".into());
@@ -142,21 +185,27 @@ pub fn parse(text: &str) -> Result<Vec<Cmd>, ScriptError> {
     for (i, piece) in pieces.enumerate() {
         let w: Vec<&str> = piece.split_whitespace().collect();
         let cmd = (|| -> Result<Cmd, String> {
-            let arg = |k: usize| w.get(k).copied().ok_or_else(|| "missing argument".to_string());
+            let arg = |k: usize| {
+                w.get(k)
+                    .copied()
+                    .ok_or_else(|| "missing argument".to_string())
+            };
             Ok(match w[0] {
                 "wait" => Cmd::Wait(num(arg(1)?)?.max(0.0)),
                 "move" => Cmd::Move(hand(arg(1)?)?, vec3(&w, 2)?, dur(&w, 5, 0.5)?),
                 "offset" => Cmd::Offset(hand(arg(1)?)?, vec3(&w, 2)?, dur(&w, 5, 0.5)?),
-                "reach" => {
-                    let t = arg(2)?;
-                    let kind = if t == "nearest" {
-                        None
-                    } else {
-                        Some(Kind::from_name(t).filter(|k| !k.is_avatar()).ok_or_else(|| {
-                            format!("unknown object {t:?}: bunny, softball, softbox, plate, block, can, ball or nearest")
-                        })?)
-                    };
-                    Cmd::Reach(hand(arg(1)?)?, kind, dur(&w, 3, 0.5)?)
+                "reach" => Cmd::Reach(hand(arg(1)?)?, target_kind(arg(2)?)?, dur(&w, 3, 0.5)?),
+                "own" => Cmd::Own(target_kind(arg(1)?)?, dur(&w, 2, 3.0)?),
+                "tear" => {
+                    let (pts, step) = path(&w, 3)?;
+                    Cmd::Tear(hand(arg(1)?)?, target_kind(arg(2)?)?, pts, step)
+                }
+                "cut" => {
+                    let n = vec3(&w, 2)?;
+                    if n.length() < 1e-6 {
+                        return Err("the normal is zero".into());
+                    }
+                    Cmd::Cut(target_kind(arg(1)?)?, n)
                 }
                 "grab" => Cmd::Grab(hand(arg(1)?)?, dur(&w, 2, 3.0)?),
                 "squeeze" => Cmd::Squeeze(hand(arg(1)?)?, num(arg(2)?)? as f32, dur(&w, 3, 0.5)?),
@@ -176,7 +225,10 @@ pub fn parse(text: &str) -> Result<Vec<Cmd>, ScriptError> {
             text: piece.to_owned(),
             msg,
         })?;
-        if matches!(cmd, Cmd::Grab(0, _) | Cmd::Squeeze(0, ..) | Cmd::Release(0)) {
+        if matches!(
+            cmd,
+            Cmd::Grab(0, _) | Cmd::Squeeze(0, ..) | Cmd::Release(0) | Cmd::Tear(0, ..)
+        ) {
             return Err(ScriptError {
                 index: i + 1,
                 text: piece.to_owned(),
@@ -210,6 +262,19 @@ enum Active {
         hand: usize,
         t0: f64,
         until: f64,
+    },
+    Own {
+        id: NetId,
+        until: f64,
+    },
+    Tear {
+        hand: usize,
+        id: NetId,
+        points: Vec<Vec3>,
+        /// The point the hand is going to.
+        k: usize,
+        t0: f64,
+        step: f64,
     },
 }
 
@@ -323,7 +388,7 @@ impl Bot {
             if self.active.is_none() && !self.next(now, peer, t) {
                 break;
             }
-            if !self.advance(peer, t) {
+            if !self.advance(now, peer, t) {
                 break;
             }
         }
@@ -434,6 +499,56 @@ impl Bot {
                 t0: t,
                 dur,
             }),
+            Cmd::Own(kind, timeout) => match self.object(now, peer, 2, kind) {
+                Some((id, name)) => {
+                    if peer.session().owner(id) != Some(peer.me()) {
+                        peer.ask_authority(now, id);
+                    }
+                    self.say(format!("own {name}"));
+                    Some(Active::Own {
+                        id,
+                        until: t + timeout,
+                    })
+                }
+                None => {
+                    self.say("own: no such object in the room".into());
+                    None
+                }
+            },
+            Cmd::Tear(hand, kind, offsets, step) => match self.object(now, peer, hand, kind) {
+                Some((id, name)) => {
+                    self.say(format!("tear {name} along {} points", offsets.len()));
+                    let c = peer.shown_state(now, id).map_or(Vec3::ZERO, |s| s.pos);
+                    let points: Vec<Vec3> = offsets.iter().map(|o| c + *o).collect();
+                    self.pos[hand] = self.to_script(hand, points[0]);
+                    Some(Active::Tear {
+                        hand,
+                        id,
+                        points,
+                        k: 1,
+                        t0: t,
+                        step,
+                    })
+                }
+                None => {
+                    self.say("tear: no such object in the room".into());
+                    None
+                }
+            },
+            Cmd::Cut(kind, normal) => {
+                let center = self.at(2);
+                match self.object(now, peer, 2, kind) {
+                    Some((id, name)) => {
+                        let point = peer.shown_state(now, id).map_or(center, |s| s.pos);
+                        match peer.cut(now, id, point, normal) {
+                            Ok(()) => self.say(format!("cut {name}")),
+                            Err(e) => self.say(format!("cut {name}: {e}")),
+                        }
+                    }
+                    None => self.say("cut: no such object in the room".into()),
+                }
+                None
+            }
             Cmd::Loop => {
                 self.pc = 0;
                 None
@@ -443,7 +558,7 @@ impl Bot {
     }
 
     /// Progress the active command; true when it finished.
-    fn advance(&mut self, peer: &Peer, t: f64) -> bool {
+    fn advance(&mut self, now: Instant, peer: &mut Peer, t: f64) -> bool {
         let Some(a) = self.active.clone() else {
             return true;
         };
@@ -506,11 +621,90 @@ impl Bot {
                     false
                 }
             }
+            Active::Own { id, until } => {
+                if peer.session().owner(id) == Some(peer.me()) {
+                    self.say(format!("own object {}", id.0));
+                    true
+                } else if t >= until {
+                    self.say(format!("own: object {} not granted", id.0));
+                    true
+                } else {
+                    false
+                }
+            }
+            Active::Tear {
+                hand,
+                id,
+                points,
+                k,
+                t0,
+                step,
+            } => {
+                let f = if step <= 0.0 {
+                    1.0
+                } else {
+                    ((t - t0) / step).clamp(0.0, 1.0) as f32
+                };
+                let (a, b) = (points[k - 1], points[k]);
+                self.pos[hand] = self.to_script(hand, a.lerp(b, f));
+                if f < 1.0 {
+                    false
+                } else {
+                    let blade = Vec3::Y * 0.04;
+                    if let Err(e) = peer.tear(now, id, a, b, blade) {
+                        self.say(format!("tear object {}: {e}", id.0));
+                    }
+                    if k + 1 < points.len() {
+                        self.active = Some(Active::Tear {
+                            hand,
+                            id,
+                            points,
+                            k: k + 1,
+                            t0: t,
+                            step,
+                        });
+                        return false;
+                    }
+                    if let Err(e) = peer.lift(now, id) {
+                        self.say(format!("lift object {}: {e}", id.0));
+                    }
+                    self.say(format!(
+                        "tore object {} in {} segments",
+                        id.0,
+                        points.len() - 1
+                    ));
+                    true
+                }
+            }
         };
         if finished {
             self.active = None;
         }
         finished
+    }
+
+    /// The object of `kind` nearest to `part` (any non-avatar object for `None`).
+    fn object(
+        &self,
+        now: Instant,
+        peer: &mut Peer,
+        part: usize,
+        kind: Option<Kind>,
+    ) -> Option<(NetId, String)> {
+        let from = self.at(part);
+        let ids: Vec<_> = peer
+            .objects()
+            .iter()
+            .filter(|(_, o)| !o.kind.is_avatar() && kind.is_none_or(|k| o.kind == k))
+            .map(|(id, o)| (*id, o.kind))
+            .collect();
+        ids.into_iter()
+            .filter_map(|(id, k)| {
+                let d = peer.shown_state(now, id)?.pos.distance(from);
+                Some((d, id, format!("{} (object {})", k.name(), id.0)))
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map(|(_, id, n)| (id, n))
     }
 
     /// A point to reach: the object's particle nearest to the hand, or its center.
@@ -580,5 +774,21 @@ mod tests {
             "extra words after wait are ignored"
         );
         assert!(parse("move left 0 1 0 in -1").is_err());
+        let c =
+            parse("own bunny; tear right bunny 0 1 0 0.01 1 0 0.02 1 0 in 0.1; cut softbox 0 1 0")
+                .unwrap();
+        assert_eq!(c[0], Cmd::Own(Some(Kind::Bunny), 3.0));
+        assert!(
+            matches!(&c[1], Cmd::Tear(2, Some(Kind::Bunny), p, s) if p.len() == 3 && *s == 0.1)
+        );
+        assert_eq!(c[2], Cmd::Cut(Some(Kind::SoftBox), Vec3::Y));
+        assert!(
+            parse("tear right bunny 0 1 0").is_err(),
+            "one point is no segment"
+        );
+        assert!(parse("tear right bunny 0 1 0 1 1").is_err());
+        assert!(parse("tear head bunny 0 1 0 1 1 1").is_err());
+        assert!(parse("cut bunny 0 0 0").is_err());
+        assert!(parse("cut bunny 0 NaN 1").is_err());
     }
 }

@@ -83,6 +83,11 @@ pub enum PeerError {
     Build(String),
 }
 
+/// Why a tear or cut was not asked for or not applied (the peer goes on).
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct TopologyError(pub String);
+
 /// Counters for the driver's reports and benchmarks.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Counters {
@@ -96,4 +101,6 @@ pub struct Counters {
     pub apply_errors: u64,
     /// Times we joined the room again after it went on without us.
     pub rejoins: u64,
+    /// Topology log entries (tears, lifts, cuts) applied to our mirror.
+    pub topology_events: u64,
 }

@@ -76,7 +76,7 @@ pub mod scene;
 
 pub use bot::Bot;
 pub use device::DeviceFrame;
-pub use events::{Counters, Event, PeerError};
+pub use events::{Counters, Event, PeerError, TopologyError};
 pub use mirror::{LocalBody, MirroredObject};
 pub use peer::{Peer, PeerConfig};
 pub use scene::{session_config, Kind, Placed, Scene};

@@ -12,11 +12,13 @@ use std::collections::{BTreeMap, HashMap};
 
 use glam::{Quat, Vec3};
 use softsync_interaction::ObjectRef;
+use softsync_net::wire::TopologyEvent;
 use softsync_net::{NetId, ObjectState, PeerId};
 use softsync_softbody::rapier3d::prelude::*;
 use softsync_softbody::{SoftBodyHandle, SoftBodySet};
 
-use crate::events::PeerError;
+use crate::events::{PeerError, TopologyError};
+use crate::peer::topology::{plane_of, segment_of};
 use crate::scene::{Kind, Scene};
 
 /// How a networked object exists in the local world.
@@ -41,6 +43,8 @@ pub struct MirroredObject {
     pub avatar_of: Option<PeerId>,
     /// Last pose of an avatar part we own (set by the bot or the device).
     pub pose: (Vec3, Quat),
+    /// Entries of its topology log applied to its body.
+    pub topology: u32,
 }
 
 /// The local world and the networked objects in it.
@@ -140,6 +144,7 @@ impl Mirror {
                 body,
                 avatar_of,
                 pose: (Vec3::ZERO, Quat::IDENTITY),
+                topology: 0,
             },
         );
     }
@@ -168,6 +173,62 @@ impl Mirror {
         for id in ids {
             self.remove(id);
         }
+    }
+
+    /// Entries of `id`'s topology log applied so far.
+    pub(crate) fn topology_applied(&self, id: NetId) -> u32 {
+        self.objects.get(&id).map_or(0, |o| o.topology)
+    }
+
+    /// Applies one topology log entry to `id`'s soft body: a tear segment, a lift, or the cut
+    /// that made this piece (the body becomes piece `keep`; the other pieces are dropped, they
+    /// are objects of their own).
+    pub(crate) fn apply_topology(
+        &mut self,
+        id: NetId,
+        event: &TopologyEvent,
+    ) -> Result<(), TopologyError> {
+        let Some(o) = self.objects.get(&id) else {
+            return Ok(());
+        };
+        let LocalBody::Soft(h) = o.body else {
+            return Err(TopologyError(format!("object {} is not a soft body", id.0)));
+        };
+        let err = |e: softsync_softbody::cut::CutError| TopologyError(e.to_string());
+        match event {
+            TopologyEvent::Tear { .. } => {
+                let seg = segment_of(event).ok_or_else(|| TopologyError("not a tear".into()))?;
+                self.soft.tear(h, &mut self.world, &seg).map_err(err)?;
+            }
+            TopologyEvent::Lift => {
+                if !self.soft.end_tear_stroke(h) {
+                    return Err(TopologyError(format!("object {} has no body", id.0)));
+                }
+            }
+            TopologyEvent::Cut { keep, .. } => {
+                let plane = plane_of(event)?;
+                let pieces = self.soft.cut(h, &mut self.world, &plane).map_err(err)?;
+                let mut kept = None;
+                for (k, p) in pieces.into_iter().enumerate() {
+                    if k == usize::from(*keep) {
+                        kept = Some(p);
+                    } else {
+                        self.soft.remove(p, &mut self.world);
+                    }
+                }
+                let kept =
+                    kept.ok_or_else(|| TopologyError(format!("the cut made no piece {keep}")))?;
+                self.by_ref.remove(&ObjectRef::Soft(h));
+                self.by_ref.insert(ObjectRef::Soft(kept), id);
+                if let Some(o) = self.objects.get_mut(&id) {
+                    o.body = LocalBody::Soft(kept);
+                }
+            }
+        }
+        if let Some(o) = self.objects.get_mut(&id) {
+            o.topology += 1;
+        }
+        Ok(())
     }
 
     /// Set the pose of a pose-only object (an avatar part).

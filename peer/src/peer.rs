@@ -9,6 +9,8 @@
 //! news, calls [`Peer::pump`] and [`Peer::fixed_step`] with `now`, and sends what
 //! [`Peer::poll_transmit`] gives it.
 
+pub(crate) mod topology;
+
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
 use std::time::Duration;
 
@@ -321,7 +323,10 @@ impl Peer {
                     }
                 }
             }
-            SessionEvent::Topology { .. } => self.events.push_back(Event::Room(e)),
+            SessionEvent::Topology { id, seq, event } => {
+                self.on_topology(now, id, seq, event);
+                self.events.push_back(Event::Room(e));
+            }
             SessionEvent::AuthorityAsked { id, by } => {
                 // Not while one of our hands holds it.
                 let held = self.mirror.object_ref(id).is_some_and(|r| self.is_held(r));
@@ -361,6 +366,13 @@ impl Peer {
     }
 
     // --- Simulation ---
+
+    /// Asks the host for authority over `id` (a bot's `own`); the answer comes as
+    /// [`Event::AuthorityGained`] or [`Event::AuthorityDenied`].
+    pub fn ask_authority(&mut self, now: Instant, id: NetId) {
+        self.counters.authority_requests += 1;
+        let _ = self.session.request_authority(now, id);
+    }
 
     /// Hand input for the next step (0 left, 1 right), from a bot or a device.
     pub fn set_hand_input(&mut self, hand: usize, input: HandInput) {

@@ -257,6 +257,8 @@ impl Session {
                 }
             }
         }
+        // The parent goes first: no peer ever has the parent and a piece in its world at once.
+        self.host_despawn(now, id);
         for (k, (&piece_id, &particles)) in ids.iter().zip(pieces).enumerate() {
             let TopologyEvent::Cut { point, normal, .. } = event else {
                 return;
@@ -305,7 +307,6 @@ impl Session {
                 });
             }
         }
-        self.host_despawn(now, id);
     }
 
     /// Host: object `id`'s log entries, after its `Spawn`, to `to`.

@@ -146,6 +146,22 @@ impl SoftBodySet {
         Ok(out)
     }
 
+    /// The particle count of every piece [`cut`](Self::cut) would make of body `handle` with
+    /// `plane` (rest frame), in the same order, changing nothing: what a peer names when it
+    /// asks the room for a cut, since every peer makes the same pieces.
+    pub fn cut_piece_particles(
+        &self,
+        handle: SoftBodyHandle,
+        world: &PhysicsWorld,
+        plane: &CutPlane,
+    ) -> Result<Vec<usize>, CutError> {
+        let plans = self
+            .get(handle)
+            .ok_or_else(|| unknown(handle))?
+            .plan_cut(world, plane)?;
+        Ok(plans.iter().map(|(p, _)| p.map.len()).collect())
+    }
+
     /// Which soft body (and which part of it) a rapier body belongs to, if any.
     pub fn part_of(&self, body: RigidBodyHandle) -> Option<SoftPart> {
         self.owners.get(&body).map(|&(h, p)| match p {

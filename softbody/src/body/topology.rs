@@ -294,6 +294,13 @@ fn weld_exact(mesh: &Mesh) -> WeldedMesh {
 /// [`finer`] configs (up to [`MAX_REFINEMENTS`]) and keeps the one with the most particles.
 fn plan_piece(mesh: &Mesh, config: &SoftBodyConfig) -> Result<BodyPlan, SoftBodyError> {
     mesh.validate("<cut piece>")?;
+    // A piece's center collider is its convex hull: balls around two sibling pieces would
+    // overlap across the cut and throw the pieces apart; their hulls only touch.
+    let mut config = config.clone();
+    if config.center_collider == crate::CenterCollider::Ball {
+        config.center_collider = crate::CenterCollider::ConvexHull;
+    }
+    let config = &config;
     let mut plan = BodyPlan::new(mesh, config.clone())?;
     let mut cfg = config.clone();
     for _ in 0..MAX_REFINEMENTS {

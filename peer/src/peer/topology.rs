@@ -1,0 +1,195 @@
+//! Tears and cuts on a peer. The owner turns a scalpel's path in the room into topology
+//! events in the object's rest frame, quantised as the wire carries them, and asks the host
+//! ([`Peer::tear`], [`Peer::lift`], [`Peer::cut`]). Nobody applies an event until it is in the
+//! host's log ([`softsync_net::Event::Topology`]): then every mirror applies the same
+//! quantised events in the same order and ends with the identical mesh. An entry that is not
+//! the next one (after a migration the new host's log replaced ours from there) rebuilds the
+//! body from its class and replays the whole log.
+
+use glam::Vec3;
+use softsync_net::wire::TopologyEvent;
+use softsync_net::{Instant, NetId};
+use softsync_softbody::cut::{CutPlane, TearSegment};
+
+use super::Peer;
+use crate::events::{Event, TopologyError};
+use crate::mirror::LocalBody;
+
+impl Peer {
+    /// The rest frame of our soft object `id`: (center position, rotation) in the room.
+    fn rest_frame(&self, id: NetId) -> Result<(Vec3, glam::Quat), TopologyError> {
+        if self.session.owner(id) != Some(self.me()) {
+            return Err(TopologyError(format!("object {} is not ours", id.0)));
+        }
+        match self.mirror.objects.get(&id).map(|o| o.body) {
+            Some(LocalBody::Soft(h)) => self
+                .mirror
+                .soft
+                .get(h)
+                .map(|b| b.center_pose(&self.mirror.world))
+                .ok_or_else(|| TopologyError(format!("object {} has no body", id.0))),
+            Some(_) => Err(TopologyError(format!("object {} is not a soft body", id.0))),
+            None => Err(TopologyError(format!("no object {}", id.0))),
+        }
+    }
+
+    /// Hash of soft object `id`'s rest mesh (welded rest vertices and triangles, 10 µm): two
+    /// peers that applied the same topology log have equal hashes.
+    pub fn topology_hash(&self, id: NetId) -> Option<u64> {
+        let LocalBody::Soft(h) = self.mirror.objects.get(&id)?.body else {
+            return None;
+        };
+        let b = self.mirror.soft.get(h)?;
+        let mesh = softsync_softbody::Mesh {
+            positions: b.rest_vertices().to_vec(),
+            normals: None,
+            triangles: b.welded().triangles.clone(),
+        };
+        Some(softsync_softbody::cut::topology_hash(&mesh, 1e-5))
+    }
+
+    /// Asks to tear our soft object `id` along one segment of a scalpel (room frame): the
+    /// blade's tip moved from `from` to `to`; `blade` runs from the tip to its back end.
+    pub fn tear(
+        &mut self,
+        now: Instant,
+        id: NetId,
+        from: Vec3,
+        to: Vec3,
+        blade: Vec3,
+    ) -> Result<(), TopologyError> {
+        let (pos, rot) = self.rest_frame(id)?;
+        let inv = rot.inverse();
+        let q = |v: Vec3| {
+            TopologyEvent::quantise(v.to_array())
+                .ok_or_else(|| TopologyError(format!("tear point {v} out of range")))
+        };
+        let event = TopologyEvent::Tear {
+            from: q(inv * (from - pos))?,
+            to: q(inv * (to - pos))?,
+            blade: q(inv * blade)?,
+        };
+        self.ask_topology(now, id, event, Vec::new())
+    }
+
+    /// Ends a stroke on `id`: the next tear starts a new one.
+    pub fn lift(&mut self, now: Instant, id: NetId) -> Result<(), TopologyError> {
+        self.rest_frame(id)?;
+        self.ask_topology(now, id, TopologyEvent::Lift, Vec::new())
+    }
+
+    /// Asks to cut our soft object `id` by the plane through `point` with normal `normal`
+    /// (room frame). The pieces become objects of their own, ours.
+    pub fn cut(
+        &mut self,
+        now: Instant,
+        id: NetId,
+        point: Vec3,
+        normal: Vec3,
+    ) -> Result<(), TopologyError> {
+        let (pos, rot) = self.rest_frame(id)?;
+        let inv = rot.inverse();
+        let event = TopologyEvent::Cut {
+            point: TopologyEvent::quantise((inv * (point - pos)).to_array())
+                .ok_or_else(|| TopologyError("cut point out of range".into()))?,
+            normal: TopologyEvent::quantise_normal((inv * normal).to_array())
+                .ok_or_else(|| TopologyError("cut normal is zero".into()))?,
+            keep: 0,
+        };
+        // The particle count of every piece, from the same quantised plane every peer uses.
+        let plane = plane_of(&event)?;
+        let Some(LocalBody::Soft(h)) = self.mirror.objects.get(&id).map(|o| o.body) else {
+            return Err(TopologyError(format!("no soft object {}", id.0)));
+        };
+        let pieces = self
+            .mirror
+            .soft
+            .cut_piece_particles(h, &self.mirror.world, &plane)
+            .map_err(|e| TopologyError(e.to_string()))?;
+        let pieces = pieces.into_iter().map(|n| n as u32).collect();
+        self.ask_topology(now, id, event, pieces)
+    }
+
+    fn ask_topology(
+        &mut self,
+        now: Instant,
+        id: NetId,
+        event: TopologyEvent,
+        pieces: Vec<u32>,
+    ) -> Result<(), TopologyError> {
+        self.session
+            .request_topology(now, id, event, pieces)
+            .map_err(|e| TopologyError(e.to_string()))
+    }
+
+    /// Entry `seq` of `id`'s log arrived: apply it, or rebuild and replay if it is not the
+    /// next one. A failure is a warning: the body keeps its last shape.
+    pub(super) fn on_topology(&mut self, now: Instant, id: NetId, seq: u32, event: TopologyEvent) {
+        let applied = self.mirror.topology_applied(id);
+        let result = if seq == applied {
+            self.mirror.apply_topology(id, &event)
+        } else {
+            let log = self.session.topology_log(id).unwrap_or(&[]).to_vec();
+            self.rebuild(now, id).and_then(|()| {
+                log.iter()
+                    .try_for_each(|e| self.mirror.apply_topology(id, e))
+            })
+        };
+        match result {
+            Ok(()) => self.counters.topology_events += 1,
+            Err(e) => {
+                self.counters.apply_errors += 1;
+                self.events.push_back(Event::Warning(format!(
+                    "object {}: topology entry {seq} not applied: {e}",
+                    id.0
+                )));
+            }
+        }
+    }
+
+    /// Replaces `id`'s body by a fresh one of its class at its current pose.
+    fn rebuild(&mut self, _now: Instant, id: NetId) -> Result<(), TopologyError> {
+        let Some(o) = self.mirror.objects.get(&id).cloned() else {
+            return Ok(());
+        };
+        let s = self.mirror.body_state(o.body, o.pose);
+        let body = self
+            .mirror
+            .build(&self.scene, o.kind, s.pos, s.rot)
+            .map_err(|e| TopologyError(e.to_string()))?;
+        self.mirror.remove(id);
+        self.mirror.insert(id, o.kind, body, o.avatar_of);
+        let ours = self.session.owner(id) == Some(self.me());
+        self.mirror.set_simulated(id, ours);
+        Ok(())
+    }
+}
+
+/// The plane a cut event names, in metres.
+pub(crate) fn plane_of(event: &TopologyEvent) -> Result<CutPlane, TopologyError> {
+    let TopologyEvent::Cut { point, normal, .. } = event else {
+        return Err(TopologyError("not a cut".into()));
+    };
+    CutPlane::new(
+        Vec3::from_array(TopologyEvent::metres(*point)),
+        Vec3::new(
+            f32::from(normal[0]),
+            f32::from(normal[1]),
+            f32::from(normal[2]),
+        ),
+    )
+    .map_err(|e| TopologyError(e.to_string()))
+}
+
+/// A tear event's segment, in metres.
+pub(crate) fn segment_of(event: &TopologyEvent) -> Option<TearSegment> {
+    let TopologyEvent::Tear { from, to, blade } = event else {
+        return None;
+    };
+    let m = |q: &[i32; 3]| Vec3::from_array(TopologyEvent::metres(*q));
+    Some(TearSegment {
+        from: m(from),
+        to: m(to),
+        blade: m(blade),
+    })
+}

@@ -1,0 +1,196 @@
+//! Tears and cuts across the network, in-process on virtual time, with the peer library the
+//! app runs: a host and a client (`softsync_peer::Peer`, the thesis room) on net's in-memory
+//! hub behind the seeded link conditioner (20 ms, 5 ms jitter, 2 % loss). The client takes the
+//! bunny and the soft box, tears the bunny along four segments and cuts the box in two; both
+//! peers end with the identical torn bunny and the same two pieces (equal topology hashes),
+//! the pieces owned by the client, showing the same positions once at rest.
+#![allow(clippy::unwrap_used, missing_docs)]
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use glam::Vec3;
+use softsync_net::transport::HubEndpoint;
+use softsync_net::{
+    ConditionerConfig, Instant, LinkConditioner, MemoryHub, NetId, PeerId, SendPolicy, Session,
+    Transport,
+};
+use softsync_peer::{session_config, Event, Kind, Peer, PeerConfig, Scene};
+
+const DT: f32 = 1.0 / 90.0;
+const HOST: PeerId = PeerId(100);
+const CLIENT: PeerId = PeerId(101);
+
+struct Node {
+    peer: Peer,
+    link: LinkConditioner<HubEndpoint>,
+    warnings: Vec<String>,
+}
+
+impl Node {
+    fn new(hub: &MemoryHub, me: PeerId, seed: u64) -> Self {
+        let policy = SendPolicy::default();
+        let cfg = session_config(policy.clone(), policy.clone(), policy);
+        let (session, contact) = if me == HOST {
+            (Session::host(me, cfg, Instant::ZERO), None)
+        } else {
+            (Session::join(me, HOST, cfg, Instant::ZERO), Some(HOST))
+        };
+        let assets = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets");
+        let scene = Scene::by_name("thesis-room", &assets).unwrap();
+        let config = PeerConfig {
+            dt_s: DT,
+            avatar: false,
+            ..PeerConfig::default()
+        };
+        let mut peer = Peer::new(Instant::ZERO, session, contact, scene, config).unwrap();
+        if me == HOST {
+            peer.open(Instant::ZERO).unwrap();
+        }
+        let link = ConditionerConfig {
+            seed,
+            latency: Duration::from_millis(20),
+            jitter: Duration::from_millis(5),
+            loss: 0.02,
+            ..ConditionerConfig::default()
+        };
+        Node {
+            peer,
+            link: LinkConditioner::new(hub.endpoint(me), link),
+            warnings: Vec::new(),
+        }
+    }
+
+    fn frame(&mut self, now: Instant) {
+        while let Some((from, bytes)) = self.link.recv(now) {
+            self.peer.handle_datagram(now, from, &bytes);
+        }
+        while let Some(e) = self.link.poll_peer_event() {
+            self.peer.handle_link_event(e);
+        }
+        self.peer.pump(now).unwrap();
+        if self.peer.joined() {
+            self.peer.fixed_step(now);
+        }
+        while let Some(t) = self.peer.poll_transmit(now) {
+            self.link.send(now, &t);
+        }
+        while let Some(e) = self.peer.poll_event() {
+            if let Event::Warning(w) = e {
+                self.warnings.push(w);
+            }
+        }
+    }
+
+    fn id_of(&self, kind: Kind) -> Vec<NetId> {
+        self.peer
+            .objects()
+            .iter()
+            .filter(|(_, o)| o.kind == kind)
+            .map(|(id, _)| *id)
+            .collect()
+    }
+}
+
+struct Room {
+    nodes: [Node; 2],
+    now: Instant,
+}
+
+impl Room {
+    fn run(&mut self, d: Duration) {
+        let end = self.now + d;
+        while self.now < end {
+            for n in &mut self.nodes {
+                n.frame(self.now);
+            }
+            self.now += Duration::from_secs_f32(DT);
+        }
+    }
+}
+
+#[test]
+fn a_client_tears_the_bunny_and_cuts_the_box_and_the_host_shows_the_same_pieces() {
+    let hub = MemoryHub::new(1200);
+    let mut room = Room {
+        nodes: [Node::new(&hub, HOST, 1), Node::new(&hub, CLIENT, 2)],
+        now: Instant::ZERO,
+    };
+    room.run(Duration::from_secs(3));
+    let [host, client] = &mut room.nodes;
+    assert!(client.peer.joined());
+    let bunny = client.id_of(Kind::Bunny)[0];
+    let soft_box = client.id_of(Kind::SoftBox)[0];
+    assert_eq!(host.id_of(Kind::Bunny), vec![bunny]);
+    let untouched = host.peer.topology_hash(bunny).unwrap();
+    assert_eq!(client.peer.topology_hash(bunny), Some(untouched));
+    let now = room.now;
+    client.peer.ask_authority(now, bunny);
+    client.peer.ask_authority(now, soft_box);
+    room.run(Duration::from_millis(500));
+    let [_, client] = &mut room.nodes;
+    assert_eq!(client.peer.session().owner(bunny), Some(CLIENT));
+    assert_eq!(client.peer.session().owner(soft_box), Some(CLIENT));
+    // A stroke across the bunny's back: the tip 3 cm above its center, the blade upright.
+    let c = client.peer.shown_state(room.now, bunny).unwrap().pos;
+    let path: Vec<Vec3> = (0..5)
+        .map(|k| c + Vec3::new(-0.05 + 0.025 * k as f32, 0.03, 0.0))
+        .collect();
+    for w in path.windows(2) {
+        let now = room.now;
+        room.nodes[1]
+            .peer
+            .tear(now, bunny, w[0], w[1], Vec3::Y * 0.04)
+            .unwrap();
+        room.run(Duration::from_millis(100));
+    }
+    let now = room.now;
+    room.nodes[1].peer.lift(now, bunny).unwrap();
+    let box_center = room.nodes[1].peer.shown_state(now, soft_box).unwrap().pos;
+    room.nodes[1]
+        .peer
+        .cut(now, soft_box, box_center, Vec3::new(0.2, 1.0, 0.0))
+        .unwrap();
+    // Both sides: the tear applied, the box replaced by two pieces; then rest.
+    room.run(Duration::from_secs(4));
+    let [host, client] = &mut room.nodes;
+    assert!(host.warnings.is_empty(), "{:?}", host.warnings);
+    assert!(client.warnings.is_empty(), "{:?}", client.warnings);
+    let torn = client.peer.topology_hash(bunny).unwrap();
+    assert_ne!(torn, untouched, "the bunny was not torn");
+    assert_eq!(host.peer.topology_hash(bunny), Some(torn));
+    assert_eq!(client.peer.objects()[&bunny].topology, 5);
+    assert_eq!(host.peer.objects()[&bunny].topology, 5);
+    let pieces = client.id_of(Kind::SoftBox);
+    assert_eq!(pieces.len(), 2, "{pieces:?}");
+    assert!(!pieces.contains(&soft_box));
+    assert_eq!(host.id_of(Kind::SoftBox), pieces);
+    let now = room.now;
+    for id in &pieces {
+        assert_eq!(client.peer.session().owner(*id), Some(CLIENT));
+        let h = client.peer.topology_hash(*id).unwrap();
+        assert_eq!(host.peer.topology_hash(*id), Some(h), "piece {}", id.0);
+        let (a, b) = (
+            client.peer.shown_state(now, *id).unwrap(),
+            host.peer.shown_state(now, *id).unwrap(),
+        );
+        assert!(
+            a.pos.distance(b.pos) < 0.002,
+            "piece {}: {} vs {}",
+            id.0,
+            a.pos,
+            b.pos
+        );
+        // The pieces fell onto the table and stayed there.
+        assert!(
+            a.pos.y > 0.75 && a.pos.y < 0.85,
+            "piece {} at {}",
+            id.0,
+            a.pos
+        );
+    }
+    assert_ne!(
+        client.peer.topology_hash(pieces[0]),
+        client.peer.topology_hash(pieces[1])
+    );
+}
