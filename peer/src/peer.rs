@@ -72,6 +72,8 @@ pub struct Peer {
     waiting_grant: BTreeSet<NetId>,
     events: VecDeque<Event>,
     counters: Counters,
+    /// Per hand: the scalpel its trigger holds (see `topology`).
+    scalpels: [topology::Scalpel; 2],
     sim_time_s: f64,
     steps: u64,
     last_step_at: Instant,
@@ -124,6 +126,7 @@ impl Peer {
             waiting_grant: BTreeSet::new(),
             events: VecDeque::new(),
             counters: Counters::default(),
+            scalpels: Default::default(),
             sim_time_s: 0.0,
             steps: 0,
             last_step_at: Instant::ZERO,
@@ -376,6 +379,13 @@ impl Peer {
 
     /// Hand input for the next step (0 left, 1 right), from a bot or a device.
     pub fn set_hand_input(&mut self, hand: usize, input: HandInput) {
+        if let Some(s) = self.scalpels.get_mut(hand) {
+            s.input = Some((
+                input.sample.position_m,
+                input.sample.rotation,
+                input.trigger,
+            ));
+        }
         if let Some(h) = self.hand_ids.get(hand).copied() {
             if let Err(e) = self.hands.set_input(h, input) {
                 self.events
@@ -424,6 +434,7 @@ impl Peer {
         while let Some(e) = self.hands.poll_event() {
             self.on_hand_event(now, e);
         }
+        self.use_scalpels(now);
         self.mirror.soft.step(&mut self.mirror.world, dt);
         // Remote soft bodies: show exactly the interpolated state again after the step.
         for id in &remote {

@@ -9,7 +9,8 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use glam::Vec3;
+use glam::{Quat, Vec3};
+use softsync_interaction::{HandInput, HandSample};
 use softsync_net::transport::HubEndpoint;
 use softsync_net::{
     ConditionerConfig, Instant, LinkConditioner, MemoryHub, NetId, PeerId, SendPolicy, Session,
@@ -62,6 +63,11 @@ impl Node {
     }
 
     fn frame(&mut self, now: Instant) {
+        self.frame_with(now, None);
+    }
+
+    /// A frame with the right hand's input (position, trigger) if given.
+    fn frame_with(&mut self, now: Instant, hand: Option<(Vec3, f32)>) {
         while let Some((from, bytes)) = self.link.recv(now) {
             self.peer.handle_datagram(now, from, &bytes);
         }
@@ -70,6 +76,18 @@ impl Node {
         }
         self.peer.pump(now).unwrap();
         if self.peer.joined() {
+            if let Some((p, trigger)) = hand {
+                let input = HandInput {
+                    sample: HandSample {
+                        position_m: p,
+                        rotation: Quat::IDENTITY,
+                        time_s: now.as_secs_f64(),
+                    },
+                    grip: 0.0,
+                    trigger,
+                };
+                self.peer.set_hand_input(1, input);
+            }
             self.peer.fixed_step(now);
         }
         while let Some(t) = self.peer.poll_transmit(now) {
@@ -193,4 +211,43 @@ fn a_client_tears_the_bunny_and_cuts_the_box_and_the_host_shows_the_same_pieces(
         client.peer.topology_hash(pieces[0]),
         client.peer.topology_hash(pieces[1])
     );
+}
+
+#[test]
+fn a_hand_with_its_trigger_held_tears_along_its_path_and_both_peers_agree() {
+    let hub = MemoryHub::new(1200);
+    let mut room = Room {
+        nodes: [Node::new(&hub, HOST, 3), Node::new(&hub, CLIENT, 4)],
+        now: Instant::ZERO,
+    };
+    room.run(Duration::from_secs(3));
+    let bunny = room.nodes[1].id_of(Kind::Bunny)[0];
+    let untouched = room.nodes[0].peer.topology_hash(bunny).unwrap();
+    let c = room.nodes[1].peer.shown_state(room.now, bunny).unwrap().pos;
+    // The right hand sweeps 10 cm across the bunny's back in 1 s, trigger held, then lets go.
+    let frames = 90;
+    for k in 0..=frames + 30 {
+        let f = (k.min(frames) as f32) / frames as f32;
+        let p = c + Vec3::new(-0.05 + 0.1 * f, 0.02, 0.0);
+        let trigger = if k <= frames { 1.0 } else { 0.0 };
+        let now = room.now;
+        room.nodes[0].frame(now);
+        room.nodes[1].frame_with(now, Some((p, trigger)));
+        room.now += Duration::from_secs_f32(DT);
+    }
+    room.run(Duration::from_secs(1));
+    let [host, client] = &mut room.nodes;
+    assert!(client.warnings.is_empty(), "{:?}", client.warnings);
+    assert_eq!(
+        client.peer.session().owner(bunny),
+        Some(CLIENT),
+        "the scalpel asked for it"
+    );
+    let applied = client.peer.objects()[&bunny].topology;
+    // 10 cm in 5 mm samples, less the first sample taken before the grant arrived.
+    assert!(applied >= 10, "{applied} entries");
+    assert_eq!(host.peer.objects()[&bunny].topology, applied);
+    let torn = client.peer.topology_hash(bunny).unwrap();
+    assert_ne!(torn, untouched);
+    assert_eq!(host.peer.topology_hash(bunny), Some(torn));
 }

@@ -15,7 +15,99 @@ use super::Peer;
 use crate::events::{Event, TopologyError};
 use crate::mirror::LocalBody;
 
+/// Distance the hand moves between two samples of a scalpel's path (the paper samples "by time
+/// or distance"; distance keeps segments the same length at any hand speed).
+pub const SCALPEL_SAMPLE_M: f32 = 0.005;
+
+/// Trigger value above which a hand holds its scalpel to the body.
+pub const SCALPEL_TRIGGER: f32 = 0.5;
+
+/// Length of the scalpel's blade above its tip, along the hand's local +y, metres.
+pub const SCALPEL_BLADE_M: f32 = 0.04;
+
+/// A hand's scalpel: while its trigger is held, the hand's path through a soft body tears it
+/// (VR controllers and the desktop's mouse hand alike: both give a trigger).
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Scalpel {
+    /// The hand's last input: position, rotation, trigger.
+    pub input: Option<(Vec3, glam::Quat, f32)>,
+    /// The object being torn, and whether we asked for it already.
+    target: Option<NetId>,
+    asked: bool,
+    /// The tip where the last segment ended.
+    last: Option<Vec3>,
+}
+
 impl Peer {
+    /// Each hand with its trigger held over a soft body tears it along the hand's path, one
+    /// segment per [`SCALPEL_SAMPLE_M`] moved; letting go lifts the scalpel. A body we do not
+    /// own is asked for first (the tear starts once it is ours).
+    pub(super) fn use_scalpels(&mut self, now: Instant) {
+        for h in 0..self.scalpels.len() {
+            let Some((tip, rot, trigger)) = self.scalpels[h].input else {
+                continue;
+            };
+            if trigger < SCALPEL_TRIGGER {
+                let s = &mut self.scalpels[h];
+                let stroke = (s.target.take(), s.last.take());
+                s.asked = false;
+                if let (Some(id), Some(_)) = stroke {
+                    let _ = self.lift(now, id);
+                }
+                continue;
+            }
+            let target = match self.scalpels[h].target {
+                Some(id) if self.mirror.objects.contains_key(&id) => id,
+                _ => match self.soft_body_at(tip) {
+                    Some(id) => {
+                        self.scalpels[h].target = Some(id);
+                        self.scalpels[h].last = None;
+                        id
+                    }
+                    None => continue,
+                },
+            };
+            if self.session.owner(target) != Some(self.me()) {
+                if !self.scalpels[h].asked {
+                    self.scalpels[h].asked = true;
+                    self.ask_authority(now, target);
+                }
+                continue;
+            }
+            match self.scalpels[h].last {
+                None => self.scalpels[h].last = Some(tip),
+                Some(last) if last.distance(tip) >= SCALPEL_SAMPLE_M => {
+                    let blade = rot * Vec3::Y * SCALPEL_BLADE_M;
+                    if let Err(e) = self.tear(now, target, last, tip, blade) {
+                        self.events
+                            .push_back(Event::Warning(format!("scalpel: {e}")));
+                    }
+                    self.scalpels[h].last = Some(tip);
+                }
+                Some(_) => {}
+            }
+        }
+    }
+
+    /// The soft body whose shown surface's bounds (1 cm wider) hold `p`, nearest center first.
+    fn soft_body_at(&self, p: Vec3) -> Option<NetId> {
+        self.mirror
+            .objects
+            .iter()
+            .filter_map(|(id, o)| {
+                let LocalBody::Soft(h) = o.body else {
+                    return None;
+                };
+                let b = self.mirror.soft.get(h)?;
+                let (lo, hi) = softsync_softbody::mesh::bounds(b.render_positions());
+                let pad = Vec3::splat(0.01);
+                let inside = p.cmpge(lo - pad).all() && p.cmple(hi + pad).all();
+                inside.then(|| (p.distance((lo + hi) * 0.5), *id))
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map(|(_, id)| id)
+    }
+
     /// The rest frame of our soft object `id`: (center position, rotation) in the room.
     fn rest_frame(&self, id: NetId) -> Result<(Vec3, glam::Quat), TopologyError> {
         if self.session.owner(id) != Some(self.me()) {
