@@ -495,6 +495,16 @@ pub fn hud_text(driver: &Driver) -> String {
             s.push_str(&format!("{name} hand holds {}\n", object_name(peer, id)));
         }
     }
+    // Torn and cut soft bodies: how many log entries each has, and the pieces of a cut.
+    let torn: Vec<String> = peer
+        .objects()
+        .iter()
+        .filter(|(_, o)| o.topology > 0)
+        .map(|(id, o)| format!("{} ({} cuts/tears)", object_name(peer, *id), o.topology))
+        .collect();
+    if !torn.is_empty() {
+        s.push_str(&format!("torn: {}\n", torn.join(", ")));
+    }
     for e in driver.recent_events.iter() {
         s.push_str(e);
         s.push('\n');
