@@ -5,6 +5,7 @@
 
 pub mod chart;
 pub mod output;
+pub mod rng;
 pub mod stats;
 pub mod thesis;
 pub mod trace;
@@ -14,4 +15,5 @@ pub use plotters;
 
 pub use chart::{write_svg, ChartError, ChartStyle, LineChart, Series};
 pub use output::{Csv, ResultLine};
+pub use rng::SplitMix64;
 pub use stats::{median, percentile, percentile_of_sorted, Summary};

@@ -26,34 +26,12 @@ use softsync_benchkit::{median, write_svg, ChartStyle, Csv, LineChart, ResultLin
 use softsync_softbody::cut::{cut_mesh, CutPlane, TearMesh, TearSegment};
 use softsync_softbody::Mesh;
 
-/// splitmix64: the same strokes every run.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-    fn unit(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
-    fn direction(&mut self) -> Vec3 {
-        loop {
-            let v = Vec3::new(self.unit(), self.unit(), self.unit()) * 2.0 - Vec3::ONE;
-            if v.length_squared() > 0.01 && v.length_squared() <= 1.0 {
-                return v.normalize();
-            }
-        }
-    }
-}
+use softsync_benchkit::SplitMix64 as Rng;
 
 /// A stroke of `n` segments of `step` metres, the blade along the surface normal, the tip
 /// `depth` below the surface.
 fn stroke(m: &Mesh, rng: &mut Rng, n: usize, step: f32, depth: f32) -> Vec<TearSegment> {
-    let v = (rng.next() % m.positions.len() as u64) as usize;
+    let v = (rng.next_u64() % m.positions.len() as u64) as usize;
     let normal = m.normals.as_ref().map(|ns| ns[v]).unwrap_or(Vec3::Y);
     let tangent = |d: Vec3| {
         let t = (d - normal * d.dot(normal)).normalize_or_zero();
