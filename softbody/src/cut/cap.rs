@@ -8,11 +8,13 @@
 //! outlines (a bunny cut through its ears), holes (a torus cut across) and outlines nested in
 //! holes, with no loop chaining and no orientation guessing.
 
-use std::collections::{HashMap, VecDeque};
+use std::collections::VecDeque;
 
 use glam::{DVec3, Vec3};
 use spade::handles::{DirectedEdgeHandle, FixedFaceHandle, InnerTag};
 use spade::{CdtEdge, ConstrainedDelaunayTriangulation, Point2, Triangulation};
+
+use super::plane::IdMap;
 
 /// A triangulated section.
 pub(super) struct Section {
@@ -39,8 +41,8 @@ pub(super) fn triangulate_section(points: &[Vec3], segments: &[[u32; 2]], normal
     let v = n.cross(u);
     // Only the outline's points go in (a point merged away by the cut is in no segment).
     // Exact duplicates collapse onto the first: spade would drop them and shift indices.
-    let mut first_of: HashMap<[u64; 2], u32> = HashMap::with_capacity(segments.len());
-    let mut cdt_of_point: HashMap<u32, u32> = HashMap::with_capacity(segments.len());
+    let mut first_of: IdMap<[u64; 2], u32> = IdMap::default();
+    let mut cdt_of_point: IdMap<u32, u32> = IdMap::default();
     let mut point_of_cdt: Vec<u32> = Vec::with_capacity(segments.len());
     let mut verts = Vec::with_capacity(segments.len());
     let mut edges: Vec<[usize; 2]> = Vec::with_capacity(segments.len());

@@ -1,10 +1,9 @@
 //! Validity of a mesh after cuts and tears: what the tests assert and what a peer can log when
 //! an event produced something it should not have.
 
-use std::collections::HashMap;
-
 use glam::Vec3;
 
+use super::plane::{weld_positions, IdMap};
 use crate::mesh::{enclosed_volume, Mesh};
 
 /// What is wrong (or right) with a mesh, measured on its welded positions: render vertices at
@@ -30,25 +29,32 @@ pub struct MeshReport {
 }
 
 impl MeshReport {
-    /// Measures `mesh`.
+    /// Measures `mesh` (welded as `Mesh::weld(1e-6)` would).
     pub fn of(mesh: &Mesh) -> Self {
-        let welded = mesh.weld(1e-6);
-        Self::of_welded(&welded.positions, &welded.triangles)
+        let (positions, triangles) = weld_positions(&mesh.positions, &mesh.triangles, 1e-6);
+        Self::of_welded(&positions, &triangles)
     }
 
-    /// Measures welded positions and triangles.
+    /// Measures welded positions and triangles. A triangle with an index out of range counts
+    /// as degenerate and is otherwise left out.
     pub fn of_welded(positions: &[Vec3], triangles: &[[u32; 3]]) -> Self {
+        let n = positions.len();
+        let (valid, broken): (Vec<[u32; 3]>, Vec<[u32; 3]>) = triangles
+            .iter()
+            .partition(|t| t.iter().all(|&i| (i as usize) < n));
         let mut r = MeshReport {
             triangles: triangles.len(),
-            vertices: positions.len(),
-            volume_m3: enclosed_volume(positions, triangles),
+            vertices: n,
+            degenerate: broken.len(),
+            volume_m3: enclosed_volume(positions, &valid),
             ..Default::default()
         };
-        let mut seen: HashMap<[u32; 3], ()> = HashMap::with_capacity(triangles.len());
+        let mut seen: IdMap<[u32; 3], ()> = IdMap::default();
+        seen.reserve(valid.len());
         // Per undirected edge: (uses, uses running low → high).
-        let mut edges: HashMap<(u32, u32), (u32, u32)> =
-            HashMap::with_capacity(triangles.len() * 2);
-        for t in triangles {
+        let mut edges: IdMap<(u32, u32), (u32, u32)> = IdMap::default();
+        edges.reserve(valid.len() * 2);
+        for t in &valid {
             let [a, b, c] = t.map(|i| positions[i as usize]);
             if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] || (b - a).cross(c - a) == Vec3::ZERO {
                 r.degenerate += 1;
@@ -113,6 +119,11 @@ mod tests {
         assert!(!r.is_closed_solid());
         m.triangles.truncate(m.triangles.len() - 2);
         let r = MeshReport::of(&m);
+        assert_eq!(r.boundary_edges, 3);
+        // An index out of range is a flaw, not a panic.
+        m.triangles.push([0, 1, 1_000_000]);
+        let r = MeshReport::of(&m);
+        assert_eq!(r.degenerate, 1);
         assert_eq!(r.boundary_edges, 3);
     }
 }

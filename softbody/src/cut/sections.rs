@@ -41,19 +41,38 @@ pub struct Sections {
 }
 
 impl Sections {
-    /// Groups `triangles` into sections of at most `max_faces` faces.
+    /// Groups `triangles` into sections of at most `max_faces` faces. Every index must be
+    /// below `positions.len()` (the callers weld first).
     pub fn build(positions: &[Vec3], triangles: &[[u32; 3]], max_faces: usize) -> Self {
-        let centroid = |t: &[u32; 3]| t.iter().map(|&v| positions[v as usize]).sum::<Vec3>() / 3.0;
+        let centroids: Vec<Vec3> = triangles
+            .iter()
+            .map(|t| t.iter().map(|&v| positions[v as usize]).sum::<Vec3>() / 3.0)
+            .collect();
+        // Order by the centroid on the axis (face id breaks ties): a total order, so the
+        // halves are the same whichever algorithm finds them.
+        let order = |axis: usize| {
+            let centroids = &centroids;
+            move |a: &u32, c: &u32| {
+                let (ka, kc) = (centroids[*a as usize][axis], centroids[*c as usize][axis]);
+                ka.total_cmp(&kc).then(a.cmp(c))
+            }
+        };
         let mut groups: Vec<Vec<u32>> = Vec::new();
-        let mut stack: Vec<Vec<u32>> = vec![(0..triangles.len() as u32).collect()];
-        while let Some(mut g) = stack.pop() {
+        // (faces, the axis of the split that made the group): a split only needs the median
+        // (linear); a final group is sorted on its axis, as a full sort at every split left it.
+        let mut stack: Vec<(Vec<u32>, Option<usize>)> =
+            vec![((0..triangles.len() as u32).collect(), None)];
+        while let Some((mut g, made_on)) = stack.pop() {
             if g.len() <= max_faces.max(1) {
+                if let Some(axis) = made_on {
+                    g.sort_unstable_by(order(axis));
+                }
                 groups.push(g);
                 continue;
             }
             let mut b = Aabb::empty();
             for &f in &g {
-                b.grow(centroid(&triangles[f as usize]));
+                b.grow(centroids[f as usize]);
             }
             let ext = b.hi - b.lo;
             let axis = if ext.x >= ext.y && ext.x >= ext.z {
@@ -63,17 +82,11 @@ impl Sections {
             } else {
                 2
             };
-            // Order by the centroid on the axis (face id breaks ties): deterministic.
-            g.sort_by(|&a, &c| {
-                let (ka, kc) = (
-                    centroid(&triangles[a as usize])[axis],
-                    centroid(&triangles[c as usize])[axis],
-                );
-                ka.total_cmp(&kc).then(a.cmp(&c))
-            });
-            let upper = g.split_off(g.len() / 2);
-            stack.push(upper);
-            stack.push(g);
+            let mid = g.len() / 2;
+            g.select_nth_unstable_by(mid, order(axis));
+            let upper = g.split_off(mid);
+            stack.push((upper, Some(axis)));
+            stack.push((g, Some(axis)));
         }
         let mut s = Sections {
             boxes: Vec::with_capacity(groups.len()),

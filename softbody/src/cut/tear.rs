@@ -20,13 +20,18 @@
 //! - **Mesh sections** (`sections`): faces grouped by a median split into boxes of at most
 //!   [`SECTION_FACES`] faces; a segment searches only the sections its box overlaps. New faces
 //!   join their parent's section.
-
-use std::collections::HashMap;
+//! - **Clearance.** Before clipping, the box's planes move out (by the least amount, plane by
+//!   plane) until no vertex is within [`CLEARANCE_M`] of one and no box edge or short chord
+//!   grazes a face; a box that cannot be cleared is refused, changing nothing, rather than
+//!   leave a sliver the simulation's weld would collapse.
+//! - **An incremental render mesh.** The render vertices of the live faces are kept per tear
+//!   (only the faces it removed and added are touched), so [`TearMesh::to_mesh`] copies them
+//!   out instead of rebuilding; a unit test checks the patched mesh against a full rebuild.
 
 use glam::{DVec3, Vec3};
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
 
-use super::plane::PieceBuilder;
+use super::plane::{weld_positions, IdMap};
 use super::sections::{Aabb, Sections};
 use super::CutError;
 use crate::mesh::{bounds, Mesh};
@@ -62,6 +67,13 @@ const BOX_EDGES: [(usize, usize); 12] = [
 
 /// New points of one face closer than this become one, metres.
 const MERGE_M: f32 = 5e-6;
+
+/// How far around a segment's box faces are gathered, metres: the box's planes may move out
+/// by the clearance (a fraction of a millimetre) and must still meet only gathered faces.
+const SEARCH_MARGIN_M: f32 = 1e-3;
+
+/// Most rounds of moving the box's planes clear of the mesh before the segment is refused.
+const CLEARANCE_ROUNDS: usize = 16;
 
 /// A face the box meets, with what the clip found on it.
 #[derive(Clone, Debug)]
@@ -134,9 +146,17 @@ impl TearBox {
 
     /// The part `[t0, t1]` of the segment `p + t (q − p)`, `t ∈ [0, 1]`, inside the box.
     fn clip_segment(&self, p: Vec3, q: Vec3) -> Option<(f32, f32)> {
+        self.clip_segment_planes(p, q)
+            .map(|(t0, t1, _, _)| (t0, t1))
+    }
+
+    /// [`clip_segment`](Self::clip_segment) with the planes that set `t0` and `t1` (6 when
+    /// an end of the segment sets it).
+    fn clip_segment_planes(&self, p: Vec3, q: Vec3) -> Option<(f32, f32, usize, usize)> {
         let (mut t0, mut t1) = (0.0f32, 1.0f32);
+        let (mut i0, mut i1) = (6, 6);
         let d = q - p;
-        for h in &self.planes {
+        for (i, h) in self.planes.iter().enumerate() {
             let (num, den) = (-h.distance(p), h.normal.dot(d));
             if den == 0.0 {
                 if num < 0.0 {
@@ -145,16 +165,53 @@ impl TearBox {
             } else {
                 let t = num / den;
                 if den < 0.0 {
-                    t0 = t0.max(t);
-                } else {
-                    t1 = t1.min(t);
+                    if t > t0 {
+                        (t0, i0) = (t, i);
+                    }
+                } else if t < t1 {
+                    (t1, i1) = (t, i);
                 }
                 if t0 > t1 {
                     return None;
                 }
             }
         }
-        Some((t0, t1))
+        Some((t0, t1, i0, i1))
+    }
+
+    /// Of the two planes meeting along the box edge from corner `i` to `j`, the one whose
+    /// shift moves the point where that edge pierces the triangle `tri` fastest across the
+    /// triangle's edge along `edge`. Shifting both together can slide the point along the
+    /// edge and never clear it (a mesh torn many times over, seed 0 of the soak).
+    fn plane_moving_across(&self, i: usize, j: usize, tri: [Vec3; 3], edge: Vec3) -> usize {
+        let [a, c] = box_edge_planes(i, j);
+        let face = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
+        let across = face.cross(edge).normalize_or_zero();
+        // Shifting plane `a` slides the point along the line where plane `c` meets the face;
+        // it moves the plane's distance by `n_a · u` per unit of that slide.
+        let rate = |moved: usize, kept: usize| {
+            let u = self.planes[kept].normal.cross(face).normalize_or_zero();
+            let along = self.planes[moved].normal.dot(u).abs();
+            if along > 1e-6 {
+                across.dot(u).abs() / along
+            } else {
+                0.0
+            }
+        };
+        if rate(c, a) > rate(a, c) {
+            c
+        } else {
+            a
+        }
+    }
+
+    /// The box's bounds grown by `margin_m`, if its corners exist.
+    fn reach(&self, margin_m: f32) -> Option<Aabb> {
+        let (lo, hi) = bounds(&self.corners()?);
+        Some(Aabb {
+            lo: lo - Vec3::splat(margin_m),
+            hi: hi + Vec3::splat(margin_m),
+        })
     }
 }
 
@@ -178,6 +235,8 @@ pub struct TearMesh {
     faces: Vec<[u32; 3]>,
     corner_normals: Vec<[Vec3; 3]>,
     alive: Vec<bool>,
+    /// The render vertices of the live faces, patched face by face.
+    render: RenderSlots,
     sections: Sections,
     /// The plane the last segment's box ended at, if the scalpel is still in the cut.
     last_end: Option<HalfSpace>,
@@ -203,19 +262,22 @@ impl TearMesh {
         }
         mesh.validate("tear input")
             .map_err(|e| CutError::Mesh(e.to_string()))?;
-        let welded = mesh.weld(1e-6);
-        let corner_normals =
-            super::plane::corner_normals(mesh, &welded.positions, &welded.triangles);
-        let sections = Sections::build(&welded.positions, &welded.triangles, SECTION_FACES);
-        Ok(Self {
-            alive: vec![true; welded.triangles.len()],
-            positions: welded.positions,
-            faces: welded.triangles,
+        let (positions, faces) = weld_positions(&mesh.positions, &mesh.triangles, 1e-6);
+        let corner_normals = super::plane::corner_normals(mesh, &positions, &faces);
+        let sections = Sections::build(&positions, &faces, SECTION_FACES);
+        let mut torn = Self {
+            alive: vec![true; faces.len()],
+            render: RenderSlots::default(),
+            positions,
+            faces,
             corner_normals,
             sections,
             last_end: None,
             width_m,
-        })
+        };
+        torn.render
+            .rebuild(&torn.faces, &torn.corner_normals, &torn.alive);
+        Ok(torn)
     }
 
     /// Ends the current stroke: the next segment starts a new tear (its box starts square).
@@ -238,7 +300,14 @@ impl TearMesh {
     /// segment.
     pub fn tear(&mut self, seg: &TearSegment) -> Result<TearStats, CutError> {
         let tear_box = self.make_box(seg)?;
-        let stats = self.clip(&tear_box);
+        let first_new_face = self.faces.len();
+        let stats = self.clip(&tear_box)?;
+        self.render.add_faces(
+            first_new_face,
+            &self.faces,
+            &self.corner_normals,
+            &self.alive,
+        );
         self.last_end = Some(tear_box.planes[1]);
         Ok(stats)
     }
@@ -302,46 +371,38 @@ impl TearMesh {
         Ok(TearBox { planes })
     }
 
-    /// Clips every face the box meets. Vertices within `eps` of a box plane push that plane
-    /// out a little first, so no edge is cut at its very end.
-    fn clip(&mut self, tear_box: &TearBox) -> TearStats {
-        let mut b = *tear_box;
+    /// Clips every face the box meets. The box's planes first move out a little until no
+    /// vertex is within [`CLEARANCE_M`] of one and nothing else grazes it (see
+    /// [`clear_box`](Self::clear_box)), so no edge is cut at its very end; a box that cannot be
+    /// cleared is refused before anything changes.
+    fn clip(&mut self, tear_box: &TearBox) -> Result<TearStats, CutError> {
         let mut stats = TearStats::default();
-        let Some(corners) = b.corners() else {
-            return stats;
-        };
-        let (lo, hi) = bounds(&corners);
-        let reach = Aabb {
-            lo: lo - Vec3::splat(1e-4),
-            hi: hi + Vec3::splat(1e-4),
+        let Some(search) = tear_box.reach(SEARCH_MARGIN_M) else {
+            return Ok(stats);
         };
         let candidates: Vec<u32> = self
             .sections
-            .faces_near(&reach)
+            .faces_near(&search)
             .filter(|&f| self.alive[f as usize])
             .collect();
         stats.faces_searched = candidates.len();
-        // Clearance: no vertex within `eps` of a box plane, no edge grazing the box (its two
-        // points closer than `eps`), no box edge grazing a face's edge. Otherwise the planes
-        // move out a little (each by its own amount) and the checks run again.
-        let original = b;
-        for attempt in 1..=8u8 {
-            if !self.grazes(&b, &candidates) {
-                break;
-            }
-            for (i, (plane, orig)) in b.planes.iter_mut().zip(&original.planes).enumerate() {
-                plane.offset =
-                    orig.offset + CLEARANCE_M * f32::from(attempt) * (1.0 + 0.37 * i as f32);
-            }
-        }
-        let Some(box_corners) = b.corners() else {
-            return stats;
+        let refused = CutError::Degenerate("no placement of the tear box clear of the mesh");
+        let Some(b) = self.clear_box(tear_box, &candidates) else {
+            return Err(refused);
         };
+        let (Some(box_corners), Some(reach)) = (b.corners(), b.reach(1e-4)) else {
+            return Ok(stats);
+        };
+        // Every face the moved box can meet was gathered (a box nearly flat between two of
+        // its planes could move far).
+        if reach.lo.cmplt(search.lo).any() || reach.hi.cmpgt(search.hi).any() {
+            return Err(refused);
+        }
 
         // Edge points, once per welded edge: (t along low→high, vertex id).
         let first_new = self.positions.len();
         let mut work: Vec<FaceWork> = Vec::new();
-        let mut edge_points: HashMap<(u32, u32), Vec<(f32, u32)>> = HashMap::new();
+        let mut edge_points: IdMap<(u32, u32), Vec<(f32, u32)>> = IdMap::default();
         for &f in &candidates {
             let tri = self.faces[f as usize];
             let [p0, p1, p2] = tri.map(|v| self.positions[v as usize]);
@@ -395,7 +456,7 @@ impl TearMesh {
             if !any_edge_point && pierce.is_empty() {
                 if inside.iter().all(|&i| i) {
                     // Wholly inside: removed.
-                    self.alive[f as usize] = false;
+                    self.kill(f);
                     stats.faces_clipped += 1;
                 }
                 continue;
@@ -444,29 +505,97 @@ impl TearMesh {
             stats.faces_clipped += 1;
             stats.faces_added += self.retriangulate(&w, &b);
         }
-        stats
+        Ok(stats)
     }
 
-    /// Whether box `b` comes within [`CLEARANCE_M`] of a degenerate configuration with the
-    /// candidate faces: a vertex near one of its planes, an edge crossing it over a tiny
-    /// length, or one of its edges passing near a face's edge.
-    fn grazes(&self, b: &TearBox, candidates: &[u32]) -> bool {
-        let Some(corners) = b.corners() else {
-            return false;
+    /// Removes face `f` from the live mesh.
+    fn kill(&mut self, f: u32) {
+        if std::mem::replace(&mut self.alive[f as usize], false) {
+            self.render.remove_face(f);
+        }
+    }
+
+    /// Moves `tear_box`'s planes out (the box only grows) until nothing in the candidate
+    /// faces grazes it (see [`graze`](Self::graze)). Each round first takes, per plane, the
+    /// least further shift that leaves every vertex more than [`CLEARANCE_M`] from it (exact,
+    /// over the vertices' sorted distances), then pushes the planes of any remaining conflict
+    /// out by twice the clearance. `None` after [`CLEARANCE_ROUNDS`] rounds.
+    ///
+    /// (The first version moved all six planes together by a fixed schedule and, after eight
+    /// tries, clipped anyway: in a mesh torn many times over the same spot some vertex was
+    /// always near some plane, and the box that was used at last cut an edge 0.4 µm from its
+    /// end — a triangle the 1 µm weld collapses, seed 30 of the soak.)
+    fn clear_box(&self, tear_box: &TearBox, candidates: &[u32]) -> Option<TearBox> {
+        let mut verts: Vec<u32> = candidates
+            .iter()
+            .flat_map(|&f| self.faces[f as usize])
+            .collect();
+        verts.sort_unstable();
+        verts.dedup();
+        // Per plane, the distances that can conflict with some shift of at most the search
+        // margin, increasing.
+        let distances: [Vec<f32>; 6] = std::array::from_fn(|i| {
+            let h = tear_box.planes[i];
+            let mut d: Vec<f32> = verts
+                .iter()
+                .map(|&v| h.distance(self.positions[v as usize]))
+                .filter(|&d| (-2.0 * CLEARANCE_M..=SEARCH_MARGIN_M).contains(&d))
+                .collect();
+            d.sort_unstable_by(f32::total_cmp);
+            d
+        });
+        let mut shift = [0.0f32; 6];
+        for _ in 0..CLEARANCE_ROUNDS {
+            let mut b = *tear_box;
+            for i in 0..6 {
+                shift[i] = clear_shift(&distances[i], shift[i]);
+                b.planes[i].offset = tear_box.planes[i].offset + shift[i];
+            }
+            match self.graze(&b, candidates) {
+                0 => return Some(b),
+                planes => {
+                    for (i, s) in shift.iter_mut().enumerate() {
+                        if planes & (1 << i) != 0 {
+                            *s += 2.0 * CLEARANCE_M;
+                        }
+                    }
+                }
+            }
+        }
+        None
+    }
+
+    /// The planes of box `b` (a bit each) that come within [`CLEARANCE_M`] of a degenerate
+    /// configuration with the candidate faces it can meet: a vertex near the plane, an edge
+    /// crossing the box between two planes over a tiny length (its two new points would
+    /// nearly coincide), or a box edge (two planes) passing near a face's edge. 0 when clear.
+    fn graze(&self, b: &TearBox, candidates: &[u32]) -> u8 {
+        let (Some(corners), Some(reach)) = (b.corners(), b.reach(1e-4)) else {
+            return 0;
         };
+        let mut planes = 0u8;
         for &f in candidates {
             let tri = self.faces[f as usize];
             let p = tri.map(|v| self.positions[v as usize]);
+            // Only the faces the clip will look at (its quick reject).
+            let (flo, fhi) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+            if flo.cmpgt(reach.hi).any() || fhi.cmplt(reach.lo).any() {
+                continue;
+            }
             for q in p {
-                if b.planes.iter().any(|h| h.distance(q).abs() <= CLEARANCE_M) {
-                    return true;
+                for (i, h) in b.planes.iter().enumerate() {
+                    if h.distance(q).abs() <= CLEARANCE_M {
+                        planes |= 1 << i;
+                    }
                 }
             }
             for k in 0..3 {
                 let (a, c) = (p[k], p[(k + 1) % 3]);
-                if let Some((t0, t1)) = b.clip_segment(a, c) {
-                    if t1 > t0 && (t1 - t0) * a.distance(c) < CLEARANCE_M {
-                        return true;
+                // Two new points on the edge (an end inside the box is a vertex, which is
+                // clear of every plane, so its one new point is far from it).
+                if let Some((t0, t1, i0, i1)) = b.clip_segment_planes(a, c) {
+                    if t0 > 0.0 && t1 < 1.0 && (t1 - t0) * a.distance(c) < CLEARANCE_M {
+                        planes |= (1 << i0) | (1 << i1);
                     }
                 }
             }
@@ -479,13 +608,13 @@ impl TearMesh {
                         let (a, c) = (p[k], p[(k + 1) % 3]);
                         let d = (c - a).cross(q - a).length() / a.distance(c).max(1e-12);
                         if d < CLEARANCE_M {
-                            return true;
+                            planes |= 1 << b.plane_moving_across(i, j, p, c - a);
                         }
                     }
                 }
             }
         }
-        false
+        planes
     }
 
     /// Replaces face `f` by the part of it outside the box; returns (faces, vertices) added.
@@ -535,8 +664,8 @@ impl TearMesh {
             .collect();
         // One CDT vertex per vertex id (merged points share an id) and per 2D position (spade
         // would drop an exact duplicate and shift the indices).
-        let mut first_id: HashMap<u32, usize> = HashMap::new();
-        let mut first: HashMap<[u64; 2], usize> = HashMap::new();
+        let mut first_id: IdMap<u32, usize> = IdMap::default();
+        let mut first: IdMap<[u64; 2], usize> = IdMap::default();
         let mut cdt_of: Vec<usize> = Vec::with_capacity(pts2.len());
         let mut local_of_cdt: Vec<usize> = Vec::new();
         let mut verts: Vec<Point2<f64>> = Vec::new();
@@ -628,7 +757,7 @@ impl TearMesh {
             let [a, c] = e.vertices().map(|v| v.fix().index());
             walls.binary_search(&(a.min(c), a.max(c))).is_ok()
         });
-        self.alive[f as usize] = false;
+        self.kill(f);
         let section = self.sections.section_of(f);
         let mut added = 0;
         for face in cdt.inner_faces() {
@@ -644,30 +773,174 @@ impl TearMesh {
             self.faces.push(local.map(|l| ids[l]));
             self.corner_normals.push(local.map(|l| normals[l]));
             self.alive.push(true);
+            self.render.of_corner.push([u32::MAX; 3]);
             self.sections.add(section, new, &[a, c, d]);
             added += 1;
         }
         added
     }
 
-    /// The torn mesh as a render mesh (live faces only, unused vertices dropped).
+    /// The torn mesh as a render mesh: the live faces in the order they were made, over one
+    /// render vertex per distinct (vertex, corner normal) they use, in increasing order of
+    /// vertex and then of the normal's bits (unused vertices dropped). The render vertices
+    /// are kept up to date by each tear (only the faces it removed and added), so this only
+    /// copies them out.
     pub fn to_mesh(&self) -> Mesh {
-        let mut b = PieceBuilder::default();
-        for (f, tri) in self.faces.iter().enumerate() {
-            if !self.alive[f] {
-                continue;
-            }
-            let out = std::array::from_fn(|k| {
-                b.vertex(
-                    self.positions[tri[k] as usize],
-                    tri[k],
-                    self.corner_normals[f][k],
-                )
-            });
-            b.triangles.push(out);
-        }
-        b.finish().mesh
+        self.render.mesh(&self.positions, &self.faces, &self.alive)
     }
+}
+
+/// The least shift `≥ from` of a plane that leaves every distance in `sorted` (the vertices'
+/// distances from the unshifted plane, increasing) more than [`CLEARANCE_M`] from it.
+fn clear_shift(sorted: &[f32], from: f32) -> f32 {
+    let mut shift = from;
+    let start = sorted.partition_point(|&d| d < shift - CLEARANCE_M);
+    for &d in &sorted[start..] {
+        if d > shift + CLEARANCE_M {
+            break;
+        }
+        // Past this vertex by a quarter of the clearance more than needed (the shifted
+        // plane's distances round differently).
+        shift = d + 1.25 * CLEARANCE_M;
+    }
+    shift
+}
+
+/// The two planes whose intersection is the box edge between corners `i` and `j` (corner
+/// bits: end?, right?, top?; an edge's corners differ in one bit).
+fn box_edge_planes(i: usize, j: usize) -> [usize; 2] {
+    let mut planes = [0; 2];
+    let mut n = 0;
+    for bit in 0..3 {
+        if (i ^ j) & (1 << bit) == 0 && n < 2 {
+            planes[n] = 2 * bit + ((i >> bit) & 1);
+            n += 1;
+        }
+    }
+    planes
+}
+
+/// The render vertices of a torn mesh's live faces, kept up to date face by face so
+/// [`TearMesh::to_mesh`] is a copy, not a rebuild: a slot per distinct (vertex, corner normal
+/// bits), in increasing order of that key, with how many live face corners use it.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct RenderSlots {
+    /// (vertex, normal bits) of each slot, strictly increasing.
+    keys: Vec<(u32, [u32; 3])>,
+    normals: Vec<Vec3>,
+    /// Live face corners using each slot; a slot at 0 is left out of the mesh.
+    uses: Vec<u32>,
+    /// Each face's corners' slots (`u32::MAX` until the face is registered).
+    of_corner: Vec<[u32; 3]>,
+}
+
+impl RenderSlots {
+    /// Rebuilds every slot from the live faces: what the patched slots must always equal.
+    fn rebuild(&mut self, faces: &[[u32; 3]], corner_normals: &[[Vec3; 3]], alive: &[bool]) {
+        let mut all: Vec<((u32, [u32; 3]), Vec3)> = faces
+            .iter()
+            .zip(corner_normals)
+            .zip(alive)
+            .filter(|(_, &a)| a)
+            .flat_map(|((t, ns), _)| (0..3).map(move |k| ((t[k], bits(ns[k])), ns[k])))
+            .collect();
+        all.sort_unstable_by_key(|e| e.0);
+        all.dedup_by_key(|e| e.0);
+        self.keys = all.iter().map(|e| e.0).collect();
+        self.normals = all.iter().map(|e| e.1).collect();
+        self.uses = vec![0; all.len()];
+        self.of_corner = vec![[u32::MAX; 3]; faces.len()];
+        for (f, _) in alive.iter().enumerate().filter(|(_, &a)| a) {
+            self.register(f, faces, corner_normals);
+        }
+    }
+
+    /// Points face `f`'s corners at their slots (which exist) and counts the uses.
+    fn register(&mut self, f: usize, faces: &[[u32; 3]], corner_normals: &[[Vec3; 3]]) {
+        for k in 0..3 {
+            let key = (faces[f][k], bits(corner_normals[f][k]));
+            let s = self.keys.binary_search(&key).unwrap_or(usize::MAX);
+            if let Some(u) = self.uses.get_mut(s) {
+                *u += 1;
+                self.of_corner[f][k] = s as u32;
+            }
+        }
+    }
+
+    fn remove_face(&mut self, f: u32) {
+        for s in self.of_corner[f as usize] {
+            if let Some(u) = self.uses.get_mut(s as usize) {
+                *u = u.saturating_sub(1);
+            }
+        }
+    }
+
+    /// Registers the faces from `first` on (just made by a tear). Their new keys sort after
+    /// every old one (new faces' corners are new vertices, or old corners with the normal
+    /// they had), so they are appended; anything else rebuilds the slots.
+    fn add_faces(
+        &mut self,
+        first: usize,
+        faces: &[[u32; 3]],
+        corner_normals: &[[Vec3; 3]],
+        alive: &[bool],
+    ) {
+        let mut new: Vec<((u32, [u32; 3]), Vec3)> = Vec::new();
+        for f in first..faces.len() {
+            for k in 0..3 {
+                let key = (faces[f][k], bits(corner_normals[f][k]));
+                if self.keys.binary_search(&key).is_err() {
+                    new.push((key, corner_normals[f][k]));
+                }
+            }
+        }
+        new.sort_unstable_by_key(|e| e.0);
+        new.dedup_by_key(|e| e.0);
+        if let (Some(last), Some(first_new)) = (self.keys.last(), new.first()) {
+            if first_new.0 <= *last {
+                self.rebuild(faces, corner_normals, alive);
+                return;
+            }
+        }
+        self.keys.extend(new.iter().map(|e| e.0));
+        self.normals.extend(new.iter().map(|e| e.1));
+        self.uses.resize(self.keys.len(), 0);
+        for (f, _) in alive.iter().enumerate().skip(first).filter(|(_, &a)| a) {
+            self.register(f, faces, corner_normals);
+        }
+    }
+
+    /// The render mesh: used slots in order, live faces in order.
+    fn mesh(&self, positions: &[Vec3], faces: &[[u32; 3]], alive: &[bool]) -> Mesh {
+        let mut remap = vec![u32::MAX; self.keys.len()];
+        let used = self.uses.iter().filter(|&&u| u > 0).count();
+        let mut out_positions = Vec::with_capacity(used);
+        let mut out_normals = Vec::with_capacity(used);
+        for (s, &u) in self.uses.iter().enumerate() {
+            if u > 0 {
+                remap[s] = out_positions.len() as u32;
+                out_positions.push(positions[self.keys[s].0 as usize]);
+                out_normals.push(self.normals[s]);
+            }
+        }
+        let triangles = self
+            .of_corner
+            .iter()
+            .zip(alive)
+            .take(faces.len())
+            .filter(|(_, &a)| a)
+            .map(|(c, _)| c.map(|s| remap.get(s as usize).copied().unwrap_or(u32::MAX)))
+            .collect();
+        Mesh {
+            positions: out_positions,
+            normals: Some(out_normals),
+            triangles,
+        }
+    }
+}
+
+fn bits(n: Vec3) -> [u32; 3] {
+    n.to_array().map(f32::to_bits)
 }
 
 /// Where the segment `a → b` crosses the triangle's interior, as barycentric coordinates
@@ -700,4 +973,135 @@ fn segment_triangle(a: Vec3, b: Vec3, p0: Vec3, p1: Vec3, p2: Vec3) -> Option<[f
         return None;
     }
     Some([1.0 - u - v, u, v])
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    /// Strokes over the upper half of `m` (centred at the origin, `up` pointing out of it):
+    /// `n` segments of 6 mm along great-circle-like paths, the blade along the outward radius.
+    fn segments(m: &Mesh, n: usize) -> Vec<TearSegment> {
+        let (lo, hi) = bounds(&m.positions);
+        let half = (hi - lo) * 0.5;
+        let mut out = Vec::new();
+        for k in 0..n {
+            let stroke = k / 8;
+            let a = 0.7 * stroke as f32;
+            let dir = Vec3::new(a.cos(), 0.0, a.sin());
+            let s = |i: usize| (i as f32 - 4.0) * 0.006 + 0.002 * stroke as f32;
+            let on = |x: f32| {
+                let p = dir * x + Vec3::Y * half.y;
+                // Onto the surface along the radius, 4 mm deep.
+                let r = p.normalize();
+                let surface = r * (half / r.abs().max(Vec3::splat(1e-6))).min_element();
+                (surface - r * 0.004, r * 0.03)
+            };
+            let (from, blade) = on(s(k % 8));
+            let (to, _) = on(s(k % 8 + 1));
+            out.push(TearSegment { from, to, blade });
+        }
+        out
+    }
+
+    #[test]
+    fn the_patched_render_mesh_is_the_rebuilt_one() {
+        for mesh in [
+            Mesh::icosphere(0.1, 3),
+            Mesh::cuboid(Vec3::new(0.1, 0.06, 0.04), 4),
+        ] {
+            let mut t = TearMesh::new(&mesh, 0.003).unwrap();
+            let mut clipped = 0;
+            for (i, seg) in segments(&mesh, 40).iter().enumerate() {
+                if i % 8 == 0 {
+                    t.lift();
+                }
+                clipped += t.tear(seg).unwrap().faces_clipped;
+                let mut fresh = t.clone();
+                fresh
+                    .render
+                    .rebuild(&fresh.faces, &fresh.corner_normals, &fresh.alive);
+                let m = t.to_mesh();
+                assert_eq!(m, fresh.to_mesh(), "segment {i}");
+                // Each live face, in order, with its corners' positions and normals.
+                let live: Vec<usize> = (0..t.faces.len()).filter(|&f| t.alive[f]).collect();
+                assert_eq!(m.triangles.len(), live.len());
+                let normals = m.normals.as_ref().unwrap();
+                for (tri, &f) in m.triangles.iter().zip(&live) {
+                    for (k, &r) in tri.iter().enumerate() {
+                        let r = r as usize;
+                        assert_eq!(m.positions[r], t.positions[t.faces[f][k] as usize]);
+                        assert_eq!(bits(normals[r]), bits(t.corner_normals[f][k]));
+                    }
+                }
+                // Every render vertex used, none twice.
+                let mut used = vec![false; m.positions.len()];
+                m.triangles
+                    .iter()
+                    .flatten()
+                    .for_each(|&r| used[r as usize] = true);
+                assert!(used.iter().all(|&u| u));
+                let mut keys: Vec<_> = m
+                    .positions
+                    .iter()
+                    .zip(normals)
+                    .map(|(p, n)| (bits(*p), bits(*n)))
+                    .collect();
+                keys.sort_unstable();
+                keys.dedup();
+                assert_eq!(keys.len(), m.positions.len());
+            }
+            assert!(clipped > 100, "the strokes tore: {clipped}");
+        }
+    }
+
+    #[test]
+    fn box_edges_lie_on_the_planes_they_name() {
+        let b = TearBox {
+            planes: [
+                HalfSpace {
+                    normal: -Vec3::X,
+                    offset: 0.0,
+                },
+                HalfSpace {
+                    normal: Vec3::X,
+                    offset: 1.0,
+                },
+                HalfSpace {
+                    normal: -Vec3::Z,
+                    offset: 0.5,
+                },
+                HalfSpace {
+                    normal: Vec3::Z,
+                    offset: 0.5,
+                },
+                HalfSpace {
+                    normal: -Vec3::Y,
+                    offset: 0.0,
+                },
+                HalfSpace {
+                    normal: Vec3::Y,
+                    offset: 2.0,
+                },
+            ],
+        };
+        let c = b.corners().unwrap();
+        for (i, j) in BOX_EDGES {
+            for p in box_edge_planes(i, j) {
+                for q in [c[i], c[j]] {
+                    assert!(b.planes[p].distance(q).abs() < 1e-6, "{i}-{j} plane {p}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_shift_clears_every_vertex() {
+        let d = [-1e-5, 0.0, 3e-5, 5.5e-5, 2e-4];
+        let s = clear_shift(&d, 0.0);
+        assert!(d.iter().all(|&x| (x - s).abs() > CLEARANCE_M), "{s}");
+        assert!(s < 1.2e-4, "the least such shift: {s}");
+        assert_eq!(clear_shift(&[1.0], 0.0), 0.0);
+    }
 }
