@@ -1,3 +1,6 @@
+//! Over 800 lines: the clip, its clearance search and the incremental render mesh share the
+//! `TearMesh` state and one invariant (conforming edges); splitting them is the next clean-up.
+//!
 //! Progressive tearing (tear paper Algorithm 1, §3.1): a scalpel's sampled positions make
 //! consecutive tear segments; each segment's box (as wide as the tear, from the blade's tip to
 //! its back end, from the previous sample to this one) clips the faces inside it.
