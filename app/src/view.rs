@@ -532,6 +532,65 @@ pub fn deformation_m(peer: &Peer, h: softsync_softbody::SoftBodyHandle) -> Optio
     )
 }
 
+/// ` KEY=x0,y0,x1,y1`: the screen box (pixels) of the points in front of the camera, or
+/// nothing if none is.
+fn screen_box(
+    (c, gt): (&Camera, &GlobalTransform),
+    key: &str,
+    points: impl Iterator<Item = Vec3>,
+) -> String {
+    let mut lo = Vec2::splat(f32::MAX);
+    let mut hi = Vec2::splat(f32::MIN);
+    for p in points {
+        if let Ok(s) = c.world_to_viewport(gt, p) {
+            lo = lo.min(s);
+            hi = hi.max(s);
+        }
+    }
+    if lo.x <= hi.x {
+        format!(" {key}={:.0},{:.0},{:.0},{:.0}", lo.x, lo.y, hi.x, hi.y)
+    } else {
+        String::new()
+    }
+}
+
+/// A drawn mesh's triangle count, and the corners of its open edges: edges that one triangle
+/// alone uses once corners at the same position are one (a closed mesh has none; a torn one
+/// has its slit's rim).
+fn rim_of(m: &Mesh) -> (usize, Vec<Vec3>) {
+    let (Some(bevy::mesh::VertexAttributeValues::Float32x3(pos)), Some(ind)) =
+        (m.attribute(Mesh::ATTRIBUTE_POSITION), m.indices())
+    else {
+        return (0, Vec::new());
+    };
+    let mut weld: HashMap<[u32; 3], u32> = HashMap::new();
+    let ids: Vec<u32> = pos
+        .iter()
+        .map(|p| {
+            let n = weld.len() as u32;
+            *weld.entry(p.map(f32::to_bits)).or_insert(n)
+        })
+        .collect();
+    let corners: Vec<usize> = ind.iter().collect();
+    let mut edges: HashMap<(u32, u32), (u32, [usize; 2])> = HashMap::new();
+    for t in corners.chunks_exact(3) {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let (Some(&ia), Some(&ib)) = (ids.get(a), ids.get(b)) else {
+                continue;
+            };
+            let e = edges.entry((ia.min(ib), ia.max(ib))).or_insert((0, [a, b]));
+            e.0 += 1;
+        }
+    }
+    let rim = edges
+        .values()
+        .filter(|(n, _)| *n == 1)
+        .flat_map(|(_, c)| c.map(|i| Vec3::from_array(pos[i])))
+        .collect();
+    (corners.len() / 3, rim)
+}
+
 fn take_screenshots(
     mut commands: Commands,
     driver: NonSend<Driver>,
@@ -539,6 +598,7 @@ fn take_screenshots(
     cfg: Res<ViewConfig>,
     cams: Query<(&Camera, &GlobalTransform)>,
     warm: Res<RenderWarm>,
+    (views, objs, meshes): (Res<Views>, Query<&ObjView>, Res<Assets<Mesh>>),
 ) {
     let Some(plan) = &cfg.screenshots else {
         return;
@@ -562,26 +622,27 @@ fn take_screenshots(
         peer.session().members().len()
     );
     let cam = cams.iter().find(|(c, _)| c.is_active);
-    for o in peer.objects().values() {
+    for (id, o) in peer.objects() {
         let LocalBody::Soft(h) = o.body else { continue };
         let name = o.kind.name();
         if let Some(d) = deformation_m(peer, h) {
             fields.push_str(&format!(" {name}_deform_mm={:.2}", d * 1e3));
         }
-        if let (Some((c, gt)), Some(b)) = (cam, peer.soft_bodies().get(h)) {
-            let mut lo = Vec2::splat(f32::MAX);
-            let mut hi = Vec2::splat(f32::MIN);
-            for p in b.render_positions() {
-                if let Ok(s) = c.world_to_viewport(gt, to_bevy(*p)) {
-                    lo = lo.min(s);
-                    hi = hi.max(s);
-                }
-            }
-            if lo.x <= hi.x {
-                fields.push_str(&format!(
-                    " {name}_px={:.0},{:.0},{:.0},{:.0}",
-                    lo.x, lo.y, hi.x, hi.y
-                ));
+        if let (Some(cam), Some(b)) = (cam, peer.soft_bodies().get(h)) {
+            let points = b.render_positions().iter().map(|p| to_bevy(*p));
+            fields.push_str(&screen_box(cam, &format!("{name}_px"), points));
+        }
+        // What is drawn, read back from the mesh asset the renderer uses: its triangles,
+        // and the screen box of its open rim (the edges of a tear's slit).
+        let drawn = (views.0.get(id))
+            .and_then(|e| objs.get(*e).ok())
+            .and_then(|v| v.soft_mesh.as_ref())
+            .and_then(|h| meshes.get(h));
+        if let Some(m) = drawn {
+            let (tris, rim) = rim_of(m);
+            fields.push_str(&format!(" {name}_tris={tris}"));
+            if let Some(cam) = cam {
+                fields.push_str(&screen_box(cam, &format!("{name}_rim_px"), rim.into_iter()));
             }
         }
     }

@@ -2,7 +2,9 @@
 //! Mesa's software Vulkan (lavapipe), saves screenshots with bevy's screenshot API, and a bot
 //! on a third peer squeezes the soft box. The test checks the frames are not blank, that the
 //! box is on screen where the peer says, that its pixels do not change while it rests, and
-//! that they do when it is squeezed.
+//! that they do when it is squeezed; and, with the camera on the bunny, that a bot's tear
+//! reaches the renderer (the drawn mesh gains triangles and an open rim) and opens a slit
+//! whose pixels change.
 //!
 //! Needs: the binary built with `--features desktop` (scripts/test builds `--features vr`,
 //! which includes it), `Xvfb`, `mesa-vulkan-drivers` (.ci/run installs them), and a network
@@ -102,33 +104,109 @@ impl Drop for Xvfb {
     }
 }
 
-/// One saved frame and what the peer measured when it took it.
+/// One saved frame and what the peer measured when it took it, for one soft body.
 #[derive(Debug, Clone)]
 struct Frame {
     n: u32,
     path: PathBuf,
     deform_mm: f64,
-    /// The soft box's screen box (x0, y0, x1, y1), pixels.
+    /// The body's screen box (x0, y0, x1, y1), pixels.
     bbox: [f64; 4],
+    /// Triangles of the mesh the renderer draws for it.
+    tris: usize,
+    /// The screen box of that mesh's open rim (a tear's slit), if it has one.
+    rim: Option<[f64; 4]>,
+}
+
+fn px_box(v: &str) -> [f64; 4] {
+    let b: Vec<f64> = v.split(',').map(|v| v.parse().unwrap()).collect();
+    [b[0], b[1], b[2], b[3]]
+}
+
+/// The frames saved so far, as seen for the soft body `kind`.
+fn frames_of(p: &Proc, kind: &str) -> Vec<Frame> {
+    let px = format!("{kind}_px=");
+    p.stdout()
+        .lines()
+        .filter(|l| l.starts_with("screenshot ") && l.contains(&px))
+        .map(|l| Frame {
+            n: field(l, "n").parse().unwrap(),
+            path: PathBuf::from(field(l, "path")),
+            deform_mm: field(l, &format!("{kind}_deform_mm")).parse().unwrap(),
+            bbox: px_box(field(l, &format!("{kind}_px"))),
+            // The drawn mesh, once the view has made it.
+            tris: if l.contains(&format!(" {kind}_tris=")) {
+                field(l, &format!("{kind}_tris")).parse().unwrap()
+            } else {
+                0
+            },
+            rim: l
+                .contains(&format!(" {kind}_rim_px="))
+                .then(|| px_box(field(l, &format!("{kind}_rim_px")))),
+        })
+        .collect()
 }
 
 fn frames(p: &Proc) -> Vec<Frame> {
-    p.stdout()
-        .lines()
-        .filter(|l| l.starts_with("screenshot ") && l.contains("softbox_px="))
-        .map(|l| {
-            let b: Vec<f64> = field(l, "softbox_px")
-                .split(',')
-                .map(|v| v.parse().unwrap())
-                .collect();
-            Frame {
-                n: field(l, "n").parse().unwrap(),
-                path: PathBuf::from(field(l, "path")),
-                deform_mm: field(l, "softbox_deform_mm").parse().unwrap(),
-                bbox: [b[0], b[1], b[2], b[3]],
-            }
-        })
-        .collect()
+    frames_of(p, "softbox")
+}
+
+/// A desktop peer joining `room`, its camera on `focus`, saving a 320×240 frame every 0.5 s.
+fn desktop_peer(dir: &Path, x: &Xvfb, url: &str, room: &str, focus: &str) -> Proc {
+    let shots = dir.join("shots");
+    let shots_s = shots.to_str().unwrap().to_owned();
+    Proc::spawn_env(
+        dir,
+        "desktop",
+        &[
+            "join",
+            "--room",
+            room,
+            "--signal",
+            url,
+            "--desktop",
+            "--window",
+            "320x240",
+            "--focus",
+            focus,
+            "--hide-avatars",
+            "--no-hud",
+            "--screenshot-dir",
+            &shots_s,
+            "--screenshot-every",
+            "0.5",
+            "--screenshots",
+            "400",
+            "--duration",
+            "140",
+            "--quiet",
+        ],
+        &x.env(&[]),
+    )
+}
+
+/// Wait until the desktop peer has saved `n` frames showing `kind` (the software renderer's
+/// first frame compiles every pipeline; bounded generously).
+fn first_frames(desktop: &mut Proc, kind: &str, n: usize) -> Vec<Frame> {
+    let start = Instant::now();
+    while frames_of(desktop, kind).len() < n {
+        if let Some(s) = desktop.child.try_wait().unwrap() {
+            panic!("the desktop peer exited ({s})\n{}", desktop.logs());
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(90),
+            "fewer than {n} screenshots within 90 s\n{}",
+            desktop.logs()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let f = frames_of(desktop, kind);
+    println!(
+        "first frames after {:.1} s: {:?}",
+        start.elapsed().as_secs_f64(),
+        f
+    );
+    f
 }
 
 struct Rgb {
@@ -186,9 +264,10 @@ fn union(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
     ]
 }
 
-/// Fraction of pixels in `b` that differ by more than 30 (sum over channels), and how many of
-/// those are box-coloured in either frame (the change is on the box, not around it).
-fn changed(a: &Rgb, c: &Rgb, b: [f64; 4]) -> (f64, usize) {
+/// Fraction of pixels in `b` (with a 4-pixel margin) that differ by more than 30 (sum over
+/// channels), how many that is, and how many of those are box-coloured in either frame (the
+/// change is on the box, not around it).
+fn changed(a: &Rgb, c: &Rgb, b: [f64; 4]) -> (f64, usize, usize) {
     let (mut n, mut diff, mut on_box) = (0usize, 0usize, 0usize);
     for (x, y) in a.region(b, 4.0) {
         let (p, q) = (a.at(x, y), c.at(x, y));
@@ -203,65 +282,18 @@ fn changed(a: &Rgb, c: &Rgb, b: [f64; 4]) -> (f64, usize) {
             }
         }
     }
-    (diff as f64 / n.max(1) as f64, on_box)
+    (diff as f64 / n.max(1) as f64, diff, on_box)
 }
 
 #[test]
 fn desktop_peer_renders_the_room_and_a_squeeze_changes_the_soft_box_pixels() {
     require_netns();
     let dir = scratch("pixels");
-    let shots = dir.join("shots");
     let x = Xvfb::start(&dir);
     let (_host, url) = host(&dir, "pixels");
-    let shots_s = shots.to_str().unwrap().to_owned();
-    let mut desktop = Proc::spawn_env(
-        &dir,
-        "desktop",
-        &[
-            "join",
-            "--room",
-            "pixels",
-            "--signal",
-            &url,
-            "--desktop",
-            "--window",
-            "320x240",
-            "--focus",
-            "softbox",
-            "--hide-avatars",
-            "--no-hud",
-            "--screenshot-dir",
-            &shots_s,
-            "--screenshot-every",
-            "0.5",
-            "--screenshots",
-            "400",
-            "--duration",
-            "140",
-            "--quiet",
-        ],
-        &x.env(&[]),
-    );
-    // Rendering works: a few frames at rest first (the software renderer's first frame
-    // compiles every pipeline; bounded generously).
-    let start = Instant::now();
-    while frames(&desktop).len() < 4 {
-        if let Some(s) = desktop.child.try_wait().unwrap() {
-            panic!("the desktop peer exited ({s})\n{}", desktop.logs());
-        }
-        assert!(
-            start.elapsed() < Duration::from_secs(90),
-            "fewer than 4 screenshots within 90 s\n{}",
-            desktop.logs()
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
-    let rest_frames = frames(&desktop);
-    println!(
-        "first frames after {:.1} s: {:?}",
-        start.elapsed().as_secs_f64(),
-        rest_frames
-    );
+    let mut desktop = desktop_peer(&dir, &x, &url, "pixels", "softbox");
+    // Rendering works: a few frames at rest first.
+    let rest_frames = first_frames(&mut desktop, "softbox", 4);
     // Now a bot squeezes the box and holds it.
     let bot = Proc::spawn(
         &dir,
@@ -353,8 +385,8 @@ fn desktop_peer_renders_the_room_and_a_squeeze_changes_the_soft_box_pixels() {
     );
     // At rest nothing changes; squeezed, the box's pixels do.
     let region = union(r1.bbox, squeezed.bbox);
-    let (still, still_box) = changed(&a, &b, region);
-    let (moved, moved_box) = changed(&a, &s, region);
+    let (still, _, still_box) = changed(&a, &b, region);
+    let (moved, _, moved_box) = changed(&a, &s, region);
     println!(
         "box region {region:?}: at rest {:.2}% changed ({still_box} on the box); \
          squeezed by {:.1} mm: {:.2}% changed ({moved_box} on the box)",
@@ -371,6 +403,93 @@ fn desktop_peer_renders_the_room_and_a_squeeze_changes_the_soft_box_pixels() {
         moved > 0.05 && moved_box > 200,
         "the squeeze did not change the box's pixels enough: {:.2}%, {moved_box} on the box",
         moved * 100.0
+    );
+}
+
+#[test]
+fn desktop_peer_draws_a_torn_bunny_with_its_slit_open() {
+    require_netns();
+    let dir = scratch("pixels-tear");
+    let x = Xvfb::start(&dir);
+    let (_host, url) = host(&dir, "tear");
+    let mut desktop = desktop_peer(&dir, &x, &url, "tear", "bunny");
+    let before = first_frames(&mut desktop, "bunny", 4);
+    let b0 = before.last().unwrap().clone();
+    assert!(
+        b0.rim.is_none() && b0.tris > 1000,
+        "the whole bunny is not drawn closed: {b0:?}"
+    );
+    // A bot takes the bunny and tears its top from left to right (the blade points up from
+    // 3 cm above the center, so the slit runs across the back and head the camera sees).
+    let bot = Proc::spawn(
+        &dir,
+        "bot",
+        &[
+            "join",
+            "--room",
+            "tear",
+            "--signal",
+            &url,
+            "--bot",
+            "wait 0.5; own bunny; \
+             tear right bunny -0.06 0.03 0 -0.03 0.03 0.004 0 0.03 0 0.03 0.03 -0.004 0.06 0.03 0 in 0.1; \
+             wait 30",
+            "--duration",
+            "60",
+            "--quiet",
+        ],
+    );
+    bot.wait_line("tore object", Duration::from_secs(40));
+    // The torn mesh reaches the renderer: wait for two frames in a row that draw it with the
+    // same triangles and the body at rest.
+    let start = Instant::now();
+    let torn = loop {
+        let f = frames_of(&desktop, "bunny");
+        let pair = f.windows(2).rev().find(|w| {
+            w[0].n > b0.n
+                && w[0].rim.is_some()
+                && w[0].tris == w[1].tris
+                && (w[0].deform_mm - w[1].deform_mm).abs() < 0.5
+        });
+        if let Some(w) = pair {
+            break w[1].clone();
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(40),
+            "the desktop peer never drew the bunny torn and at rest\n{:?}\n{}\n{}",
+            f.last(),
+            desktop.logs(),
+            bot.logs()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    let rim = torn.rim.unwrap();
+    println!("before {b0:?}\ntorn {torn:?}");
+    assert!(
+        torn.tris > b0.tris,
+        "the torn mesh has no more triangles than the whole one"
+    );
+    // The slit is on screen, inside the bunny's box, and a few pixels wide at least.
+    assert!(
+        rim[0] >= torn.bbox[0] - 1.0
+            && rim[1] >= torn.bbox[1] - 1.0
+            && rim[2] <= torn.bbox[2] + 1.0
+            && rim[3] <= torn.bbox[3] + 1.0
+            && rim[2] - rim[0] > 20.0,
+        "the slit's rim {rim:?} is not a line across the bunny {:?}",
+        torn.bbox
+    );
+    // Through the slit the camera sees past the bunny's skin: its pixels change.
+    let (a, t) = (Rgb::load(&b0.path), Rgb::load(&torn.path));
+    let (frac, diff, _) = changed(&a, &t, rim);
+    println!(
+        "slit region {rim:?}: {diff} pixels ({:.1}%) changed",
+        frac * 100.0
+    );
+    assert!(
+        diff >= 40 && frac >= 0.03,
+        "the torn bunny looks like the whole one around its slit: {diff} pixels ({:.1}%) changed",
+        frac * 100.0
     );
 }
 

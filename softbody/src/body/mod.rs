@@ -13,6 +13,8 @@ pub(crate) mod handle;
 pub(crate) mod set;
 mod topology;
 
+pub use topology::{StageClock, TearTimings};
+
 use glam::{Quat, Vec3};
 use rapier3d::prelude::{
     Aabb, ColliderBuilder, ColliderHandle, Group, InteractionGroups, InteractionTestMode,
@@ -47,6 +49,7 @@ pub struct SoftBody {
     /// Every tear box applied so far, in the rest frame.
     tear_boxes: Vec<TearBoxPlanes>,
     last_particle_update: ParticleUpdateStats,
+    last_tear_timings: TearTimings,
     map: ParticleMap,
     /// Particle rest positions relative to the rest center.
     rest_offsets: Vec<Vec3>,
@@ -337,6 +340,7 @@ impl BodyPlan {
             tear: None,
             tear_boxes: Vec::new(),
             last_particle_update: ParticleUpdateStats::default(),
+            last_tear_timings: TearTimings::default(),
             map,
             rest_offsets,
             neighbour_scale,
@@ -730,6 +734,11 @@ impl SoftBody {
     /// What the particle update of the last tear did.
     pub fn last_particle_update(&self) -> ParticleUpdateStats {
         self.last_particle_update
+    }
+
+    /// Where the last tear segment's time went, stage by stage.
+    pub fn last_tear_timings(&self) -> TearTimings {
+        self.last_tear_timings
     }
 
     /// Deformed render vertex positions, ready for a renderer.

@@ -4,6 +4,7 @@
 use rapier3d::prelude::{PhysicsWorld, RigidBodyHandle};
 
 use super::handle::SoftBodyHandle;
+use super::topology::StageClock;
 use super::SoftBody;
 use crate::cut::{CutError, CutPlane, TearSegment, TearStats};
 use crate::{Mesh, SoftBodyConfig, SoftBodyError};
@@ -16,6 +17,8 @@ pub struct SoftBodySet {
     groups_used: u32,
     /// Rapier body → (soft body, particle index or `None` for the center).
     owners: std::collections::HashMap<RigidBodyHandle, (SoftBodyHandle, Option<u32>)>,
+    /// Times the stages of a tear ([`SoftBody::last_tear_timings`]); none by default.
+    stage_clock: Option<StageClock>,
 }
 
 /// What a rapier body is to a soft body.
@@ -31,6 +34,12 @@ impl SoftBodySet {
     /// An empty set.
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// Gives the set a clock to time the stages of each tear with (a bench's wall clock; the
+    /// simulation never reads it), or takes it away.
+    pub fn set_stage_clock(&mut self, clock: Option<StageClock>) {
+        self.stage_clock = clock;
     }
 
     /// Builds a soft body from `mesh` (already baked into world space) and inserts its bodies
@@ -93,16 +102,18 @@ impl SoftBodySet {
     /// and their rapier bodies stay; the body keeps simulating. Consecutive segments continue
     /// one slit until [`end_tear_stroke`](Self::end_tear_stroke). Refused (changing nothing)
     /// for an unknown handle or a segment [`TearMesh::tear`](crate::cut::TearMesh::tear)
-    /// refuses. The particle update's figures: [`SoftBody::last_particle_update`].
+    /// refuses. The particle update's figures: [`SoftBody::last_particle_update`]; the time of
+    /// each stage, with a [stage clock](Self::set_stage_clock): [`SoftBody::last_tear_timings`].
     pub fn tear(
         &mut self,
         handle: SoftBodyHandle,
         world: &mut PhysicsWorld,
         segment: &TearSegment,
     ) -> Result<TearStats, CutError> {
+        let clock = self.stage_clock;
         self.get_mut(handle)
             .ok_or_else(|| unknown(handle))?
-            .tear_rest(world, segment)
+            .tear_rest(world, segment, clock)
     }
 
     /// Ends body `handle`'s current tear stroke (the scalpel lifted); false for an unknown

@@ -33,6 +33,45 @@ pub const MAX_REFINEMENTS: u32 = 6;
 /// where a vertex is then on opposite sides of the two tear planes.
 pub const ZONE_TOLERANCE_M: f32 = 1e-4;
 
+/// Where the last tear segment's time went, per stage of the tear paper's Table 1, in
+/// milliseconds as read from the set's [`StageClock`] (all zero without one; measured, never
+/// used by the simulation).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TearTimings {
+    /// The clip of the faces in the segment's box ("perform tear").
+    pub clip_ms: f64,
+    /// The torn render mesh copied out ("update mesh").
+    pub mesh_ms: f64,
+    /// The welded mesh rebuilt and the new vertices matched to the old ones.
+    pub weld_ms: f64,
+    /// Algorithm 4: new vertices given particles, links across the box removed, influences
+    /// across the tear plane removed and weights renormalised ("update particles",
+    /// "disconnect particles", "calculate bone weights").
+    pub particles_ms: f64,
+    /// The body's arrays resized and its vertices placed from the new map.
+    pub rebuild_ms: f64,
+}
+
+impl TearTimings {
+    /// Every stage.
+    pub fn total_ms(&self) -> f64 {
+        self.clip_ms + self.mesh_ms + self.weld_ms + self.particles_ms + self.rebuild_ms
+    }
+}
+
+/// A clock for profiling, in milliseconds from any fixed origin (the core crates take time as
+/// an argument: a bench passes one that reads the wall clock, see
+/// [`SoftBodySet::set_stage_clock`](crate::SoftBodySet::set_stage_clock)).
+pub type StageClock = fn() -> f64;
+
+/// Reads `clock` (0 without one) and returns the time since `*last`, which it moves on.
+fn lap(clock: Option<StageClock>, last: &mut f64) -> f64 {
+    let now = clock.map_or(0.0, |c| c());
+    let d = now - *last;
+    *last = now;
+    d
+}
+
 fn position_key(p: Vec3) -> [u32; 3] {
     p.to_array().map(f32::to_bits)
 }
@@ -55,6 +94,7 @@ impl SoftBody {
         &mut self,
         world: &PhysicsWorld,
         seg: &TearSegment,
+        clock: Option<StageClock>,
     ) -> Result<TearStats, CutError> {
         if self.tear.is_none() {
             self.tear = Some(TearMesh::new(&self.rest_mesh, self.config.tear_width_m)?);
@@ -62,14 +102,21 @@ impl SoftBody {
         let Some(tear) = self.tear.as_mut() else {
             return Err(CutError::Mesh("the tear mesh could not be made".into()));
         };
+        let mut t = 0.0;
+        lap(clock, &mut t);
         let planes = tear.box_for(seg)?;
         let stats = tear.tear(seg)?;
+        self.last_tear_timings = TearTimings {
+            clip_ms: lap(clock, &mut t),
+            ..TearTimings::default()
+        };
         if stats.faces_clipped == 0 {
             return Ok(stats);
         }
         let mesh = tear.to_mesh();
+        self.last_tear_timings.mesh_ms = lap(clock, &mut t);
         self.tear_boxes.push(planes);
-        if let Err(e) = self.retopologise(mesh, world) {
+        if let Err(e) = self.retopologise(mesh, world, clock, t) {
             // Cannot happen (the update's input is built right here); if it did, the body
             // keeps its last mesh and map, and the next tear starts from that mesh.
             self.tear_boxes.pop();
@@ -87,7 +134,14 @@ impl SoftBody {
     }
 
     /// Makes `mesh` (rest frame, just torn by the last of `tear_boxes`) the body's mesh.
-    fn retopologise(&mut self, mesh: Mesh, world: &PhysicsWorld) -> Result<(), CutError> {
+    /// `clock` and `t` (its last reading) time the stages.
+    fn retopologise(
+        &mut self,
+        mesh: Mesh,
+        world: &PhysicsWorld,
+        clock: Option<StageClock>,
+        mut t: f64,
+    ) -> Result<(), CutError> {
         let welded = weld_exact(&mesh);
         let old = vertex_index(&self.rest_vertices);
         let source: Vec<Option<u32>> = welded
@@ -105,6 +159,7 @@ impl SoftBody {
                 (None, None) => true,
             })
             .collect();
+        self.last_tear_timings.weld_ms = lap(clock, &mut t);
         let (map, stats) = update_after_tear(
             &self.map,
             &self.rest_offsets,
@@ -121,6 +176,7 @@ impl SoftBody {
         self.neighbour_scale = neighbour_scale(&map, self.config.neighbour_share);
         self.map = map;
         self.last_particle_update = stats;
+        self.last_tear_timings.particles_ms = lap(clock, &mut t);
         // Open along the slit: the volume is that of the surface closed across it.
         self.rest_volume_m3 = enclosed_volume(&welded.positions, &welded.triangles);
         let n = welded.positions.len();
@@ -137,6 +193,7 @@ impl SoftBody {
         };
         self.rest_mesh = mesh;
         self.deform(world);
+        self.last_tear_timings.rebuild_ms = lap(clock, &mut t);
         Ok(())
     }
 

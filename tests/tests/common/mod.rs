@@ -150,12 +150,9 @@ impl Proc {
         let _ = self.child.wait();
     }
 
-    /// The peer id it printed (`hosting …` / `joining …`). A joiner prints it once its
-    /// signaling socket has an id; on a 2-core machine running other multi-process tests
-    /// that once took over 20 s (CI of c342fbd), so the bound is generous: it only has to
-    /// stop a hung test.
+    /// The peer id it printed (`hosting …` / `joining …`).
     pub fn peer_id(&self) -> u64 {
-        let l = self.wait_line("peer=", Duration::from_secs(60));
+        let l = self.wait_line("peer=", Duration::from_secs(20));
         field(&l, "peer").parse().unwrap()
     }
 }
