@@ -581,13 +581,25 @@ impl SplitMix64 {
 /// result is sorted by particle and its weights sum to 1 (empty only without particles).
 pub fn weights_for_point(method: ClusterMethod, particles: &[Vec3], p: Vec3) -> Vec<(u32, f32)> {
     let nearest = || {
-        particles
-            .iter()
-            .enumerate()
-            .map(|(i, q)| (q.distance_squared(p), i as u32))
-            .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)))
-            .map(|(_, i)| vec![(i, 1.0)])
-            .unwrap_or_default()
+        // The first of the nearest (a plain loop: this runs for every vertex a tear adds).
+        let mut best: Option<(f32, u32)> = None;
+        for (i, q) in particles.iter().enumerate() {
+            let d = q.distance_squared(p);
+            if best.is_none_or(|(b, _)| d < b) {
+                best = Some((d, i as u32));
+            }
+        }
+        match best {
+            Some((d, i)) if d.is_finite() => vec![(i, 1.0)],
+            // Non-finite distances: ordered as before, by `total_cmp`.
+            _ => particles
+                .iter()
+                .enumerate()
+                .map(|(i, q)| (q.distance_squared(p), i as u32))
+                .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)))
+                .map(|(_, i)| vec![(i, 1.0)])
+                .unwrap_or_default(),
+        }
     };
     let within = |r: f32| -> Vec<(u32, f32)> {
         particles

@@ -40,6 +40,9 @@ pub struct SoftBody {
     /// Welded rest vertices relative to the rest center: the *rest frame*, the center body's
     /// local frame, in which tears and cuts are given.
     rest_vertices: Vec<Vec3>,
+    /// Each rest vertex's index by its exact position, kept from one tear to the next (made
+    /// at the first).
+    rest_index: Option<rustc_hash::FxHashMap<[u32; 3], u32>>,
     /// The rest center in the frame the mesh was built in (the world at insertion).
     rest_center: Vec3,
     /// The render mesh at rest, in the rest frame: what tears and cuts act on.
@@ -335,6 +338,7 @@ impl BodyPlan {
             slot_normals: vec![Vec3::ZERO; welded.normal_slots],
             welded,
             rest_vertices,
+            rest_index: None,
             rest_center,
             rest_mesh,
             tear: None,

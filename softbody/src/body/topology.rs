@@ -7,7 +7,7 @@
 //! Only a cut's *placement* of the pieces reads the state (the old center's pose and velocity
 //! and the particles' displacement).
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap;
 
 use glam::Vec3;
 use rapier3d::prelude::PhysicsWorld;
@@ -78,7 +78,7 @@ fn position_key(p: Vec3) -> [u32; 3] {
 
 /// The old welded vertex at each exact rest position: tears and cuts copy the positions of the
 /// vertices they keep bit for bit, so this finds every kept vertex.
-fn vertex_index(rest_vertices: &[Vec3]) -> HashMap<[u32; 3], u32> {
+fn vertex_index(rest_vertices: &[Vec3]) -> FxHashMap<[u32; 3], u32> {
     rest_vertices
         .iter()
         .enumerate()
@@ -142,8 +142,11 @@ impl SoftBody {
         clock: Option<StageClock>,
         mut t: f64,
     ) -> Result<(), CutError> {
-        let welded = weld_exact(&mesh);
-        let old = vertex_index(&self.rest_vertices);
+        let (welded, index) = weld_exact(&mesh);
+        let old = match self.rest_index.take() {
+            Some(i) => i,
+            None => vertex_index(&self.rest_vertices),
+        };
         let source: Vec<Option<u32>> = welded
             .positions
             .iter()
@@ -186,6 +189,7 @@ impl SoftBody {
         self.slot_normals = vec![Vec3::ZERO; welded.normal_slots];
         self.render_triangles = mesh.triangles.clone();
         self.rest_vertices = welded.positions.clone();
+        self.rest_index = Some(index);
         let rest_center = self.rest_center;
         self.welded = WeldedMesh {
             positions: welded.positions.iter().map(|p| *p + rest_center).collect(),
@@ -296,20 +300,26 @@ impl SoftBody {
 /// (the rest mesh: each render vertex sits at its welded position; a tear copies positions
 /// and keeps its new vertices 20 µm from any other): one hash lookup per render vertex
 /// instead of a search of the neighbouring cells (about 2 ms on the torn bunny), the same
-/// normal slots.
-fn weld_exact(mesh: &Mesh) -> WeldedMesh {
-    let mut index: HashMap<[u32; 3], u32> = HashMap::with_capacity(mesh.positions.len());
+/// normal slots; and the welded vertices' index by position.
+fn weld_exact(mesh: &Mesh) -> (WeldedMesh, FxHashMap<[u32; 3], u32>) {
+    let mut index: FxHashMap<[u32; 3], u32> =
+        FxHashMap::with_capacity_and_hasher(mesh.positions.len(), Default::default());
     let mut positions: Vec<Vec3> = Vec::new();
     let mut render_to_welded = Vec::with_capacity(mesh.positions.len());
     let mut render_to_normal_slot = Vec::with_capacity(mesh.positions.len());
     // As in `Mesh::weld`: render vertices of one welded vertex share a normal slot when their
-    // normals are within ~30°.
-    let mut slots_of: Vec<Vec<(Vec3, u32)>> = Vec::new();
-    let mut slot_count = 0u32;
+    // normals are within ~30°. Each welded vertex's slots, in the order they were made, as a
+    // list threaded through one array (no allocation per vertex).
+    const NONE: u32 = u32::MAX;
+    let mut first_slot: Vec<u32> = Vec::with_capacity(mesh.positions.len());
+    let mut last_slot: Vec<u32> = Vec::with_capacity(mesh.positions.len());
+    // (normal, next slot of the same welded vertex)
+    let mut slots: Vec<(Vec3, u32)> = Vec::with_capacity(mesh.positions.len());
     for (r, &p) in mesh.positions.iter().enumerate() {
         let w = *index.entry(position_key(p)).or_insert_with(|| {
             positions.push(p);
-            slots_of.push(Vec::new());
+            first_slot.push(NONE);
+            last_slot.push(NONE);
             (positions.len() - 1) as u32
         });
         render_to_welded.push(w);
@@ -319,32 +329,39 @@ fn weld_exact(mesh: &Mesh) -> WeldedMesh {
             .and_then(|ns| ns.get(r))
             .copied()
             .unwrap_or(Vec3::ZERO);
-        let slots = &mut slots_of[w as usize];
-        let hit = slots
-            .iter()
-            .find(|(sn, _)| n == Vec3::ZERO || *sn == Vec3::ZERO || sn.dot(n) > 0.866);
-        let s = match hit {
-            Some(&(_, s)) => s,
-            None => {
-                slot_count += 1;
-                slots.push((n, slot_count - 1));
-                slot_count - 1
+        let mut at = first_slot[w as usize];
+        while at != NONE {
+            let sn = slots[at as usize].0;
+            if n == Vec3::ZERO || sn == Vec3::ZERO || sn.dot(n) > 0.866 {
+                break;
             }
-        };
-        render_to_normal_slot.push(s);
+            at = slots[at as usize].1;
+        }
+        if at == NONE {
+            at = slots.len() as u32;
+            slots.push((n, NONE));
+            match last_slot[w as usize] {
+                NONE => first_slot[w as usize] = at,
+                l => slots[l as usize].1 = at,
+            }
+            last_slot[w as usize] = at;
+        }
+        render_to_normal_slot.push(at);
     }
+    let slot_count = slots.len() as u32;
     let triangles = mesh
         .triangles
         .iter()
         .map(|t| t.map(|i| render_to_welded[i as usize]))
         .collect();
-    WeldedMesh {
+    let welded = WeldedMesh {
         positions,
         triangles,
         render_to_welded,
         render_to_normal_slot,
         normal_slots: slot_count as usize,
-    }
+    };
+    (welded, index)
 }
 
 /// Plans one piece with `config`; with fewer than [`MIN_PIECE_PARTICLES`] particles, tries
@@ -425,7 +442,7 @@ mod tests {
         })
         .unwrap();
         let torn = t.to_mesh();
-        let (a, b) = (weld_exact(&torn), torn.weld(1e-6));
+        let (a, b) = (weld_exact(&torn).0, torn.weld(1e-6));
         assert_eq!(a.positions, b.positions);
         assert_eq!(a.triangles, b.triangles);
         assert_eq!(a.render_to_welded, b.render_to_welded);

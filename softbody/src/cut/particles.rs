@@ -282,9 +282,10 @@ pub fn update_after_tear(
                 .row(i)
                 .0
                 .iter()
-                .map(move |&j| a.distance(anchors[j as usize]))
+                .map(move |&j| a.distance_squared(anchors[j as usize]))
         })
-        .fold(0.0f32, f32::max);
+        .fold(0.0f32, f32::max)
+        .sqrt();
     let mut cut_links: Vec<(u32, u32)> = Vec::new();
     for (k, b) in boxes.iter().enumerate().skip(first_new) {
         for (i, &a) in anchors.iter().enumerate() {
@@ -292,7 +293,11 @@ pub fn update_after_tear(
                 continue;
             }
             for &j in map.neighbours.row(i).0.iter().filter(|&&j| j as usize > i) {
-                if b.meets_segment(a, anchors[j as usize], 0.0) {
+                let c = anchors[j as usize];
+                // A link whose bounds miss the box's cannot meet it.
+                let misses = bounds[k]
+                    .is_some_and(|(lo, hi)| a.min(c).cmpgt(hi).any() || a.max(c).cmplt(lo).any());
+                if !misses && b.meets_segment(a, c, 0.0) {
                     cut_links.push((i as u32, j));
                 }
             }
@@ -309,14 +314,27 @@ pub fn update_after_tear(
             ..Default::default()
         };
         r.offsets.push(0);
-        for i in 0..map.len() {
+        r.ids.reserve(map.neighbours.ids.len());
+        r.weights.reserve(map.neighbours.ids.len());
+        // Rows of particles no removed link touches are copied whole.
+        let mut touches = vec![false; map.len()];
+        for &(i, j) in &cut_links {
+            touches[i as usize] = true;
+            touches[j as usize] = true;
+        }
+        for (i, &touched) in touches.iter().enumerate() {
             let (js, ws) = map.neighbours.row(i);
-            for (&j, &w) in js.iter().zip(ws) {
-                let key = (i.min(j as usize) as u32, i.max(j as usize) as u32);
-                if cut_links.binary_search(&key).is_err() {
-                    r.ids.push(j);
-                    r.weights.push(w);
+            if touched {
+                for (&j, &w) in js.iter().zip(ws) {
+                    let key = (i.min(j as usize) as u32, i.max(j as usize) as u32);
+                    if cut_links.binary_search(&key).is_err() {
+                        r.ids.push(j);
+                        r.weights.push(w);
+                    }
                 }
+            } else {
+                r.ids.extend_from_slice(js);
+                r.weights.extend_from_slice(ws);
             }
             r.offsets.push(r.ids.len() as u32);
         }
@@ -327,9 +345,21 @@ pub fn update_after_tear(
     // bounds cannot be separated by it from any of its particles.
     let reach = (0..n)
         .flat_map(|v| ids[offsets[v]..offsets[v + 1]].iter().map(move |&p| (v, p)))
-        .map(|(v, p)| pos[v].distance(anchors[p as usize]))
+        .map(|(v, p)| pos[v].distance_squared(anchors[p as usize]))
         .fold(0.0f32, f32::max)
+        .sqrt()
         + tolerance_m;
+    // Which side of each box's tear plane every anchor is on (as `separates` decides it):
+    // only an entry whose vertex is on the other side needs the full test.
+    let right_of: Vec<Vec<bool>> = boxes
+        .iter()
+        .map(|b| {
+            anchors
+                .iter()
+                .map(|&a| b.tear_plane_distance(a) >= 0.0)
+                .collect()
+        })
+        .collect();
     let mut touched = vec![false; n];
     for v in 0..n {
         let row = offsets[v]..offsets[v + 1];
@@ -342,8 +372,12 @@ pub fn update_after_tear(
             if !near(k, pos[v], reach) {
                 continue;
             }
+            let right = b.tear_plane_distance(pos[v]) >= 0.0;
             for e in row.clone() {
-                if ids[e] != GONE && b.separates(anchors[ids[e] as usize], pos[v], tolerance_m) {
+                if ids[e] != GONE
+                    && right_of[k][ids[e] as usize] != right
+                    && b.separates(anchors[ids[e] as usize], pos[v], tolerance_m)
+                {
                     ids[e] = GONE;
                     stats.influences_removed += 1;
                     touched[v] = true;
