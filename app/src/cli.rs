@@ -12,7 +12,7 @@ softsync — collaborative soft-body rooms, peer to peer
 
 USAGE:
   softsync signal [--bind ADDR]
-  softsync host --room NAME [--bind ADDR | --signal URL] [--scene NAME] [PEER OPTIONS]
+  softsync host --room NAME [--bind ADDR | --signal URL] [--scene SCENE] [PEER OPTIONS]
   softsync join --room NAME --signal URL [PEER OPTIONS]
   softsync bench net-live [--out DIR] [--seconds S] [--quick]
   softsync bench room-load [--out DIR] [--seconds S] [--peers 2,4,8]
@@ -35,8 +35,12 @@ PEER OPTIONS:
   --send-rate HZ        replication rate of avatars and soft bodies (default 20; thesis 5.3)
   --threshold-mm MM     ignore threshold for positions and particles (default 5)
   --sim-hz HZ           fixed simulation rate (default 60)
-  --scene NAME          thesis-room (default) or bench-ball (host only)
-  --assets DIR          where bunny.obj is (default: ./assets, or next to the binary)
+  --scene SCENE         a scene file (.ron), or the name of one in --assets: thesis-room
+                        (default) or bench-ball. The host spawns its objects; a joiner needs
+                        the host's classes (a joiner with other classes, settings or meshes is
+                        refused at the handshake)
+  --assets DIR          where the shipped scenes and meshes are (default: ./assets, or next
+                        to the binary)
   --ice URL             an ICE server (stun:/turn:), repeatable; default none (LAN/loopback)
   --connect-timeout S   give up joining after S seconds (default 15)
   --rejoin-limit N      a peer the room went on without (it stalled or was cut off for longer
@@ -398,6 +402,7 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
                 "threshold-mm",
                 "sim-hz",
                 "assets",
+                "scene",
                 "ice",
                 "connect-timeout",
                 "rejoin-limit",
@@ -408,7 +413,7 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
             ];
             ok.extend(VIEW_FLAGS);
             if host {
-                ok.extend(["bind", "scene"]);
+                ok.push("bind");
             }
             allowed(&ok)?;
             if let Some(p) = positional.first() {

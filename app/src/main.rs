@@ -28,7 +28,7 @@ use glam::Vec3;
 use softsync_interaction::HandConfig;
 use softsync_net::{LinkConditioner, PeerEvent, SendPolicy, Session, Transport};
 use softsync_net_matchbox::{MatchboxConfig, MatchboxTransport, Role, SignalServer};
-use softsync_peer::{bot, scene, Bot, Peer, PeerConfig, Scene};
+use softsync_peer::{bot, Bot, Peer, PeerConfig, Scene};
 
 use crate::cli::{Command, FrontEnd, PeerArgs, UsageError};
 use crate::driver::{Clock, Driver};
@@ -136,13 +136,13 @@ fn assets_dir(given: Option<&Path>) -> PathBuf {
         return p.to_owned();
     }
     let here = PathBuf::from("assets");
-    if here.join("bunny.obj").exists() {
+    if here.join("thesis-room.ron").exists() {
         return here;
     }
     if let Ok(exe) = std::env::current_exe() {
         for up in exe.ancestors().skip(1).take(4) {
             let p = up.join("assets");
-            if p.join("bunny.obj").exists() {
+            if p.join("thesis-room.ron").exists() {
                 return p;
             }
         }
@@ -251,23 +251,32 @@ fn front_end(asked: FrontEnd) -> Result<FrontEnd, Failure> {
 fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     // Check every input before opening anything.
     let front = front_end(a.front)?;
+    let scene =
+        Scene::by_name(&a.scene, &assets_dir(a.assets.as_deref())).map_err(Failure::usage)?;
     #[cfg(feature = "desktop")]
     let focus = match a.view.focus.as_deref() {
         None => None,
-        Some(k) => Some(
-            scene::Kind::from_name(k)
-                .filter(|k| !k.is_avatar())
-                .ok_or_else(|| Failure::usage(format!("--focus: {k:?} is not an object kind")))?,
-        ),
+        Some(k) => Some(scene.kind(k).ok_or_else(|| {
+            Failure::usage(format!(
+                "--focus: {k:?} is not a class of scene {} ({})",
+                scene.name,
+                scene
+                    .object_classes()
+                    .map(|(_, c)| c.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+        })?),
     };
     #[cfg(feature = "desktop")]
     if let Some(d) = &a.view.screenshot_dir {
         std::fs::create_dir_all(d)
             .map_err(|e| Failure::usage(format!("--screenshot-dir {}: {e}", d.display())))?;
     }
-    let scene =
-        Scene::by_name(&a.scene, &assets_dir(a.assets.as_deref())).map_err(Failure::usage)?;
     let bot = a.bot.as_deref().map(load_bot).transpose()?;
+    if let Some(b) = &bot {
+        b.check(&scene).map_err(Failure::usage)?;
+    }
     let dump = match &a.dump {
         Some(p) => Some(
             report::Dump::create(p)
@@ -281,7 +290,7 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
         particle_threshold_m: a.threshold_m,
         ..SendPolicy::default()
     };
-    let cfg = scene::session_config(send.clone(), send.clone(), send);
+    let cfg = scene.session_config(send.clone(), send.clone(), send);
 
     // Signaling: embedded in the host unless --signal names a server.
     let (signal_server, url) = match (&a.signal, a.host) {

@@ -89,7 +89,7 @@ pub fn snapshot(now: Instant, peer: &mut Peer) -> DumpLine {
         };
         objects.push(DumpObject {
             id: id.0,
-            kind: kind.name().to_owned(),
+            kind: peer.scene().name_of(kind).to_owned(),
             owner: owner.map_or(0, |p| p.0),
             pos: s.pos.to_array(),
             rot: s.rot.to_array(),
@@ -98,7 +98,7 @@ pub fn snapshot(now: Instant, peer: &mut Peer) -> DumpLine {
             log: peer
                 .objects()
                 .get(&id)
-                .filter(|o| o.kind.is_soft())
+                .filter(|o| matches!(o.body, softsync_peer::LocalBody::Soft(_)))
                 .map(|o| o.topology),
             topology: peer.topology_hash(id).map(|h| format!("{h:016x}")),
         });

@@ -24,8 +24,7 @@ use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
 use bevy::render::{Render, RenderApp, RenderSystems};
 use softsync_net::NetId;
 
-use softsync_peer::scene::TABLE_TOP_Y;
-use softsync_peer::{Kind, LocalBody, Peer};
+use softsync_peer::{Kind, LocalBody, Peer, Scene, Shape};
 
 use crate::driver::Driver;
 use crate::glue::{to_bevy, to_bevy_quat};
@@ -111,18 +110,10 @@ pub fn peer_color(peer: u64) -> Color {
     Color::hsl(h, 0.65, 0.5)
 }
 
-/// The colour a kind is drawn in (avatars use their peer's colour).
-pub fn kind_color(kind: Kind) -> Color {
-    match kind {
-        Kind::Plate => Color::srgb(0.93, 0.93, 0.90),
-        Kind::Block => Color::srgb(0.55, 0.38, 0.22),
-        Kind::Can => Color::srgb(0.70, 0.72, 0.75),
-        Kind::Ball => Color::srgb(0.95, 0.85, 0.20),
-        Kind::Bunny => Color::srgb(0.85, 0.72, 0.58),
-        Kind::SoftBall => Color::srgb(0.90, 0.25, 0.30),
-        Kind::SoftBox => Color::srgb(0.95, 0.50, 0.10),
-        Kind::Head | Kind::Hand => Color::srgb(0.4, 0.6, 0.9),
-    }
+/// The colour a class is drawn in, as its scene says (avatars use their peer's colour).
+pub fn kind_color(scene: &Scene, kind: Kind) -> Color {
+    let [r, g, b] = scene.class(kind).map_or([0.8, 0.8, 0.8], |c| c.colour);
+    Color::srgb(r, g, b)
 }
 
 /// How an object is drawn this frame (a change rewrites its material).
@@ -162,38 +153,24 @@ struct ScreenshotState {
 
 fn spawn_static(
     mut commands: Commands,
+    driver: NonSend<Driver>,
     mut meshes: ResMut<Assets<Mesh>>,
     mut materials: ResMut<Assets<StandardMaterial>>,
     cfg: Res<ViewConfig>,
 ) {
-    let floor = materials.add(StandardMaterial {
-        base_color: Color::srgb(0.42, 0.44, 0.46),
-        perceptual_roughness: 0.9,
-        ..default()
-    });
-    let wood = materials.add(StandardMaterial {
-        base_color: Color::srgb(0.45, 0.32, 0.22),
-        perceptual_roughness: 0.7,
-        ..default()
-    });
-    commands.spawn((
-        Mesh3d(meshes.add(Plane3d::default().mesh().size(8.0, 8.0))),
-        MeshMaterial3d(floor),
-        Transform::IDENTITY,
-    ));
-    // The table as scene.rs builds it: a 1.2 × 0.04 × 0.8 m top and four legs.
-    commands.spawn((
-        Mesh3d(meshes.add(Cuboid::new(1.2, 0.04, 0.8))),
-        MeshMaterial3d(wood.clone()),
-        Transform::from_xyz(0.0, TABLE_TOP_Y - 0.02, 0.0),
-    ));
-    let leg_h = TABLE_TOP_Y - 0.04;
-    let leg = meshes.add(Cuboid::new(0.06, leg_h, 0.06));
-    for (x, z) in [(-0.55, -0.35), (0.55, -0.35), (-0.55, 0.35), (0.55, 0.35)] {
+    // The scene's fixed boxes (the floor, the table), as the peer's world has them.
+    for b in &driver.peer.scene().fixed {
+        let [r, g, bl] = b.colour;
+        let material = materials.add(StandardMaterial {
+            base_color: Color::srgb(r, g, bl),
+            perceptual_roughness: 0.8,
+            ..default()
+        });
+        let size = 2.0 * to_bevy(b.half_extents_m).abs();
         commands.spawn((
-            Mesh3d(leg.clone()),
-            MeshMaterial3d(wood.clone()),
-            Transform::from_xyz(x, leg_h / 2.0, z),
+            Mesh3d(meshes.add(Cuboid::new(size.x, size.y, size.z))),
+            MeshMaterial3d(material),
+            Transform::from_translation(to_bevy(b.at)),
         ));
     }
     commands.spawn((
@@ -243,17 +220,37 @@ fn to_arrays(v: &[glam::Vec3]) -> Vec<[f32; 3]> {
     v.iter().map(|p| p.to_array()).collect()
 }
 
-fn rigid_mesh(kind: Kind) -> Mesh {
-    // The colliders of scene.rs / the avatar sizes of the thesis's room.
-    match kind {
-        Kind::Plate => Cylinder::new(0.12, 0.02).into(),
-        Kind::Block => Cuboid::new(0.06, 0.06, 0.06).into(),
-        Kind::Can => Cylinder::new(0.033, 0.1).into(),
-        Kind::Ball => Sphere::new(0.035).mesh().uv(24, 16),
-        Kind::Head => Cuboid::new(0.16, 0.2, 0.18).into(),
-        Kind::Hand => Cuboid::new(0.05, 0.03, 0.09).into(),
-        // Soft kinds are built from their body.
-        _ => Sphere::new(0.05).into(),
+/// A rigid or avatar class's mesh, from its shape in the scene.
+fn rigid_mesh(scene: &Scene, kind: Kind) -> Mesh {
+    let Some(class) = scene.class(kind) else {
+        return Sphere::new(0.05).into();
+    };
+    match &class.shape {
+        Shape::Ball { radius_m, .. } => Sphere::new(*radius_m).mesh().uv(24, 16),
+        Shape::Cuboid { half_extents_m, .. } => {
+            let s = 2.0 * to_bevy(*half_extents_m).abs();
+            Cuboid::new(s.x, s.y, s.z).into()
+        }
+        Shape::Cylinder {
+            half_height_m,
+            radius_m,
+        } => Cylinder::new(*radius_m, 2.0 * half_height_m).into(),
+        // A rigid mesh class: drawn as its file's mesh (it collides as the hull).
+        Shape::Mesh { size_m, .. } => match class.mesh() {
+            Some(m) => {
+                let mut out = Mesh::new(
+                    PrimitiveTopology::TriangleList,
+                    RenderAssetUsages::MAIN_WORLD | RenderAssetUsages::RENDER_WORLD,
+                );
+                out.insert_attribute(Mesh::ATTRIBUTE_POSITION, to_arrays(&m.positions));
+                out.insert_indices(Indices::U32(
+                    m.triangles.iter().flatten().copied().collect(),
+                ));
+                out.compute_smooth_normals();
+                out
+            }
+            None => Sphere::new(0.5 * size_m).mesh().uv(24, 16),
+        },
     }
 }
 
@@ -305,7 +302,7 @@ fn sync_objects(
         };
         let base = match o.avatar_of {
             Some(p) => peer_color(p.0),
-            None => kind_color(o.kind),
+            None => kind_color(peer.scene(), o.kind),
         };
         let Some(&e) = views.0.get(&id) else {
             // New object: spawn its entity.
@@ -322,7 +319,7 @@ fn sync_objects(
                     }
                     None => continue,
                 },
-                _ => (meshes.add(rigid_mesh(o.kind)), None),
+                _ => (meshes.add(rigid_mesh(peer.scene(), o.kind)), None),
             };
             let e = commands
                 .spawn((
@@ -349,7 +346,7 @@ fn sync_objects(
         };
         debug_assert_eq!(view.id, id);
         let hidden = (o.kind.is_avatar() && cfg.hide_avatars)
-            || (o.kind == Kind::Head && cfg.hide_own_head && o.avatar_of == Some(me));
+            || (o.kind == Kind::HEAD && cfg.hide_own_head && o.avatar_of == Some(me));
         // Soft bodies: rewrite positions and normals (world space, identity transform), and
         // the triangles too after a tear or cut changed them.
         if let (LocalBody::Soft(h), Some(handle)) = (o.body, &view.soft_mesh) {
@@ -514,7 +511,7 @@ pub fn hud_text(driver: &Driver) -> String {
 
 fn object_name(peer: &Peer, id: NetId) -> String {
     peer.objects().get(&id).map_or(format!("#{}", id.0), |o| {
-        format!("{} #{}", o.kind.name(), id.0)
+        format!("{} #{}", peer.scene().name_of(o.kind), id.0)
     })
 }
 
@@ -624,7 +621,7 @@ fn take_screenshots(
     let cam = cams.iter().find(|(c, _)| c.is_active);
     for (id, o) in peer.objects() {
         let LocalBody::Soft(h) = o.body else { continue };
-        let name = o.kind.name();
+        let name = peer.scene().name_of(o.kind);
         if let Some(d) = deformation_m(peer, h) {
             fields.push_str(&format!(" {name}_deform_mm={:.2}", d * 1e3));
         }

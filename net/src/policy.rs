@@ -181,6 +181,11 @@ pub struct SessionConfig {
     /// particles than this in total.
     #[serde(default = "default_max_particles_per_peer")]
     pub max_particles_per_peer: usize,
+    /// A digest of the application's content every peer must share beyond the class table
+    /// (e.g. a scene's meshes and soft-body settings); part of [`digest`](Self::digest), so
+    /// a joiner with other content is refused at the handshake. 0: none.
+    #[serde(default)]
+    pub content_digest: u64,
 }
 
 fn default_max_members() -> usize {
@@ -206,6 +211,7 @@ impl Default for SessionConfig {
             max_members: default_max_members(),
             max_objects_per_peer: default_max_objects_per_peer(),
             max_particles_per_peer: default_max_particles_per_peer(),
+            content_digest: 0,
         }
     }
 }
@@ -214,7 +220,7 @@ impl SessionConfig {
     /// A digest of everything that must agree across peers (compared in the join handshake).
     pub fn digest(&self) -> u64 {
         // FNV-1a over the class table's JSON-free debug text: stable within one build.
-        let text = format!("{:?}", self.classes);
+        let text = format!("{:?}|{}", self.classes, self.content_digest);
         let mut h: u64 = 0xcbf2_9ce4_8422_2325;
         for b in text.bytes() {
             h ^= u64::from(b);

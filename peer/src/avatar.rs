@@ -51,7 +51,7 @@ impl Avatar {
             if self.parts[i].is_some() || self.requests[i].is_some() {
                 continue;
             }
-            let kind = if i == 0 { Kind::Head } else { Kind::Hand };
+            let kind = if i == 0 { Kind::HEAD } else { Kind::HAND };
             let pos = home_pos + home_rot * off;
             match session.spawn(now, kind.class(), ObjectState::rigid(pos, home_rot)) {
                 Ok((id, request)) => {

@@ -8,9 +8,10 @@
 //! wait S                        do nothing for S
 //! move HAND X Y Z [in S]        go to a point (straight line over S, default 0.5)
 //! offset HAND DX DY DZ [in S]   go by an offset
-//! reach HAND TARGET [in S]      go to an object: a kind (bunny, softball, softbox, plate,
-//!                               block, can, ball) or `nearest`; soft bodies are reached at
-//!                               their particle nearest to the hand
+//! reach HAND TARGET [in S]      go to an object: a class of the scene (the thesis room's:
+//!                               bunny, softball, softbox, plate, block, can, ball) or
+//!                               `nearest`; soft bodies are reached at their particle nearest
+//!                               to the hand
 //! grab HAND [timeout S]         close the grip; waits until held (through the authority
 //!                               request if another peer owns it), or gives up (default 3 s)
 //! squeeze HAND DEPTH [in S]     push the held point DEPTH metres toward the body's center
@@ -47,7 +48,7 @@ use softsync_net::{Instant, NetId};
 
 use crate::device::{clamp01, DeviceFrame};
 use crate::peer::Peer;
-use crate::scene::Kind;
+use crate::scene::Scene;
 
 /// A bot script command.
 #[derive(Clone, Debug, PartialEq)]
@@ -59,7 +60,7 @@ pub enum Cmd {
     /// Relative move.
     Offset(usize, Vec3, f64),
     /// Move to an object (None: nearest).
-    Reach(usize, Option<Kind>, f64),
+    Reach(usize, Option<String>, f64),
     /// Close the grip.
     Grab(usize, f64),
     /// Push toward the held body's center.
@@ -69,11 +70,11 @@ pub enum Cmd {
     /// Sinusoidal motion.
     Wave(usize, f32, f64, f64),
     /// Ask for authority over an object and wait.
-    Own(Option<Kind>, f64),
+    Own(Option<String>, f64),
     /// Tear along points (offsets from the target's center, room axes), seconds per step.
-    Tear(usize, Option<Kind>, Vec<Vec3>, f64),
+    Tear(usize, Option<String>, Vec<Vec3>, f64),
     /// Cut through the center with a normal (room frame).
-    Cut(Option<Kind>, Vec3),
+    Cut(Option<String>, Vec3),
     /// Restart.
     Loop,
 }
@@ -135,16 +136,20 @@ fn dur(w: &[&str], at: usize, default: f64) -> Result<f64, String> {
     }
 }
 
-fn target_kind(t: &str) -> Result<Option<Kind>, String> {
+fn target_kind(t: &str) -> Result<Option<String>, String> {
     if t == "nearest" {
         return Ok(None);
     }
-    Kind::from_name(t)
-        .filter(|k| !k.is_avatar())
-        .map(Some)
-        .ok_or_else(|| {
-            format!("unknown object {t:?}: bunny, softball, softbox, plate, block, can, ball or nearest")
-        })
+    // Checked against the scene when the bot meets it (`Bot::check`).
+    if t.is_empty()
+        || t.len() > 64
+        || !t
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+    {
+        return Err(format!("{t:?} is not a class name or `nearest`"));
+    }
+    Ok(Some(t.to_owned()))
 }
 
 /// `X Y Z [X Y Z]… [in S]` from `at`: at least two points.
@@ -331,6 +336,37 @@ impl Bot {
         }
     }
 
+    /// Whether every class the script names is one of `scene`'s (not the avatar's): the
+    /// error lists the unknown ones and the scene's classes.
+    pub fn check(&self, scene: &Scene) -> Result<(), String> {
+        let mut unknown: Vec<&str> = self
+            .cmds
+            .iter()
+            .filter_map(|c| match c {
+                Cmd::Reach(_, k, _) | Cmd::Own(k, _) | Cmd::Tear(_, k, _, _) | Cmd::Cut(k, _) => {
+                    k.as_deref()
+                }
+                _ => None,
+            })
+            .filter(|k| scene.kind(k).is_none())
+            .collect();
+        unknown.sort_unstable();
+        unknown.dedup();
+        if unknown.is_empty() {
+            return Ok(());
+        }
+        let classes: Vec<&str> = scene
+            .object_classes()
+            .map(|(_, c)| c.name.as_str())
+            .collect();
+        Err(format!(
+            "the bot script names {} not in scene {} (its classes: {}, or nearest)",
+            unknown.join(", "),
+            scene.name,
+            classes.join(", ")
+        ))
+    }
+
     fn say(&mut self, msg: String) {
         self.said.push_back(msg);
     }
@@ -435,7 +471,7 @@ impl Bot {
                 t0: t,
                 dur,
             }),
-            Cmd::Reach(part, kind, dur) => match self.target(now, peer, part, kind) {
+            Cmd::Reach(part, kind, dur) => match self.target(now, peer, part, kind.as_deref()) {
                 Some((to, name)) => {
                     self.say(format!("reach {name}"));
                     Some(Active::Motion {
@@ -449,7 +485,7 @@ impl Bot {
                 None => {
                     self.say(format!(
                         "reach: no {} in the room",
-                        kind.map_or("object", Kind::name)
+                        kind.as_deref().unwrap_or("object")
                     ));
                     None
                 }
@@ -499,7 +535,7 @@ impl Bot {
                 t0: t,
                 dur,
             }),
-            Cmd::Own(kind, timeout) => match self.object(now, peer, 2, kind) {
+            Cmd::Own(kind, timeout) => match self.object(now, peer, 2, kind.as_deref()) {
                 Some((id, name)) => {
                     if peer.session().owner(id) != Some(peer.me()) {
                         peer.ask_authority(now, id);
@@ -515,29 +551,31 @@ impl Bot {
                     None
                 }
             },
-            Cmd::Tear(hand, kind, offsets, step) => match self.object(now, peer, hand, kind) {
-                Some((id, name)) => {
-                    self.say(format!("tear {name} along {} points", offsets.len()));
-                    let c = peer.shown_state(now, id).map_or(Vec3::ZERO, |s| s.pos);
-                    let points: Vec<Vec3> = offsets.iter().map(|o| c + *o).collect();
-                    self.pos[hand] = self.to_script(hand, points[0]);
-                    Some(Active::Tear {
-                        hand,
-                        id,
-                        points,
-                        k: 1,
-                        t0: t,
-                        step,
-                    })
+            Cmd::Tear(hand, kind, offsets, step) => {
+                match self.object(now, peer, hand, kind.as_deref()) {
+                    Some((id, name)) => {
+                        self.say(format!("tear {name} along {} points", offsets.len()));
+                        let c = peer.shown_state(now, id).map_or(Vec3::ZERO, |s| s.pos);
+                        let points: Vec<Vec3> = offsets.iter().map(|o| c + *o).collect();
+                        self.pos[hand] = self.to_script(hand, points[0]);
+                        Some(Active::Tear {
+                            hand,
+                            id,
+                            points,
+                            k: 1,
+                            t0: t,
+                            step,
+                        })
+                    }
+                    None => {
+                        self.say("tear: no such object in the room".into());
+                        None
+                    }
                 }
-                None => {
-                    self.say("tear: no such object in the room".into());
-                    None
-                }
-            },
+            }
             Cmd::Cut(kind, normal) => {
                 let center = self.at(2);
-                match self.object(now, peer, 2, kind) {
+                match self.object(now, peer, 2, kind.as_deref()) {
                     Some((id, name)) => {
                         let point = peer.shown_state(now, id).map_or(center, |s| s.pos);
                         match peer.cut(now, id, point, normal) {
@@ -689,19 +727,21 @@ impl Bot {
         now: Instant,
         peer: &mut Peer,
         part: usize,
-        kind: Option<Kind>,
+        kind: Option<&str>,
     ) -> Option<(NetId, String)> {
         let from = self.at(part);
         let ids: Vec<_> = peer
             .objects()
             .iter()
-            .filter(|(_, o)| !o.kind.is_avatar() && kind.is_none_or(|k| o.kind == k))
-            .map(|(id, o)| (*id, o.kind))
+            .filter(|(_, o)| {
+                !o.kind.is_avatar() && kind.is_none_or(|k| peer.scene().name_of(o.kind) == k)
+            })
+            .map(|(id, o)| (*id, peer.scene().name_of(o.kind).to_owned()))
             .collect();
         ids.into_iter()
             .filter_map(|(id, k)| {
                 let d = peer.shown_state(now, id)?.pos.distance(from);
-                Some((d, id, format!("{} (object {})", k.name(), id.0)))
+                Some((d, id, format!("{k} (object {})", id.0)))
             })
             .min_by(|a, b| a.0.total_cmp(&b.0))
             .map(|(_, id, n)| (id, n))
@@ -713,14 +753,16 @@ impl Bot {
         now: Instant,
         peer: &mut Peer,
         part: usize,
-        kind: Option<Kind>,
+        kind: Option<&str>,
     ) -> Option<(Vec3, String)> {
         let from = self.at(part);
         let ids: Vec<_> = peer
             .objects()
             .iter()
-            .filter(|(_, o)| !o.kind.is_avatar() && kind.is_none_or(|k| o.kind == k))
-            .map(|(id, o)| (*id, o.kind))
+            .filter(|(_, o)| {
+                !o.kind.is_avatar() && kind.is_none_or(|k| peer.scene().name_of(o.kind) == k)
+            })
+            .map(|(id, o)| (*id, peer.scene().name_of(o.kind).to_owned()))
             .collect();
         let mut best: Option<(f32, Vec3, String)> = None;
         for (id, k) in ids {
@@ -738,7 +780,7 @@ impl Bot {
             };
             let d = p.distance(from);
             if best.as_ref().is_none_or(|b| d < b.0) {
-                best = Some((d, p, format!("{} (object {})", k.name(), id.0)));
+                best = Some((d, p, format!("{k} (object {})", id.0)));
             }
         }
         best.map(|(_, p, n)| (p, n))
@@ -754,7 +796,7 @@ mod tests {
     fn scripts_parse_and_errors_name_the_command() {
         let c = parse("wait 1; reach right softball in 1\n# comment\ngrab right; squeeze right 0.03 in 0.6; release right; loop").unwrap();
         assert_eq!(c.len(), 6);
-        assert_eq!(c[1], Cmd::Reach(2, Some(Kind::SoftBall), 1.0));
+        assert_eq!(c[1], Cmd::Reach(2, Some("softball".into()), 1.0));
         assert_eq!(c[2], Cmd::Grab(2, 3.0));
         for name in ["squeeze", "idle", "wave"] {
             parse(builtin(name).unwrap()).unwrap();
@@ -762,10 +804,22 @@ mod tests {
         let e = parse("wait 1; jump right").unwrap_err();
         assert_eq!(e.index, 2);
         assert!(e.to_string().contains("unknown command"), "{e}");
-        assert!(parse("reach right teapot")
+        assert!(parse("reach right tea/pot")
             .unwrap_err()
             .msg
-            .contains("unknown object"));
+            .contains("not a class name"));
+        // A name the scene does not have: refused when the bot meets the scene.
+        let scene = Scene::by_name(
+            "thesis-room",
+            std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../assets")),
+        )
+        .unwrap();
+        let teapot = Bot::new(parse("reach right teapot; own bunny").unwrap());
+        let e = teapot.check(&scene).unwrap_err();
+        assert!(e.contains("teapot") && e.contains("softbox"), "{e}");
+        Bot::new(parse("reach right softball; cut softbox 0 1 0").unwrap())
+            .check(&scene)
+            .unwrap();
         assert!(parse("move left 1 2").is_err());
         assert!(parse("move left 1 2 NaN").is_err());
         assert!(parse("grab head").is_err());
@@ -777,11 +831,11 @@ mod tests {
         let c =
             parse("own bunny; tear right bunny 0 1 0 0.01 1 0 0.02 1 0 in 0.1; cut softbox 0 1 0")
                 .unwrap();
-        assert_eq!(c[0], Cmd::Own(Some(Kind::Bunny), 3.0));
+        assert_eq!(c[0], Cmd::Own(Some("bunny".into()), 3.0));
         assert!(
-            matches!(&c[1], Cmd::Tear(2, Some(Kind::Bunny), p, s) if p.len() == 3 && *s == 0.1)
+            matches!(&c[1], Cmd::Tear(2, Some(k), p, s) if k == "bunny" && p.len() == 3 && *s == 0.1)
         );
-        assert_eq!(c[2], Cmd::Cut(Some(Kind::SoftBox), Vec3::Y));
+        assert_eq!(c[2], Cmd::Cut(Some("softbox".into()), Vec3::Y));
         assert!(
             parse("tear right bunny 0 1 0").is_err(),
             "one point is no segment"

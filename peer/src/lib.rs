@@ -9,9 +9,10 @@
 //! socket, so a headless test can run two peers on virtual time, and a bevy app, a server or
 //! another engine can drive one.
 //!
-//! Also here, because they are engine-agnostic and tests want them: the thesis's room
-//! ([`scene`]: object kinds, the static geometry, the session configuration), bot scripts
-//! ([`bot`]) and one frame of a tracked device ([`device`]).
+//! Also here, because they are engine-agnostic and tests want them: scenes ([`scene`]: a
+//! room's object classes, fixed geometry and objects, read from a RON file; the session
+//! configuration they imply), bot scripts ([`bot`]) and one frame of a tracked device
+//! ([`device`]).
 //!
 //! # Driving a peer
 //!
@@ -25,16 +26,16 @@
 //! use std::time::Duration;
 //!
 //! use softsync_net::{Instant, SendPolicy, Session, Transport};
-//! use softsync_peer::{session_config, Event, Peer, PeerConfig, Scene};
+//! use softsync_peer::{Event, Peer, PeerConfig, Scene};
 //!
 //! fn host(
 //!     transport: &mut dyn Transport,
 //!     clock: impl Fn() -> Instant,
 //! ) -> Result<(), Box<dyn std::error::Error>> {
-//!     let policy = SendPolicy::default();
-//!     let cfg = session_config(policy.clone(), policy.clone(), policy);
-//!     let session = Session::host(transport.local_id(), cfg, clock());
 //!     let scene = Scene::by_name("thesis-room", Path::new("assets"))?;
+//!     let policy = SendPolicy::default();
+//!     let cfg = scene.session_config(policy.clone(), policy.clone(), policy);
+//!     let session = Session::host(transport.local_id(), cfg, clock());
 //!     let mut peer = Peer::new(clock(), session, None, scene, PeerConfig::default())?;
 //!     peer.open(clock())?;
 //!     let dt = Duration::from_secs_f32(peer.config().dt_s);
@@ -79,4 +80,4 @@ pub use device::DeviceFrame;
 pub use events::{Counters, Event, PeerError, TopologyError};
 pub use mirror::{LocalBody, MirroredObject};
 pub use peer::{Peer, PeerConfig};
-pub use scene::{session_config, Kind, Placed, Scene};
+pub use scene::{BodyClass, Class, FixedBox, Kind, Placed, Scene, Shape};

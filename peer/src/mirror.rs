@@ -98,19 +98,19 @@ impl Mirror {
         if kind.is_avatar() {
             return Ok(LocalBody::Pose);
         }
-        if !kind.is_soft() {
-            return Ok(LocalBody::Rigid(Scene::build_rigid(
-                kind,
-                &mut self.world,
-                pos,
-                rot,
-            )));
-        }
+        let Some(config) = scene.soft_config(kind) else {
+            return scene
+                .build_rigid(kind, &mut self.world, pos, rot)
+                .map(LocalBody::Rigid)
+                .ok_or_else(|| {
+                    PeerError::Build(format!("class {} is not in scene {}", kind.0, scene.name))
+                });
+        };
         let mesh = scene.soft_mesh(kind).map_err(PeerError::Build)?;
         let h = self
             .soft
-            .insert(&mesh, Scene::soft_config(kind), &mut self.world)
-            .map_err(|e| PeerError::Build(format!("{}: {e}", kind.name())))?;
+            .insert(&mesh, config.clone(), &mut self.world)
+            .map_err(|e| PeerError::Build(format!("{}: {e}", scene.name_of(kind))))?;
         // Built around the origin, then placed: the rest shape stays in the body's own frame.
         if let Some(b) = self.soft.get_mut(h) {
             let particles: Vec<Vec3> = b.rest_offsets().iter().map(|o| pos + rot * *o).collect();
@@ -323,7 +323,15 @@ mod tests {
     use std::path::Path;
 
     fn scene() -> Scene {
-        Scene::by_name("bench-ball", Path::new(".")).unwrap()
+        Scene::by_name(
+            "bench-ball",
+            Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../assets")),
+        )
+        .unwrap()
+    }
+
+    fn kind(s: &Scene, name: &str) -> Kind {
+        s.kind(name).unwrap()
     }
 
     #[test]
@@ -333,14 +341,16 @@ mod tests {
         let statics = m.world.bodies.len();
         let pos = Vec3::new(0.0, 1.0, 0.0);
         let ball = m
-            .build(&scene, Kind::SoftBall, pos, Quat::IDENTITY)
+            .build(&scene, kind(&scene, "softball"), pos, Quat::IDENTITY)
             .unwrap();
-        let block = m.build(&scene, Kind::Block, pos, Quat::IDENTITY).unwrap();
-        let head = m.build(&scene, Kind::Head, pos, Quat::IDENTITY).unwrap();
+        let block = m
+            .build(&scene, kind(&scene, "block"), pos, Quat::IDENTITY)
+            .unwrap();
+        let head = m.build(&scene, Kind::HEAD, pos, Quat::IDENTITY).unwrap();
         assert_eq!(head, LocalBody::Pose);
-        m.insert(NetId(1), Kind::SoftBall, ball, None);
-        m.insert(NetId(2), Kind::Block, block, None);
-        m.insert(NetId(3), Kind::Head, head, Some(PeerId(7)));
+        m.insert(NetId(1), kind(&scene, "softball"), ball, None);
+        m.insert(NetId(2), kind(&scene, "block"), block, None);
+        m.insert(NetId(3), Kind::HEAD, head, Some(PeerId(7)));
         for id in [NetId(1), NetId(2)] {
             let r = m.object_ref(id).unwrap();
             assert_eq!(m.id_of(r), Some(id));
@@ -369,8 +379,10 @@ mod tests {
         let scene = scene();
         let mut m = Mirror::new(&scene, 1.0 / 60.0);
         let pos = Vec3::new(0.0, 1.0, 0.0);
-        let block = m.build(&scene, Kind::Block, pos, Quat::IDENTITY).unwrap();
-        m.insert(NetId(2), Kind::Block, block, None);
+        let block = m
+            .build(&scene, kind(&scene, "block"), pos, Quat::IDENTITY)
+            .unwrap();
+        m.insert(NetId(2), kind(&scene, "block"), block, None);
         let LocalBody::Rigid(h) = block else {
             panic!("a block is rigid")
         };
@@ -384,9 +396,9 @@ mod tests {
         assert_eq!(m.state(NetId(2)).unwrap().pos, to);
 
         let ball = m
-            .build(&scene, Kind::SoftBall, pos, Quat::IDENTITY)
+            .build(&scene, kind(&scene, "softball"), pos, Quat::IDENTITY)
             .unwrap();
-        m.insert(NetId(1), Kind::SoftBall, ball, None);
+        m.insert(NetId(1), kind(&scene, "softball"), ball, None);
         let mut s = m.state(NetId(1)).unwrap();
         s.particles.pop();
         assert!(!m.apply_shown(NetId(1), &s), "one particle short");

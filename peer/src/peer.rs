@@ -136,14 +136,14 @@ impl Peer {
     /// The host opens the room: spawn the scene's objects and our avatar.
     pub fn open(&mut self, now: Instant) -> Result<(), PeerError> {
         for p in self.scene.objects.clone() {
-            let body = self
-                .mirror
-                .build(&self.scene, p.kind, p.pos, Quat::IDENTITY)?;
-            let state = self.mirror.body_state(body, (p.pos, Quat::IDENTITY));
+            let body = self.mirror.build(&self.scene, p.kind, p.pos, p.rot)?;
+            let state = self.mirror.body_state(body, (p.pos, p.rot));
             let (id, _) = self
                 .session
                 .spawn(now, p.kind.class(), state)
-                .map_err(|e| PeerError::Build(format!("spawning {}: {e}", p.kind.name())))?;
+                .map_err(|e| {
+                    PeerError::Build(format!("spawning {}: {e}", self.scene.name_of(p.kind)))
+                })?;
             self.mirror.insert(id, p.kind, body, None);
         }
         self.spawn_avatar(now);
@@ -283,9 +283,10 @@ impl Peer {
                 if self.mirror.objects.contains_key(&id) {
                     return Ok(());
                 }
-                let Some(kind) = Kind::of_class(class) else {
+                let kind = Kind::of_class(class);
+                if self.scene.class(kind).is_none() {
                     return Ok(());
-                };
+                }
                 let s = self
                     .session
                     .latest_state(id)
@@ -464,7 +465,7 @@ impl Peer {
             };
             let s = self.mirror.body_state(o.body, o.pose);
             if let Err(e) = self.session.publish_state(now, id, &s) {
-                let msg = format!("not publishing {}: {e}", o.kind.name());
+                let msg = format!("not publishing {}: {e}", self.scene.name_of(o.kind));
                 self.events.push_back(Event::Warning(msg));
             }
         }

@@ -3,7 +3,9 @@
 #![allow(clippy::unwrap_used, missing_docs)]
 
 use glam::Vec3;
-use softsync_softbody::cut::{cut_mesh, topology_hash, CutError, CutPlane, MeshReport, Side};
+use softsync_softbody::cut::{
+    cut_mesh, cut_welded, topology_hash, CutError, CutPlane, MeshReport, Side,
+};
 use softsync_softbody::Mesh;
 
 use softsync_benchkit::SplitMix64 as Rng;
@@ -254,6 +256,39 @@ fn the_same_cut_gives_bit_identical_pieces() {
     for (p, q) in a.pieces.iter().zip(&b.pieces) {
         assert_eq!(p.mesh, q.mesh);
         assert_eq!(topology_hash(&p.mesh, 1e-5), topology_hash(&q.mesh, 1e-5));
+    }
+}
+
+#[test]
+fn a_cut_of_the_welded_form_is_the_cut_and_a_welded_form_that_does_not_match_is_refused() {
+    let m = bunny();
+    let w = m.weld(1e-6);
+    let plane = CutPlane::new(Vec3::new(0.0, 0.03, 0.0), Vec3::new(0.2, 1.0, 0.1)).unwrap();
+    let a = cut_mesh(&m, &plane).unwrap();
+    let b = cut_welded(&m, &w.positions, &w.triangles, &plane).unwrap();
+    assert_eq!(a.pieces.len(), b.pieces.len());
+    assert_eq!(a.intersection_points, b.intersection_points);
+    for (p, q) in a.pieces.iter().zip(&b.pieces) {
+        assert_eq!(p.mesh, q.mesh);
+    }
+    // A vertex moved, a triangle missing, an index out of range, a NaN: refused.
+    let mut moved = w.positions.clone();
+    moved[w.triangles[7][1] as usize].x += 1e-3;
+    let short = &w.triangles[1..];
+    let mut wild = w.triangles.clone();
+    wild[3][2] = u32::MAX;
+    let mut nan = w.positions.clone();
+    nan[0] = Vec3::NAN;
+    for (pos, tris) in [
+        (&moved[..], &w.triangles[..]),
+        (&w.positions[..], short),
+        (&w.positions[..], &wild[..]),
+        (&nan[..], &w.triangles[..]),
+    ] {
+        assert!(matches!(
+            cut_welded(&m, pos, tris, &plane),
+            Err(CutError::Mesh(_))
+        ));
     }
 }
 

@@ -16,7 +16,7 @@ use softsync_net::{
     ConditionerConfig, Instant, LinkConditioner, MemoryHub, NetId, PeerId, SendPolicy, Session,
     Transport,
 };
-use softsync_peer::{session_config, Event, Kind, Peer, PeerConfig, Scene};
+use softsync_peer::{Event, Peer, PeerConfig, Scene};
 
 const DT: f32 = 1.0 / 90.0;
 const HOST: PeerId = PeerId(100);
@@ -30,15 +30,15 @@ struct Node {
 
 impl Node {
     fn new(hub: &MemoryHub, me: PeerId, seed: u64) -> Self {
+        let assets = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets");
+        let scene = Scene::by_name("thesis-room", &assets).unwrap();
         let policy = SendPolicy::default();
-        let cfg = session_config(policy.clone(), policy.clone(), policy);
+        let cfg = scene.session_config(policy.clone(), policy.clone(), policy);
         let (session, contact) = if me == HOST {
             (Session::host(me, cfg, Instant::ZERO), None)
         } else {
             (Session::join(me, HOST, cfg, Instant::ZERO), Some(HOST))
         };
-        let assets = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets");
-        let scene = Scene::by_name("thesis-room", &assets).unwrap();
         let config = PeerConfig {
             dt_s: DT,
             avatar: false,
@@ -100,11 +100,13 @@ impl Node {
         }
     }
 
-    fn id_of(&self, kind: Kind) -> Vec<NetId> {
+    /// The objects of class `name`.
+    fn id_of(&self, name: &str) -> Vec<NetId> {
+        let kind = self.peer.scene().kind(name);
         self.peer
             .objects()
             .iter()
-            .filter(|(_, o)| o.kind == kind)
+            .filter(|(_, o)| Some(o.kind) == kind)
             .map(|(id, _)| *id)
             .collect()
     }
@@ -137,9 +139,9 @@ fn a_client_tears_the_bunny_and_cuts_the_box_and_the_host_shows_the_same_pieces(
     room.run(Duration::from_secs(3));
     let [host, client] = &mut room.nodes;
     assert!(client.peer.joined());
-    let bunny = client.id_of(Kind::Bunny)[0];
-    let soft_box = client.id_of(Kind::SoftBox)[0];
-    assert_eq!(host.id_of(Kind::Bunny), vec![bunny]);
+    let bunny = client.id_of("bunny")[0];
+    let soft_box = client.id_of("softbox")[0];
+    assert_eq!(host.id_of("bunny"), vec![bunny]);
     let untouched = host.peer.topology_hash(bunny).unwrap();
     assert_eq!(client.peer.topology_hash(bunny), Some(untouched));
     let now = room.now;
@@ -179,10 +181,10 @@ fn a_client_tears_the_bunny_and_cuts_the_box_and_the_host_shows_the_same_pieces(
     assert_eq!(host.peer.topology_hash(bunny), Some(torn));
     assert_eq!(client.peer.objects()[&bunny].topology, 5);
     assert_eq!(host.peer.objects()[&bunny].topology, 5);
-    let pieces = client.id_of(Kind::SoftBox);
+    let pieces = client.id_of("softbox");
     assert_eq!(pieces.len(), 2, "{pieces:?}");
     assert!(!pieces.contains(&soft_box));
-    assert_eq!(host.id_of(Kind::SoftBox), pieces);
+    assert_eq!(host.id_of("softbox"), pieces);
     let now = room.now;
     for id in &pieces {
         assert_eq!(client.peer.session().owner(*id), Some(CLIENT));
@@ -221,7 +223,7 @@ fn a_hand_with_its_trigger_held_tears_along_its_path_and_both_peers_agree() {
         now: Instant::ZERO,
     };
     room.run(Duration::from_secs(3));
-    let bunny = room.nodes[1].id_of(Kind::Bunny)[0];
+    let bunny = room.nodes[1].id_of("bunny")[0];
     let untouched = room.nodes[0].peer.topology_hash(bunny).unwrap();
     let c = room.nodes[1].peer.shown_state(room.now, bunny).unwrap().pos;
     // The right hand sweeps 10 cm across the bunny's back in 1 s, trigger held, then lets go.

@@ -7,7 +7,7 @@
 //! and both peers show the same shape, back at rest.
 #![allow(clippy::unwrap_used, missing_docs)]
 
-use std::path::Path;
+use std::path::PathBuf;
 use std::time::Duration;
 
 use glam::{Quat, Vec3};
@@ -17,7 +17,7 @@ use softsync_net::{
     ConditionerConfig, Instant, LinkConditioner, MemoryHub, NetId, ObjectState, PeerId, SendPolicy,
     Session, Transport,
 };
-use softsync_peer::{session_config, Event, Kind, Peer, PeerConfig, Scene};
+use softsync_peer::{Event, Peer, PeerConfig, Scene};
 
 const DT: f32 = 1.0 / 90.0;
 const HOST: PeerId = PeerId(100);
@@ -34,14 +34,15 @@ struct Node {
 
 impl Node {
     fn new(hub: &MemoryHub, me: PeerId, seed: u64) -> Self {
+        let assets = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets");
+        let scene = Scene::by_name("bench-ball", &assets).unwrap();
         let policy = SendPolicy::default();
-        let cfg = session_config(policy.clone(), policy.clone(), policy);
+        let cfg = scene.session_config(policy.clone(), policy.clone(), policy);
         let (session, contact) = if me == HOST {
             (Session::host(me, cfg, Instant::ZERO), None)
         } else {
             (Session::join(me, HOST, cfg, Instant::ZERO), Some(HOST))
         };
-        let scene = Scene::by_name("bench-ball", Path::new(".")).unwrap();
         let config = PeerConfig {
             hand: HandConfig {
                 // A hand that reaches exactly, as the app gives bots.
@@ -134,7 +135,7 @@ fn a_client_grabs_a_host_owned_soft_body_through_authority_and_the_host_sees_it(
         .peer
         .objects()
         .iter()
-        .find(|(_, o)| o.kind == Kind::SoftBall)
+        .find(|(_, o)| Some(o.kind) == client.peer.scene().kind("softball"))
         .expect("the client has no ball");
     assert_eq!(client.peer.session().owner(id), Some(HOST));
 

@@ -364,7 +364,67 @@ fn e_errors_are_clear_and_exit_non_zero() {
         ],
     );
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains("cannot load the bunny"), "{err}");
+    assert!(
+        err.contains("unknown scene \"thesis-room\"") && err.contains("/nonexistent"),
+        "{err}"
+    );
+
+    // Scene files: a broken one names the file and what is wrong; a joiner whose scene
+    // differs from the host's (one soft setting) is refused by the room.
+    let assets = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets");
+    let room = std::fs::read_to_string(assets.join("thesis-room.ron")).unwrap();
+    let bunny = assets.join("bunny.obj");
+    let room = room.replace("\"bunny.obj\"", &format!("{:?}", bunny.to_str().unwrap()));
+    let broken = dir.join("broken.ron");
+    std::fs::write(
+        &broken,
+        room.replace("(class: \"plate\"", "(class: \"saucer\""),
+    )
+    .unwrap();
+    let (code, err) = run(
+        "broken-scene",
+        &[
+            "host",
+            "--room",
+            "x",
+            "--signal",
+            &url,
+            "--scene",
+            broken.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("broken.ron") && err.contains("objects[0]") && err.contains("saucer"),
+        "{err}"
+    );
+    let stiffer = dir.join("stiffer.ron");
+    assert!(room.contains("stiffness: 20.0"));
+    std::fs::write(&stiffer, room.replace("stiffness: 20.0", "stiffness: 30.0")).unwrap();
+    let mut host = peer_on(
+        &dir,
+        "scene-host",
+        "host",
+        &url,
+        "scenes",
+        &["--bot", "idle"],
+    );
+    host.peer_id();
+    let (code, err) = run(
+        "other-scene",
+        &[
+            "join",
+            "--room",
+            "scenes",
+            "--signal",
+            &url,
+            "--scene",
+            stiffer.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(code, 3, "{err}");
+    assert!(err.contains("configuration differs"), "{err}");
+    host.kill();
 
     let (code, err) = run(
         "flag",

@@ -60,7 +60,11 @@ impl Session {
                 "protocol version mismatch: host speaks {PROTOCOL_VERSION}, you speak {protocol}"
             ))
         } else if digest != self.cfg.digest() {
-            Some("object class configuration differs from the host's".to_string())
+            Some(
+                "object class configuration differs from the host's (another scene, or other \
+                 replication settings)"
+                    .to_string(),
+            )
         } else if self.members.len() >= self.cfg.max_members {
             Some(format!(
                 "the room is full ({} members)",

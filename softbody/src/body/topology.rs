@@ -15,7 +15,7 @@ use rapier3d::prelude::PhysicsWorld;
 use super::{neighbour_scale, BodyPlan, SoftBody, Spawn};
 use crate::cluster::ClusterMethod;
 use crate::cut::particles::{update_after_tear, TornVertices};
-use crate::cut::{cut_mesh, CutError, CutPlane, TearMesh, TearSegment, TearStats};
+use crate::cut::{cut_welded, CutError, CutPlane, TearMesh, TearSegment, TearStats};
 use crate::mesh::{enclosed_volume, Mesh, WeldedMesh};
 use crate::{SoftBodyConfig, SoftBodyError};
 
@@ -209,7 +209,13 @@ impl SoftBody {
         world: &PhysicsWorld,
         plane: &CutPlane,
     ) -> Result<Vec<(BodyPlan, Spawn)>, CutError> {
-        let cut = cut_mesh(&self.rest_mesh, plane)?;
+        // The body's welded rest mesh is the rest mesh's welded form (built or torn so).
+        let cut = cut_welded(
+            &self.rest_mesh,
+            &self.rest_vertices,
+            &self.welded.triangles,
+            plane,
+        )?;
         let center = world
             .bodies
             .get(self.center)
@@ -219,7 +225,14 @@ impl SoftBody {
         if !(c.is_finite() && r.is_finite() && vc.is_finite() && wc.is_finite()) {
             return Err(CutError::NonFinite("the body's center state"));
         }
-        let old = vertex_index(&self.rest_vertices);
+        let made;
+        let old = match &self.rest_index {
+            Some(i) => i,
+            None => {
+                made = vertex_index(&self.rest_vertices);
+                &made
+            }
+        };
         // Each old vertex's displacement from where the center's rigid motion puts it.
         let displaced = |v: usize| {
             let d = self.vertices[v] - (c + r * self.rest_vertices[v]);

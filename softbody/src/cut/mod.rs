@@ -8,7 +8,8 @@
 //!   the new vertices (normals interpolated per face corner, so hard edges stay hard), caps
 //!   both sides (`cap`: a constrained Delaunay triangulation of the section, inside chosen by
 //!   the even–odd rule, so nested outlines and holes come out right) and separates each side
-//!   into its connected pieces.
+//!   into its connected pieces. [`cut_welded`] does the same for a mesh whose welded form the
+//!   caller already has (a soft body keeps it), skipping the weld, most of a cut's time.
 //! - [`TearMesh`] (in `tear`): progressive tearing (Algorithm 1) by the boxes of consecutive
 //!   scalpel segments, over mesh [`Sections`] so a segment searches only nearby faces.
 //! - [`MeshReport`] (in `check`): the validity of a mesh after cuts — degenerate or duplicate
@@ -34,7 +35,7 @@ use thiserror::Error;
 pub use check::MeshReport;
 pub use hash::topology_hash;
 pub use particles::TearBoxPlanes;
-pub use plane::{cut_mesh, Cut, Piece, Side};
+pub use plane::{cut_mesh, cut_welded, Cut, Piece, Side};
 pub use sections::{Aabb, Sections};
 pub use tear::{TearMesh, TearSegment, TearStats, MAX_SEGMENT_M, MAX_TEAR_WIDTH_M, SECTION_FACES};
 

@@ -97,6 +97,52 @@ struct Crossing {
 /// unusable. A cut always separates the two sides: the plane is unbounded, as in the paper. A
 /// partial incision that leaves the object in one piece is a tear, not a cut.
 pub fn cut_mesh(mesh: &Mesh, plane: &CutPlane) -> Result<Cut, CutError> {
+    check_cut_input(mesh, plane)?;
+    let (welded_positions, welded_triangles) =
+        weld_positions(&mesh.positions, &mesh.triangles, WELD_EPS_M);
+    cut_checked(mesh, &welded_positions, &welded_triangles, plane)
+}
+
+/// [`cut_mesh`] of a mesh already welded: `positions` and `triangles` are its welded form
+/// (what a soft body keeps from its build or last tear: each render triangle's corners as
+/// welded vertices, numbered by first use), so the cut does not weld again — the weld is most
+/// of a cut's time, and a body has paid it once. The welded form must match the mesh: one
+/// welded triangle per render triangle, every corner within the weld tolerance of its render
+/// vertex; else refused. With the welded form `cut_mesh` would make, the result is identical.
+pub fn cut_welded(
+    mesh: &Mesh,
+    positions: &[Vec3],
+    triangles: &[[u32; 3]],
+    plane: &CutPlane,
+) -> Result<Cut, CutError> {
+    check_cut_input(mesh, plane)?;
+    let n = positions.len();
+    if triangles.len() != mesh.triangles.len() || n > mesh.positions.len() {
+        return Err(CutError::Mesh(format!(
+            "welded form of {n} vertices and {} triangles for a mesh of {} and {}",
+            triangles.len(),
+            mesh.positions.len(),
+            mesh.triangles.len()
+        )));
+    }
+    let tolerance_sq = (2.0 * WELD_EPS_M) * (2.0 * WELD_EPS_M);
+    for (w, r) in triangles.iter().zip(&mesh.triangles) {
+        for k in 0..3 {
+            let ok = positions.get(w[k] as usize).is_some_and(|p| {
+                p.is_finite() && p.distance_squared(mesh.positions[r[k] as usize]) <= tolerance_sq
+            });
+            if !ok {
+                return Err(CutError::Mesh(
+                    "the welded form does not match the mesh's triangles".into(),
+                ));
+            }
+        }
+    }
+    cut_checked(mesh, positions, triangles, plane)
+}
+
+/// What a cut refuses before it looks at the geometry.
+fn check_cut_input(mesh: &Mesh, plane: &CutPlane) -> Result<(), CutError> {
     if mesh.triangles.len() > MAX_CUT_TRIANGLES {
         return Err(CutError::Mesh(format!(
             "{} triangles, more than the {MAX_CUT_TRIANGLES} a cut accepts",
@@ -108,10 +154,16 @@ pub fn cut_mesh(mesh: &Mesh, plane: &CutPlane) -> Result<Cut, CutError> {
     if !(plane.normal.is_finite() && plane.offset_m.is_finite()) {
         return Err(CutError::NonFinite("plane"));
     }
-    let (welded_positions, welded_triangles) =
-        weld_positions(&mesh.positions, &mesh.triangles, WELD_EPS_M);
-    let pos = &welded_positions;
-    let tris = &welded_triangles;
+    Ok(())
+}
+
+/// The cut proper, on a checked mesh and its welded form `pos`, `tris`.
+fn cut_checked(
+    mesh: &Mesh,
+    pos: &[Vec3],
+    tris: &[[u32; 3]],
+    plane: &CutPlane,
+) -> Result<Cut, CutError> {
     let corner_normals = corner_normals(mesh, pos, tris);
 
     let (lo, hi) = bounds(pos);
