@@ -812,12 +812,14 @@ fn readme(rows: &[Row], results: &[String]) -> String {
          from its build or last tear, as rapier's body keeps its own): split the crossing \
          faces, cap both sides with a triangulated cross-section, separate the connected \
          pieces (closed solids). **With the weld** is `cut_mesh` on a bare render mesh, which \
-         welds it first (the weld alone, once: the next column). **Body cut** is the whole \
+         welds it first with its packed-grid weld (the difference of the two columns). **Build \
+         weld** is `Mesh::weld`, the weld a body's build makes once (the exhaustive 27-cell \
+         search, slower). **Body cut** is the whole \
          `SoftBodySet::cut`: that cut, then every piece made a soft body of its own \
          (clustered, its rapier bodies and colliders inserted) — what rapier's cut also does \
          for its pieces. The paper's cut splits and separates; it does not cap. Intersection \
          points: crossing welded edges (each point is in both pieces once).\n\n\
-         | mesh | vertices | intersection points | **ours ms** | with the weld ms | weld ms | body cut ms | rapier ms | rapier / ours | rapier / with the weld | rapier / body cut | paper model | its vertices | its points | paper ms |\n\
+         | mesh | vertices | intersection points | **ours ms** | with the weld ms | build weld ms | body cut ms | rapier ms | rapier / ours | rapier / with the weld | rapier / body cut | paper model | its vertices | its points | paper ms |\n\
          |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     for r in rows {
@@ -873,7 +875,7 @@ fn readme(rows: &[Row], results: &[String]) -> String {
          meets (the cut follows the mesh's edges, no vertices are added, nothing is capped), \
          then separates the pieces into soft bodies of their own with their colliders. Ours adds \
          the exact intersection points, caps both sides and separates into meshes; making \
-         bodies of the pieces is the soft body's (not timed). Also timed: the same cut of \
+         bodies of the pieces is timed apart (Table 3's body cut). Also timed: the same cut of \
          rapier's volumetric body of the mesh (`SoftBodyBuilder::volumetric`, cells a tenth of \
          the mesh's size; the cut then runs through its tetrahedra).\n\
          - **Tear**: the edges the segment's blade sweeps (the quad from the tip's path to the \
