@@ -9,7 +9,7 @@ use crate::{HandId, ObjectRef, Target};
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum InteractionEvent {
     /// The hand wants `object`, which the local peer does not own: ask for authority, then
-    /// call [`Interaction::grant`] or [`Interaction::deny`].
+    /// call [`Interaction::grant`](crate::Interaction::grant) or [`Interaction::deny`](crate::Interaction::deny).
     AuthorityRequested {
         /// The hand.
         hand: HandId,

@@ -1,4 +1,4 @@
-//! What this peer keeps per remote peer ([`Link`]): the reliable control channel, datagram
+//! What this peer keeps per remote peer (`Link`): the reliable control channel, datagram
 //! sequences (loss, and which datagram is the newest), the sender's clock (interpolation
 //! timing), acknowledgements of state datagrams both ways, the RTT estimate, keyframe
 //! requests, and what is queued to go out.

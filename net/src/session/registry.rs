@@ -1,4 +1,4 @@
-//! The room's objects as this peer knows them ([`Registry`]): each one's spawn record, its
+//! The room's objects as this peer knows them (`Registry`): each one's spawn record, its
 //! state on the quantization grid (what replication compares and sends), what its owner last
 //! published, and the snapshot buffer remote peers interpolate; object ids and the per-peer
 //! limits the host enforces.

@@ -6,7 +6,7 @@
 //!
 //! One module owns the byte layout both ways: [`PacketWriter`] writes datagrams section by
 //! section, [`decode_datagram`] reads them; the session never writes a tag byte itself.
-//! Children: [`control`] (control messages), [`state`] (bit-packed state entries).
+//! Children: `control` (control messages), `state` (bit-packed state entries).
 
 mod control;
 mod state;

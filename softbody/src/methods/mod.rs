@@ -8,7 +8,7 @@
 //! | [`ispc`] | internal shape-preserving links (ISPC paper Algorithm 2) |
 //! | [`tets`] | XPBD tets on parry's `volume_mesh` cover (Apache-2.0), surface embedded |
 //! | [`lattice`] | a well-shaped Kuhn lattice of tets weighted by inside fraction (the reference's mesh) |
-//! | [`reference`] | the verified accuracy reference: stable Neo-Hookean tets, its spec and convergence |
+//! | [`reference`](mod@reference) | the verified accuracy reference: stable Neo-Hookean tets, its spec and convergence |
 //! | [`spec`] | what a method is: [`MethodKind`], [`MethodSpec`] (resolution, budget), [`spec::Material`] |
 //! | [`builders`] | one constructor per method and resolution ([`build_model`]) |
 //! | [`particle`] | the thesis's particle method ([`crate::SoftBodySet`]) as a model |

@@ -102,7 +102,7 @@ impl NeoHookeanGroup {
         }
     }
 
-    /// How often a tet was pushed back up to [`MIN_VOLUME_RATIO`] (the floor engaged), in
+    /// How often a tet was pushed back up to `MIN_VOLUME_RATIO` (the floor engaged), in
     /// all tets and in tets at least half inside the surface (the rest is the fringe of
     /// fictitious material around it, soft in proportion, which contacts crush most).
     pub fn floor_hits(&self) -> (u64, u64) {
