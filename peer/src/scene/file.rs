@@ -64,14 +64,14 @@ struct SceneFile {
 }
 
 #[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, rename = "Bounds")]
 struct BoundsFile {
     min: [f32; 3],
     max: [f32; 3],
 }
 
 #[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, rename = "Fixed")]
 struct FixedFile {
     half_extents: [f32; 3],
     at: [f32; 3],
@@ -82,7 +82,7 @@ struct FixedFile {
 }
 
 #[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, rename = "Class")]
 struct ClassFile {
     name: String,
     shape: ShapeFile,
@@ -96,7 +96,7 @@ struct ClassFile {
 }
 
 #[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, rename = "Shape")]
 enum ShapeFile {
     Ball {
         radius: f32,
@@ -119,7 +119,7 @@ enum ShapeFile {
 }
 
 #[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, rename = "Body")]
 enum BodyFile {
     Rigid {
         density: f32,
@@ -131,7 +131,7 @@ enum BodyFile {
 }
 
 #[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, rename = "Object")]
 struct ObjectFile {
     class: String,
     at: [f32; 3],
@@ -143,7 +143,7 @@ struct ObjectFile {
 /// A class's replication settings that differ from the room's defaults (thesis 5.3–5.4); a
 /// field left out keeps the default (the `--send-rate` and `--threshold-mm` of the peer).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, rename = "Replication")]
 pub struct ReplicationFile {
     /// Updates per second while moving (0.1–240).
     #[serde(default)]
@@ -605,6 +605,12 @@ mod tests {
             .unwrap()
             + 1;
         assert!(e.contains(&format!("{line}:")), "line {line}: {e}");
+        // Types are named as the file writes them, not as the code does.
+        let e = err(&swap(
+            "colour: (0.93, 0.93, 0.90)",
+            "colr: (0.93, 0.93, 0.90)",
+        ));
+        assert!(e.contains("colr") && e.contains("`Class`"), "{e}");
         let e = err(&swap("density: 800.0", "density: \"heavy\""));
         assert!(e.contains("heavy") || e.contains("float"), "{e}");
         // A missing mesh names the class and the file.
