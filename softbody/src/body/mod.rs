@@ -8,6 +8,10 @@
 //! rest mesh and updates its particle map (tear paper Algorithm 4), and plans the bodies a
 //! cut makes of it. Tears and cuts are given in the *rest frame*: relative to the rest center,
 //! in the center body's local frame (see [`SoftBody::rest_vertices`]).
+//!
+//! Just over 800 lines: the struct's fields, its build (`BodyPlan`) and its per-step work
+//! (restoring, wake, deformation) read each other's invariants and are one owned part; the
+//! parts that stand alone already live in `set`, `handle` and `topology`.
 
 pub(crate) mod handle;
 pub(crate) mod set;
