@@ -21,6 +21,7 @@ pub mod fuzzing;
 pub mod harness;
 pub mod ids;
 pub mod interp;
+pub mod messages;
 pub mod policy;
 pub mod quant;
 pub mod reliable;
@@ -34,11 +35,15 @@ pub mod wire;
 pub use error::NetError;
 pub use ids::{AuthorityEpoch, ClassId, NetId, PeerId, Term};
 pub use interp::InterpolationConfig;
-pub use policy::{AuthorityPolicy, ClassConfig, SendPolicy, SessionConfig, SoftBodyMode};
+pub use policy::{
+    AuthorityPolicy, ClassConfig, MessageConfig, SendPolicy, SessionConfig, SoftBodyMode,
+};
 pub use session::{DisplayedState, Event, ObjectState, Session};
 pub use stats::Stats;
 pub use time::Instant;
 #[cfg(feature = "testing")]
 pub use transport::MemoryHub;
 pub use transport::{ConditionerConfig, LinkConditioner, PeerEvent, Transmit, Transport};
-pub use wire::PROTOCOL_VERSION;
+pub use wire::{
+    Delivery, MessageKind, MessageRefusal, MessageTarget, ReceivedMessage, PROTOCOL_VERSION,
+};

@@ -186,6 +186,44 @@ pub struct SessionConfig {
     /// a joiner with other content is refused at the handshake. 0: none.
     #[serde(default)]
     pub content_digest: u64,
+    /// The application's message types and the bounds on them; part of
+    /// [`digest`](Self::digest).
+    #[serde(default)]
+    pub messages: MessageConfig,
+}
+
+/// The application's message types and the room's bounds on messages. Every peer enforces
+/// the bounds on what it sends, the host again on what it relays.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct MessageConfig {
+    /// Message type names; a [`MessageKind`](crate::wire::MessageKind) is an index here
+    /// ([`crate::messages::MessageTypes::configure`] fills it from the registered types).
+    pub kinds: Vec<String>,
+    /// Largest payload, bytes (at most [`MAX_MESSAGE_PAYLOAD`](crate::wire::MAX_MESSAGE_PAYLOAD)).
+    pub max_payload: usize,
+    /// Messages per second a peer may send, sustained.
+    pub rate_per_s: f32,
+    /// Messages a peer may send at once above the rate.
+    pub burst: u32,
+    /// A peer's reliable messages not yet delivered to all their targets; more are refused
+    /// ([`MessageRefusal::QueueFull`](crate::wire::MessageRefusal::QueueFull)).
+    pub max_outbox: usize,
+    /// Unreliable messages waiting for the next datagram to one peer; more are dropped.
+    pub max_unreliable_queue: usize,
+}
+
+impl Default for MessageConfig {
+    fn default() -> Self {
+        MessageConfig {
+            kinds: Vec::new(),
+            max_payload: crate::wire::MAX_MESSAGE_PAYLOAD,
+            rate_per_s: 60.0,
+            burst: 120,
+            max_outbox: 256,
+            max_unreliable_queue: 64,
+        }
+    }
 }
 
 fn default_max_members() -> usize {
@@ -212,15 +250,30 @@ impl Default for SessionConfig {
             max_objects_per_peer: default_max_objects_per_peer(),
             max_particles_per_peer: default_max_particles_per_peer(),
             content_digest: 0,
+            messages: MessageConfig::default(),
         }
     }
 }
 
 impl SessionConfig {
+    /// The largest application payload this room takes: the configured bound, within
+    /// [`MAX_MESSAGE_PAYLOAD`](crate::wire::MAX_MESSAGE_PAYLOAD) and small enough that its
+    /// envelope fits one datagram of [`mtu`](Self::mtu) (100 bytes for the datagram header
+    /// and the envelope).
+    pub fn max_message_payload(&self) -> usize {
+        self.messages
+            .max_payload
+            .min(crate::wire::MAX_MESSAGE_PAYLOAD)
+            .min(self.mtu.saturating_sub(100))
+    }
+
     /// A digest of everything that must agree across peers (compared in the join handshake).
     pub fn digest(&self) -> u64 {
         // FNV-1a over the class table's JSON-free debug text: stable within one build.
-        let text = format!("{:?}|{}", self.classes, self.content_digest);
+        let text = format!(
+            "{:?}|{}|{:?}",
+            self.classes, self.content_digest, self.messages
+        );
         let mut h: u64 = 0xcbf2_9ce4_8422_2325;
         for b in text.bytes() {
             h ^= u64::from(b);

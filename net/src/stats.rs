@@ -91,6 +91,28 @@ pub struct Stats {
     /// after a migration), implausible (an epoch or id the sender cannot know) or over a
     /// per-peer limit.
     pub refused_controls: u64,
+    /// Application messages.
+    pub messages: MessageStats,
+}
+
+/// Application message counters.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MessageStats {
+    /// Messages we sent (accepted by our own checks).
+    pub sent: u64,
+    /// Messages delivered to us.
+    pub received: u64,
+    /// Host: copies relayed to targets.
+    pub relayed: u64,
+    /// Our reliable messages that reached every target.
+    pub delivered: u64,
+    /// Reliable messages we had already (resent after a migration), dropped.
+    pub duplicates: u64,
+    /// Unreliable messages dropped: a full queue, or too big for a datagram.
+    pub unreliable_dropped: u64,
+    /// Refusals by reason: ours (at send, or told by the host) and, at the host, those it
+    /// refused for members.
+    pub refused: BTreeMap<crate::wire::MessageRefusal, u64>,
 }
 
 impl Stats {

@@ -249,6 +249,33 @@ fn arb_control() -> impl Strategy<Value = Control> {
                     blade: a
                 },
             }),
+        (
+            arb_peer(),
+            1u32..,
+            any::<u16>(),
+            prop_oneof![
+                Just(softsync_net::MessageTarget::Everyone),
+                Just(softsync_net::MessageTarget::Host),
+                arb_peer().prop_map(softsync_net::MessageTarget::Peer),
+                arb_id().prop_map(|i| softsync_net::MessageTarget::OwnerOf(NetId(i))),
+            ],
+            prop::collection::vec(any::<u8>(), 0..=softsync_net::wire::MAX_MESSAGE_PAYLOAD)
+        )
+            .prop_map(|(origin, seq, kind, to, payload)| {
+                let delivery = if to == softsync_net::MessageTarget::Everyone && seq % 2 == 0 {
+                    softsync_net::Delivery::Retained
+                } else {
+                    softsync_net::Delivery::Reliable
+                };
+                Control::Message(softsync_net::wire::AppMessage {
+                    origin,
+                    seq,
+                    kind: softsync_net::MessageKind(kind),
+                    to,
+                    delivery,
+                    payload,
+                })
+            }),
     ]
 }
 

@@ -141,7 +141,8 @@ fn render() -> String {
         tag::STATE
     )
     .unwrap();
-    writeln!(w, "| {} | state ack | `u8` newest datagram sequence with state received, `u32` bits for the 32 before it (bit i = newest − 1 − i) |\n", tag::STATE_ACK).unwrap();
+    writeln!(w, "| {} | state ack | `u8` newest datagram sequence with state received, `u32` bits for the 32 before it (bit i = newest − 1 − i) |", tag::STATE_ACK).unwrap();
+    writeln!(w, "| {} | message | `varint` length ≤ {}, bincode-2 `AppMessage` with `seq` 0 and `delivery` Unreliable (an unreliable application message) |\n", tag::MESSAGE, wire::MAX_CONTROL_LEN).unwrap();
     writeln!(w, "Unknown tags, truncated fields, lengths beyond the datagram, over-long varints or entry counts that cannot fit the block are decode errors; the datagram is dropped and counted.\n").unwrap();
 
     writeln!(w, "## State entries (bit-packed)\n").unwrap();
@@ -246,7 +247,7 @@ fn render() -> String {
     )
     .unwrap();
     writeln!(w, "Retransmitted after an RTO of 1.25 × smoothed RTT + 20 ms (≥ `min_rto`) with gentle backoff; the receiver delivers in order within a window of {} messages and acks cumulatively. Floats are validated finite, lists bounded ({} members, {} particles).\n", softsync_net::reliable::WINDOW, wire::MAX_MEMBERS, wire::MAX_PARTICLES).unwrap();
-    let examples: Vec<(&str, Control)> = vec![
+    let mut examples: Vec<(&str, Control)> = vec![
         (
             "Hello",
             Control::Hello {
@@ -394,6 +395,29 @@ fn render() -> String {
             },
         ),
     ];
+    let bell = wire::AppMessage {
+        origin: PeerId(101),
+        seq: 12,
+        kind: wire::MessageKind(0),
+        to: wire::MessageTarget::Everyone,
+        delivery: wire::Delivery::Retained,
+        payload: vec![3],
+    };
+    examples.push((
+        "Message (a retained one-byte payload)",
+        Control::Message(bell),
+    ));
+    examples.push((
+        "MessagesDelivered",
+        Control::MessagesDelivered { up_to: 12 },
+    ));
+    examples.push((
+        "MessageRefused",
+        Control::MessageRefused {
+            seq: 13,
+            reason: wire::MessageRefusal::Filtered(7),
+        },
+    ));
     writeln!(
         w,
         "| message | example size (bytes) | example bytes |\n|---|---:|---|"
@@ -404,6 +428,10 @@ fn render() -> String {
         writeln!(w, "| {name} | {} | `{}` |", b.len(), hex(&b)).unwrap();
     }
     writeln!(w).unwrap();
+
+    let mc = softsync_net::MessageConfig::default();
+    writeln!(w, "## Application messages\n").unwrap();
+    writeln!(w, "An application's own message travels in an `AppMessage` envelope: origin peer, the origin's number (from 1 per reliable or retained message, 0 for unreliable), kind (an index into `SessionConfig::messages.kinds`, whose names are part of the configuration digest checked at join), target (`Everyone`, `Peer(id)`, `OwnerOf(object)`, `Host`), delivery (`Reliable`, `Unreliable`, `Retained`) and at most {} payload bytes. Reliable and retained ones go origin → host in a `Message` control message, and host → each target likewise; unreliable ones in a `message` section, relayed the same way. The host checks the origin (it must be the sender), the kind, the size, the origin's rate (token bucket, default {} per second, burst {}; after a takeover the burst grows by the outbox bound so resends pass) and its application filter, and answers a refused reliable message with `MessageRefused`. Once every target's link acknowledged the relayed copy (or the target left), the host tells the origin `MessagesDelivered` up to that number. The origin keeps undelivered messages (at most {}) and sends them again, in order, to a new host after a migration; a receiver delivers a reliable message only if its number is above the last it delivered from that origin, so each target gets it exactly once. The host, and every member, keeps the latest retained message of each kind; a joiner receives them after the object snapshot.\n", wire::MAX_MESSAGE_PAYLOAD, mc.rate_per_s, mc.burst, mc.max_outbox).unwrap();
 
     writeln!(w, "## Refusal datagram (version-independent)\n").unwrap();
     let r = encode_refusal(
@@ -465,6 +493,7 @@ fn render() -> String {
                 wire::Section::KeyframeRequest { .. } => "keyframe request",
                 wire::Section::State { .. } => "state",
                 wire::Section::StateAck { .. } => "state ack",
+                wire::Section::Message(_) => "message",
             })
             .collect();
         writeln!(

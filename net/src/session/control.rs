@@ -89,7 +89,9 @@ impl Session {
                 host,
                 join_seq: _,
                 members,
-            } if self.role == Role::Joining && from == host => self.on_welcome(term, host, members),
+            } if self.role == Role::Joining && from == host => {
+                self.on_welcome(now, term, host, members);
+            }
             Control::Refused { reason } if self.role == Role::Joining => self.on_refused(reason),
             Control::Redirect { host } if self.role == Role::Joining && from != host => {
                 self.join_via(now, host);
@@ -127,6 +129,13 @@ impl Session {
                 members,
             } if host == from && self.role == Role::Client => {
                 self.on_new_host(now, from, term, members);
+            }
+            // ---- application messages (messages.rs)
+            Control::Message(m) if self.is_member_client(from) => self.host_relay(now, from, m),
+            Control::Message(m) if from_host => self.deliver_message(m),
+            Control::MessagesDelivered { up_to } if from_host => self.on_messages_delivered(up_to),
+            Control::MessageRefused { seq, reason } if from_host => {
+                self.on_message_refused(seq, reason);
             }
             // ---- requests at the host
             msg @ (Control::SpawnRequest { .. }

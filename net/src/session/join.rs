@@ -61,8 +61,8 @@ impl Session {
             ))
         } else if digest != self.cfg.digest() {
             Some(
-                "object class configuration differs from the host's (another scene, or other \
-                 replication settings)"
+                "room configuration differs from the host's (another scene, other replication \
+                 settings, or other message types)"
                     .to_string(),
             )
         } else if self.members.len() >= self.cfg.max_members {
@@ -80,6 +80,7 @@ impl Session {
         let join_seq = self.next_join_seq;
         self.next_join_seq = self.next_join_seq.saturating_add(1);
         self.members.insert(from, join_seq);
+        self.forget_message_origin(from);
         let members: Vec<(PeerId, u32)> = self.members.iter().map(|(p, s)| (*p, *s)).collect();
         let welcome = Control::Welcome {
             term: self.term,
@@ -89,6 +90,7 @@ impl Session {
         };
         self.send_control(now, from, &welcome);
         self.send_snapshot(now, from);
+        self.send_retained(now, from);
         self.broadcast(
             now,
             &Control::PeerJoined {
@@ -101,12 +103,20 @@ impl Session {
     }
 
     /// The host welcomed us.
-    pub(super) fn on_welcome(&mut self, term: Term, host: PeerId, members: Vec<(PeerId, u32)>) {
+    pub(super) fn on_welcome(
+        &mut self,
+        now: Instant,
+        term: Term,
+        host: PeerId,
+        members: Vec<(PeerId, u32)>,
+    ) {
         self.role = Role::Client;
         self.term = term;
         self.host = Some(host);
         self.members = members.into_iter().collect();
         self.events.push_back(Event::Joined { host, term });
+        // reliable messages sent while joining
+        self.resend_outbox(now);
     }
 
     /// The host refused us while joining.
@@ -118,6 +128,7 @@ impl Session {
     /// Our host says `peer` joined.
     pub(super) fn on_peer_joined(&mut self, peer: PeerId, join_seq: u32) {
         self.members.insert(peer, join_seq);
+        self.forget_message_origin(peer);
         self.links.entry(peer).or_default();
         self.events.push_back(Event::PeerJoined(peer));
     }
@@ -125,6 +136,7 @@ impl Session {
     /// Our host says `peer` left or timed out.
     pub(super) fn on_peer_left(&mut self, peer: PeerId) {
         self.members.remove(&peer);
+        self.forget_message_origin(peer);
         // Its sequences die with its membership: should it join again, it does so with a
         // fresh session, and both ends start over.
         self.links.remove(&peer);
@@ -156,6 +168,8 @@ impl Session {
             self.host_grant(now, id, me, false);
         }
         self.forget_asks_of(p);
+        self.forget_message_origin(p);
+        self.advance_deliveries(now);
     }
 }
 
@@ -196,7 +210,7 @@ mod tests {
         w.add(Session::join(PeerId(3), PeerId(1), small.clone(), w.now));
         w.settle();
         assert!(
-            matches!(&w.events(2)[..], [Event::Refused { reason }] if reason.contains("class"))
+            matches!(&w.events(2)[..], [Event::Refused { reason }] if reason.contains("configuration"))
         );
         w.add(Session::join(PeerId(4), PeerId(1), small, w.now));
         w.settle();

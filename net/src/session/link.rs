@@ -359,6 +359,8 @@ pub(crate) struct Link {
     pub pong_due: Option<u32>,
     /// A ping of ours to send.
     pub ping_due: bool,
+    /// Unreliable application messages for the next datagram (encoded sections).
+    pub unreliable: std::collections::VecDeque<Vec<u8>>,
 }
 
 impl Link {
@@ -371,6 +373,7 @@ impl Link {
             || !self.pending.is_empty()
             || self.state_acks.is_owed()
             || self.reliable.has_due(now)
+            || !self.unreliable.is_empty()
     }
 
     /// Forget the replication state toward and from the peer (a new host: every chain

@@ -149,6 +149,7 @@ impl Session {
             .collect();
         for p in &dead {
             self.members.remove(p);
+            self.forget_message_origin(*p);
             if let Some(l) = self.links.get_mut(p) {
                 l.pending.clear();
             }
@@ -195,8 +196,11 @@ impl Session {
                 },
             );
             self.send_snapshot(now, p);
+            self.send_retained(now, p);
         }
         self.events.push_back(Event::HostChanged { host: me, term });
+        // our messages the old host had not delivered everywhere: we relay them now
+        self.resend_outbox(now);
         // our own spawn requests the old host never answered: we create them now
         for (request, class, st) in self.spawns.take_all() {
             let _ = self.host_spawn_own(now, class, &st, request);
@@ -293,6 +297,7 @@ impl Session {
         for p in gone {
             self.links.remove(&p);
             self.stats.links.remove(&p);
+            self.forget_message_origin(p);
         }
         for l in self.links.values_mut() {
             l.reset_replication();
@@ -321,6 +326,8 @@ impl Session {
         for msg in requests {
             self.send_control(now, host, &msg);
         }
+        // our messages the old host had not delivered everywhere, in order
+        self.resend_outbox(now);
         self.events.push_back(Event::HostChanged { host, term });
     }
 }

@@ -19,6 +19,7 @@
 //! | `authority` | who owns what: requests, grants, asks, releases, post-migration claims |
 //! | `liveness` | heartbeats, timeouts, our own stalls, peers told they were dropped |
 //! | `migration` | electing the next host, taking over, following a new host |
+//! | `messages` | application messages: outbox, duplicate filter, retained table, host relay |
 //! | `control` | routing control messages; the host as a client of itself |
 //! | [`topology`] | tears and cuts: the owner's requests, the host's checks, per-object logs |
 
@@ -28,6 +29,7 @@ mod delta;
 mod join;
 pub mod link;
 mod liveness;
+mod messages;
 mod migration;
 mod recv;
 pub mod registry;
@@ -55,7 +57,7 @@ use crate::policy::{ClassConfig, SessionConfig, SoftBodyMode};
 use crate::stats::Stats;
 use crate::time::{min_opt, Instant};
 pub use crate::transport::Transmit;
-use crate::wire::DenyReason;
+use crate::wire::{DenyReason, MessageRefusal, ReceivedMessage};
 
 /// Non-member peers (joiners, unknown senders) we keep link state for at once.
 pub const MAX_STRANGERS: usize = 32;
@@ -155,6 +157,21 @@ pub enum Event {
         /// Asking peer.
         by: PeerId,
     },
+    /// An application message for us ([`Session::send_message`]; decode a typed one with
+    /// [`crate::messages::MessageTypes::decode`]).
+    Message(ReceivedMessage),
+    /// Our reliable message `seq` reached every target.
+    MessageDelivered {
+        /// Its number.
+        seq: u32,
+    },
+    /// The host refused our message `seq`: it reached nobody.
+    MessageRefused {
+        /// Its number.
+        seq: u32,
+        /// Why.
+        reason: MessageRefusal,
+    },
 }
 
 /// Where this peer stands in the room.
@@ -201,6 +218,7 @@ pub struct Session {
     /// Host: topology requests refused, by reason.
     topology_refused: topology::TopologyRefusals,
     last_relay_at: Option<Instant>,
+    messages: messages::Messages,
 }
 
 impl Session {
@@ -229,6 +247,7 @@ impl Session {
             stats: Stats::default(),
             topology_refused: topology::TopologyRefusals::default(),
             last_relay_at: None,
+            messages: messages::Messages::default(),
         }
     }
 

@@ -151,6 +151,7 @@ impl Session {
 
         let mut states = Vec::new();
         let mut controls = Vec::new();
+        let mut unreliable = Vec::new();
         for s in sections {
             match s {
                 Section::Ack { next_expected } => self.on_reliable_ack(now, from, next_expected),
@@ -192,10 +193,18 @@ impl Session {
                 }
                 Section::State { count, bits } => states.push((count, bits)),
                 Section::StateAck { latest, mask } => self.on_state_ack(from, latest, mask),
+                Section::Message(m) => unreliable.push(m),
             }
         }
         for c in controls {
             self.deliver_control(now, from, c);
+        }
+        for m in unreliable {
+            if self.is_member_client(from) {
+                self.host_relay(now, from, m);
+            } else if Some(from) == self.host && self.role == Role::Client {
+                self.deliver_message(m);
+            }
         }
         if !self.members.contains_key(&from) && Some(from) != self.host {
             return; // state only from members
@@ -286,6 +295,7 @@ impl Session {
                     self.queue_entries(now, from, id, Refresh::Keyframe);
                 }
             }
+            self.advance_deliveries(now);
         }
     }
 

@@ -451,6 +451,17 @@ impl Session {
         }
         link.reliable
             .take_due(now, rto, |seq, bytes| w.reliable(seq, bytes));
+        // unreliable messages next, before state; one too big for any datagram is dropped
+        while let Some(m) = link.unreliable.front() {
+            if w.message(m) {
+                link.unreliable.pop_front();
+            } else if w.is_empty() {
+                link.unreliable.pop_front();
+                self.stats.messages.unreliable_dropped += 1;
+            } else {
+                break;
+            }
+        }
         if !link.pending.is_empty() {
             link.pending.sort_by_key(|e| e.id);
             let mut block = StateBlockWriter::new(w.state_budget_bits());

@@ -6,6 +6,7 @@ use crate::error::{decode_err, NetError};
 use crate::ids::{AuthorityEpoch, ClassId, NetId, PeerId, Term};
 use crate::policy::AuthorityPolicy;
 
+use super::message::{AppMessage, MessageRefusal};
 use super::{MAX_CONTROL_LEN, MAX_MEMBERS, MAX_PARTICLES};
 
 /// Control messages, carried reliably and in order per link.
@@ -161,6 +162,22 @@ pub enum Control {
     /// Any member → the others: I am leaving now. The receivers treat the sender as gone at
     /// once instead of after `peer_timeout` (authority returns, a host is replaced).
     Leave,
+    /// An application's reliable or retained message: origin → host, then host → each
+    /// target (and host → a joiner, for retained ones, after the snapshot).
+    Message(AppMessage),
+    /// Host → origin: every reliable message of yours numbered up to `up_to` has reached
+    /// all its targets (or was refused, which you were told first).
+    MessagesDelivered {
+        /// Highest message number covered.
+        up_to: u32,
+    },
+    /// Host → origin: your message `seq` was not relayed.
+    MessageRefused {
+        /// Its number.
+        seq: u32,
+        /// Why.
+        reason: MessageRefusal,
+    },
 }
 
 /// One change of an object's mesh topology, in the object's rest frame (the frame of its
@@ -339,6 +356,7 @@ impl Control {
                     && pieces.iter().all(|&p| p <= MAX_PARTICLES)
             }
             Control::Topology { event, .. } => event.valid(),
+            Control::Message(m) => m.valid() && m.delivery.is_reliable(),
             _ => true,
         };
         if ok {

@@ -9,11 +9,16 @@
 //! Children: `control` (control messages), `state` (bit-packed state entries).
 
 mod control;
+mod message;
 mod state;
 
 pub use control::{
     Control, DenyReason, SpawnInfo, TopologyEvent, MAX_CUT_PIECES, MAX_TOPOLOGY_COORD,
     TOPOLOGY_QUANTUM_M,
+};
+pub use message::{
+    AppMessage, Delivery, MessageKind, MessageRefusal, MessageTarget, ReceivedMessage,
+    MAX_MESSAGE_PAYLOAD,
 };
 pub use state::{
     decode_state_block, decode_state_block_sized, entry_id_bits, write_entry_id, ChunkEnc,
@@ -25,7 +30,7 @@ use crate::error::{decode_err, NetError};
 use crate::ids::{NetId, Term};
 
 /// Version byte at offset 0 of every datagram.
-pub const PROTOCOL_VERSION: u8 = 3;
+pub const PROTOCOL_VERSION: u8 = 4;
 /// First byte of the version-independent refusal datagram.
 pub const REFUSAL_MARKER: u8 = 0;
 /// Largest reliable control message (bytes), also the bincode decode limit.
@@ -51,6 +56,8 @@ pub mod tag {
     pub const STATE: u8 = 6;
     /// Which datagrams carrying state arrived (newest sequence + 32-bit history).
     pub const STATE_ACK: u8 = 7;
+    /// An unreliable application message (bincode [`AppMessage`](super::AppMessage)).
+    pub const MESSAGE: u8 = 8;
 }
 
 /// Bits of the per-(link, object, part) entry sequence number.
@@ -133,6 +140,8 @@ pub enum Section<'a> {
         /// Bits.
         bits: &'a [u8],
     },
+    /// An unreliable application message, decoded and validated.
+    Message(AppMessage),
 }
 
 /// Largest keyframe-request list.
@@ -210,11 +219,35 @@ pub fn decode_packet(bytes: &[u8]) -> Result<(PacketHeader, Vec<Section<'_>>), N
                 }
                 Section::State { count, bits }
             }
+            tag::MESSAGE => {
+                let len = r.varint()? as usize;
+                if len > MAX_CONTROL_LEN {
+                    return Err(decode_err(at, "message section too long"));
+                }
+                Section::Message(decode_unreliable_message(r.take(len)?, at)?)
+            }
             _ => return Err(decode_err(at, "unknown section tag")),
         };
         sections.push(s);
     }
     Ok((header, sections))
+}
+
+/// An unreliable message section's body: a bincode [`AppMessage`] without a number.
+fn decode_unreliable_message(bytes: &[u8], at: usize) -> Result<AppMessage, NetError> {
+    let cfg = bincode::config::standard().with_limit::<MAX_CONTROL_LEN>();
+    let (m, used): (AppMessage, usize) = bincode::serde::decode_from_slice(bytes, cfg)
+        .map_err(|_| decode_err(at, "malformed message section"))?;
+    if used != bytes.len() || !m.valid() || m.delivery.is_reliable() {
+        return Err(decode_err(at, "message section fails validation"));
+    }
+    Ok(m)
+}
+
+/// The bytes of an unreliable message section's body.
+pub fn encode_unreliable_message(m: &AppMessage) -> Vec<u8> {
+    let cfg = bincode::config::standard().with_limit::<MAX_CONTROL_LEN>();
+    bincode::serde::encode_to_vec(m, cfg).unwrap_or_default()
 }
 
 /// Encoded size of a reliable section.
@@ -333,6 +366,19 @@ impl PacketWriter {
         write_varint(&mut self.out, bytes.len() as u64);
         self.out.extend_from_slice(bytes);
         self.reliable = true;
+        true
+    }
+
+    /// An unreliable message section (`bytes` from [`encode_unreliable_message`]); false,
+    /// and nothing written, if it does not fit.
+    pub fn message(&mut self, bytes: &[u8]) -> bool {
+        let need = 1 + crate::bits::varint_len(bytes.len() as u64) + bytes.len();
+        if self.out.len() + need > self.mtu {
+            return false;
+        }
+        self.out.push(tag::MESSAGE);
+        write_varint(&mut self.out, bytes.len() as u64);
+        self.out.extend_from_slice(bytes);
         true
     }
 

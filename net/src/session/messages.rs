@@ -1,0 +1,776 @@
+//! Application messages: the sender's outbox, the receiver's duplicate filter and retained
+//! table, and the host's relay with its checks and delivery ledger.
+//!
+//! # Exactly once, also across a host migration
+//!
+//! A reliable message carries its origin's number (from 1, one per reliable message). The
+//! origin keeps it in its outbox until the host says every target has it
+//! ([`Control::MessagesDelivered`], sent once each target's link acknowledged the relayed
+//! copy, or the target left), or refused it. When the host changes, the origin sends every
+//! message still in its outbox to the new host (or, if it is the new host, relays them
+//! itself), in order. Every path from an origin to a receiver keeps the origin's order (one
+//! ordered channel to the host, one from the host), so a receiver delivers a message only if
+//! its number is above the last it delivered from that origin: a resent message some target
+//! already had is dropped there, and the targets that missed it get it. A retained message
+//! replayed by a new host is also recognised by the retained table (same origin, same
+//! number). What is not guaranteed: a message whose origin dies with the host before the
+//! host relayed it (nobody is left who has it).
+
+use std::collections::{BTreeMap, VecDeque};
+
+use super::{Event, Role, Session};
+use crate::ids::PeerId;
+use crate::time::Instant;
+use crate::wire::{
+    encode_unreliable_message, AppMessage, Control, Delivery, MessageKind, MessageRefusal,
+    MessageTarget, ReceivedMessage,
+};
+
+/// A token bucket: `rate` per second, at most `cap` at once.
+#[derive(Debug, Default, Clone)]
+struct TokenBucket {
+    tokens: f32,
+    at: Option<Instant>,
+}
+
+impl TokenBucket {
+    /// Take one token if there is one.
+    fn take(&mut self, now: Instant, rate: f32, cap: f32) -> bool {
+        let tokens = match self.at {
+            None => cap,
+            Some(at) => {
+                let dt = now.saturating_since(at).as_secs_f32();
+                (self.tokens + dt * rate.max(0.0)).min(cap)
+            }
+        };
+        self.at = Some(now);
+        if tokens >= 1.0 {
+            self.tokens = tokens - 1.0;
+            true
+        } else {
+            self.tokens = tokens;
+            false
+        }
+    }
+}
+
+/// A reliable message the host relayed and the targets' links still have to acknowledge.
+#[derive(Debug)]
+struct Relayed {
+    seq: u32,
+    /// (target, reliable sequence of the relayed copy on its link).
+    waiting: Vec<(PeerId, u16)>,
+}
+
+/// The host's check on a message before it relays it.
+type FilterFn = dyn FnMut(&ReceivedMessage) -> Result<(), u16> + Send + Sync;
+
+/// Everything the session keeps about application messages.
+#[derive(Default)]
+pub(crate) struct Messages {
+    /// Our last reliable message number.
+    last_seq: u32,
+    /// Our reliable messages not yet delivered everywhere, in order.
+    outbox: VecDeque<AppMessage>,
+    /// Our sending rate.
+    bucket: TokenBucket,
+    /// Per origin: the highest reliable message number delivered to us.
+    passed: BTreeMap<PeerId, u32>,
+    /// The latest retained message of each kind.
+    retained: BTreeMap<MessageKind, AppMessage>,
+    /// Host: per origin, relayed reliable messages not yet acknowledged by every target.
+    ledger: BTreeMap<PeerId, VecDeque<Relayed>>,
+    /// Host: per origin, its sending rate.
+    buckets: BTreeMap<PeerId, TokenBucket>,
+    filter: Option<Box<FilterFn>>,
+}
+
+impl std::fmt::Debug for Messages {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Messages")
+            .field("last_seq", &self.last_seq)
+            .field("outbox", &self.outbox.len())
+            .field("passed", &self.passed)
+            .field("retained", &self.retained.len())
+            .field("ledger", &self.ledger.len())
+            .field("filter", &self.filter.is_some())
+            .finish()
+    }
+}
+
+impl Messages {
+    /// An origin is gone (or came back with a fresh session): forget its numbers and what
+    /// the host kept for it.
+    fn forget(&mut self, p: PeerId) {
+        self.passed.remove(&p);
+        self.ledger.remove(&p);
+        self.buckets.remove(&p);
+    }
+}
+
+impl Session {
+    /// Send an application message of type `kind` (an index into the room's message table,
+    /// [`crate::policy::MessageConfig::kinds`]; the typed way is [`Session::send`]).
+    /// Returns the message's number (0 for an unreliable one): [`Event::MessageDelivered`]
+    /// or [`Event::MessageRefused`] later name it.
+    ///
+    /// A reliable message sent while still joining waits for the welcome. Every refusal is
+    /// counted in [`crate::stats::MessageStats::refused`].
+    pub fn send_message(
+        &mut self,
+        now: Instant,
+        kind: MessageKind,
+        to: MessageTarget,
+        delivery: Delivery,
+        payload: Vec<u8>,
+    ) -> Result<u32, MessageRefusal> {
+        let r = self.try_send_message(now, kind, to, delivery, payload);
+        if let Err(e) = r {
+            *self.stats.messages.refused.entry(e).or_default() += 1;
+        }
+        r
+    }
+
+    fn try_send_message(
+        &mut self,
+        now: Instant,
+        kind: MessageKind,
+        to: MessageTarget,
+        delivery: Delivery,
+        payload: Vec<u8>,
+    ) -> Result<u32, MessageRefusal> {
+        let cfg = &self.cfg.messages;
+        let usable = match self.role {
+            Role::Host | Role::Client => true,
+            Role::Joining => delivery.is_reliable(),
+            Role::Refused => false,
+        };
+        if !usable {
+            return Err(MessageRefusal::NotConnected);
+        }
+        if usize::from(kind.0) >= cfg.kinds.len() {
+            return Err(MessageRefusal::UnknownKind);
+        }
+        if payload.len() > self.cfg.max_message_payload() {
+            return Err(MessageRefusal::TooLarge);
+        }
+        if delivery == Delivery::Retained && to != MessageTarget::Everyone {
+            return Err(MessageRefusal::BadDelivery);
+        }
+        if to == MessageTarget::Peer(self.local)
+            || (to == MessageTarget::Host && self.role == Role::Host)
+        {
+            return Err(MessageRefusal::NoSuchTarget);
+        }
+        if delivery.is_reliable() && self.messages.outbox.len() >= cfg.max_outbox {
+            return Err(MessageRefusal::QueueFull);
+        }
+        let (rate, cap) = (cfg.rate_per_s, cfg.burst as f32);
+        if !self.messages.bucket.take(now, rate, cap) {
+            return Err(MessageRefusal::RateLimited);
+        }
+        let seq = if delivery.is_reliable() {
+            self.messages.last_seq = self.messages.last_seq.wrapping_add(1).max(1);
+            self.messages.last_seq
+        } else {
+            0
+        };
+        let msg = AppMessage {
+            origin: self.local,
+            seq,
+            kind,
+            to,
+            delivery,
+            payload,
+        };
+        self.stats.messages.sent += 1;
+        if delivery.is_reliable() {
+            self.messages.outbox.push_back(msg.clone());
+        }
+        if delivery == Delivery::Retained {
+            self.messages.retained.insert(kind, msg.clone());
+        }
+        match self.role {
+            Role::Host => {
+                let me = self.local;
+                self.host_relay(now, me, msg);
+            }
+            Role::Client => {
+                if let Some(host) = self.host {
+                    if delivery.is_reliable() {
+                        self.send_control(now, host, &Control::Message(msg));
+                    } else {
+                        self.queue_unreliable(host, &msg);
+                    }
+                }
+            }
+            // kept in the outbox: sent when welcomed
+            Role::Joining | Role::Refused => {}
+        }
+        Ok(seq)
+    }
+
+    /// Install the host's check on every message it relays: `Err(code)` refuses the
+    /// message (its sender hears [`MessageRefusal::Filtered`] with the code). Only the host
+    /// calls it, but any peer may become the host: install it on every peer.
+    pub fn set_message_filter(
+        &mut self,
+        filter: impl FnMut(&ReceivedMessage) -> Result<(), u16> + Send + Sync + 'static,
+    ) {
+        self.messages.filter = Some(Box::new(filter));
+    }
+
+    /// Our reliable messages not yet delivered to every target.
+    pub fn messages_in_flight(&self) -> usize {
+        self.messages.outbox.len()
+    }
+
+    /// The retained messages of the room, one per kind (what a late joiner receives).
+    pub fn retained_messages(&self) -> impl Iterator<Item = ReceivedMessage> + '_ {
+        self.messages
+            .retained
+            .values()
+            .map(|m| ReceivedMessage::from(m.clone()))
+    }
+
+    /// An unreliable message for the next datagram to `to` (dropped, and counted, if its
+    /// queue is full).
+    fn queue_unreliable(&mut self, to: PeerId, msg: &AppMessage) {
+        let max = self.cfg.messages.max_unreliable_queue;
+        let l = self.links.entry(to).or_default();
+        if l.unreliable.len() >= max {
+            self.stats.messages.unreliable_dropped += 1;
+        } else {
+            l.unreliable.push_back(encode_unreliable_message(msg));
+        }
+    }
+
+    /// Host: the checks on `msg` from `from`, and its targets if it passes.
+    fn host_check(
+        &mut self,
+        now: Instant,
+        from: PeerId,
+        msg: &AppMessage,
+    ) -> Result<Vec<PeerId>, MessageRefusal> {
+        let cfg = &self.cfg.messages;
+        if msg.origin != from || !msg.valid() {
+            return Err(MessageRefusal::Malformed);
+        }
+        if usize::from(msg.kind.0) >= cfg.kinds.len() {
+            return Err(MessageRefusal::UnknownKind);
+        }
+        if msg.payload.len() > self.cfg.max_message_payload() {
+            return Err(MessageRefusal::TooLarge);
+        }
+        if from != self.local {
+            // right after a takeover, members resend what the old host had not delivered
+            let resend = if self.succession.resync_open(now) {
+                cfg.max_outbox as f32
+            } else {
+                0.0
+            };
+            let cap = cfg.burst as f32 + resend;
+            let rate = cfg.rate_per_s;
+            if !self
+                .messages
+                .buckets
+                .entry(from)
+                .or_default()
+                .take(now, rate, cap)
+            {
+                return Err(MessageRefusal::RateLimited);
+            }
+            let waiting = self.messages.ledger.get(&from).map_or(0, VecDeque::len);
+            if msg.delivery.is_reliable() && waiting >= cfg.max_outbox.saturating_mul(2) {
+                return Err(MessageRefusal::QueueFull);
+            }
+        }
+        let targets: Vec<PeerId> = match msg.to {
+            MessageTarget::Everyone => self
+                .members
+                .keys()
+                .copied()
+                .filter(|p| *p != from)
+                .collect(),
+            MessageTarget::Peer(p) if p != from && self.members.contains_key(&p) => vec![p],
+            MessageTarget::Peer(_) => return Err(MessageRefusal::NoSuchTarget),
+            MessageTarget::OwnerOf(id) => match self.objects.owner(id) {
+                None => return Err(MessageRefusal::NoSuchTarget),
+                Some(o) if o == from => Vec::new(),
+                Some(o) => vec![o],
+            },
+            MessageTarget::Host if from == self.local => return Err(MessageRefusal::NoSuchTarget),
+            MessageTarget::Host => vec![self.local],
+        };
+        if let Some(filter) = self.messages.filter.as_mut() {
+            filter(&ReceivedMessage::from(msg.clone())).map_err(MessageRefusal::Filtered)?;
+        }
+        Ok(targets)
+    }
+
+    /// Host: relay `msg` from `from` (a member, or ourselves) to its targets, or refuse it.
+    pub(super) fn host_relay(&mut self, now: Instant, from: PeerId, msg: AppMessage) {
+        let targets = match self.host_check(now, from, &msg) {
+            Ok(t) => t,
+            Err(reason) => {
+                if from != self.local {
+                    *self.stats.messages.refused.entry(reason).or_default() += 1;
+                }
+                if msg.delivery.is_reliable() {
+                    if from == self.local {
+                        self.on_message_refused(msg.seq, reason);
+                    } else {
+                        let refusal = Control::MessageRefused {
+                            seq: msg.seq,
+                            reason,
+                        };
+                        self.send_control(now, from, &refusal);
+                    }
+                }
+                return;
+            }
+        };
+        let mut waiting = Vec::new();
+        for t in targets {
+            if t == self.local {
+                self.deliver_message(msg.clone());
+            } else if msg.delivery.is_reliable() {
+                let seq = self.send_control(now, t, &Control::Message(msg.clone()));
+                waiting.push((t, seq));
+                self.stats.messages.relayed += 1;
+            } else {
+                self.queue_unreliable(t, &msg);
+                self.stats.messages.relayed += 1;
+            }
+        }
+        if msg.delivery.is_reliable() {
+            self.messages
+                .ledger
+                .entry(from)
+                .or_default()
+                .push_back(Relayed {
+                    seq: msg.seq,
+                    waiting,
+                });
+            self.advance_deliveries(now);
+        }
+    }
+
+    /// Host: tell each origin how far its messages have reached every target.
+    pub(super) fn advance_deliveries(&mut self, now: Instant) {
+        if self.role != Role::Host {
+            return;
+        }
+        let mut done: Vec<(PeerId, u32)> = Vec::new();
+        for (origin, queue) in self.messages.ledger.iter_mut() {
+            let mut up_to = None;
+            while let Some(front) = queue.front() {
+                let complete = front.waiting.iter().all(|(p, seq)| {
+                    !self.members.contains_key(p)
+                        || self.links.get(p).is_none_or(|l| l.reliable.is_acked(*seq))
+                });
+                if !complete {
+                    break;
+                }
+                up_to = Some(front.seq);
+                queue.pop_front();
+            }
+            if let Some(u) = up_to {
+                done.push((*origin, u));
+            }
+        }
+        self.messages.ledger.retain(|_, q| !q.is_empty());
+        for (origin, up_to) in done {
+            if origin == self.local {
+                self.on_messages_delivered(up_to);
+            } else if self.members.contains_key(&origin) {
+                self.send_control(now, origin, &Control::MessagesDelivered { up_to });
+            }
+        }
+    }
+
+    /// A message for us (relayed by our host, or one the host is a target of): delivered
+    /// unless we had it already.
+    pub(super) fn deliver_message(&mut self, msg: AppMessage) {
+        if msg.origin == self.local {
+            return;
+        }
+        if usize::from(msg.kind.0) >= self.cfg.messages.kinds.len() {
+            *self
+                .stats
+                .messages
+                .refused
+                .entry(MessageRefusal::UnknownKind)
+                .or_default() += 1;
+            return;
+        }
+        if msg.delivery.is_reliable() {
+            let passed = self.messages.passed.get(&msg.origin).copied();
+            let known_retained = msg.delivery == Delivery::Retained
+                && self
+                    .messages
+                    .retained
+                    .get(&msg.kind)
+                    .is_some_and(|r| r.origin == msg.origin && r.seq == msg.seq);
+            if passed.is_some_and(|p| msg.seq <= p) || known_retained {
+                self.stats.messages.duplicates += 1;
+                return;
+            }
+            self.messages.passed.insert(msg.origin, msg.seq);
+            if msg.delivery == Delivery::Retained {
+                self.messages.retained.insert(msg.kind, msg.clone());
+            }
+        }
+        self.stats.messages.received += 1;
+        self.events.push_back(Event::Message(msg.into()));
+    }
+
+    /// Our host: our messages up to `up_to` reached every target.
+    pub(super) fn on_messages_delivered(&mut self, up_to: u32) {
+        while let Some(front) = self.messages.outbox.front() {
+            if front.seq > up_to {
+                break;
+            }
+            let seq = front.seq;
+            self.messages.outbox.pop_front();
+            self.stats.messages.delivered += 1;
+            self.events.push_back(Event::MessageDelivered { seq });
+        }
+    }
+
+    /// Our host refused our message `seq`.
+    pub(super) fn on_message_refused(&mut self, seq: u32, reason: MessageRefusal) {
+        let Some(i) = self.messages.outbox.iter().position(|m| m.seq == seq) else {
+            return;
+        };
+        let Some(m) = self.messages.outbox.remove(i) else {
+            return;
+        };
+        *self.stats.messages.refused.entry(reason).or_default() += 1;
+        if self
+            .messages
+            .retained
+            .get(&m.kind)
+            .is_some_and(|r| r.origin == self.local && r.seq == seq)
+        {
+            self.messages.retained.remove(&m.kind);
+        }
+        self.events.push_back(Event::MessageRefused { seq, reason });
+    }
+
+    /// We have a new host (welcomed, or a migration): every message of ours not yet
+    /// delivered everywhere goes to it, in order; if we are the new host, we relay them.
+    pub(super) fn resend_outbox(&mut self, now: Instant) {
+        let pending: Vec<AppMessage> = self.messages.outbox.iter().cloned().collect();
+        match self.role {
+            Role::Host => {
+                let me = self.local;
+                for m in pending {
+                    self.host_relay(now, me, m);
+                }
+            }
+            Role::Client => {
+                if let Some(host) = self.host {
+                    for m in pending {
+                        self.send_control(now, host, &Control::Message(m));
+                    }
+                }
+            }
+            Role::Joining | Role::Refused => {}
+        }
+    }
+
+    /// The retained messages, for a joiner's (or after a migration, a member's) snapshot,
+    /// in each origin's order.
+    pub(super) fn send_retained(&mut self, now: Instant, to: PeerId) {
+        let mut all: Vec<AppMessage> = self.messages.retained.values().cloned().collect();
+        all.sort_by_key(|m| (m.origin, m.seq));
+        for m in all {
+            if m.origin != to {
+                self.send_control(now, to, &Control::Message(m));
+            }
+        }
+    }
+
+    /// A peer left or joined afresh: forget its message numbers.
+    pub(super) fn forget_message_origin(&mut self, p: PeerId) {
+        self.messages.forget(p);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::super::testkit::{config, Wire};
+    use super::*;
+    use crate::policy::SessionConfig;
+    use crate::wire::MAX_MESSAGE_PAYLOAD;
+
+    fn cfg() -> SessionConfig {
+        let mut c = config();
+        c.messages.kinds = vec!["bell".into(), "valve".into()];
+        c
+    }
+
+    fn room(n: u64) -> Wire {
+        let mut w = Wire::new();
+        w.add(Session::host(PeerId(1), cfg(), w.now));
+        for p in 2..=n {
+            w.add(Session::join(PeerId(p), PeerId(1), cfg(), w.now));
+            w.settle();
+        }
+        w
+    }
+
+    fn messages(w: &mut Wire, p: u64) -> Vec<ReceivedMessage> {
+        w.events(p)
+            .into_iter()
+            .filter_map(|e| match e {
+                Event::Message(m) => Some(m),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_reliable_message_reaches_its_targets_once_and_the_sender_hears_it_delivered() {
+        let mut w = room(3);
+        let now = w.now;
+        let seq = w
+            .get(2)
+            .send_message(
+                now,
+                MessageKind(0),
+                MessageTarget::Everyone,
+                Delivery::Reliable,
+                b"ding".to_vec(),
+            )
+            .unwrap();
+        assert_eq!(seq, 1);
+        w.settle();
+        for p in [1, 3] {
+            let got = messages(&mut w, p);
+            assert_eq!(got.len(), 1, "peer {p}");
+            assert_eq!(got[0].from, PeerId(2));
+            assert_eq!(got[0].payload, b"ding");
+        }
+        assert!(w.events(2).contains(&Event::MessageDelivered { seq: 1 }));
+        assert_eq!(w.get(2).messages_in_flight(), 0);
+        // to one peer, to the host, to an object's owner
+        w.get(3)
+            .send_message(
+                now,
+                MessageKind(1),
+                MessageTarget::Peer(PeerId(2)),
+                Delivery::Reliable,
+                vec![7],
+            )
+            .unwrap();
+        w.get(3)
+            .send_message(
+                now,
+                MessageKind(1),
+                MessageTarget::Host,
+                Delivery::Unreliable,
+                vec![8],
+            )
+            .unwrap();
+        w.settle();
+        assert_eq!(
+            messages(&mut w, 2)
+                .iter()
+                .map(|m| m.payload[0])
+                .collect::<Vec<_>>(),
+            [7]
+        );
+        assert_eq!(
+            messages(&mut w, 1)
+                .iter()
+                .map(|m| m.payload[0])
+                .collect::<Vec<_>>(),
+            [8]
+        );
+    }
+
+    #[test]
+    fn bad_messages_are_refused_and_counted_at_the_sender_and_at_the_host() {
+        let mut w = room(2);
+        let now = w.now;
+        let s = w.get(2);
+        let big = vec![0u8; MAX_MESSAGE_PAYLOAD + 1];
+        let e = MessageTarget::Everyone;
+        assert_eq!(
+            s.send_message(now, MessageKind(0), e, Delivery::Reliable, big),
+            Err(MessageRefusal::TooLarge)
+        );
+        assert_eq!(
+            s.send_message(now, MessageKind(9), e, Delivery::Reliable, vec![]),
+            Err(MessageRefusal::UnknownKind)
+        );
+        let one = MessageTarget::Peer(PeerId(1));
+        assert_eq!(
+            s.send_message(now, MessageKind(0), one, Delivery::Retained, vec![]),
+            Err(MessageRefusal::BadDelivery)
+        );
+        assert_eq!(
+            s.send_message(
+                now,
+                MessageKind(0),
+                MessageTarget::Peer(PeerId(2)),
+                Delivery::Reliable,
+                vec![]
+            ),
+            Err(MessageRefusal::NoSuchTarget)
+        );
+        let refused = &s.stats().messages.refused;
+        assert_eq!(refused.values().sum::<u64>(), 4);
+        // a flood: the burst passes, the rest is refused, nothing queues without bound
+        let mut ok = 0;
+        for _ in 0..1000 {
+            if s.send_message(now, MessageKind(0), e, Delivery::Unreliable, vec![1])
+                .is_ok()
+            {
+                ok += 1;
+            }
+        }
+        assert_eq!(ok, 120);
+        assert_eq!(
+            s.stats().messages.refused[&MessageRefusal::RateLimited],
+            880
+        );
+        // a modified client skips its own checks: the host refuses, counts, and says so
+        let forged = AppMessage {
+            origin: PeerId(2),
+            seq: 50,
+            kind: MessageKind(7),
+            to: e,
+            delivery: Delivery::Reliable,
+            payload: vec![],
+        };
+        w.get(2)
+            .send_raw_control(now, PeerId(1), &Control::Message(forged.clone()));
+        let other_origin = AppMessage {
+            origin: PeerId(3),
+            seq: 51,
+            kind: MessageKind(0),
+            ..forged
+        };
+        w.get(2)
+            .send_raw_control(now, PeerId(1), &Control::Message(other_origin));
+        w.settle();
+        let host = w.get(1).stats().messages.refused.clone();
+        assert_eq!(host[&MessageRefusal::UnknownKind], 1);
+        assert_eq!(host[&MessageRefusal::Malformed], 1);
+        // of the flood, what fit the unreliable queue reached the host; nothing forged did
+        let got = messages(&mut w, 1);
+        assert_eq!(got.len(), 64);
+        assert!(got
+            .iter()
+            .all(|m| m.payload == [1] && m.delivery == Delivery::Unreliable));
+        assert_eq!(w.get(2).stats().messages.unreliable_dropped, 120 - 64);
+    }
+
+    #[test]
+    fn the_hosts_filter_refuses_with_the_applications_code() {
+        let mut w = room(2);
+        let now = w.now;
+        w.get(1)
+            .set_message_filter(|m| if m.payload == b"no" { Err(42) } else { Ok(()) });
+        w.get(2)
+            .send_message(
+                now,
+                MessageKind(0),
+                MessageTarget::Everyone,
+                Delivery::Reliable,
+                b"no".to_vec(),
+            )
+            .unwrap();
+        w.get(2)
+            .send_message(
+                now,
+                MessageKind(0),
+                MessageTarget::Everyone,
+                Delivery::Reliable,
+                b"yes".to_vec(),
+            )
+            .unwrap();
+        w.settle();
+        let ev = w.events(2);
+        assert!(ev.contains(&Event::MessageRefused {
+            seq: 1,
+            reason: MessageRefusal::Filtered(42)
+        }));
+        assert!(ev.contains(&Event::MessageDelivered { seq: 2 }));
+        assert_eq!(
+            messages(&mut w, 1)
+                .iter()
+                .map(|m| m.payload.clone())
+                .collect::<Vec<_>>(),
+            [b"yes".to_vec()]
+        );
+    }
+
+    #[test]
+    fn a_late_joiner_gets_the_retained_message_of_each_kind_after_the_objects() {
+        let mut w = room(2);
+        let now = w.now;
+        for v in [1u8, 2, 3] {
+            w.get(2)
+                .send_message(
+                    now,
+                    MessageKind(1),
+                    MessageTarget::Everyone,
+                    Delivery::Retained,
+                    vec![v],
+                )
+                .unwrap();
+        }
+        w.get(1)
+            .send_message(
+                now,
+                MessageKind(0),
+                MessageTarget::Everyone,
+                Delivery::Retained,
+                vec![9],
+            )
+            .unwrap();
+        w.settle();
+        w.add(Session::join(PeerId(3), PeerId(1), cfg(), now));
+        w.settle();
+        let mut got: Vec<(u16, u8)> = messages(&mut w, 3)
+            .iter()
+            .map(|m| (m.kind.0, m.payload[0]))
+            .collect();
+        got.sort();
+        assert_eq!(got, [(0, 9), (1, 3)]);
+        assert_eq!(w.get(3).retained_messages().count(), 2);
+    }
+
+    #[test]
+    fn a_message_sent_while_joining_goes_out_once_welcomed() {
+        let mut w = room(1);
+        let now = w.now;
+        let mut s = Session::join(PeerId(2), PeerId(1), cfg(), now);
+        assert_eq!(
+            s.send_message(
+                now,
+                MessageKind(0),
+                MessageTarget::Everyone,
+                Delivery::Unreliable,
+                vec![]
+            ),
+            Err(MessageRefusal::NotConnected)
+        );
+        s.send_message(
+            now,
+            MessageKind(0),
+            MessageTarget::Host,
+            Delivery::Reliable,
+            vec![5],
+        )
+        .unwrap();
+        w.add(s);
+        w.settle();
+        assert_eq!(messages(&mut w, 1).len(), 1);
+    }
+}
