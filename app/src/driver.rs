@@ -8,7 +8,8 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use softsync_net::{Event as RoomEvent, Instant, Transport};
-use softsync_peer::{Bot, DeviceFrame, Event, Peer, PeerError};
+use softsync_peer::messages::MessageTypes;
+use softsync_peer::{Bot, DeviceFrame, Event, Peer, PeerError, Say};
 
 use crate::report::{snapshot, Dump, Rates, StatsLine};
 
@@ -149,7 +150,7 @@ impl Driver {
             Err(e) => return Err(e.to_string()),
         }
         while let Some(e) = self.peer.poll_event() {
-            let Some(line) = event_line(&e) else {
+            let Some(line) = event_line(&e, self.peer.message_types()) else {
                 if let Event::Warning(w) = e {
                     eprintln!("{w}");
                 }
@@ -252,7 +253,7 @@ impl Driver {
 
 /// The log line of an event (after `event peer=… t=…`); None for warnings, which go to stderr
 /// as they are.
-fn event_line(e: &Event) -> Option<String> {
+fn event_line(e: &Event, types: &MessageTypes) -> Option<String> {
     let hand_name = |hand: usize| *["left", "right"].get(hand).unwrap_or(&"?");
     Some(match e {
         Event::Room(RoomEvent::Joined { host, term }) => {
@@ -263,6 +264,19 @@ fn event_line(e: &Event) -> Option<String> {
         }
         Event::Room(RoomEvent::PeerJoined(q)) => format!("peer-joined {}", q.0),
         Event::Room(RoomEvent::PeerLeft(q)) => format!("peer-left {}", q.0),
+        Event::Room(RoomEvent::Message(m)) => match types.decode::<Say>(m) {
+            Some(Ok(say)) => format!("message from={} say={:?}", m.from.0, say.text),
+            _ => format!(
+                "message from={} kind={} bytes={}",
+                m.from.0,
+                types.name(m.kind).unwrap_or("?"),
+                m.payload.len()
+            ),
+        },
+        Event::Room(RoomEvent::MessageDelivered { seq }) => format!("message-delivered seq={seq}"),
+        Event::Room(RoomEvent::MessageRefused { seq, reason }) => {
+            format!("message-refused seq={seq} reason={:?}", reason.to_string())
+        }
         Event::Room(_) | Event::Warning(_) => return None,
         Event::AuthorityAsked(id) => format!("authority-asked object={}", id.0),
         Event::AuthorityGained(id) => format!("authority-gained object={}", id.0),
@@ -310,18 +324,32 @@ fn hud_event(line: &str) -> String {
 
 #[cfg(test)]
 mod tests {
+    #![allow(clippy::unwrap_used)]
     use super::*;
     use softsync_net::{NetId, PeerId, Term};
 
     #[test]
     fn event_lines_keep_the_format_the_live_tests_parse() {
+        let types = softsync_peer::messages::builtin();
         let host = PeerId(12_345_678_901);
+        let (kind, payload) = types.encode(&Say { text: "hi".into() }).unwrap();
+        let said = Event::Room(RoomEvent::Message(softsync_net::ReceivedMessage {
+            from: host,
+            kind,
+            to: softsync_net::MessageTarget::Everyone,
+            delivery: softsync_net::Delivery::Reliable,
+            payload,
+        }));
+        assert_eq!(
+            event_line(&said, &types).as_deref(),
+            Some("message from=12345678901 say=\"hi\"")
+        );
         let joined = Event::Room(RoomEvent::Joined {
             host,
             term: Term(2),
         });
         assert_eq!(
-            event_line(&joined).as_deref(),
+            event_line(&joined, &types).as_deref(),
             Some("joined host=12345678901 term=2")
         );
         let grab = Event::GrabStarted {
@@ -330,7 +358,7 @@ mod tests {
             particle: Some(17),
         };
         assert_eq!(
-            event_line(&grab).as_deref(),
+            event_line(&grab, &types).as_deref(),
             Some("grab-started object=5 hand=right particle=17")
         );
         let ended = Event::GrabEnded {
@@ -339,22 +367,22 @@ mod tests {
             speed: 0.256,
         };
         assert_eq!(
-            event_line(&ended).as_deref(),
+            event_line(&ended, &types).as_deref(),
             Some("grab-ended object=5 hand=left speed=0.26m/s")
         );
         let rejoin = Event::Rejoining {
             host,
             reason: "the room moved on".into(),
         };
-        let line = event_line(&rejoin).unwrap_or_default();
+        let line = event_line(&rejoin, &types).unwrap_or_default();
         assert_eq!(
             line,
             "rejoining host=12345678901 reason=\"the room moved on\""
         );
         assert_eq!(hud_event(&line), "rejoining host=dc1c35");
-        assert_eq!(event_line(&Event::Warning("x".into())), None);
+        assert_eq!(event_line(&Event::Warning("x".into()), &types), None);
         assert_eq!(
-            event_line(&Event::Room(RoomEvent::Despawned(NetId(1)))),
+            event_line(&Event::Room(RoomEvent::Despawned(NetId(1))), &types),
             None
         );
     }

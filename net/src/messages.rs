@@ -106,6 +106,16 @@ impl MessageTypes {
         Ok(kind)
     }
 
+    /// The table a room's configuration holds (what [`configure`](Self::configure) put
+    /// there); `None` if it names a type twice.
+    pub fn from_config(cfg: &SessionConfig) -> Option<Self> {
+        let mut t = MessageTypes::new();
+        for n in &cfg.messages.kinds {
+            t.register_name(n).ok()?;
+        }
+        Some(t)
+    }
+
     /// Put the table into a room's configuration (every peer must, before it hosts or joins).
     pub fn configure(&self, cfg: &mut SessionConfig) {
         cfg.messages.kinds = self.names.clone();

@@ -27,6 +27,8 @@
 //!                               last point to this one, the blade upright 4 cm above the
 //!                               tip; the stroke ends with a lift
 //! cut TARGET NX NY NZ           cut TARGET (ours) through its center, plane normal N (room)
+//! say TEXT                      send TEXT to everyone in the room (a reliable
+//!                               [`Say`](crate::messages::Say) message; at most 200 bytes)
 //! loop                          start again from the top (last line)
 //! ```
 //!
@@ -44,7 +46,7 @@ use std::collections::VecDeque;
 
 use glam::{Quat, Vec3};
 use softsync_interaction::{HandInput, HandSample};
-use softsync_net::{Instant, NetId};
+use softsync_net::{Delivery, Instant, MessageTarget, NetId};
 
 use crate::device::{clamp01, DeviceFrame};
 use crate::peer::Peer;
@@ -75,6 +77,8 @@ pub enum Cmd {
     Tear(usize, Option<String>, Vec<Vec3>, f64),
     /// Cut through the center with a normal (room frame).
     Cut(Option<String>, Vec3),
+    /// Send a line of text to the room.
+    Say(String),
     /// Restart.
     Loop,
 }
@@ -211,6 +215,13 @@ pub fn parse(text: &str) -> Result<Vec<Cmd>, ScriptError> {
                         return Err("the normal is zero".into());
                     }
                     Cmd::Cut(target_kind(arg(1)?)?, n)
+                }
+                "say" => {
+                    let text = piece["say".len()..].trim();
+                    if text.is_empty() || text.len() > 200 {
+                        return Err("say needs a text of 1 to 200 bytes".into());
+                    }
+                    Cmd::Say(text.to_owned())
                 }
                 "grab" => Cmd::Grab(hand(arg(1)?)?, dur(&w, 2, 3.0)?),
                 "squeeze" => Cmd::Squeeze(hand(arg(1)?)?, num(arg(2)?)? as f32, dur(&w, 3, 0.5)?),
@@ -587,6 +598,14 @@ impl Bot {
                 }
                 None
             }
+            Cmd::Say(text) => {
+                let msg = crate::messages::Say { text: text.clone() };
+                match peer.send(now, MessageTarget::Everyone, Delivery::Reliable, &msg) {
+                    Ok(seq) => self.say(format!("said {text:?} (message {seq})")),
+                    Err(e) => self.say(format!("say: {e}")),
+                }
+                None
+            }
             Cmd::Loop => {
                 self.pc = 0;
                 None
@@ -820,6 +839,12 @@ mod tests {
         Bot::new(parse("reach right softball; cut softbox 0 1 0").unwrap())
             .check(&scene)
             .unwrap();
+        assert_eq!(
+            parse("say  the valve is open ").unwrap(),
+            [Cmd::Say("the valve is open".into())]
+        );
+        assert!(parse("say").is_err());
+        assert!(parse(&format!("say {}", "x".repeat(201))).is_err());
         assert!(parse("move left 1 2").is_err());
         assert!(parse("move left 1 2 NaN").is_err());
         assert!(parse("grab head").is_err());

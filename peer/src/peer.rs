@@ -18,8 +18,10 @@ use glam::{Quat, Vec3};
 use softsync_interaction::{
     HandConfig, HandId, HandInput, Interaction, InteractionEvent, ObjectRef, Ownership, Target,
 };
+use softsync_net::messages::{Message, MessageTypes};
 use softsync_net::{
-    DisplayedState, Instant, NetId, ObjectState, PeerEvent, PeerId, Session, Transmit,
+    Delivery, DisplayedState, Instant, MessageKind, MessageRefusal, MessageTarget, NetId,
+    ObjectState, PeerEvent, PeerId, ReceivedMessage, Session, Transmit,
 };
 use softsync_softbody::rapier3d::prelude::PhysicsWorld;
 use softsync_softbody::SoftBodySet;
@@ -60,6 +62,8 @@ impl Default for PeerConfig {
 /// One peer of a room: session, rapier world, soft bodies, hands, avatar.
 pub struct Peer {
     session: Session,
+    /// The room's message types (read from the session's configuration).
+    message_types: MessageTypes,
     mirror: Mirror,
     hands: Interaction,
     /// Left and right hand.
@@ -114,7 +118,11 @@ impl Peer {
         };
         let hand_ids = [add_hand()?, add_hand()?];
         let joining = Joining::new(now, session.is_host(), contact);
+        let message_types = MessageTypes::from_config(session.config()).ok_or_else(|| {
+            PeerError::Build("the room's message table names a type twice".into())
+        })?;
         Ok(Peer {
+            message_types,
             session,
             mirror,
             hands,
@@ -331,6 +339,9 @@ impl Peer {
                 self.on_topology(now, id, seq, event);
                 self.events.push_back(Event::Room(e));
             }
+            SessionEvent::Message(_)
+            | SessionEvent::MessageDelivered { .. }
+            | SessionEvent::MessageRefused { .. } => self.events.push_back(Event::Room(e)),
             SessionEvent::AuthorityAsked { id, by } => {
                 // Not while one of our hands holds it.
                 let held = self.mirror.object_ref(id).is_some_and(|r| self.is_held(r));
@@ -367,6 +378,54 @@ impl Peer {
         self.hand_ids
             .iter()
             .any(|h| self.hands.held(*h).is_some_and(|t| t.object() == r))
+    }
+
+    // --- Application messages ---
+
+    /// Send a typed message through the room (see [`Session::send_message`]: whom to,
+    /// how, the bounds); what happens to it comes back as [`Event::Room`] with
+    /// `MessageDelivered` or `MessageRefused`. `M` must be in the room's message table.
+    pub fn send<M: Message>(
+        &mut self,
+        now: Instant,
+        to: MessageTarget,
+        delivery: Delivery,
+        msg: &M,
+    ) -> Result<u32, MessageRefusal> {
+        self.session
+            .send(now, &self.message_types, to, delivery, msg)
+    }
+
+    /// Send raw bytes of message type `kind`.
+    pub fn send_message(
+        &mut self,
+        now: Instant,
+        kind: MessageKind,
+        to: MessageTarget,
+        delivery: Delivery,
+        payload: Vec<u8>,
+    ) -> Result<u32, MessageRefusal> {
+        self.session.send_message(now, kind, to, delivery, payload)
+    }
+
+    /// A received message as an `M`: `None` if it is another type, an error if its bytes
+    /// are not an `M`.
+    pub fn decode<M: Message>(&self, m: &ReceivedMessage) -> Option<Result<M, MessageRefusal>> {
+        self.message_types.decode(m)
+    }
+
+    /// The room's message types.
+    pub fn message_types(&self) -> &MessageTypes {
+        &self.message_types
+    }
+
+    /// The host's check on every message it relays (see [`Session::set_message_filter`];
+    /// install it on every peer, since any may become the host).
+    pub fn set_message_filter(
+        &mut self,
+        filter: impl FnMut(&ReceivedMessage) -> Result<(), u16> + Send + Sync + 'static,
+    ) {
+        self.session.set_message_filter(filter);
     }
 
     // --- Simulation ---

@@ -29,7 +29,9 @@ const SQUEEZE: &str = "wait 1; reach right softbox in 1; grab right; squeeze rig
                        wait 0.6; release right; offset right 0 0.15 0 in 0.5";
 
 /// Host and one bot; the bot takes the host's soft box through the authority request,
-/// squeezes it, lets go; after rest both peers show the same room.
+/// squeezes it, lets go; after rest both peers show the same room. The bot then says a line
+/// to the room (an application message): the host's process receives it and the bot hears
+/// it delivered.
 fn two_process_sync(test: &str, condition: Option<&str>) {
     require_netns();
     let dir = scratch(test);
@@ -52,7 +54,8 @@ fn two_process_sync(test: &str, condition: Option<&str>) {
     host_args.extend(&common);
     let mut host = Proc::spawn(&dir, "host", &host_args);
     let url = signal_url(&host);
-    let mut bot_args = vec!["join", "--room", "sync", "--signal", &url, "--bot", SQUEEZE];
+    let script = format!("{SQUEEZE}; say hello from the bot; wait 1");
+    let mut bot_args = vec!["join", "--room", "sync", "--signal", &url, "--bot", &script];
     bot_args.extend(["--duration", "13", "--dump", jd.to_str().unwrap()]);
     bot_args.extend(&common);
     let mut bot = Proc::spawn(&dir, "bot", &bot_args);
@@ -69,10 +72,20 @@ fn two_process_sync(test: &str, condition: Option<&str>) {
         "authority never went back after rest\n{}",
         bot.logs()
     );
+    assert!(
+        out.contains("message-delivered seq=1"),
+        "the bot's message was not delivered\n{}",
+        bot.logs()
+    );
     assert_eq!(
         host.wait_exit(Duration::from_secs(30)),
         0,
         "{}",
+        host.logs()
+    );
+    assert!(
+        host.stdout().contains("say=\"hello from the bot\""),
+        "the host never received the bot's message\n{}",
         host.logs()
     );
     let (h, j) = (read_dump(&hd), read_dump(&jd));

@@ -294,7 +294,9 @@ impl Scene {
 
     /// The session configuration every peer of this scene uses: each class's send policy is
     /// `avatar`, `soft` or `rigid` with the class's own replication settings over it (thesis
-    /// 5.3); its digest covers [`content_digest`](Self::content_digest).
+    /// 5.3); its digest covers [`content_digest`](Self::content_digest). Its message table
+    /// holds the built-in types ([`crate::messages::builtin`]); an application with its own
+    /// starts from that table, registers its types and configures the result over it.
     pub fn session_config(
         &self,
         avatar: SendPolicy,
@@ -329,11 +331,13 @@ impl Scene {
                 cc
             })
             .collect();
-        SessionConfig {
+        let mut cfg = SessionConfig {
             classes,
             content_digest: self.content_digest,
             ..SessionConfig::default()
-        }
+        };
+        crate::messages::builtin().configure(&mut cfg);
+        cfg
     }
 
     /// The fixed geometry (bodies on every peer).
