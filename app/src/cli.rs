@@ -1,97 +1,301 @@
-//! Command-line parsing (no parser crate: the surface is small and errors name the flag).
+//! Command-line parsing: clap's derive API for the grammar, `--help` and `softsync help`;
+//! the checks that span several flags, and the values' own checks, say which flag is wrong.
+//! Exit codes are unchanged: 0 for help, 2 for any usage error.
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::Duration;
 
+use clap::{Args, Parser, Subcommand};
 use softsync_net::ConditionerConfig;
 
-/// Usage text.
-pub const USAGE: &str = "\
-softsync — collaborative soft-body rooms, peer to peer
-
-USAGE:
-  softsync signal [--bind ADDR]
-  softsync host --room NAME [--bind ADDR | --signal URL] [--scene SCENE] [PEER OPTIONS]
-  softsync join --room NAME --signal URL [PEER OPTIONS]
-  softsync bench net-live [--out DIR] [--seconds S] [--quick]
-  softsync bench room-load [--out DIR] [--seconds S] [--peers 2,4,8]
-
-signal          a standalone signaling server (default --bind 127.0.0.1:3536). Rooms that must
-                outlive their host use one: new peers can still join after a migration.
-host            creates the room and spawns the scene; embeds a signaling server on --bind
-                (default 127.0.0.1:3536, port 0 picks one) unless --signal names one
-join            enters a room as a headless peer (a bot when --bot is given), a desktop peer
-                (--desktop) or a VR peer (--vr)
-
-PEER OPTIONS:
-  --bot SCRIPT          a bot script: a file, a built-in name (squeeze, idle, wave), or inline
-                        commands separated by ';' (see peer/src/bot.rs)
-  --duration S          leave after S seconds (default: run until killed)
-  --net-condition SPEC  impair what this peer sends with the seeded link conditioner, e.g.
-                        \"lat=40ms,jitter=8ms,loss=2%,seed=7\" (also burst=…%, dup=…%, mtu=…)
-  --dump FILE           JSON lines of the state this peer shows, once per second and at exit
-  --dump-hz HZ          dump rate (default 1)
-  --send-rate HZ        replication rate of avatars and soft bodies (default 20; thesis 5.3)
-  --threshold-mm MM     ignore threshold for positions and particles (default 5)
-  --sim-hz HZ           fixed simulation rate (default 60)
-  --scene SCENE         a scene file (.ron), or the name of one in --assets: thesis-room
-                        (default) or bench-ball. The host spawns its objects; a joiner needs
-                        the host's classes (a joiner with other classes, settings or meshes is
-                        refused at the handshake)
-  --assets DIR          where the shipped scenes and meshes are (default: ./assets, or next
-                        to the binary)
-  --ice URL             an ICE server (stun:/turn:), repeatable; default none (LAN/loopback)
-  --connect-timeout S   give up joining after S seconds (default 15)
-  --rejoin-limit N      a peer the room went on without (it stalled or was cut off for longer
-                        than the 1 s peer timeout; a stalled host is replaced) joins the room
-                        again, at most N times (default 3); 0: exit with code 3 instead
-  --quiet               no stats lines
-  --no-avatar           spawn no avatar (to measure one object's traffic)
-
-FRONT ENDS (host or join; need a build with `--features desktop` or `--features vr`):
-  --desktop             a window: orbit camera, the right hand on the mouse cursor; left
-                        button grips (Ctrl: left hand), wheel reaches (Shift: zoom), E trigger,
-                        right-drag orbits, middle-drag/WASDQZ pans, P particles, H HUD, R reset
-  --vr                  an OpenXR headset and controllers (SteamVR, Monado, ...): head and grip
-                        poses drive the avatar, squeeze grips, trigger triggers. Without a
-                        runtime or headset it says why and opens the desktop peer instead
-  --window WxH          desktop window size (default 1280x800)
-  --focus KIND          start the camera close to an object (softbox, bunny, softball, ...)
-  --particles           draw soft-body particles and their neighbour links (thesis Fig. 1.1)
-  --hide-avatars        draw no avatars
-  --no-hud              no HUD
-  --screenshot-dir DIR  save frame-NNNN.png there every --screenshot-every S (default 1) and
-                        print a line per frame (soft bodies' deformation and screen boxes);
-                        at most --screenshots N (default 60)
-  A bot script also runs on a desktop or VR peer: it then moves the hands relative to the
-  tracked ones and its grip adds to the device's.
+/// What `softsync help` prints after the commands.
+const AFTER_HELP: &str = "\
+A bot script also runs on a desktop or VR peer: it then moves the hands relative to the
+tracked ones and its grip adds to the device's. Desktop controls: the right hand on the mouse
+cursor; left button grips (Ctrl: left hand), wheel reaches (Shift: zoom), E trigger,
+right-drag orbits, middle-drag/WASDQZ pans, P particles, H HUD, R reset.
 
 Every peer prints a stats line per second on stderr: peers, host, term, bytes/s up and down,
 RTT, objects owned. Exit codes: 0 done, 1 runtime failure, 2 usage or input error, 3 cannot
 reach the signaling server or the room, 130 stopped by Ctrl-C/SIGTERM/SIGHUP (after a last
-dump and a Leave to the room).
-";
+dump and a Leave to the room).";
 
-/// Options that only a desktop or VR peer takes.
-const VIEW_FLAGS: [&str; 8] = [
-    "window",
-    "focus",
-    "particles",
-    "hide-avatars",
-    "no-hud",
-    "screenshot-dir",
-    "screenshot-every",
-    "screenshots",
-];
+/// softsync — collaborative soft-body rooms, peer to peer.
+#[derive(Parser, Debug)]
+#[command(name = "softsync", version, after_help = AFTER_HELP)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Sub>,
+}
+
+#[derive(Subcommand, Debug)]
+enum Sub {
+    /// A standalone signaling server. Rooms that must outlive their host use one: new peers
+    /// can still join after a migration.
+    Signal {
+        /// Listen address.
+        #[arg(long, default_value = "127.0.0.1:3536", value_parser = address)]
+        bind: SocketAddr,
+    },
+    /// Create the room and spawn the scene; embeds a signaling server on --bind unless
+    /// --signal names one.
+    Host {
+        /// The embedded signaling server's address (port 0 picks one).
+        #[arg(long, value_parser = address, conflicts_with = "signal")]
+        bind: Option<SocketAddr>,
+        /// An external signaling server (ws:// or wss://).
+        #[arg(long, value_parser = ws_url)]
+        signal: Option<String>,
+        #[command(flatten)]
+        peer: PeerOpts,
+    },
+    /// Enter a room as a headless peer (a bot when --bot is given), a desktop peer
+    /// (--desktop) or a VR peer (--vr).
+    Join {
+        /// The room's signaling server (e.g. ws://127.0.0.1:3536).
+        #[arg(long, value_parser = ws_url)]
+        signal: String,
+        #[command(flatten)]
+        peer: PeerOpts,
+    },
+    /// Benchmarks of real rooms (processes on loopback WebRTC).
+    Bench {
+        #[command(subcommand)]
+        which: BenchSub,
+    },
+}
+
+#[derive(Subcommand, Debug)]
+enum BenchSub {
+    /// Bandwidth and error of a live two-peer room under send policies and link conditions.
+    NetLive {
+        /// Output directory.
+        #[arg(long, default_value = "docs/results/live")]
+        out: PathBuf,
+        /// Seconds measured per configuration.
+        #[arg(long, default_value_t = 8.0, value_parser = positive::<600>)]
+        seconds: f64,
+        /// Fewer configurations.
+        #[arg(long)]
+        quick: bool,
+    },
+    /// Rooms of growing size.
+    RoomLoad {
+        /// Output directory.
+        #[arg(long, default_value = "docs/results/live")]
+        out: PathBuf,
+        /// Seconds measured per room.
+        #[arg(long, default_value_t = 10.0, value_parser = positive::<600>)]
+        seconds: f64,
+        /// Room sizes (peers, host included), comma-separated, each 2-32.
+        #[arg(long, default_value = "2,4,8", value_parser = room_sizes)]
+        peers: Sizes,
+    },
+}
+
+/// Room sizes of `bench room-load`.
+#[derive(Clone, Debug)]
+struct Sizes(Vec<usize>);
+
+/// Options of `host` and `join`.
+#[derive(Args, Debug)]
+struct PeerOpts {
+    /// The room's name (1-64 characters of A-Z a-z 0-9 - _ .).
+    #[arg(long, value_parser = room_name)]
+    room: String,
+    /// A bot script: a file, a built-in name (squeeze, idle, wave), or inline commands
+    /// separated by ';' (the language: peer/src/bot.rs).
+    #[arg(long)]
+    bot: Option<String>,
+    /// Leave after S seconds (default: run until killed).
+    #[arg(long, value_name = "S", value_parser = seconds)]
+    duration: Option<f64>,
+    /// Impair what this peer sends with the seeded link conditioner, e.g.
+    /// "lat=40ms,jitter=8ms,loss=2%,seed=7" (also burst=…%, dup=…%, reorder=…%, mtu=…).
+    #[arg(long, value_name = "SPEC", value_parser = condition)]
+    net_condition: Option<ConditionerConfig>,
+    /// JSON lines of the state this peer shows, --dump-hz times a second and at exit.
+    #[arg(long, value_name = "FILE")]
+    dump: Option<PathBuf>,
+    /// Dump rate.
+    #[arg(long, value_name = "HZ", default_value_t = 1.0, value_parser = positive::<240>)]
+    dump_hz: f64,
+    /// Replication rate of avatars and soft bodies (thesis 5.3).
+    #[arg(long, value_name = "HZ", default_value_t = 20.0, value_parser = positive::<240>)]
+    send_rate: f64,
+    /// Ignore threshold for positions and particles, mm (0-1000).
+    #[arg(long, value_name = "MM", default_value_t = 5.0, value_parser = threshold_mm)]
+    threshold_mm: f32,
+    /// Fixed simulation rate (at least 10).
+    #[arg(long, value_name = "HZ", default_value_t = 60.0, value_parser = positive::<1000>)]
+    sim_hz: f64,
+    /// A scene file (.ron), or the name of one in --assets: thesis-room or bench-ball. The
+    /// host spawns its objects; a joiner with other classes, settings, meshes or message
+    /// types is refused at the handshake.
+    #[arg(long, default_value = "thesis-room")]
+    scene: String,
+    /// Where the shipped scenes and meshes are (default: ./assets, or next to the binary).
+    #[arg(long, value_name = "DIR")]
+    assets: Option<PathBuf>,
+    /// An ICE server (stun:/turn:), repeatable; default none (LAN/loopback).
+    #[arg(long, value_name = "URL")]
+    ice: Vec<String>,
+    /// Give up joining after S seconds.
+    #[arg(long, value_name = "S", default_value_t = 15.0, value_parser = positive::<3600>)]
+    connect_timeout: f64,
+    /// A peer the room went on without (it stalled or was cut off for longer than the 1 s
+    /// peer timeout; a stalled host is replaced) joins again, at most N times; 0: exit with
+    /// code 3 instead.
+    #[arg(long, value_name = "N", default_value_t = 3, value_parser = clap::value_parser!(u32).range(0..=1000))]
+    rejoin_limit: u32,
+    /// No stats lines.
+    #[arg(long)]
+    quiet: bool,
+    /// Spawn no avatar (to measure one object's traffic).
+    #[arg(long)]
+    no_avatar: bool,
+    /// A window: orbit camera, the right hand on the mouse (needs a build with --features
+    /// desktop).
+    #[arg(long, conflicts_with = "vr", help_heading = "Front ends")]
+    desktop: bool,
+    /// An OpenXR headset and controllers (SteamVR, Monado, …); without a runtime or headset
+    /// it says why and opens the desktop peer (needs --features vr).
+    #[arg(long, help_heading = "Front ends")]
+    vr: bool,
+    #[command(flatten)]
+    view: ViewOpts,
+}
+
+/// Options of the desktop and VR views (each needs --desktop or --vr).
+#[derive(Args, Debug)]
+#[command(next_help_heading = "Front ends")]
+struct ViewOpts {
+    /// Desktop window size, WIDTHxHEIGHT (64-8192).
+    #[arg(long, value_name = "WxH", value_parser = window_size)]
+    window: Option<(u32, u32)>,
+    /// Start the camera close to an object (softbox, bunny, softball, …).
+    #[arg(long, value_name = "KIND")]
+    focus: Option<String>,
+    /// Draw soft-body particles and their neighbour links (thesis Fig. 1.1).
+    #[arg(long)]
+    particles: bool,
+    /// Draw no avatars.
+    #[arg(long)]
+    hide_avatars: bool,
+    /// No HUD.
+    #[arg(long)]
+    no_hud: bool,
+    /// Save frame-NNNN.png there every --screenshot-every S and print a line per frame
+    /// (soft bodies' deformation and screen boxes), at most --screenshots N.
+    #[arg(long, value_name = "DIR")]
+    screenshot_dir: Option<PathBuf>,
+    /// Seconds between screenshots (default 1).
+    #[arg(long, value_name = "S", value_parser = positive::<3600>)]
+    screenshot_every: Option<f64>,
+    /// Most screenshots (1-100000, default 60).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    screenshots: Option<u32>,
+}
+
+impl ViewOpts {
+    /// The first view flag given, if any (they need a front end).
+    fn first_given(&self) -> Option<&'static str> {
+        [
+            (self.window.is_some(), "window"),
+            (self.focus.is_some(), "focus"),
+            (self.particles, "particles"),
+            (self.hide_avatars, "hide-avatars"),
+            (self.no_hud, "no-hud"),
+            (self.screenshot_dir.is_some(), "screenshot-dir"),
+            (self.screenshot_every.is_some(), "screenshot-every"),
+            (self.screenshots.is_some(), "screenshots"),
+        ]
+        .into_iter()
+        .find_map(|(given, name)| given.then_some(name))
+    }
+}
+
+// ---- value parsers: each says what a good value is
+
+fn seconds(v: &str) -> Result<f64, String> {
+    match v.parse::<f64>() {
+        Ok(s) if s.is_finite() && (0.0..1e7).contains(&s) => Ok(s),
+        _ => Err(format!("{v:?} is not a number of seconds")),
+    }
+}
+
+fn positive<const MAX: u32>(v: &str) -> Result<f64, String> {
+    match v.parse::<f64>() {
+        Ok(s) if s.is_finite() && s > 0.0 && s <= f64::from(MAX) => Ok(s),
+        _ => Err(format!("{v:?} must be a number in (0, {MAX}]")),
+    }
+}
+
+fn address(v: &str) -> Result<SocketAddr, String> {
+    v.parse()
+        .map_err(|_| format!("{v:?} is not an address like 127.0.0.1:3536"))
+}
+
+fn ws_url(v: &str) -> Result<String, String> {
+    if v.starts_with("ws://") || v.starts_with("wss://") {
+        Ok(v.to_owned())
+    } else {
+        Err(format!("{v:?} is not a ws:// or wss:// URL"))
+    }
+}
+
+fn room_name(v: &str) -> Result<String, String> {
+    if softsync_net_matchbox::valid_room_name(v) {
+        Ok(v.to_owned())
+    } else {
+        Err(format!(
+            "{v:?} is not a room name (1-64 characters of A-Z a-z 0-9 - _ .)"
+        ))
+    }
+}
+
+fn threshold_mm(v: &str) -> Result<f32, String> {
+    match v.parse::<f32>() {
+        Ok(x) if x.is_finite() && (0.0..=1000.0).contains(&x) => Ok(x),
+        _ => Err(format!("{v:?} must be 0-1000")),
+    }
+}
+
+fn window_size(v: &str) -> Result<(u32, u32), String> {
+    match v
+        .split_once('x')
+        .map(|(a, b)| (a.parse::<u32>(), b.parse::<u32>()))
+    {
+        Some((Ok(a), Ok(b))) if (64..=8192).contains(&a) && (64..=8192).contains(&b) => Ok((a, b)),
+        _ => Err(format!("{v:?} is not WIDTHxHEIGHT (64-8192)")),
+    }
+}
+
+fn room_sizes(v: &str) -> Result<Sizes, String> {
+    v.split(',')
+        .map(|p| match p.trim().parse::<usize>() {
+            Ok(n) if (2..=32).contains(&n) => Ok(n),
+            _ => Err(format!("{p:?} must be 2-32")),
+        })
+        .collect::<Result<_, _>>()
+        .map(Sizes)
+}
+
+fn condition(v: &str) -> Result<ConditionerConfig, String> {
+    parse_condition(v).map_err(|e| e.0)
+}
 
 /// A usage error (exit code 2).
 #[derive(Debug, thiserror::Error)]
-#[error("{0}\n(run `softsync help` for usage)")]
+#[error("{0}")]
 pub struct UsageError(pub String);
 
 fn err<T>(msg: impl Into<String>) -> Result<T, UsageError> {
-    Err(UsageError(msg.into()))
+    Err(UsageError(format!(
+        "{}\n\nFor more information, try '--help'.",
+        msg.into()
+    )))
 }
 
 /// What to run.
@@ -122,8 +326,8 @@ pub enum Command {
         /// Room sizes (peers, host included).
         peers: Vec<usize>,
     },
-    /// Usage.
-    Help,
+    /// Print this (help, or the version).
+    Help(String),
 }
 
 /// Options of `host` and `join`.
@@ -207,28 +411,6 @@ pub struct ViewArgs {
     pub screenshots: u32,
 }
 
-fn secs(flag: &str, v: &str) -> Result<f64, UsageError> {
-    match v.parse::<f64>() {
-        Ok(s) if s.is_finite() && (0.0..1e7).contains(&s) => Ok(s),
-        _ => err(format!("{flag}: {v:?} is not a number of seconds")),
-    }
-}
-
-fn positive(flag: &str, v: &str, max: f64) -> Result<f64, UsageError> {
-    match v.parse::<f64>() {
-        Ok(s) if s.is_finite() && s > 0.0 && s <= max => Ok(s),
-        _ => err(format!("{flag}: {v:?} must be a number in (0, {max}]")),
-    }
-}
-
-fn addr(flag: &str, v: &str) -> Result<SocketAddr, UsageError> {
-    v.parse().map_err(|_| {
-        UsageError(format!(
-            "{flag}: {v:?} is not an address like 127.0.0.1:3536"
-        ))
-    })
-}
-
 /// Parse `lat=40ms,jitter=8ms,loss=2%,seed=7`.
 pub fn parse_condition(spec: &str) -> Result<ConditionerConfig, UsageError> {
     let mut c = ConditionerConfig::default();
@@ -285,269 +467,117 @@ pub fn parse_condition(spec: &str) -> Result<ConditionerConfig, UsageError> {
     Ok(c)
 }
 
-/// Parse the arguments after the program name.
+/// Parse the arguments after the program name. `Command::Help` carries the text to print
+/// (`softsync`, `softsync help [COMMAND]`, `--help`, `--version`).
 pub fn parse(args: &[String]) -> Result<Command, UsageError> {
-    let Some(cmd) = args.first() else {
-        return Ok(Command::Help);
-    };
-    let rest = &args[1..];
-    let mut flags: Vec<(String, Option<String>)> = Vec::new();
-    let mut positional = Vec::new();
-    let mut i = 0;
-    while i < rest.len() {
-        let a = &rest[i];
-        if let Some(name) = a.strip_prefix("--") {
-            let takes_value = !matches!(
-                name,
-                "quiet"
-                    | "quick"
-                    | "help"
-                    | "no-avatar"
-                    | "desktop"
-                    | "vr"
-                    | "particles"
-                    | "hide-avatars"
-                    | "no-hud"
-            );
-            if let Some((n, v)) = name.split_once('=') {
-                flags.push((n.to_owned(), Some(v.to_owned())));
-            } else if takes_value {
-                let Some(v) = rest.get(i + 1) else {
-                    return err(format!("--{name} needs a value"));
-                };
-                flags.push((name.to_owned(), Some(v.clone())));
-                i += 1;
-            } else {
-                flags.push((name.to_owned(), None));
-            }
-        } else {
-            positional.push(a.clone());
-        }
-        i += 1;
-    }
-    let get = |n: &str| -> Option<String> {
-        flags
-            .iter()
-            .rev()
-            .find(|(k, _)| k == n)
-            .and_then(|(_, v)| v.clone())
-    };
-    let has = |n: &str| flags.iter().any(|(k, _)| k == n);
-    let allowed = |ok: &[&str]| -> Result<(), UsageError> {
-        for (k, _) in &flags {
-            if !ok.contains(&k.as_str()) {
-                return err(format!("{cmd}: unknown option --{k}"));
-            }
-        }
-        Ok(())
-    };
-    match cmd.as_str() {
-        "help" | "--help" | "-h" => Ok(Command::Help),
-        "signal" => {
-            allowed(&["bind"])?;
-            let bind = addr(
-                "--bind",
-                &get("bind").unwrap_or_else(|| "127.0.0.1:3536".into()),
-            )?;
-            Ok(Command::Signal { bind })
-        }
-        "bench" => {
-            allowed(&["out", "seconds", "quick", "peers"])?;
-            let out = get("out")
-                .map(PathBuf::from)
-                .unwrap_or_else(|| PathBuf::from("docs/results/live"));
-            match positional.first().map(String::as_str) {
-                Some("net-live") => Ok(Command::BenchNetLive {
-                    out,
-                    seconds: match get("seconds") {
-                        Some(s) => positive("--seconds", &s, 600.0)?,
-                        None => 8.0,
-                    },
-                    quick: has("quick"),
-                }),
-                Some("room-load") => {
-                    let peers = get("peers").unwrap_or_else(|| "2,4,8".into());
-                    let peers: Vec<usize> = peers
-                        .split(',')
-                        .map(|p| match p.trim().parse::<usize>() {
-                            Ok(n) if (2..=32).contains(&n) => Ok(n),
-                            _ => err(format!("--peers: {p:?} must be 2-32")),
-                        })
-                        .collect::<Result<_, _>>()?;
-                    Ok(Command::BenchRoomLoad {
-                        out,
-                        seconds: match get("seconds") {
-                            Some(s) => positive("--seconds", &s, 600.0)?,
-                            None => 10.0,
-                        },
-                        peers,
-                    })
-                }
-                other => err(format!(
-                    "bench: unknown benchmark {other:?} (net-live, room-load)"
+    use clap::error::ErrorKind;
+    let argv = std::iter::once("softsync".to_string()).chain(args.iter().cloned());
+    let cli = match Cli::try_parse_from(argv) {
+        Ok(c) => c,
+        Err(e) => {
+            let text = e.render().to_string();
+            return match e.kind() {
+                ErrorKind::DisplayHelp
+                | ErrorKind::DisplayVersion
+                | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => Ok(Command::Help(text)),
+                _ => Err(UsageError(
+                    text.trim_start_matches("error: ").trim_end().to_string(),
                 )),
-            }
+            };
         }
-        "host" | "join" => {
-            let host = cmd == "host";
-            let mut ok = vec![
-                "room",
-                "signal",
-                "bot",
-                "duration",
-                "net-condition",
-                "dump",
-                "dump-hz",
-                "send-rate",
-                "threshold-mm",
-                "sim-hz",
-                "assets",
-                "scene",
-                "ice",
-                "connect-timeout",
-                "rejoin-limit",
-                "quiet",
-                "no-avatar",
-                "desktop",
-                "vr",
-            ];
-            ok.extend(VIEW_FLAGS);
-            if host {
-                ok.push("bind");
-            }
-            allowed(&ok)?;
-            if let Some(p) = positional.first() {
-                return err(format!("{cmd}: unexpected argument {p:?}"));
-            }
-            let room =
-                get("room").ok_or_else(|| UsageError(format!("{cmd}: --room NAME is required")))?;
-            if !softsync_net_matchbox::valid_room_name(&room) {
-                return err(format!(
-                    "--room: {room:?} is not a room name (1-64 characters of A-Z a-z 0-9 - _ .)"
-                ));
-            }
-            let signal = get("signal");
-            if !host && signal.is_none() {
-                return err("join: --signal URL is required (e.g. ws://127.0.0.1:3536)");
-            }
-            if host && signal.is_some() && has("bind") {
-                return err("host: --bind and --signal exclude each other");
-            }
-            if let Some(s) = &signal {
-                if !(s.starts_with("ws://") || s.starts_with("wss://")) {
-                    return err(format!("--signal: {s:?} is not a ws:// or wss:// URL"));
-                }
-            }
-            let scene = get("scene").unwrap_or_else(|| "thesis-room".into());
-            let front = match (has("desktop"), has("vr")) {
-                (true, true) => return err("--desktop and --vr exclude each other"),
-                (true, false) => FrontEnd::Desktop,
-                (false, true) => FrontEnd::Vr,
-                (false, false) => FrontEnd::Headless,
-            };
-            if front == FrontEnd::Headless {
-                if let Some(f) = VIEW_FLAGS.iter().find(|f| has(f)) {
-                    return err(format!("--{f} needs --desktop or --vr"));
-                }
-            }
-            let window = match get("window") {
-                Some(w) => match w
-                    .split_once('x')
-                    .map(|(a, b)| (a.parse::<u32>(), b.parse::<u32>()))
-                {
-                    Some((Ok(a), Ok(b)))
-                        if (64..=8192).contains(&a) && (64..=8192).contains(&b) =>
-                    {
-                        (a, b)
-                    }
-                    _ => return err(format!("--window: {w:?} is not WIDTHxHEIGHT (64-8192)")),
+    };
+    let Some(sub) = cli.command else {
+        use clap::CommandFactory;
+        return Ok(Command::Help(Cli::command().render_help().to_string()));
+    };
+    Ok(match sub {
+        Sub::Signal { bind } => Command::Signal { bind },
+        Sub::Bench {
+            which:
+                BenchSub::NetLive {
+                    out,
+                    seconds,
+                    quick,
                 },
-                None => (1280, 800),
-            };
-            let view = ViewArgs {
-                window,
-                focus: get("focus"),
-                particles: has("particles"),
-                hide_avatars: has("hide-avatars"),
-                no_hud: has("no-hud"),
-                screenshot_dir: get("screenshot-dir").map(PathBuf::from),
-                screenshot_every: match get("screenshot-every") {
-                    Some(s) => Duration::from_secs_f64(positive("--screenshot-every", &s, 3600.0)?),
-                    None => Duration::from_secs(1),
+        } => Command::BenchNetLive {
+            out,
+            seconds,
+            quick,
+        },
+        Sub::Bench {
+            which:
+                BenchSub::RoomLoad {
+                    out,
+                    seconds,
+                    peers,
                 },
-                screenshots: match get("screenshots") {
-                    Some(s) => match s.parse::<u32>() {
-                        Ok(n) if (1..=100_000).contains(&n) => n,
-                        _ => return err(format!("--screenshots: {s:?} must be 1-100000")),
-                    },
-                    None => 60,
-                },
-            };
-            Ok(Command::Peer(Box::new(PeerArgs {
-                host,
-                room,
-                bind: addr(
-                    "--bind",
-                    &get("bind").unwrap_or_else(|| "127.0.0.1:3536".into()),
-                )?,
-                signal,
-                scene,
-                bot: get("bot"),
-                duration: match get("duration") {
-                    Some(s) => Some(Duration::from_secs_f64(secs("--duration", &s)?)),
-                    None => None,
-                },
-                condition: match get("net-condition") {
-                    Some(s) => Some(parse_condition(&s)?),
-                    None => None,
-                },
-                dump: get("dump").map(PathBuf::from),
-                dump_hz: match get("dump-hz") {
-                    Some(s) => positive("--dump-hz", &s, 240.0)?,
-                    None => 1.0,
-                },
-                send_rate_hz: match get("send-rate") {
-                    Some(s) => positive("--send-rate", &s, 240.0)? as f32,
-                    None => 20.0,
-                },
-                threshold_m: match get("threshold-mm") {
-                    Some(s) => match s.parse::<f32>() {
-                        Ok(v) if v.is_finite() && (0.0..=1000.0).contains(&v) => v / 1000.0,
-                        _ => return err(format!("--threshold-mm: {s:?} must be 0-1000")),
-                    },
-                    None => 0.005,
-                },
-                sim_hz: match get("sim-hz") {
-                    Some(s) => positive("--sim-hz", &s, 1000.0)?.max(10.0),
-                    None => 60.0,
-                },
-                assets: get("assets").map(PathBuf::from),
-                ice: flags
-                    .iter()
-                    .filter(|(k, _)| k == "ice")
-                    .filter_map(|(_, v)| v.clone())
-                    .collect(),
-                connect_timeout: match get("connect-timeout") {
-                    Some(s) => Duration::from_secs_f64(positive("--connect-timeout", &s, 3600.0)?),
-                    None => Duration::from_secs(15),
-                },
-                rejoin_limit: match get("rejoin-limit") {
-                    Some(s) => match s.parse::<u32>() {
-                        Ok(n) if n <= 1000 => n,
-                        _ => return err(format!("--rejoin-limit: {s:?} must be 0-1000")),
-                    },
-                    None => 3,
-                },
-                quiet: has("quiet"),
-                no_avatar: has("no-avatar"),
-                front,
-                view,
-            })))
+        } => Command::BenchRoomLoad {
+            out,
+            seconds,
+            peers: peers.0,
+        },
+        Sub::Host { bind, signal, peer } => {
+            let bind = bind.unwrap_or(SocketAddr::from(([127, 0, 0, 1], 3536)));
+            Command::Peer(Box::new(peer_args(true, bind, signal, peer)?))
         }
-        other => err(format!(
-            "unknown command {other:?}: signal, host, join, bench or help"
-        )),
+        Sub::Join { signal, peer } => {
+            let bind = SocketAddr::from(([127, 0, 0, 1], 3536));
+            Command::Peer(Box::new(peer_args(false, bind, Some(signal), peer)?))
+        }
+    })
+}
+
+/// `host`'s and `join`'s options, checked across flags.
+fn peer_args(
+    host: bool,
+    bind: SocketAddr,
+    signal: Option<String>,
+    p: PeerOpts,
+) -> Result<PeerArgs, UsageError> {
+    let front = match (p.desktop, p.vr) {
+        (true, _) => FrontEnd::Desktop,
+        (false, true) => FrontEnd::Vr,
+        (false, false) => FrontEnd::Headless,
+    };
+    if front == FrontEnd::Headless {
+        if let Some(f) = p.view.first_given() {
+            return err(format!("--{f} needs --desktop or --vr"));
+        }
     }
+    let v = p.view;
+    let view = ViewArgs {
+        window: v.window.unwrap_or((1280, 800)),
+        focus: v.focus,
+        particles: v.particles,
+        hide_avatars: v.hide_avatars,
+        no_hud: v.no_hud,
+        screenshot_dir: v.screenshot_dir,
+        screenshot_every: Duration::from_secs_f64(v.screenshot_every.unwrap_or(1.0)),
+        screenshots: v.screenshots.unwrap_or(60),
+    };
+    Ok(PeerArgs {
+        host,
+        room: p.room,
+        bind,
+        signal,
+        scene: p.scene,
+        bot: p.bot,
+        duration: p.duration.map(Duration::from_secs_f64),
+        condition: p.net_condition,
+        dump: p.dump,
+        dump_hz: p.dump_hz,
+        send_rate_hz: p.send_rate as f32,
+        threshold_m: p.threshold_mm / 1000.0,
+        sim_hz: p.sim_hz.max(10.0),
+        assets: p.assets,
+        ice: p.ice,
+        connect_timeout: Duration::from_secs_f64(p.connect_timeout),
+        rejoin_limit: p.rejoin_limit,
+        quiet: p.quiet,
+        no_avatar: p.no_avatar,
+        front,
+        view,
+    })
 }
 
 #[cfg(test)]
@@ -557,6 +587,36 @@ mod tests {
 
     fn args(s: &str) -> Vec<String> {
         s.split_whitespace().map(String::from).collect()
+    }
+
+    #[test]
+    fn help_is_generated_for_every_command() {
+        for a in [
+            "",
+            "help",
+            "--help",
+            "help host",
+            "join --help",
+            "bench room-load --help",
+        ] {
+            let Command::Help(text) = parse(&args(a)).unwrap() else {
+                panic!("{a:?} is not help");
+            };
+            assert!(text.contains("Usage"), "{a:?}: {text}");
+        }
+        let Command::Help(text) = parse(&args("help join")).unwrap() else {
+            panic!()
+        };
+        assert!(
+            text.contains("--net-condition") && text.contains("--signal"),
+            "{text}"
+        );
+        let Command::BenchRoomLoad { peers, seconds, .. } =
+            parse(&args("bench room-load --peers 2,4")).unwrap()
+        else {
+            panic!()
+        };
+        assert_eq!((peers, seconds), (vec![2, 4], 10.0));
     }
 
     #[test]
@@ -605,19 +665,24 @@ mod tests {
             ("join --room lab", "--signal"),
             ("join --signal ws://x:1", "--room"),
             ("host --room a/b", "room name"),
-            ("host --room a --frob 1", "unknown option --frob"),
+            ("host --room a --frob 1", "--frob"),
             ("join --room a --signal http://x", "ws://"),
             ("host --room a --net-condition loss=200%", "0-100%"),
             ("host --room a --net-condition lag=3", "unknown key"),
             ("host --room a --duration soon", "seconds"),
             ("host --room a --bind nowhere", "address"),
-            ("host --room a --dump", "needs a value"),
-            ("fly", "unknown command"),
-            ("host --room a --desktop --vr", "exclude"),
+            ("host --room a --dump", "value is required"),
+            ("fly", "unrecognized subcommand"),
+            ("host --room a --desktop --vr", "cannot be used with"),
             ("host --room a --window 10x10", "--window"),
             ("host --room a --desktop --window 800", "--window"),
             ("host --room a --particles", "needs --desktop or --vr"),
             ("host --room a --vr --screenshots 0", "--screenshots"),
+            (
+                "host --room a --signal ws://x:1 --bind 127.0.0.1:1",
+                "cannot be used with",
+            ),
+            ("bench room-load --peers 2,40", "2-32"),
         ] {
             let e = parse(&args(bad)).unwrap_err().to_string();
             assert!(e.contains(says), "{bad}: {e}");

@@ -80,8 +80,8 @@ fn main() -> ExitCode {
 
 fn run(args: &[String]) -> Result<ExitCode, Failure> {
     match cli::parse(args)? {
-        Command::Help => {
-            print!("{}", cli::USAGE);
+        Command::Help(text) => {
+            print!("{text}");
             Ok(ExitCode::SUCCESS)
         }
         Command::Signal { bind } => signal(bind),
