@@ -220,3 +220,38 @@ fn a_peer_built_with_other_message_types_is_refused_at_the_handshake() {
         "{reason:?}"
     );
 }
+
+proptest::proptest! {
+    #![proptest_config(proptest::test_runner::Config { cases: 12, ..Default::default() })]
+
+    /// Whatever the seed, loss, room size and moment of the host's death: every survivor
+    /// delivers every surviving sender's messages exactly once and in order, and every
+    /// surviving sender's outbox drains.
+    #[test]
+    fn exactly_once_in_order_whatever_the_loss_and_the_moment_of_the_kill(
+        seed in 1u64..1_000_000,
+        loss in 0.0f64..0.15,
+        n in 3usize..6,
+        kill_at in 0u32..40,
+    ) {
+        let mut h = room_with(n, cfg(), ConditionerConfig::rough(seed, 15, 5, loss), ms(2500));
+        let senders: Vec<usize> = (0..n).collect();
+        stream(&mut h, &senders, 40, |h, f| {
+            if f == kill_at {
+                h.kill(0);
+            }
+        });
+        h.advance(ms(10_000));
+        let all: Vec<u32> = (0..40).collect();
+        for i in 1..n {
+            proptest::prop_assert!(h.peers[i].session.is_connected(), "peer {} left the room", i);
+            let got = received(&h, i);
+            for j in (1..n).filter(|j| *j != i) {
+                proptest::prop_assert_eq!(got.get(&Harness::id(j)), Some(&all), "peer {} from {}", i, j);
+            }
+            let from_dead = got.get(&Harness::id(0)).cloned().unwrap_or_default();
+            proptest::prop_assert!(from_dead.windows(2).all(|w| w[1] == w[0] + 1));
+            proptest::prop_assert_eq!(h.peers[i].session.messages_in_flight(), 0);
+        }
+    }
+}
