@@ -38,7 +38,7 @@ pub use interp::InterpolationConfig;
 pub use policy::{
     AuthorityPolicy, ClassConfig, MessageConfig, SendPolicy, SessionConfig, SoftBodyMode,
 };
-pub use session::{DisplayedState, Event, ObjectState, Session};
+pub use session::{DisplayedState, Event, ObjectState, RoomKey, Session};
 pub use stats::Stats;
 pub use time::Instant;
 #[cfg(feature = "testing")]

@@ -190,6 +190,11 @@ pub struct SessionConfig {
     /// [`digest`](Self::digest).
     #[serde(default)]
     pub messages: MessageConfig,
+    /// The room's key, if it has one: the host admits only joiners that prove they hold it
+    /// (challenge and response; see [`RoomKey`](crate::RoomKey)). Every peer of the room
+    /// sets the same secret. Not part of the digest, never serialised, never shown.
+    #[serde(skip)]
+    pub room_key: Option<crate::RoomKey>,
 }
 
 /// The application's message types and the room's bounds on messages. Every peer enforces
@@ -251,6 +256,7 @@ impl Default for SessionConfig {
             max_particles_per_peer: default_max_particles_per_peer(),
             content_digest: 0,
             messages: MessageConfig::default(),
+            room_key: None,
         }
     }
 }

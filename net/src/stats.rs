@@ -91,6 +91,8 @@ pub struct Stats {
     /// after a migration), implausible (an epoch or id the sender cannot know) or over a
     /// per-peer limit.
     pub refused_controls: u64,
+    /// Host: joiners refused for a wrong room key.
+    pub refused_joins: u64,
     /// Application messages.
     pub messages: MessageStats,
 }

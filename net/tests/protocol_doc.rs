@@ -418,6 +418,8 @@ fn render() -> String {
             reason: wire::MessageRefusal::Filtered(7),
         },
     ));
+    examples.push(("Challenge", Control::Challenge { nonce: [0x5a; 16] }));
+    examples.push(("Proof", Control::Proof { mac: [0xc3; 32] }));
     writeln!(
         w,
         "| message | example size (bytes) | example bytes |\n|---|---:|---|"
@@ -432,6 +434,9 @@ fn render() -> String {
     let mc = softsync_net::MessageConfig::default();
     writeln!(w, "## Application messages\n").unwrap();
     writeln!(w, "An application's own message travels in an `AppMessage` envelope: origin peer, the origin's number (from 1 per reliable or retained message, 0 for unreliable), kind (an index into `SessionConfig::messages.kinds`, whose names are part of the configuration digest checked at join), target (`Everyone`, `Peer(id)`, `OwnerOf(object)`, `Host`), delivery (`Reliable`, `Unreliable`, `Retained`) and at most {} payload bytes. Reliable and retained ones go origin → host in a `Message` control message, and host → each target likewise; unreliable ones in a `message` section, relayed the same way. The host checks the origin (it must be the sender), the kind, the size, the origin's rate (token bucket, default {} per second, burst {}; after a takeover the burst grows by the outbox bound so resends pass) and its application filter, and answers a refused reliable message with `MessageRefused`. Once every target's link acknowledged the relayed copy (or the target left), the host tells the origin `MessagesDelivered` up to that number. The origin keeps undelivered messages (at most {}) and sends them again, in order, to a new host after a migration; a receiver delivers a reliable message only if its number is above the last it delivered from that origin, so each target gets it exactly once. The host, and every member, keeps the latest retained message of each kind; a joiner receives them after the object snapshot.\n", wire::MAX_MESSAGE_PAYLOAD, mc.rate_per_s, mc.burst, mc.max_outbox).unwrap();
+
+    writeln!(w, "## Rooms with a key\n").unwrap();
+    writeln!(w, "A host whose configuration has a room key answers a `Hello` that passed every other check with `Challenge` (a 16-byte nonce, the same one again for a repeated `Hello`) instead of `Welcome`. The joiner answers `Proof`: HMAC-SHA256 under the key of `\"softsync-join-v1\" ‖ nonce ‖ joiner id (u64 LE) ‖ host id (u64 LE)`. A matching proof is admitted (`Welcome`, snapshot, …); another gets `Refused` \"wrong room key\"; a joiner without a key ends with a refusal of its own. The secret never crosses the wire, and a proof opens nothing but the one challenge it answers.\n").unwrap();
 
     writeln!(w, "## Refusal datagram (version-independent)\n").unwrap();
     let r = encode_refusal(

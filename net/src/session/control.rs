@@ -93,6 +93,12 @@ impl Session {
                 self.on_welcome(now, term, host, members);
             }
             Control::Refused { reason } if self.role == Role::Joining => self.on_refused(reason),
+            Control::Challenge { nonce }
+                if self.role == Role::Joining && Some(from) == self.host =>
+            {
+                self.on_challenge(now, from, nonce);
+            }
+            Control::Proof { mac } if self.role == Role::Host => self.on_proof(now, from, mac),
             Control::Redirect { host } if self.role == Role::Joining && from != host => {
                 self.join_via(now, host);
             }

@@ -77,6 +77,24 @@ impl Session {
             self.send_control(now, from, &Control::Refused { reason });
             return;
         }
+        if self.challenge(now, from) {
+            return; // a room with a key: admitted once it proves it holds the key
+        }
+        self.admit(now, from);
+    }
+
+    /// Host: `from` is a member now: `Welcome`, the snapshot and the retained messages to
+    /// it, `PeerJoined` to the others.
+    pub(super) fn admit(&mut self, now: Instant, from: PeerId) {
+        if self.members.contains_key(&from) {
+            return;
+        }
+        if self.members.len() >= self.cfg.max_members {
+            // it filled up while this joiner proved its key
+            let reason = format!("the room is full ({} members)", self.cfg.max_members);
+            self.send_control(now, from, &Control::Refused { reason });
+            return;
+        }
         let join_seq = self.next_join_seq;
         self.next_join_seq = self.next_join_seq.saturating_add(1);
         self.members.insert(from, join_seq);

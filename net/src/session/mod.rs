@@ -15,6 +15,7 @@
 //! | `send` | replication out: send ticks, thresholds, deltas, datagram assembly |
 //! | `recv` | datagrams in: sections, state entries applied against their bases, acks |
 //! | `join` | joining: `Hello`/`Welcome`/`Redirect`/refusals, members joining and leaving |
+//! | `access` | rooms with a key: the host's challenge, the joiner's proof |
 //! | `spawn` | spawning and despawning, spawn requests, late-join snapshots |
 //! | `authority` | who owns what: requests, grants, asks, releases, post-migration claims |
 //! | `liveness` | heartbeats, timeouts, our own stalls, peers told they were dropped |
@@ -23,6 +24,7 @@
 //! | `control` | routing control messages; the host as a client of itself |
 //! | [`topology`] | tears and cuts: the owner's requests, the host's checks, per-object logs |
 
+mod access;
 mod authority;
 mod control;
 mod delta;
@@ -42,6 +44,7 @@ pub mod topology;
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
 
+pub use access::RoomKey;
 pub use registry::{DisplayedState, ObjectState};
 
 use self::authority::PendingAsks;
@@ -219,6 +222,7 @@ pub struct Session {
     topology_refused: topology::TopologyRefusals,
     last_relay_at: Option<Instant>,
     messages: messages::Messages,
+    challenges: access::Challenges,
 }
 
 impl Session {
@@ -248,6 +252,7 @@ impl Session {
             topology_refused: topology::TopologyRefusals::default(),
             last_relay_at: None,
             messages: messages::Messages::default(),
+            challenges: access::Challenges::default(),
         }
     }
 

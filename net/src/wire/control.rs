@@ -178,6 +178,17 @@ pub enum Control {
         /// Why.
         reason: MessageRefusal,
     },
+    /// Host → joiner (a room with a key): prove you hold it, over this nonce.
+    Challenge {
+        /// The host's nonce.
+        nonce: [u8; 16],
+    },
+    /// Joiner → host: HMAC-SHA256 under the room key of the nonce, the joiner's id and the
+    /// host's id.
+    Proof {
+        /// The MAC.
+        mac: [u8; 32],
+    },
 }
 
 /// One change of an object's mesh topology, in the object's rest frame (the frame of its
