@@ -149,6 +149,11 @@ struct PeerOpts {
     /// code 3 instead.
     #[arg(long, value_name = "N", default_value_t = 3, value_parser = clap::value_parser!(u32).range(0..=1000))]
     rejoin_limit: u32,
+    /// A file holding the room's secret: the host admits only peers that prove they hold
+    /// the same (challenge and response; the secret never crosses the wire). Or set
+    /// SOFTSYNC_ROOM_KEY. Use 16 or more random bytes.
+    #[arg(long, value_name = "FILE")]
+    room_key_file: Option<PathBuf>,
     /// No stats lines.
     #[arg(long)]
     quiet: bool,
@@ -367,6 +372,8 @@ pub struct PeerArgs {
     pub connect_timeout: Duration,
     /// How many times to join again after the room went on without us.
     pub rejoin_limit: u32,
+    /// The room secret's file.
+    pub room_key_file: Option<PathBuf>,
     /// No stats lines.
     pub quiet: bool,
     /// Spawn no avatar.
@@ -573,6 +580,7 @@ fn peer_args(
         ice: p.ice,
         connect_timeout: Duration::from_secs_f64(p.connect_timeout),
         rejoin_limit: p.rejoin_limit,
+        room_key_file: p.room_key_file,
         quiet: p.quiet,
         no_avatar: p.no_avatar,
         front,

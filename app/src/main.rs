@@ -197,6 +197,34 @@ fn view_config(a: &PeerArgs, desktop: bool) -> view::ViewConfig {
     }
 }
 
+/// The room's key: `--room-key-file`, or `SOFTSYNC_ROOM_KEY`, or none. Its challenges are
+/// seeded from the process's own random hasher keys (the OS's randomness).
+fn room_key(file: Option<&Path>) -> Result<Option<softsync_net::RoomKey>, Failure> {
+    let secret = match file {
+        Some(f) => std::fs::read(f)
+            .map_err(|e| Failure::usage(format!("--room-key-file {}: {e}", f.display())))?,
+        None => match std::env::var_os("SOFTSYNC_ROOM_KEY") {
+            Some(v) => v.into_encoded_bytes(),
+            None => return Ok(None),
+        },
+    };
+    let trimmed = secret.trim_ascii_end();
+    if trimmed.is_empty() {
+        return Err(Failure::usage("the room key is empty"));
+    }
+    if trimmed.len() < 16 {
+        eprintln!(
+            "warning: the room key has {} bytes; use 16 or more random ones",
+            trimmed.len()
+        );
+    }
+    use std::hash::{BuildHasher, Hasher};
+    let seed = std::collections::hash_map::RandomState::new()
+        .build_hasher()
+        .finish();
+    Ok(Some(softsync_net::RoomKey::new(trimmed, seed)))
+}
+
 fn load_bot(src: &str) -> Result<Bot, Failure> {
     let text = if let Some(b) = bot::builtin(src) {
         b.to_owned()
@@ -290,7 +318,8 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
         particle_threshold_m: a.threshold_m,
         ..SendPolicy::default()
     };
-    let cfg = scene.session_config(send.clone(), send.clone(), send);
+    let mut cfg = scene.session_config(send.clone(), send.clone(), send);
+    cfg.room_key = room_key(a.room_key_file.as_deref())?;
 
     // Signaling: embedded in the host unless --signal names a server.
     let (signal_server, url) = match (&a.signal, a.host) {

@@ -244,7 +244,17 @@ impl Peer {
         self.avatar.clear();
         self.waiting_grant.clear();
         let cfg = self.session.config().clone();
-        self.session = Session::join(self.me(), host, cfg, now);
+        let fresh = Session::join(self.me(), host, cfg, now);
+        let mut old = std::mem::replace(&mut self.session, fresh);
+        self.session.take_message_filter_from(&mut old);
+        // our messages the old room never delivered everywhere are lost with it: say so
+        for seq in old.undelivered_messages() {
+            self.events
+                .push_back(Event::Room(softsync_net::Event::MessageRefused {
+                    seq,
+                    reason: MessageRefusal::NotConnected,
+                }));
+        }
         self.joining.restart(now, host);
         self.events.push_back(Event::Rejoining { host, reason });
     }

@@ -439,6 +439,44 @@ fn e_errors_are_clear_and_exit_non_zero() {
     assert!(err.contains("configuration differs"), "{err}");
     host.kill();
 
+    // A room with a key: no key, or another, is refused (exit 3); the key gets in.
+    let key = dir.join("room.key");
+    std::fs::write(&key, "a long random room secret\n").unwrap();
+    let wrong = dir.join("wrong.key");
+    std::fs::write(&wrong, "not the room's secret at all").unwrap();
+    let (k, w) = (key.to_str().unwrap(), wrong.to_str().unwrap());
+    let mut host = peer_on(
+        &dir,
+        "key-host",
+        "host",
+        &url,
+        "keyed",
+        &["--room-key-file", k],
+    );
+    host.peer_id();
+    let join = |name: &str, extra: &[&str]| {
+        let mut a = vec![
+            "join",
+            "--room",
+            "keyed",
+            "--signal",
+            &url,
+            "--duration",
+            "2",
+        ];
+        a.extend_from_slice(extra);
+        run(name, &a)
+    };
+    let (code, err) = join("no-key", &[]);
+    assert_eq!(code, 3, "{err}");
+    assert!(err.contains("needs a key"), "{err}");
+    let (code, err) = join("wrong-key", &["--room-key-file", w]);
+    assert_eq!(code, 3, "{err}");
+    assert!(err.contains("wrong room key"), "{err}");
+    let (code, err) = join("key", &["--room-key-file", k]);
+    assert_eq!(code, 0, "the keyholder was not let in: {err}");
+    host.kill();
+
     let (code, err) = run(
         "flag",
         &["host", "--room", "x", "--net-condition", "loss=150%"],

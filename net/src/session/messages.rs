@@ -225,6 +225,19 @@ impl Session {
         self.messages.outbox.len()
     }
 
+    /// The numbers of our reliable messages not yet delivered everywhere (what is lost if
+    /// this session is replaced, e.g. by a fresh one after the room went on without us).
+    pub fn undelivered_messages(&self) -> Vec<u32> {
+        self.messages.outbox.iter().map(|m| m.seq).collect()
+    }
+
+    /// Move the message filter of `old` (a session this one replaces) to this one.
+    pub fn take_message_filter_from(&mut self, old: &mut Session) {
+        if let Some(f) = old.messages.filter.take() {
+            self.messages.filter = Some(f);
+        }
+    }
+
     /// The retained messages of the room, one per kind (what a late joiner receives).
     pub fn retained_messages(&self) -> impl Iterator<Item = ReceivedMessage> + '_ {
         self.messages
