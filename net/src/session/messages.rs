@@ -19,7 +19,7 @@
 use std::collections::{BTreeMap, VecDeque};
 
 use super::{Event, Role, Session};
-use crate::ids::PeerId;
+use crate::ids::{NetId, PeerId};
 use crate::time::Instant;
 use crate::wire::{
     encode_unreliable_message, AppMessage, Control, Delivery, MessageKind, MessageRefusal,
@@ -76,8 +76,8 @@ pub(crate) struct Messages {
     bucket: TokenBucket,
     /// Per origin: the highest reliable message number delivered to us.
     passed: BTreeMap<PeerId, u32>,
-    /// The latest retained message of each kind.
-    retained: BTreeMap<MessageKind, AppMessage>,
+    /// The latest retained message of each kind (and object, for per-object state).
+    retained: BTreeMap<(MessageKind, Option<NetId>), AppMessage>,
     /// Host: per origin, relayed reliable messages not yet acknowledged by every target.
     ledger: BTreeMap<PeerId, VecDeque<Relayed>>,
     /// Host: per origin, its sending rate.
@@ -154,13 +154,18 @@ impl Session {
         if payload.len() > self.cfg.max_message_payload() {
             return Err(MessageRefusal::TooLarge);
         }
-        if delivery == Delivery::Retained && to != MessageTarget::Everyone {
+        if delivery.is_retained() && to != MessageTarget::Everyone {
             return Err(MessageRefusal::BadDelivery);
         }
         if to == MessageTarget::Peer(self.local)
             || (to == MessageTarget::Host && self.role == Role::Host)
         {
             return Err(MessageRefusal::NoSuchTarget);
+        }
+        if let Delivery::ObjectState(id) = delivery {
+            if self.objects.get(id).is_none() {
+                return Err(MessageRefusal::NoSuchTarget);
+            }
         }
         if delivery.is_reliable() && self.messages.outbox.len() >= cfg.max_outbox {
             return Err(MessageRefusal::QueueFull);
@@ -187,8 +192,8 @@ impl Session {
         if delivery.is_reliable() {
             self.messages.outbox.push_back(msg.clone());
         }
-        if delivery == Delivery::Retained {
-            self.messages.retained.insert(kind, msg.clone());
+        if let Some(key) = msg.retain_key() {
+            self.messages.retained.insert(key, msg.clone());
         }
         match self.role {
             Role::Host => {
@@ -238,7 +243,8 @@ impl Session {
         }
     }
 
-    /// The retained messages of the room, one per kind (what a late joiner receives).
+    /// The retained messages of the room, one per kind and one per kind and object (what a
+    /// late joiner receives).
     pub fn retained_messages(&self) -> impl Iterator<Item = ReceivedMessage> + '_ {
         self.messages
             .retained
@@ -296,6 +302,11 @@ impl Session {
             let waiting = self.messages.ledger.get(&from).map_or(0, VecDeque::len);
             if msg.delivery.is_reliable() && waiting >= cfg.max_outbox.saturating_mul(2) {
                 return Err(MessageRefusal::QueueFull);
+            }
+        }
+        if let Delivery::ObjectState(id) = msg.delivery {
+            if self.objects.get(id).is_none() {
+                return Err(MessageRefusal::NoSuchTarget);
             }
         }
         let targets: Vec<PeerId> = match msg.to {
@@ -419,19 +430,19 @@ impl Session {
         }
         if msg.delivery.is_reliable() {
             let passed = self.messages.passed.get(&msg.origin).copied();
-            let known_retained = msg.delivery == Delivery::Retained
-                && self
-                    .messages
+            let known_retained = msg.retain_key().is_some_and(|key| {
+                self.messages
                     .retained
-                    .get(&msg.kind)
-                    .is_some_and(|r| r.origin == msg.origin && r.seq == msg.seq);
+                    .get(&key)
+                    .is_some_and(|r| r.origin == msg.origin && r.seq == msg.seq)
+            });
             if passed.is_some_and(|p| msg.seq <= p) || known_retained {
                 self.stats.messages.duplicates += 1;
                 return;
             }
             self.messages.passed.insert(msg.origin, msg.seq);
-            if msg.delivery == Delivery::Retained {
-                self.messages.retained.insert(msg.kind, msg.clone());
+            if let Some(key) = msg.retain_key() {
+                self.messages.retained.insert(key, msg.clone());
             }
         }
         self.stats.messages.received += 1;
@@ -460,13 +471,15 @@ impl Session {
             return;
         };
         *self.stats.messages.refused.entry(reason).or_default() += 1;
-        if self
-            .messages
-            .retained
-            .get(&m.kind)
-            .is_some_and(|r| r.origin == self.local && r.seq == seq)
-        {
-            self.messages.retained.remove(&m.kind);
+        if let Some(key) = m.retain_key() {
+            if self
+                .messages
+                .retained
+                .get(&key)
+                .is_some_and(|r| r.origin == self.local && r.seq == seq)
+            {
+                self.messages.retained.remove(&key);
+            }
         }
         self.events.push_back(Event::MessageRefused { seq, reason });
     }
@@ -505,6 +518,20 @@ impl Session {
         }
     }
 
+    /// The latest per-object state message of each kind about `id`.
+    pub fn object_messages(&self, id: NetId) -> impl Iterator<Item = ReceivedMessage> + '_ {
+        self.messages
+            .retained
+            .iter()
+            .filter(move |((_, o), _)| *o == Some(id))
+            .map(|(_, m)| ReceivedMessage::from(m.clone()))
+    }
+
+    /// An object is gone: its per-object state goes with it.
+    pub(super) fn forget_object_messages(&mut self, id: NetId) {
+        self.messages.retained.retain(|(_, o), _| *o != Some(id));
+    }
+
     /// A peer left or joined afresh: forget its message numbers.
     pub(super) fn forget_message_origin(&mut self, p: PeerId) {
         self.messages.forget(p);
@@ -518,6 +545,7 @@ mod tests {
     use super::*;
     use crate::policy::SessionConfig;
     use crate::wire::MAX_MESSAGE_PAYLOAD;
+    use crate::NetId;
 
     fn cfg() -> SessionConfig {
         let mut c = config();
@@ -757,6 +785,65 @@ mod tests {
         got.sort();
         assert_eq!(got, [(0, 9), (1, 3)]);
         assert_eq!(w.get(3).retained_messages().count(), 2);
+    }
+
+    #[test]
+    fn per_object_state_reaches_late_joiners_and_goes_with_its_object() {
+        use crate::session::ObjectState;
+        use glam::{Quat, Vec3};
+        let mut w = room(2);
+        let now = w.now;
+        let st = ObjectState::rigid(Vec3::Y, Quat::IDENTITY);
+        let (a, _) = w.get(1).spawn(now, crate::ClassId(0), st.clone()).unwrap();
+        let (b, _) = w.get(1).spawn(now, crate::ClassId(0), st).unwrap();
+        w.settle();
+        let valve = MessageKind(1);
+        for (id, opening) in [(a, 10u8), (a, 40), (b, 70)] {
+            w.get(2)
+                .send_message(
+                    now,
+                    valve,
+                    MessageTarget::Everyone,
+                    Delivery::ObjectState(id),
+                    vec![opening],
+                )
+                .unwrap();
+        }
+        assert_eq!(
+            w.get(2).send_message(
+                now,
+                valve,
+                MessageTarget::Everyone,
+                Delivery::ObjectState(NetId(99)),
+                vec![1]
+            ),
+            Err(MessageRefusal::NoSuchTarget)
+        );
+        w.settle();
+        w.add(Session::join(PeerId(3), PeerId(1), cfg(), now));
+        w.settle();
+        let got: Vec<(Delivery, u8)> = messages(&mut w, 3)
+            .iter()
+            .map(|m| (m.delivery, m.payload[0]))
+            .collect();
+        assert_eq!(got.len(), 2);
+        assert!(
+            got.contains(&(Delivery::ObjectState(a), 40))
+                && got.contains(&(Delivery::ObjectState(b), 70))
+        );
+        assert_eq!(
+            w.get(1)
+                .object_messages(a)
+                .map(|m| m.payload[0])
+                .collect::<Vec<_>>(),
+            [40]
+        );
+        w.get(1).despawn(now, a).unwrap();
+        w.settle();
+        for p in 1..=3 {
+            assert_eq!(w.get(p).object_messages(a).count(), 0, "peer {p}");
+            assert_eq!(w.get(p).object_messages(b).count(), 1, "peer {p}");
+        }
     }
 
     #[test]

@@ -310,6 +310,7 @@ impl Session {
     /// Our host removed an object.
     pub(super) fn on_despawn_from_host(&mut self, id: NetId) {
         if self.objects.remove(id) {
+            self.forget_object_messages(id);
             self.events.push_back(Event::Despawned(id));
         }
     }
@@ -317,6 +318,7 @@ impl Session {
     /// Host: remove an object everywhere.
     pub(super) fn host_despawn(&mut self, now: Instant, id: NetId) {
         if self.objects.remove(id) {
+            self.forget_object_messages(id);
             self.events.push_back(Event::Despawned(id));
             for l in self.links.values_mut() {
                 l.spawn_pending.remove(&id);

@@ -45,14 +45,23 @@ pub enum Delivery {
     Unreliable,
     /// Reliable, to [`MessageTarget::Everyone`] only, and kept by every member (the latest
     /// one per kind): a peer that joins later receives it after the room's objects. For
-    /// messages that are state (a valve's opening, the step a procedure is at).
+    /// messages that are state (the step a procedure is at, a bell that rang).
     Retained,
+    /// Retained, per object: the latest one of each kind about this object is kept with it
+    /// (a late joiner gets it after the objects) and forgotten when the object is despawned.
+    /// For small custom state that belongs to an object (a valve's opening, a colour).
+    ObjectState(NetId),
 }
 
 impl Delivery {
-    /// Reliable or retained.
+    /// Everything but unreliable.
     pub fn is_reliable(self) -> bool {
         self != Delivery::Unreliable
+    }
+
+    /// Kept by the room (retained, room-wide or per object).
+    pub fn is_retained(self) -> bool {
+        matches!(self, Delivery::Retained | Delivery::ObjectState(_))
     }
 }
 
@@ -124,7 +133,17 @@ impl AppMessage {
     pub fn valid(&self) -> bool {
         self.payload.len() <= MAX_MESSAGE_PAYLOAD
             && (self.seq == 0) == (self.delivery == Delivery::Unreliable)
-            && (self.delivery != Delivery::Retained || self.to == MessageTarget::Everyone)
+            && (!self.delivery.is_retained() || self.to == MessageTarget::Everyone)
+    }
+
+    /// Where the room keeps it: its kind, and its object for per-object state; `None` if it
+    /// is not retained.
+    pub fn retain_key(&self) -> Option<(MessageKind, Option<NetId>)> {
+        match self.delivery {
+            Delivery::Retained => Some((self.kind, None)),
+            Delivery::ObjectState(id) => Some((self.kind, Some(id))),
+            Delivery::Reliable | Delivery::Unreliable => None,
+        }
     }
 }
 
