@@ -198,7 +198,7 @@ fn view_config(a: &PeerArgs, desktop: bool) -> view::ViewConfig {
 }
 
 /// The room's key: `--room-key-file`, or `SOFTSYNC_ROOM_KEY`, or none. Its challenges are
-/// seeded from the process's own random hasher keys (the OS's randomness).
+/// seeded from the system's random source.
 fn room_key(file: Option<&Path>) -> Result<Option<softsync_net::RoomKey>, Failure> {
     let secret = match file {
         Some(f) => std::fs::read(f)
@@ -218,11 +218,9 @@ fn room_key(file: Option<&Path>) -> Result<Option<softsync_net::RoomKey>, Failur
             trimmed.len()
         );
     }
-    use std::hash::{BuildHasher, Hasher};
-    let seed = std::collections::hash_map::RandomState::new()
-        .build_hasher()
-        .finish();
-    Ok(Some(softsync_net::RoomKey::new(trimmed, seed)))
+    softsync_net::RoomKey::with_random_seed(trimmed)
+        .map(Some)
+        .ok_or_else(|| Failure::runtime("no system random source for the room key's challenges"))
 }
 
 fn load_bot(src: &str) -> Result<Bot, Failure> {

@@ -110,6 +110,9 @@ pub struct MessageStats {
     pub delivered: u64,
     /// Reliable messages we had already (resent after a migration), dropped.
     pub duplicates: u64,
+    /// Host: relayed reliable messages given up on for a target that stayed a member but did
+    /// not acknowledge within four peer timeouts.
+    pub unacknowledged: u64,
     /// Unreliable messages dropped: a full queue, or too big for a datagram.
     pub unreliable_dropped: u64,
     /// Refusals by reason: ours (at send, or told by the host) and, at the host, those it

@@ -255,3 +255,45 @@ proptest::proptest! {
         }
     }
 }
+
+/// The member the dead host never reached gets the origin's reliable message and its later
+/// retained one, each once: the new host's snapshot replays the retained state without
+/// counting it as the origin's live message, and the resend fills the gap.
+#[test]
+fn a_replayed_retained_message_does_not_hide_an_earlier_resent_one() {
+    let mut h = room_with(4, cfg(), steady_link(), ms(1000));
+    h.partition(0, 3, true);
+    let now = h.now;
+    let s = h.session(2);
+    s.send_message(
+        now,
+        MessageKind(0),
+        MessageTarget::Everyone,
+        Delivery::Reliable,
+        11u32.to_le_bytes().to_vec(),
+    )
+    .unwrap();
+    s.send_message(
+        now,
+        MessageKind(1),
+        MessageTarget::Everyone,
+        Delivery::Retained,
+        vec![12],
+    )
+    .unwrap();
+    h.advance(ms(60));
+    h.kill(0);
+    h.advance(ms(5000));
+    assert!(h.peers[1].session.is_host());
+    let at_3: Vec<Vec<u8>> = h.peers[3]
+        .events
+        .iter()
+        .filter_map(|e| match e {
+            Event::Message(m) if m.from == Harness::id(2) => Some(m.payload.clone()),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(at_3.len(), 2, "{at_3:?}");
+    assert!(at_3.contains(&11u32.to_le_bytes().to_vec()) && at_3.contains(&vec![12]));
+    assert_eq!(h.peers[2].session.messages_in_flight(), 0);
+}

@@ -26,6 +26,8 @@ use crate::wire::Control;
 pub struct RoomKey {
     key: hmac::Key,
     nonce_seed: u64,
+    /// HMAC of a fixed text under the key: keys compare by it, never by the secret.
+    fingerprint: [u8; 32],
 }
 
 impl RoomKey {
@@ -33,10 +35,24 @@ impl RoomKey {
     /// bytes). `nonce_seed` makes this peer's challenges its own: give every process a fresh
     /// random one (the session draws no randomness itself).
     pub fn new(secret: &[u8], nonce_seed: u64) -> Self {
+        let key = hmac::Key::new(hmac::HMAC_SHA256, secret);
+        let mut fingerprint = [0u8; 32];
+        let tag = hmac::sign(&key, b"softsync-fingerprint-v1");
+        fingerprint.copy_from_slice(tag.as_ref().get(..32).unwrap_or(&[0; 32]));
         RoomKey {
-            key: hmac::Key::new(hmac::HMAC_SHA256, secret),
+            key,
             nonce_seed,
+            fingerprint,
         }
+    }
+
+    /// The key of `secret`, its nonce seed drawn from the system's random source (`None` if
+    /// there is none).
+    pub fn with_random_seed(secret: &[u8]) -> Option<Self> {
+        use ring::rand::SecureRandom;
+        let mut seed = [0u8; 8];
+        ring::rand::SystemRandom::new().fill(&mut seed).ok()?;
+        Some(RoomKey::new(secret, u64::from_le_bytes(seed)))
     }
 
     fn proof(&self, nonce: &[u8; 16], joiner: PeerId, host: PeerId) -> hmac::Tag {
@@ -77,16 +93,16 @@ impl std::fmt::Debug for RoomKey {
 }
 
 impl PartialEq for RoomKey {
-    /// Keys are not compared (a configuration with a key equals one with another).
-    fn eq(&self, _: &Self) -> bool {
-        true
+    /// The same secret (by fingerprint; the nonce seeds may differ).
+    fn eq(&self, other: &Self) -> bool {
+        self.fingerprint == other.fingerprint
     }
 }
 
-/// The host's open challenges.
+/// The host's open challenges (nonce, and when it was issued).
 #[derive(Debug, Default)]
 pub(crate) struct Challenges {
-    open: BTreeMap<PeerId, [u8; 16]>,
+    open: BTreeMap<PeerId, ([u8; 16], Instant)>,
     issued: u64,
 }
 
@@ -98,17 +114,23 @@ impl Session {
             return false;
         };
         let nonce = match self.challenges.open.get(&from) {
-            Some(n) => *n,
+            Some((n, _)) => *n,
             None => {
                 if self.challenges.open.len() >= MAX_STRANGERS {
-                    // the oldest id first: bounded, and a flood cannot keep one out for long
-                    if let Some(first) = self.challenges.open.keys().next().copied() {
-                        self.challenges.open.remove(&first);
+                    // bounded: the oldest challenge goes (its joiner is told if it answers)
+                    let oldest = self
+                        .challenges
+                        .open
+                        .iter()
+                        .min_by_key(|(_, (_, at))| *at)
+                        .map(|(p, _)| *p);
+                    if let Some(p) = oldest {
+                        self.challenges.open.remove(&p);
                     }
                 }
                 self.challenges.issued += 1;
                 let n = key.nonce(self.local, from, self.challenges.issued, now);
-                self.challenges.open.insert(from, n);
+                self.challenges.open.insert(from, (n, now));
                 n
             }
         };
@@ -134,13 +156,20 @@ impl Session {
     }
 
     /// Host: a joiner's proof. Right: admitted; wrong: refused with a reason; no open
-    /// challenge for it: ignored and counted.
+    /// challenge for it (never issued, or given up under a flood): refused, so the joiner
+    /// does not wait forever, and counted.
     pub(super) fn on_proof(&mut self, now: Instant, from: PeerId, mac: [u8; 32]) {
-        let (Some(key), Some(nonce)) = (
-            self.cfg.room_key.clone(),
-            self.challenges.open.remove(&from),
-        ) else {
+        let Some(key) = self.cfg.room_key.clone() else {
             self.stats.refused_controls += 1;
+            return;
+        };
+        if self.members.contains_key(&from) {
+            return; // a member already (a proof repeated)
+        }
+        let Some((nonce, _)) = self.challenges.open.remove(&from) else {
+            self.stats.refused_controls += 1;
+            let reason = "no open challenge for this peer (it expired): join again".to_string();
+            self.send_control(now, from, &Control::Refused { reason });
             return;
         };
         if self.role == Role::Host && key.verify(&nonce, from, self.local, &mac) {
@@ -230,5 +259,68 @@ mod tests {
         w.add(s);
         w.settle();
         assert_eq!(w.get(1).members().len(), 1);
+    }
+}
+
+#[cfg(test)]
+mod joining_guards {
+    #![allow(clippy::unwrap_used)]
+    use super::super::testkit::{config, Wire};
+    use super::super::Event;
+    use super::*;
+
+    #[test]
+    fn only_the_peer_a_joiner_asked_may_welcome_refuse_or_redirect_it() {
+        let mut w = Wire::new();
+        let mut cfg = config();
+        cfg.room_key = Some(RoomKey::new(b"a long random room secret", 1));
+        w.add(Session::host(PeerId(1), cfg.clone(), w.now));
+        w.add(Session::join(PeerId(2), PeerId(1), cfg, w.now));
+        // a stranger tries to take the joiner over before the host answers
+        let mut stranger = Session::host(PeerId(9), config(), w.now);
+        let now = w.now;
+        let welcome = Control::Welcome {
+            term: crate::Term(1),
+            host: PeerId(9),
+            join_seq: 1,
+            members: vec![(PeerId(9), 0), (PeerId(2), 1)],
+        };
+        stranger.send_raw_control(now, PeerId(2), &welcome);
+        stranger.send_raw_control(
+            now,
+            PeerId(2),
+            &Control::Refused {
+                reason: "go away".into(),
+            },
+        );
+        stranger.send_raw_control(now, PeerId(2), &Control::Redirect { host: PeerId(9) });
+        w.add(stranger);
+        w.settle();
+        assert_eq!(w.get(2).host_id(), Some(PeerId(1)));
+        assert!(w.get(2).is_connected(), "the real host admitted it");
+        assert!(!w
+            .events(2)
+            .iter()
+            .any(|e| matches!(e, Event::Refused { .. })));
+    }
+
+    #[test]
+    fn a_proof_without_an_open_challenge_is_refused_so_nobody_waits_forever() {
+        let mut w = Wire::new();
+        let mut cfg = config();
+        cfg.room_key = Some(RoomKey::new(b"a long random room secret", 1));
+        w.add(Session::host(PeerId(1), cfg, w.now));
+        let mut s = Session::host(PeerId(5), config(), w.now);
+        s.send_raw_control(w.now, PeerId(1), &Control::Proof { mac: [0; 32] });
+        w.add(s);
+        w.settle();
+        assert_eq!(w.get(1).stats().refused_controls, 1);
+        assert_eq!(w.get(1).members().len(), 1);
+        assert_eq!(
+            RoomKey::new(b"same", 1),
+            RoomKey::new(b"same", 2),
+            "keys compare by secret"
+        );
+        assert_ne!(RoomKey::new(b"same", 1), RoomKey::new(b"other", 1));
     }
 }

@@ -89,17 +89,24 @@ impl Session {
                 host,
                 join_seq: _,
                 members,
-            } if self.role == Role::Joining && from == host => {
+            } if self.role == Role::Joining && from == host && Some(from) == self.host => {
                 self.on_welcome(now, term, host, members);
             }
-            Control::Refused { reason } if self.role == Role::Joining => self.on_refused(reason),
+            // only the peer we asked may refuse or redirect us
+            Control::Refused { reason }
+                if self.role == Role::Joining && Some(from) == self.host =>
+            {
+                self.on_refused(reason);
+            }
             Control::Challenge { nonce }
                 if self.role == Role::Joining && Some(from) == self.host =>
             {
                 self.on_challenge(now, from, nonce);
             }
             Control::Proof { mac } if self.role == Role::Host => self.on_proof(now, from, mac),
-            Control::Redirect { host } if self.role == Role::Joining && from != host => {
+            Control::Redirect { host }
+                if self.role == Role::Joining && from != host && Some(from) == self.host =>
+            {
                 self.join_via(now, host);
             }
             Control::PeerJoined { peer, join_seq } if from_host => {
@@ -139,6 +146,7 @@ impl Session {
             // ---- application messages (messages.rs)
             Control::Message(m) if self.is_member_client(from) => self.host_relay(now, from, m),
             Control::Message(m) if from_host => self.deliver_message(m),
+            Control::Replay(m) if from_host => self.deliver_replay(m),
             Control::MessagesDelivered { up_to } if from_host => self.on_messages_delivered(up_to),
             Control::MessageRefused { seq, reason } if from_host => {
                 self.on_message_refused(seq, reason);

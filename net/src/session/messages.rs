@@ -58,6 +58,8 @@ impl TokenBucket {
 #[derive(Debug)]
 struct Relayed {
     seq: u32,
+    /// When it was relayed (a target that never acknowledges is given up on).
+    at: Instant,
     /// (target, reliable sequence of the relayed copy on its link).
     waiting: Vec<(PeerId, u16)>,
 }
@@ -192,9 +194,6 @@ impl Session {
         if delivery.is_reliable() {
             self.messages.outbox.push_back(msg.clone());
         }
-        if let Some(key) = msg.retain_key() {
-            self.messages.retained.insert(key, msg.clone());
-        }
         match self.role {
             Role::Host => {
                 let me = self.local;
@@ -282,13 +281,9 @@ impl Session {
             return Err(MessageRefusal::TooLarge);
         }
         if from != self.local {
-            // right after a takeover, members resend what the old host had not delivered
-            let resend = if self.succession.resync_open(now) {
-                cfg.max_outbox as f32
-            } else {
-                0.0
-            };
-            let cap = cfg.burst as f32 + resend;
+            // room above the burst for a whole outbox: what a joiner queued before its
+            // welcome, or a member resends to a new host, arrives at once
+            let cap = cfg.burst as f32 + cfg.max_outbox as f32;
             let rate = cfg.rate_per_s;
             if !self
                 .messages
@@ -309,7 +304,13 @@ impl Session {
                 return Err(MessageRefusal::NoSuchTarget);
             }
         }
+        let me = self.local;
         let targets: Vec<PeerId> = match msg.to {
+            // a retained message also goes back to its origin: every member's table then
+            // follows the relay order
+            MessageTarget::Everyone if msg.delivery.is_retained() => {
+                self.members.keys().copied().filter(|p| *p != me).collect()
+            }
             MessageTarget::Everyone => self
                 .members
                 .keys()
@@ -354,6 +355,9 @@ impl Session {
                 return;
             }
         };
+        if let Some(key) = msg.retain_key() {
+            self.messages.retained.insert(key, msg.clone());
+        }
         let mut waiting = Vec::new();
         for t in targets {
             if t == self.local {
@@ -375,6 +379,7 @@ impl Session {
                 .push_back(Relayed {
                     seq: msg.seq,
                     waiting,
+                    at: now,
                 });
             self.advance_deliveries(now);
         }
@@ -386,6 +391,7 @@ impl Session {
             return;
         }
         let mut done: Vec<(PeerId, u32)> = Vec::new();
+        let give_up = self.cfg.peer_timeout * 4;
         for (origin, queue) in self.messages.ledger.iter_mut() {
             let mut up_to = None;
             while let Some(front) = queue.front() {
@@ -393,7 +399,12 @@ impl Session {
                     !self.members.contains_key(p)
                         || self.links.get(p).is_none_or(|l| l.reliable.is_acked(*seq))
                 });
-                if !complete {
+                let stale = now.saturating_since(front.at) > give_up;
+                if stale && !complete {
+                    // a member that stays but never acknowledges must not hold up the room
+                    self.stats.messages.unacknowledged += 1;
+                }
+                if !complete && !stale {
                     break;
                 }
                 up_to = Some(front.seq);
@@ -416,37 +427,81 @@ impl Session {
     /// A message for us (relayed by our host, or one the host is a target of): delivered
     /// unless we had it already.
     pub(super) fn deliver_message(&mut self, msg: AppMessage) {
-        if msg.origin == self.local {
+        if !self.known_kind(&msg) {
             return;
         }
-        if usize::from(msg.kind.0) >= self.cfg.messages.kinds.len() {
-            *self
-                .stats
-                .messages
-                .refused
-                .entry(MessageRefusal::UnknownKind)
-                .or_default() += 1;
+        if msg.origin == self.local {
+            // our own retained message back from the host: the table follows the relay order
+            if let Some(key) = msg.retain_key() {
+                self.messages.retained.insert(key, msg);
+            }
             return;
         }
         if msg.delivery.is_reliable() {
             let passed = self.messages.passed.get(&msg.origin).copied();
-            let known_retained = msg.retain_key().is_some_and(|key| {
-                self.messages
-                    .retained
-                    .get(&key)
-                    .is_some_and(|r| r.origin == msg.origin && r.seq == msg.seq)
-            });
-            if passed.is_some_and(|p| msg.seq <= p) || known_retained {
+            if passed.is_some_and(|p| msg.seq <= p) {
+                // a resend after a migration: had it. A retained one still sets the state in
+                // the relay order (told again only if the state was another meanwhile).
                 self.stats.messages.duplicates += 1;
+                self.adopt_retained(msg);
                 return;
             }
             self.messages.passed.insert(msg.origin, msg.seq);
-            if let Some(key) = msg.retain_key() {
-                self.messages.retained.insert(key, msg.clone());
+            if msg.retain_key().is_some() {
+                self.adopt_retained(msg);
+                return;
             }
         }
         self.stats.messages.received += 1;
         self.events.push_back(Event::Message(msg.into()));
+    }
+
+    /// A retained message from a new host's snapshot: it sets the state without moving the
+    /// origin's number (its live messages before it may still come, resent).
+    pub(super) fn deliver_replay(&mut self, msg: AppMessage) {
+        if !self.known_kind(&msg) || msg.retain_key().is_none() {
+            return;
+        }
+        if msg.origin == self.local {
+            if let Some(key) = msg.retain_key() {
+                self.messages.retained.insert(key, msg);
+            }
+            return;
+        }
+        self.adopt_retained(msg);
+    }
+
+    /// The room's state for a retained message's key is `msg`: stored, and told unless it
+    /// was already that.
+    fn adopt_retained(&mut self, msg: AppMessage) {
+        let Some(key) = msg.retain_key() else {
+            return;
+        };
+        let same = self
+            .messages
+            .retained
+            .get(&key)
+            .is_some_and(|r| r.origin == msg.origin && r.seq == msg.seq);
+        if same {
+            return;
+        }
+        self.messages.retained.insert(key, msg.clone());
+        self.stats.messages.received += 1;
+        self.events.push_back(Event::Message(msg.into()));
+    }
+
+    /// A kind in the room's table (one beyond it is counted and dropped).
+    fn known_kind(&mut self, msg: &AppMessage) -> bool {
+        if usize::from(msg.kind.0) < self.cfg.messages.kinds.len() {
+            return true;
+        }
+        *self
+            .stats
+            .messages
+            .refused
+            .entry(MessageRefusal::UnknownKind)
+            .or_default() += 1;
+        false
     }
 
     /// Our host: our messages up to `up_to` reached every target.
@@ -467,20 +522,10 @@ impl Session {
         let Some(i) = self.messages.outbox.iter().position(|m| m.seq == seq) else {
             return;
         };
-        let Some(m) = self.messages.outbox.remove(i) else {
+        if self.messages.outbox.remove(i).is_none() {
             return;
-        };
-        *self.stats.messages.refused.entry(reason).or_default() += 1;
-        if let Some(key) = m.retain_key() {
-            if self
-                .messages
-                .retained
-                .get(&key)
-                .is_some_and(|r| r.origin == self.local && r.seq == seq)
-            {
-                self.messages.retained.remove(&key);
-            }
         }
+        *self.stats.messages.refused.entry(reason).or_default() += 1;
         self.events.push_back(Event::MessageRefused { seq, reason });
     }
 
@@ -506,15 +551,13 @@ impl Session {
         }
     }
 
-    /// The retained messages, for a joiner's (or after a migration, a member's) snapshot,
-    /// in each origin's order.
+    /// The retained messages, for a joiner's (or after a migration, a member's) snapshot, as
+    /// replays (they set the state; they do not count as the origin's live messages).
     pub(super) fn send_retained(&mut self, now: Instant, to: PeerId) {
         let mut all: Vec<AppMessage> = self.messages.retained.values().cloned().collect();
         all.sort_by_key(|m| (m.origin, m.seq));
         for m in all {
-            if m.origin != to {
-                self.send_control(now, to, &Control::Message(m));
-            }
+            self.send_control(now, to, &Control::Replay(m));
         }
     }
 
@@ -844,6 +887,114 @@ mod tests {
             assert_eq!(w.get(p).object_messages(a).count(), 0, "peer {p}");
             assert_eq!(w.get(p).object_messages(b).count(), 1, "peer {p}");
         }
+    }
+
+    #[test]
+    fn every_members_retained_state_follows_the_hosts_relay_order() {
+        let mut w = room(3);
+        let now = w.now;
+        for (p, v) in [(2u64, 20u8), (3, 30), (1, 10), (3, 31)] {
+            w.get(p)
+                .send_message(
+                    now,
+                    MessageKind(1),
+                    MessageTarget::Everyone,
+                    Delivery::Retained,
+                    vec![v],
+                )
+                .unwrap();
+        }
+        w.settle();
+        let table = |w: &mut Wire, p: u64| -> Vec<(PeerId, Vec<u8>)> {
+            w.get(p)
+                .retained_messages()
+                .map(|m| (m.from, m.payload))
+                .collect()
+        };
+        let host = table(&mut w, 1);
+        assert_eq!(host.len(), 1);
+        for p in [2, 3] {
+            assert_eq!(table(&mut w, p), host, "peer {p}'s state is the host's");
+        }
+        // and the origin was not told of its own messages
+        assert!(messages(&mut w, 3).iter().all(|m| m.from != PeerId(3)));
+    }
+
+    #[test]
+    fn a_peer_back_with_a_fresh_session_is_heard_from_its_first_message() {
+        let mut w = room(3);
+        let now = w.now;
+        for v in 0..5u8 {
+            w.get(3)
+                .send_message(
+                    now,
+                    MessageKind(1),
+                    MessageTarget::Everyone,
+                    Delivery::Retained,
+                    vec![v],
+                )
+                .unwrap();
+        }
+        w.settle();
+        // peer 3 goes silent until the room drops it, then comes back with the same id and a
+        // fresh session numbering from 1 (as `Peer` rejoins); a late joiner then hears the
+        // old state and every new message
+        w.peers.remove(&PeerId(3));
+        for _ in 0..30 {
+            w.now += std::time::Duration::from_millis(100);
+            w.settle();
+        }
+        let now = w.now;
+        assert!(!w.get(1).members().contains_key(&PeerId(3)));
+        w.add(Session::join(PeerId(3), PeerId(1), cfg(), now));
+        w.settle();
+        w.get(3)
+            .send_message(
+                now,
+                MessageKind(0),
+                MessageTarget::Everyone,
+                Delivery::Reliable,
+                vec![77],
+            )
+            .unwrap();
+        w.add(Session::join(PeerId(4), PeerId(1), cfg(), now));
+        w.settle();
+        w.get(3)
+            .send_message(
+                now,
+                MessageKind(0),
+                MessageTarget::Everyone,
+                Delivery::Reliable,
+                vec![78],
+            )
+            .unwrap();
+        w.settle();
+        let at_4: Vec<u8> = messages(&mut w, 4).iter().map(|m| m.payload[0]).collect();
+        assert_eq!(at_4, [4, 78], "the room's state, then the live message");
+        let at_2: Vec<u8> = messages(&mut w, 2).iter().map(|m| m.payload[0]).collect();
+        assert_eq!(at_2, [0, 1, 2, 3, 4, 77, 78]);
+    }
+
+    #[test]
+    fn a_whole_outbox_queued_while_joining_passes_the_hosts_rate_check() {
+        let mut w = room(1);
+        let now = w.now;
+        let mut s = Session::join(PeerId(2), PeerId(1), cfg(), now);
+        for v in 0..120u32 {
+            s.send_message(
+                now,
+                MessageKind(0),
+                MessageTarget::Host,
+                Delivery::Reliable,
+                v.to_le_bytes().to_vec(),
+            )
+            .unwrap();
+        }
+        w.add(s);
+        w.settle();
+        assert_eq!(messages(&mut w, 1).len(), 120);
+        assert!(w.get(1).stats().messages.refused.is_empty());
+        assert_eq!(w.get(2).messages_in_flight(), 0);
     }
 
     #[test]

@@ -196,11 +196,15 @@ impl Session {
                 },
             );
             self.send_snapshot(now, p);
-            self.send_retained(now, p);
         }
         self.events.push_back(Event::HostChanged { host: me, term });
-        // our messages the old host had not delivered everywhere: we relay them now
+        // our messages the old host had not delivered everywhere: we relay them now, then
+        // the room's retained state as we know it (which includes them)
         self.resend_outbox(now);
+        let others: Vec<PeerId> = self.members.keys().copied().filter(|p| *p != me).collect();
+        for p in others {
+            self.send_retained(now, p);
+        }
         // our own spawn requests the old host never answered: we create them now
         for (request, class, st) in self.spawns.take_all() {
             let _ = self.host_spawn_own(now, class, &st, request);

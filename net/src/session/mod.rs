@@ -485,6 +485,7 @@ impl Session {
         self.check_liveness(now);
         self.forget_silent_strangers(now);
         self.send_ticks(now);
+        self.advance_deliveries(now);
     }
 
     /// Feed a datagram received from `from`.

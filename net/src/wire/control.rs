@@ -178,6 +178,10 @@ pub enum Control {
         /// Why.
         reason: MessageRefusal,
     },
+    /// Host → joiner, or a new host → member: a retained message from the room's table (the
+    /// snapshot's share of the messages); it sets the state and is not one of the origin's
+    /// live messages.
+    Replay(AppMessage),
     /// Host → joiner (a room with a key): prove you hold it, over this nonce.
     Challenge {
         /// The host's nonce.
@@ -368,6 +372,7 @@ impl Control {
             }
             Control::Topology { event, .. } => event.valid(),
             Control::Message(m) => m.valid() && m.delivery.is_reliable(),
+            Control::Replay(m) => m.valid() && m.delivery.is_retained(),
             _ => true,
         };
         if ok {
