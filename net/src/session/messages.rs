@@ -11,10 +11,19 @@
 //! itself), in order. Every path from an origin to a receiver keeps the origin's order (one
 //! ordered channel to the host, one from the host), so a receiver delivers a message only if
 //! its number is above the last it delivered from that origin: a resent message some target
-//! already had is dropped there, and the targets that missed it get it. A retained message
-//! replayed by a new host is also recognised by the retained table (same origin, same
-//! number). What is not guaranteed: a message whose origin dies with the host before the
-//! host relayed it (nobody is left who has it).
+//! already had is dropped there, and the targets that missed it get it. What is not
+//! guaranteed: a message whose origin dies with the host before the host relayed it (nobody
+//! is left who has it). Also not: that a target that changes across a migration (`Host`,
+//! `OwnerOf`) is one peer; the new host resolves it again, and runs its filter again.
+//!
+//! # Retained state
+//!
+//! Retained messages (room-wide or per object) are state, kept by every member in the host's
+//! relay order: the host relays a retained message to every member but itself, its origin
+//! included, so every table applies the same sequence. A joiner, and after a migration every
+//! member, gets the host's table as `Replay`s: a replay sets the state (told if it differs)
+//! without moving the origin's number, so the origin's earlier messages resent to the new host
+//! are still delivered; the live copy of a replayed message is recognised by the table.
 
 use std::collections::{BTreeMap, VecDeque};
 
