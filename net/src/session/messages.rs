@@ -364,8 +364,14 @@ impl Session {
                 return;
             }
         };
+        // the host's own table takes a retained message in relay order; another's is news
+        // to the host as to every member (a retained message's targets exclude the host)
         if let Some(key) = msg.retain_key() {
-            self.messages.retained.insert(key, msg.clone());
+            if from == self.local {
+                self.messages.retained.insert(key, msg.clone());
+            } else {
+                self.deliver_message(msg.clone());
+            }
         }
         let mut waiting = Vec::new();
         for t in targets {
@@ -925,8 +931,14 @@ mod tests {
         for p in [2, 3] {
             assert_eq!(table(&mut w, p), host, "peer {p}'s state is the host's");
         }
-        // and the origin was not told of its own messages
-        assert!(messages(&mut w, 3).iter().all(|m| m.from != PeerId(3)));
+        // every peer was told of the others' messages, in the host's order, and not of its own
+        let told = |w: &mut Wire, p: u64| -> Vec<u8> {
+            messages(w, p).iter().map(|m| m.payload[0]).collect()
+        };
+        assert_eq!(told(&mut w, 1), [20, 30, 31]);
+        // (the host's own went out first: it relays at once what it sends)
+        assert_eq!(told(&mut w, 2), [10, 30, 31]);
+        assert_eq!(told(&mut w, 3), [10, 20]);
     }
 
     #[test]
