@@ -19,8 +19,10 @@ use bevy::window::PrimaryWindow;
 use softsync_peer::scene::TABLE_TOP_Y;
 use softsync_peer::{DeviceFrame, Kind};
 
+use softsync_bevy::Room;
+
 use crate::driver::Driver;
-use crate::glue::{from_bevy, from_bevy_quat, pose_from_bevy, to_bevy, to_bevy_quat};
+use softsync_bevy::glue::{from_bevy, from_bevy_quat, pose_from_bevy, to_bevy, to_bevy_quat};
 
 /// Where the camera looks from and at.
 #[derive(Resource, Clone, Copy, Debug)]
@@ -87,7 +89,7 @@ impl Plugin for DesktopPlugin {
                 PreUpdate,
                 desktop_input
                     .after(bevy::input::InputSystems)
-                    .after(crate::plugins::NetIn),
+                    .after(softsync_bevy::SoftsyncSet::NetIn),
             );
     }
 }
@@ -95,9 +97,9 @@ impl Plugin for DesktopPlugin {
 /// Frames rendered before the network starts (window and renderer setup stall the first).
 const WARMUP_FRAMES: u32 = 5;
 
-fn ready_after_first_frames(mut driver: NonSendMut<Driver>, frames: Res<FrameCount>) {
+fn ready_after_first_frames(mut room: NonSendMut<Room>, frames: Res<FrameCount>) {
     if frames.0 >= WARMUP_FRAMES {
-        driver.set_ready();
+        Driver::set_ready(&mut room);
     }
 }
 
@@ -107,6 +109,7 @@ fn spawn_camera(mut commands: Commands, orbit: Res<OrbitCamera>) {
 
 #[allow(clippy::too_many_arguments)]
 fn desktop_input(
+    mut room: NonSendMut<Room>,
     mut driver: NonSendMut<Driver>,
     mut orbit: ResMut<OrbitCamera>,
     mut cam: Query<(&Camera, &GlobalTransform, &mut Transform), With<DesktopCamera>>,
@@ -120,14 +123,14 @@ fn desktop_input(
     let dt = time.delta_secs().min(0.1);
     // Focus on an object once it is in the room.
     if let (Some(kind), false) = (orbit.focus, orbit.focused) {
-        let now = driver.now();
-        let found = driver
+        let now = room.now();
+        let found = room
             .peer
             .objects()
             .iter()
             .find(|(_, o)| o.kind == kind)
             .map(|(id, _)| *id);
-        if let Some(s) = found.and_then(|id| driver.peer.shown_state(now, id)) {
+        if let Some(s) = found.and_then(|id| room.peer.shown_state(now, id)) {
             // A fixed view of it, from the room's +z side and above, whoever we are: the
             // same picture on every run (the pixel test relies on it).
             orbit.target = to_bevy(s.pos);

@@ -1,59 +1,25 @@
-//! [`Driver`]: the peer as this process runs it. The library's [`Peer`] is sans-IO; the driver
-//! gives it what it lacks: a transport (WebRTC, maybe behind the link conditioner), this
-//! machine's clock, a bot or a tracked device for its hands, the log lines, the stats line
-//! and the dump, and the end of the run (`--duration`, errors, the wait after `Leave`). The
-//! bevy systems in `plugins.rs` call into it each frame; nothing here knows about bevy.
+//! [`Driver`]: what the `softsync` binary adds around the library's [`Room`]: a bot or a
+//! tracked device for the hands, the log lines, the stats line and the dump, and the end of
+//! the run (`--duration`, errors). The room itself — transport, clock, network in and out,
+//! fixed steps, leaving — is `softsync-bevy`'s, run by its plugin as any user's app runs it;
+//! the systems in `plugins.rs` call into the driver at their places around it.
 
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use softsync_net::{Event as RoomEvent, Instant, Transport};
+use softsync_bevy::Room;
+use softsync_net::Event as RoomEvent;
 use softsync_peer::messages::MessageTypes;
-use softsync_peer::{Bot, DeviceFrame, Event, Peer, PeerError, Say};
+use softsync_peer::{Bot, DeviceFrame, Event, Say};
 
 use crate::report::{snapshot, Dump, Rates, StatsLine};
 
-/// The session's clock: microseconds since the peer was built, on this machine's clock.
-#[derive(Clone, Copy, Debug)]
-pub struct Clock {
-    origin: std::time::Instant,
-}
-
-impl Clock {
-    /// A clock that reads zero now.
-    pub fn start() -> Self {
-        Clock {
-            origin: std::time::Instant::now(),
-        }
-    }
-
-    /// Now, on the session's clock.
-    pub fn now(&self) -> Instant {
-        Instant::from_micros(self.origin.elapsed().as_micros() as u64)
-    }
-}
-
-/// How long a leaving peer waits for the transport to send its `Leave` before the process
-/// ends (the WebRTC thread sends it).
-const LEAVE_GRACE: Duration = Duration::from_millis(100);
-
-/// One peer on a real transport and clock, with its bot or device and its reports.
+/// The binary's side of one peer: its bot or device and its reports.
 pub struct Driver {
-    /// The peer.
-    pub peer: Peer,
-    transport: Box<dyn Transport>,
-    clock: Clock,
     /// The bot, if any.
     pub bot: Option<Bot>,
     /// This frame's tracked device (desktop or VR front end), if any.
     pub device: Option<DeviceFrame>,
-    /// False while a front end warms up (window, renderer, XR session): the network is not
-    /// pumped, so nobody sees us join and then time out during the first frames' stalls
-    /// (measured: an OpenXR session start on a software renderer froze the loop for over the
-    /// session's 1 s peer timeout). Headless peers start ready.
-    pub ready: bool,
-    /// Room name.
-    pub room_name: String,
     /// Leave after this long.
     pub duration: Option<Duration>,
     /// Dump.
@@ -66,47 +32,31 @@ pub struct Driver {
     pub last_rates: Rates,
     /// The last few events (the HUD shows them).
     pub recent_events: VecDeque<String>,
-    /// Kept alive while the peer runs (the host's embedded signaling server): held, never
-    /// read; dropping it stops the server.
-    #[allow(dead_code)]
-    pub signal: Option<softsync_net_matchbox::SignalServer>,
     stats: StatsLine,
     next_stats: Duration,
     next_dump: Duration,
-    /// Exiting: no more network in, simulation or reports.
+    /// Exiting: no more bot, reports or events.
     pub exiting: bool,
 }
 
 impl Driver {
-    /// A driver of `peer` on `transport`, its times read on `clock`.
-    #[allow(clippy::too_many_arguments)]
+    /// A driver with `bot`, ending after `duration`, dumping to `dump`.
     pub fn new(
-        peer: Peer,
-        transport: Box<dyn Transport>,
-        clock: Clock,
         bot: Option<Bot>,
-        room_name: String,
         duration: Option<Duration>,
         dump: Option<Dump>,
         dump_hz: f64,
         quiet: bool,
-        signal: Option<softsync_net_matchbox::SignalServer>,
     ) -> Self {
         Driver {
-            peer,
-            transport,
-            clock,
             bot,
             device: None,
-            ready: true,
-            room_name,
             duration,
             dump,
             dump_every: Duration::from_secs_f64(1.0 / dump_hz.max(0.01)),
             quiet,
             last_rates: Rates::default(),
             recent_events: VecDeque::new(),
-            signal,
             stats: StatsLine::default(),
             next_stats: Duration::from_secs(1),
             next_dump: Duration::ZERO,
@@ -114,133 +64,95 @@ impl Driver {
         }
     }
 
-    /// Now, on the session's clock.
-    pub fn now(&self) -> Instant {
-        self.clock.now()
-    }
-
-    /// The front end is up: start pumping the network (and counting the join timeout).
+    /// The front end is up: the room starts pumping the network (and counting the join
+    /// timeout).
     #[cfg_attr(not(feature = "desktop"), allow(dead_code))]
-    pub fn set_ready(&mut self) {
-        if !self.ready {
-            self.ready = true;
-            self.peer.restart_join_clock(self.now());
+    pub fn set_ready(room: &mut Room) {
+        if room.set_ready() {
             println!(
                 "front end ready after {:.1} s: entering the room",
-                self.now().as_secs_f64()
+                room.now().as_secs_f64()
             );
         }
     }
 
-    /// Network in: datagrams, link news, timers and the session's news, then what that sends;
-    /// the peer's events go to the log and the HUD. An error says why the peer must stop.
-    pub fn network_in(&mut self) -> Result<(), String> {
-        let now = self.now();
-        while let Some((from, bytes)) = self.transport.recv(now) {
-            self.peer.handle_datagram(now, from, &bytes);
-        }
-        while let Some(e) = self.transport.poll_peer_event() {
-            self.peer.handle_link_event(e);
-        }
-        match self.peer.pump(now) {
-            Ok(()) => self.flush(),
-            Err(e @ PeerError::NotWelcomed { .. }) => {
-                return Err(format!("connected to room {:?} but {e}", self.room_name))
+    /// A peer event: its log line and the HUD's list (warnings to stderr as they are).
+    pub fn log_event(&mut self, room: &Room, e: &Event) {
+        let Some(line) = event_line(e, room.peer.message_types()) else {
+            if let Event::Warning(w) = e {
+                eprintln!("{w}");
             }
-            Err(e) => return Err(e.to_string()),
+            return;
+        };
+        let t = room.now().as_secs_f64();
+        println!("event peer={} t={t:.2} {line}", room.peer.me().0);
+        if self.recent_events.len() >= 6 {
+            self.recent_events.pop_front();
         }
-        while let Some(e) = self.peer.poll_event() {
-            let Some(line) = event_line(&e, self.peer.message_types()) else {
-                if let Event::Warning(w) = e {
-                    eprintln!("{w}");
-                }
-                continue;
-            };
-            let t = self.now().as_secs_f64();
-            println!("event peer={} t={t:.2} {line}", self.peer.me().0);
-            if self.recent_events.len() >= 6 {
-                self.recent_events.pop_front();
-            }
-            self.recent_events
-                .push_back(format!("{t:.1}s {}", hud_event(&line)));
-        }
-        Ok(())
+        self.recent_events
+            .push_back(format!("{t:.1}s {}", hud_event(&line)));
     }
 
-    /// Network out: everything the peer has to send.
-    pub fn flush(&mut self) {
-        let now = self.now();
-        while let Some(t) = self.peer.poll_transmit(now) {
-            self.transport.send(now, &t);
-        }
-    }
-
-    /// One fixed step: the bot and/or the device set the hands, the peer steps and publishes.
-    pub fn simulate(&mut self) {
-        if !self.peer.joined() || self.exiting {
+    /// Before a fixed step: the bot and/or the device set the hands.
+    pub fn drive_hands(&mut self, room: &mut Room) {
+        if !room.peer.joined() || self.exiting || room.has_left() {
             return;
         }
-        let me = self.peer.me().0;
+        let now = room.now();
+        let me = room.peer.me().0;
         match (&mut self.bot, &self.device) {
             (Some(bot), device) => {
-                bot.step(self.clock.now(), &mut self.peer, device.as_ref());
+                bot.step(now, &mut room.peer, device.as_ref());
                 while let Some(msg) = bot.poll_message() {
-                    let t = self.clock.now().as_secs_f64();
+                    let t = room.now().as_secs_f64();
                     println!("bot peer={me} t={t:.2} {msg}");
                 }
             }
-            (None, Some(device)) => device.apply(&mut self.peer),
+            (None, Some(device)) => device.apply(&mut room.peer),
             (None, None) => {}
         }
-        self.peer.fixed_step(self.now());
-        self.flush();
     }
 
     /// The stats line once a second, the dump at its rate; true when `--duration` is over.
-    pub fn report(&mut self) -> bool {
-        let now = self.now();
+    pub fn report(&mut self, room: &mut Room) -> bool {
+        let now = room.now();
         let t = Duration::from_micros(now.as_micros());
         if t >= self.next_stats {
             self.next_stats = t + Duration::from_secs(1);
-            let (line, rates) = self.stats.line(now, &self.peer);
+            let (line, rates) = self.stats.line(now, &room.peer);
             if !self.quiet {
                 eprintln!("{line}");
             }
             self.last_rates = rates;
         }
-        if t >= self.next_dump && self.peer.joined() {
+        if t >= self.next_dump && room.peer.joined() {
             self.next_dump = t + self.dump_every;
-            self.write_dump();
+            self.write_dump(room);
         }
         self.duration.is_some_and(|d| t >= d)
     }
 
     /// Stop for `msg`: say why, a last dump, no more frames.
-    pub fn fail(&mut self, msg: &str) {
+    pub fn fail(&mut self, room: &mut Room, msg: &str) {
         eprintln!("error: {msg}");
-        self.write_dump();
+        self.write_dump(room);
         self.exiting = true;
     }
 
-    /// The run is over (whoever asked): a last dump and stats line, and a `Leave` to the room
-    /// so the others act at once (a host is replaced, authority returns).
-    pub fn finish(&mut self) {
+    /// The run is over (whoever asked): a last dump and stats line. (The plugin then sends
+    /// the `Leave`.)
+    pub fn finish(&mut self, room: &mut Room) {
         if !self.exiting {
-            self.write_dump();
-            let (line, _) = self.stats.line(self.now(), &self.peer);
+            self.write_dump(room);
+            let (line, _) = self.stats.line(room.now(), &room.peer);
             println!("final {line}");
             self.exiting = true;
         }
-        if self.peer.joined() {
-            self.peer.leave(self.now());
-            self.flush();
-            std::thread::sleep(LEAVE_GRACE);
-        }
     }
 
-    fn write_dump(&mut self) {
+    fn write_dump(&mut self, room: &mut Room) {
         if self.dump.is_some() {
-            let line = snapshot(self.now(), &mut self.peer);
+            let line = snapshot(room.now(), &mut room.peer);
             if let Some(d) = &mut self.dump {
                 if let Err(e) = d.write(&line) {
                     eprintln!("dump: {e}; no more dumps");

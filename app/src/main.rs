@@ -7,8 +7,6 @@ mod cli;
 #[cfg(feature = "desktop")]
 mod desktop;
 mod driver;
-#[cfg(feature = "desktop")]
-mod glue;
 mod plugins;
 mod report;
 #[cfg(feature = "desktop")]
@@ -25,14 +23,15 @@ use bevy::time::{Fixed, Time};
 use bevy::MinimalPlugins;
 #[cfg(feature = "vr")]
 use glam::Vec3;
+use softsync_bevy::{Room, RoomOptions, SoftsyncApp, SoftsyncPlugin};
 use softsync_interaction::HandConfig;
-use softsync_net::{LinkConditioner, PeerEvent, SendPolicy, Session, Transport};
-use softsync_net_matchbox::{MatchboxConfig, MatchboxTransport, Role, SignalServer};
-use softsync_peer::{bot, Bot, Peer, PeerConfig, Scene};
+use softsync_net::SendPolicy;
+use softsync_net_matchbox::SignalServer;
+use softsync_peer::{bot, Bot, PeerConfig, Scene};
 
 use crate::cli::{Command, FrontEnd, PeerArgs, UsageError};
-use crate::driver::{Clock, Driver};
-use crate::plugins::{NetPlugin, ReportPlugin, SimPlugin};
+use crate::driver::Driver;
+use crate::plugins::ReportPlugin;
 
 /// A failure with its exit code.
 struct Failure {
@@ -310,122 +309,72 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
         ),
         None => None,
     };
-    let send = SendPolicy {
+    let mut opts = if a.host {
+        RoomOptions::host(a.room.clone())
+    } else {
+        let Some(url) = a.signal.clone() else {
+            return Err(Failure::usage("join needs --signal"));
+        };
+        RoomOptions::join(a.room.clone(), url)
+    };
+    opts.signal = a.signal.clone();
+    opts.bind = a.bind;
+    opts.ice_servers = a.ice.clone();
+    opts.connect_timeout = a.connect_timeout;
+    opts.room_key = room_key(a.room_key_file.as_deref())?;
+    opts.condition = a.condition.clone();
+    opts.send = SendPolicy {
         rate_hz: a.send_rate_hz,
         position_threshold_m: a.threshold_m,
         particle_threshold_m: a.threshold_m,
         ..SendPolicy::default()
     };
-    let mut cfg = scene.session_config(send.clone(), send.clone(), send);
-    cfg.room_key = room_key(a.room_key_file.as_deref())?;
-
-    // Signaling: embedded in the host unless --signal names a server.
-    let (signal_server, url) = match (&a.signal, a.host) {
-        (Some(u), _) => (None, u.clone()),
-        (None, true) => {
-            let s = SignalServer::start(a.bind).map_err(Failure::connect)?;
-            let url = s.url();
-            println!("signaling on {url}");
-            (Some(s), url)
-        }
-        (None, false) => return Err(Failure::usage("join needs --signal")),
-    };
-    let mut mcfg = MatchboxConfig::new(
-        url.clone(),
-        a.room.clone(),
-        if a.host { Role::Host } else { Role::Join },
-    );
-    mcfg.ice_servers = a.ice.clone();
-    mcfg.connect_timeout = a.connect_timeout.min(Duration::from_secs(30));
-    let started = std::time::Instant::now();
-    let mut transport = MatchboxTransport::connect(&mcfg).map_err(Failure::connect)?;
-    let me = transport.local_id();
-    let now0 = softsync_net::Instant::ZERO;
-    let mut contact = None;
-    let session = if a.host {
-        Session::host(me, cfg, now0)
-    } else {
-        // Wait for the first data channel: that peer is our contact (a non-host redirects us).
-        let c = loop {
-            if let Some(PeerEvent::Connected(p)) = transport.poll_peer_event() {
-                break p;
-            }
-            if let Some(why) = transport.closed() {
-                return Err(Failure::connect(format!(
-                    "signaling lost while joining: {why}"
-                )));
-            }
-            if started.elapsed() > a.connect_timeout {
-                return Err(Failure::connect(format!(
-                    "room {:?}: no WebRTC connection to any of its peers within {:?}",
-                    a.room, a.connect_timeout
-                )));
-            }
-            std::thread::sleep(Duration::from_millis(2));
-        };
-        println!(
-            "connected to peer {} after {:.0} ms",
-            c.0,
-            started.elapsed().as_secs_f64() * 1e3
-        );
-        let s = Session::join(me, c, cfg, now0);
-        contact = Some(c);
-        s
-    };
-    println!(
-        "{} room={} peer={} signal={url}",
-        if a.host { "hosting" } else { "joining" },
-        a.room,
-        me.0
-    );
-    let transport: Box<dyn Transport> = match a.condition.clone() {
-        Some(c) => Box::new(LinkConditioner::new(transport, c)),
-        None => Box::new(transport),
-    };
-    let hand = HandConfig {
-        // Bots reach exactly; a physical hand body would shove what it reaches for. VR hands
-        // get one (people push things with their controllers); mouse hands do not: a hand
-        // resting under the view would shove whatever is there.
-        physical_controller: front == FrontEnd::Vr && a.bot.is_none(),
-        hover_radius_m: 0.03,
-        ..HandConfig::default()
-    };
-    let config = PeerConfig {
-        hand,
+    opts.peer = PeerConfig {
+        hand: HandConfig {
+            // Bots reach exactly; a physical hand body would shove what it reaches for. VR
+            // hands get one (people push things with their controllers); mouse hands do not: a
+            // hand resting under the view would shove whatever is there.
+            physical_controller: front == FrontEnd::Vr && a.bot.is_none(),
+            hover_radius_m: 0.03,
+            ..HandConfig::default()
+        },
         dt_s: (1.0 / a.sim_hz) as f32,
         avatar: !a.no_avatar,
         rejoin_limit: a.rejoin_limit,
         join_timeout: a.connect_timeout,
     };
-    // The session's clock starts with the peer.
-    let clock = Clock::start();
-    let mut peer =
-        Peer::new(clock.now(), session, contact, scene, config).map_err(Failure::usage)?;
-    if a.host {
-        peer.open(clock.now()).map_err(Failure::runtime)?;
+    // A desktop or VR peer enters the room once its front end renders (`Room::set_ready`).
+    opts.start_ready = front == FrontEnd::Headless;
+    let started = std::time::Instant::now();
+    let room = Room::open(scene, opts).map_err(|e| Failure {
+        code: e.exit_code(),
+        msg: e.to_string(),
+    })?;
+    if room.runs_signaling() {
+        println!("signaling on {}", room.signal_url());
     }
-    let driver = Driver::new(
-        peer,
-        transport,
-        clock,
-        bot,
-        a.room.clone(),
-        a.duration,
-        dump,
-        a.dump_hz,
-        a.quiet,
-        signal_server,
+    if let (false, Some(contact)) = (a.host, room.peer.session().host_id()) {
+        println!(
+            "connected to peer {} after {:.0} ms",
+            contact.0,
+            started.elapsed().as_secs_f64() * 1e3
+        );
+    }
+    println!(
+        "{} room={} peer={} signal={}",
+        if a.host { "hosting" } else { "joining" },
+        a.room,
+        room.peer.me().0,
+        room.signal_url()
     );
+    let driver = Driver::new(bot, a.duration, dump, a.dump_hz, a.quiet);
     // Ctrl-C, SIGTERM and SIGHUP end the peer cleanly (last dump, `Leave`). Installed here
     // with overwrite: bevy's own installer gives up when SIGINT is ignored, which it is for
     // every background job a script starts, and then SIGTERM is not handled either.
     if let Err(e) = ctrlc::set_handler(TerminalCtrlCHandlerPlugin::gracefully_exit) {
         eprintln!("warning: no signal handler ({e}): a kill is noticed by the timeout only");
     }
-    let home = driver.peer.home();
-    let mut driver = driver;
-    // A desktop or VR peer enters the room once its front end renders (see `Driver::ready`).
-    driver.ready = front == FrontEnd::Headless;
+    let home = room.peer.home();
     let mut app = App::new();
     match front {
         FrontEnd::Headless => {
@@ -448,8 +397,8 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
                 .add_plugins(view::ViewPlugin(view_config(&a, false)))
                 .add_plugins(vr::VrPlugin(vr::StageOrigin {
                     // The floor under our place at the table, facing it.
-                    pos: glue::to_bevy(Vec3::new(home.0.x, 0.0, home.0.z)),
-                    rot: glue::to_bevy_quat(home.1),
+                    pos: softsync_bevy::glue::to_bevy(Vec3::new(home.0.x, 0.0, home.0.z)),
+                    rot: softsync_bevy::glue::to_bevy_quat(home.1),
                 }));
         }
         #[allow(unreachable_patterns)]
@@ -457,9 +406,11 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     }
     let _ = home;
     let exit = app
+        .add_plugins(SoftsyncPlugin::default())
+        .add_room(room)
         .insert_resource(Time::<Fixed>::from_hz(a.sim_hz))
         .insert_non_send(driver)
-        .add_plugins((NetPlugin, SimPlugin, ReportPlugin))
+        .add_plugins(ReportPlugin)
         .run();
     Ok(match exit {
         AppExit::Success => ExitCode::SUCCESS,

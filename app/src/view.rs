@@ -26,8 +26,10 @@ use softsync_net::NetId;
 
 use softsync_peer::{Kind, LocalBody, Peer, Scene, Shape};
 
+use softsync_bevy::glue::to_bevy;
+use softsync_bevy::{NetEntities, NetObject, Room, SoftsyncSet};
+
 use crate::driver::Driver;
-use crate::glue::{to_bevy, to_bevy_quat};
 
 /// What the view shows and records.
 #[derive(Clone, Debug, Resource)]
@@ -55,13 +57,12 @@ pub struct ScreenshotPlan {
     pub max: u32,
 }
 
-/// Draws the room: add to an app that has bevy's renderer and a `Driver`.
+/// Draws the room: add to an app that has bevy's renderer, the softsync plugin and a `Driver`.
 pub struct ViewPlugin(pub ViewConfig);
 
 impl Plugin for ViewPlugin {
     fn build(&self, app: &mut App) {
         app.insert_resource(self.0.clone())
-            .init_resource::<Views>()
             .init_resource::<ScreenshotState>()
             .insert_resource(ClearColor(Color::srgb(0.62, 0.70, 0.78)))
             .insert_resource(GlobalAmbientLight {
@@ -74,7 +75,9 @@ impl Plugin for ViewPlugin {
             .init_resource::<RenderWarm>()
             .add_systems(
                 Update,
-                (sync_objects, draw_overlay, update_hud, take_screenshots).chain(),
+                (sync_objects, draw_overlay, update_hud, take_screenshots)
+                    .chain()
+                    .after(SoftsyncSet::Mirror),
             );
     }
 
@@ -125,11 +128,9 @@ enum Tint {
     Held,
 }
 
-/// The bevy side of one networked object.
+/// The drawing of one networked object (on the plugin's entity of it).
 #[derive(Component)]
 struct ObjView {
-    id: NetId,
-    kind: Kind,
     base: Color,
     material: Handle<StandardMaterial>,
     /// Soft bodies: the mesh rewritten every frame.
@@ -138,9 +139,6 @@ struct ObjView {
     topology: u32,
     tint: Tint,
 }
-
-#[derive(Resource, Default)]
-struct Views(HashMap<NetId, Entity>);
 
 #[derive(Component)]
 struct Hud;
@@ -153,13 +151,13 @@ struct ScreenshotState {
 
 fn spawn_static(
     mut commands: Commands,
-    driver: NonSend<Driver>,
+    room: NonSend<Room>,
     mut meshes: ResMut<Assets<Mesh>>,
     mut materials: ResMut<Assets<StandardMaterial>>,
     cfg: Res<ViewConfig>,
 ) {
     // The scene's fixed boxes (the floor, the table), as the peer's world has them.
-    for b in &driver.peer.scene().fixed {
+    for b in &room.peer.scene().fixed {
         let [r, g, bl] = b.colour;
         let material = materials.add(StandardMaterial {
             base_color: Color::srgb(r, g, bl),
@@ -254,97 +252,63 @@ fn rigid_mesh(scene: &Scene, kind: Kind) -> Mesh {
     }
 }
 
-/// The pose a rigid or avatar object is drawn at.
-fn drawn_pose(
-    now: softsync_net::Instant,
-    peer: &mut Peer,
-    id: NetId,
-) -> Option<(glam::Vec3, glam::Quat)> {
-    let o = peer.objects().get(&id)?.clone();
-    match o.body {
-        LocalBody::Rigid(h) => {
-            let b = peer.world().bodies.get(h)?;
-            Some((b.translation(), *b.rotation()))
-        }
-        LocalBody::Pose if o.avatar_of == Some(peer.me()) => Some(o.pose),
-        _ => peer.shown_state(now, id).map(|s| (s.pos, s.rot)),
-    }
-}
-
+/// Gives the plugin's object entities (`NetObject`, its `Transform` following the room) their
+/// meshes and materials, and each frame rewrites soft meshes, visibility and tints.
 #[allow(clippy::too_many_arguments)]
 fn sync_objects(
     mut commands: Commands,
-    mut driver: NonSendMut<Driver>,
-    mut views: ResMut<Views>,
+    room: NonSend<Room>,
     mut meshes: ResMut<Assets<Mesh>>,
     mut materials: ResMut<Assets<StandardMaterial>>,
-    mut q: Query<(&mut Transform, &mut ObjView, &mut Visibility)>,
+    new: Query<(Entity, &NetObject), Without<ObjView>>,
+    mut q: Query<(&NetObject, &mut ObjView, &mut Visibility)>,
     cfg: Res<ViewConfig>,
 ) {
-    let now = driver.now();
-    let peer = &mut driver.peer;
+    let peer = &room.peer;
     let me = peer.me();
-    // Gone objects.
-    let live: HashSet<NetId> = peer.objects().keys().copied().collect();
-    views.0.retain(|id, e| {
-        let keep = live.contains(id);
-        if !keep {
-            commands.entity(*e).despawn();
-        }
-        keep
-    });
-    let hovered = peer.hovered_ids();
-    let held: HashSet<NetId> = (0..2).filter_map(|h| peer.held(h).map(|x| x.0)).collect();
-    let ids: Vec<NetId> = peer.objects().keys().copied().collect();
-    for id in ids {
-        let Some(o) = peer.objects().get(&id).cloned() else {
+    for (e, obj) in &new {
+        let Some(o) = peer.objects().get(&obj.id) else {
             continue;
         };
         let base = match o.avatar_of {
             Some(p) => peer_color(p.0),
             None => kind_color(peer.scene(), o.kind),
         };
-        let Some(&e) = views.0.get(&id) else {
-            // New object: spawn its entity.
-            let material = materials.add(StandardMaterial {
-                base_color: base,
-                perceptual_roughness: 0.6,
-                ..default()
-            });
-            let (mesh, soft) = match o.body {
-                LocalBody::Soft(h) => match soft_mesh(peer, h) {
-                    Some(m) => {
-                        let handle = meshes.add(m);
-                        (handle.clone(), Some(handle))
-                    }
-                    None => continue,
-                },
-                _ => (meshes.add(rigid_mesh(peer.scene(), o.kind)), None),
-            };
-            let e = commands
-                .spawn((
-                    Mesh3d(mesh),
-                    MeshMaterial3d(material.clone()),
-                    Transform::IDENTITY,
-                    Visibility::Hidden,
-                    ObjView {
-                        id,
-                        kind: o.kind,
-                        base,
-                        material,
-                        soft_mesh: soft,
-                        topology: o.topology,
-                        tint: Tint::Plain,
-                    },
-                ))
-                .id();
-            views.0.insert(id, e);
+        let material = materials.add(StandardMaterial {
+            base_color: base,
+            perceptual_roughness: 0.6,
+            ..default()
+        });
+        let (mesh, soft) = match o.body {
+            LocalBody::Soft(h) => match soft_mesh(peer, h) {
+                Some(m) => {
+                    let handle = meshes.add(m);
+                    (handle.clone(), Some(handle))
+                }
+                None => continue,
+            },
+            _ => (meshes.add(rigid_mesh(peer.scene(), o.kind)), None),
+        };
+        commands.entity(e).insert((
+            Mesh3d(mesh),
+            MeshMaterial3d(material.clone()),
+            Visibility::Hidden,
+            ObjView {
+                base,
+                material,
+                soft_mesh: soft,
+                topology: o.topology,
+                tint: Tint::Plain,
+            },
+        ));
+    }
+    let hovered = peer.hovered_ids();
+    let held: HashSet<NetId> = (0..2).filter_map(|h| peer.held(h).map(|x| x.0)).collect();
+    for (obj, mut view, mut vis) in &mut q {
+        let id = obj.id;
+        let Some(o) = peer.objects().get(&id) else {
             continue;
         };
-        let Ok((mut tf, mut view, mut vis)) = q.get_mut(e) else {
-            continue;
-        };
-        debug_assert_eq!(view.id, id);
         let hidden = (o.kind.is_avatar() && cfg.hide_avatars)
             || (o.kind == Kind::HEAD && cfg.hide_own_head && o.avatar_of == Some(me));
         // Soft bodies: rewrite positions and normals (world space, identity transform), and
@@ -361,10 +325,6 @@ fn sync_objects(
                 }
             }
             view.topology = o.topology;
-        } else if let Some((p, r)) = drawn_pose(now, peer, id) {
-            if p.is_finite() && r.is_finite() {
-                *tf = Transform::from_translation(to_bevy(p)).with_rotation(to_bevy_quat(r));
-            }
         }
         let want_vis = if hidden {
             Visibility::Hidden
@@ -374,10 +334,9 @@ fn sync_objects(
         if *vis != want_vis {
             *vis = want_vis;
         }
-        let owner = peer.session().owner(id);
         let tint = if held.contains(&id) {
             Tint::Held
-        } else if owner == Some(me) && !o.kind.is_avatar() {
+        } else if obj.mine && !o.kind.is_avatar() {
             Tint::Owned
         } else if hovered.contains(&id) {
             Tint::Hovered
@@ -397,13 +356,12 @@ fn sync_objects(
                 m.base_color = view.base;
             }
         }
-        let _ = view.kind;
     }
 }
 
 /// Particles and neighbour links (thesis Figure 1.1), when switched on (P).
 fn draw_overlay(
-    driver: NonSend<Driver>,
+    room: NonSend<Room>,
     mut gizmos: Gizmos,
     mut cfg: ResMut<ViewConfig>,
     keys: Option<Res<ButtonInput<KeyCode>>>,
@@ -427,7 +385,7 @@ fn draw_overlay(
     if !cfg.particles {
         return;
     }
-    let peer = &driver.peer;
+    let peer = &room.peer;
     for o in peer.objects().values() {
         let LocalBody::Soft(h) = o.body else { continue };
         let Some(b) = peer.soft_bodies().get(h) else {
@@ -450,14 +408,19 @@ fn draw_overlay(
     }
 }
 
-fn update_hud(driver: NonSend<Driver>, cfg: Res<ViewConfig>, mut q: Query<&mut Text, With<Hud>>) {
+fn update_hud(
+    room: NonSend<Room>,
+    driver: NonSend<Driver>,
+    cfg: Res<ViewConfig>,
+    mut q: Query<&mut Text, With<Hud>>,
+) {
     if !cfg.hud {
         return;
     }
     let Ok(mut text) = q.single_mut() else {
         return;
     };
-    let new = hud_text(&driver);
+    let new = hud_text(&room, &driver);
     if text.0 != new {
         text.0 = new;
     }
@@ -469,14 +432,14 @@ fn short(id: u64) -> String {
 }
 
 /// The HUD's text: room, peers, host, RTT, bytes/s, objects owned, the hands, the last events.
-pub fn hud_text(driver: &Driver) -> String {
-    let peer = &driver.peer;
+pub fn hud_text(room: &Room, driver: &Driver) -> String {
+    let peer = &room.peer;
     let session = peer.session();
     let rtt = crate::report::mean_rtt_ms(peer).map_or("-".to_owned(), |r| format!("{r:.0} ms"));
     let host = session.host_id();
     let mut s = format!(
         "room {} | me {}{}\nhost {} term {} | peers {}\nrtt {rtt} | up {:.0} B/s down {:.0} B/s\nowned {}/{}\n",
-        driver.room_name,
+        room.name(),
         short(peer.me().0),
         if session.is_host() { " (host)" } else { "" },
         host.map_or("-".into(), |h| short(h.0)),
@@ -590,18 +553,18 @@ fn rim_of(m: &Mesh) -> (usize, Vec<Vec3>) {
 
 fn take_screenshots(
     mut commands: Commands,
-    driver: NonSend<Driver>,
+    room: NonSend<Room>,
     mut state: ResMut<ScreenshotState>,
     cfg: Res<ViewConfig>,
     cams: Query<(&Camera, &GlobalTransform)>,
     warm: Res<RenderWarm>,
-    (views, objs, meshes): (Res<Views>, Query<&ObjView>, Res<Assets<Mesh>>),
+    (ents, objs, meshes): (Res<NetEntities>, Query<&ObjView>, Res<Assets<Mesh>>),
 ) {
     let Some(plan) = &cfg.screenshots else {
         return;
     };
-    let peer = &driver.peer;
-    let t = Duration::from_micros(driver.now().as_micros());
+    let peer = &room.peer;
+    let t = Duration::from_micros(room.now().as_micros());
     if state.taken >= plan.max
         || t < state.next
         || !peer.joined()
@@ -631,8 +594,8 @@ fn take_screenshots(
         }
         // What is drawn, read back from the mesh asset the renderer uses: its triangles,
         // and the screen box of its open rim (the edges of a tear's slit).
-        let drawn = (views.0.get(id))
-            .and_then(|e| objs.get(*e).ok())
+        let drawn = (ents.get(*id))
+            .and_then(|e| objs.get(e).ok())
             .and_then(|v| v.soft_mesh.as_ref())
             .and_then(|h| meshes.get(h));
         if let Some(m) = drawn {

@@ -33,8 +33,10 @@ use bevy_mod_xr::spaces::{XrSpace, XrSpaceSyncSet};
 
 use softsync_peer::DeviceFrame;
 
+use softsync_bevy::Room;
+
 use crate::driver::Driver;
-use crate::glue::pose_from_bevy;
+use softsync_bevy::glue::pose_from_bevy;
 
 /// Is there an OpenXR runtime with a headset? `Err` says what is missing.
 #[allow(unsafe_code)]
@@ -143,7 +145,7 @@ impl Plugin for VrPlugin {
                 read_device
                     .after(XrSpaceSyncSet)
                     .after(OxrActionSetSyncSet)
-                    .after(crate::plugins::NetIn)
+                    .after(softsync_bevy::SoftsyncSet::NetIn)
                     .run_if(openxr_session_running),
             )
             .add_systems(Update, report_state)
@@ -377,14 +379,14 @@ fn read_device(
 const WARMUP_FRAMES: u32 = 30;
 
 fn ready_when_running(
-    mut driver: NonSendMut<Driver>,
+    mut room: NonSendMut<Room>,
     state: Option<Res<XrState>>,
     mut running: Local<u32>,
 ) {
     if state.is_some_and(|s| *s == XrState::Running) {
         *running += 1;
         if *running >= WARMUP_FRAMES {
-            driver.set_ready();
+            Driver::set_ready(&mut room);
         }
     }
 }

@@ -677,6 +677,22 @@ impl Peer {
         }
     }
 
+    /// The pose an object is drawn at now: a rigid body's simulated pose (ours, or the
+    /// replica moved to the owner's interpolated state), our own avatar parts where the bot or
+    /// device put them, anything else at its shown state. Soft bodies are drawn from their
+    /// particles ([`SoftBodySet`]'s render positions); this is their centre.
+    pub fn drawn_pose(&mut self, now: Instant, id: NetId) -> Option<(Vec3, Quat)> {
+        let o = self.mirror.objects.get(&id)?;
+        match o.body {
+            LocalBody::Rigid(h) => {
+                let b = self.mirror.world.bodies.get(h)?;
+                Some((b.translation(), *b.rotation()))
+            }
+            LocalBody::Pose if o.avatar_of == Some(self.me()) => Some(o.pose),
+            _ => self.shown_state(now, id).map(|s| (s.pos, s.rot)),
+        }
+    }
+
     /// The interpolated state of an object another peer owns, with the owner's time it
     /// stands for (see [`Session::display_state`]).
     pub fn displayed_state(&mut self, now: Instant, id: NetId) -> Option<DisplayedState> {

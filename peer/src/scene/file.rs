@@ -46,6 +46,7 @@ const MAX_CLASSES: usize = 1000;
 const MAX_OBJECTS: usize = 10_000;
 const MAX_FIXED: usize = 10_000;
 const MAX_NAME_CHARS: usize = 64;
+const MAX_MESSAGE_TYPES: usize = 1000;
 const MAX_SIZE_M: f32 = 100.0;
 const MAX_TEXT_BYTES: usize = 4 << 20;
 
@@ -61,6 +62,9 @@ struct SceneFile {
     classes: Vec<ClassFile>,
     #[serde(default)]
     objects: Vec<ObjectFile>,
+    /// The application's message types, by name (`Message::NAME`), after the built-in ones.
+    #[serde(default)]
+    messages: Vec<String>,
 }
 
 #[derive(Deserialize)]
@@ -379,6 +383,8 @@ pub(super) fn parse(text: &str, path: &Path) -> Result<Scene, String> {
         objects.push(Placed { kind, pos, rot });
     }
 
+    let messages = message_names(f.messages)?;
+
     let mut scene = Scene {
         name: f.name,
         path: path.to_owned(),
@@ -386,10 +392,38 @@ pub(super) fn parse(text: &str, path: &Path) -> Result<Scene, String> {
         fixed,
         objects,
         bounds,
+        messages,
         content_digest: 0,
     };
     scene.content_digest = digest(&scene);
     Ok(scene)
+}
+
+/// The scene's message names: each 1–64 printable ASCII characters without spaces, none
+/// twice, none a built-in type's.
+fn message_names(names: Vec<String>) -> Result<Vec<String>, String> {
+    let builtin = crate::messages::builtin();
+    if names.len() > MAX_MESSAGE_TYPES {
+        return Err(format!(
+            "messages: {} types, at most {MAX_MESSAGE_TYPES}",
+            names.len()
+        ));
+    }
+    for (i, n) in names.iter().enumerate() {
+        let at = |e: &str| format!("messages[{i}] {n:?}: {e}");
+        if n.is_empty() || n.len() > MAX_NAME_CHARS || !n.chars().all(|c| c.is_ascii_graphic()) {
+            return Err(at(&format!(
+                "a message type's name is 1–{MAX_NAME_CHARS} printable ASCII characters, no spaces"
+            )));
+        }
+        if builtin.names().iter().any(|b| b == n) {
+            return Err(at("a built-in message type has this name"));
+        }
+        if names[..i].contains(n) {
+            return Err(at("named twice"));
+        }
+    }
+    Ok(names)
 }
 
 fn friction(v: f32) -> Result<f32, String> {
@@ -626,6 +660,19 @@ mod tests {
         // Soft settings out of range, a soft cylinder.
         let e = err(&swap("stiffness: 20.0", "stiffness: 50000.0"));
         assert!(e.contains("stiffness") && e.contains("\"bunny\""), "{e}");
+        // Message types: twice, a built-in name, a blank name.
+        let e = err(&swap(
+            "classes: [",
+            "messages: [\"bell\", \"bell\"], classes: [",
+        ));
+        assert!(e.contains("messages[1]") && e.contains("twice"), "{e}");
+        let e = err(&swap(
+            "classes: [",
+            "messages: [\"softsync.say\"], classes: [",
+        ));
+        assert!(e.contains("built-in"), "{e}");
+        let e = err(&swap("classes: [", "messages: [\"a b\"], classes: ["));
+        assert!(e.contains("messages[0]"), "{e}");
         // Duplicate and reserved names.
         let e = err(&swap("name: \"block\"", "name: \"plate\""));
         assert!(e.contains("earlier"), "{e}");

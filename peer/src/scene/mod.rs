@@ -193,6 +193,10 @@ pub struct Scene {
     pub objects: Vec<Placed>,
     /// The box positions are quantized in (every class's bounds), metres.
     pub bounds: (Vec3, Vec3),
+    /// The application's message types the room relays, by name, after the built-in ones
+    /// (the file's `messages`): peers with the same scene can talk in them whether or not
+    /// they know the types (the `softsync` binary relays and logs a bell it cannot decode).
+    pub messages: Vec<String>,
     content_digest: u64,
 }
 
@@ -295,8 +299,10 @@ impl Scene {
     /// The session configuration every peer of this scene uses: each class's send policy is
     /// `avatar`, `soft` or `rigid` with the class's own replication settings over it (thesis
     /// 5.3); its digest covers [`content_digest`](Self::content_digest). Its message table
-    /// holds the built-in types ([`crate::messages::builtin`]); an application with its own
-    /// starts from that table, registers its types and configures the result over it.
+    /// holds the built-in types ([`crate::messages::builtin`]), then the scene's
+    /// [`messages`](Self::messages); an application with more of its own starts from that
+    /// table ([`MessageTypes::from_config`](softsync_net::messages::MessageTypes::from_config)),
+    /// registers them and configures the result over it.
     pub fn session_config(
         &self,
         avatar: SendPolicy,
@@ -336,7 +342,12 @@ impl Scene {
             content_digest: self.content_digest,
             ..SessionConfig::default()
         };
-        crate::messages::builtin().configure(&mut cfg);
+        let mut types = crate::messages::builtin();
+        for n in &self.messages {
+            // Checked when the file was read: no name twice, none a built-in one.
+            let _ = types.register_name(n);
+        }
+        types.configure(&mut cfg);
         cfg
     }
 

@@ -26,6 +26,23 @@ pub fn binary() -> PathBuf {
     bin
 }
 
+/// A built example program of `softsync-bevy` (`target/<profile>/examples/NAME`).
+pub fn example(name: &str) -> PathBuf {
+    let bin = binary().parent().unwrap().join("examples").join(name);
+    assert!(
+        bin.exists(),
+        "{} is missing: build it first (`cargo build -p softsync-bevy --example {name}`; \
+         scripts/test does)",
+        bin.display()
+    );
+    bin
+}
+
+/// A file of the repository, by its path from the root.
+pub fn repo_file(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel)
+}
+
 pub fn require_netns() {
     assert_eq!(
         std::env::var("SOFTSYNC_IN_NETNS").as_deref(),

@@ -1,0 +1,423 @@
+//! [`Room`]: one peer of a room on a real transport and clock — what [`Room::open`] connects
+//! and the plugin runs each frame. Nothing here needs bevy: a server or a test can drive a
+//! `Room` by hand with [`Room::network_in`], [`Room::step`] and [`Room::flush`].
+
+// The I/O layer: this machine's clock, the wait for a first data channel, the grace after a
+// `Leave`. The session and peer below stay sans-IO.
+#![allow(clippy::disallowed_methods)]
+
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use softsync_net::messages::{Message, MessageTypes, RegisterError};
+use softsync_net::{
+    ConditionerConfig, Delivery, Instant, LinkConditioner, MessageRefusal, MessageTarget,
+    PeerEvent, RoomKey, SendPolicy, Session, SessionConfig, Transport,
+};
+use softsync_net_matchbox::{MatchboxConfig, MatchboxTransport, Role, SignalServer};
+use softsync_peer::{Event, Peer, PeerConfig, PeerError, Scene};
+
+/// The session's clock: microseconds since the room was opened, on this machine's clock.
+#[derive(Clone, Copy, Debug)]
+pub struct Clock {
+    origin: std::time::Instant,
+}
+
+impl Clock {
+    /// A clock that reads zero now.
+    pub fn start() -> Self {
+        Clock {
+            origin: std::time::Instant::now(),
+        }
+    }
+
+    /// Now, on the session's clock.
+    pub fn now(&self) -> Instant {
+        Instant::from_micros(self.origin.elapsed().as_micros() as u64)
+    }
+}
+
+/// How a room is opened: its name, host or join, signaling, ICE, the replication policy and
+/// the peer's settings. [`RoomOptions::host`] and [`RoomOptions::join`] give the defaults of
+/// `softsync host` and `softsync join`.
+#[derive(Clone, Debug)]
+pub struct RoomOptions {
+    /// The room's name (peers with the same name and signaling server meet).
+    pub name: String,
+    /// Create the room (and spawn the scene's objects) rather than join it.
+    pub host: bool,
+    /// The signaling server's URL (`ws://…`). A host without one embeds a server on
+    /// [`bind`](Self::bind); a joiner needs one.
+    pub signal: Option<String>,
+    /// Where a host's embedded signaling server listens.
+    pub bind: SocketAddr,
+    /// STUN/TURN servers (`stun:…`, `turn:…`); none on a LAN.
+    pub ice_servers: Vec<String>,
+    /// TURN credentials.
+    pub ice_username: Option<String>,
+    /// TURN credentials.
+    pub ice_credential: Option<String>,
+    /// How long to wait for signaling, the first data channel and the host's welcome.
+    pub connect_timeout: Duration,
+    /// The room's shared secret: only peers that know it get in.
+    pub room_key: Option<RoomKey>,
+    /// A seeded link conditioner over the real transport (loss and latency in tests).
+    pub condition: Option<ConditionerConfig>,
+    /// How often and how precisely objects are sent (the scene's classes refine it).
+    pub send: SendPolicy,
+    /// Hands, the fixed step, the avatar, rejoining.
+    pub peer: PeerConfig,
+    /// The application's message types beyond the built-in ones and the scene's `messages`
+    /// (every peer of the room must register the same, in the same order).
+    pub messages: MessageTypes,
+    /// Start pumping the network at once (true), or only after [`Room::set_ready`] (a front
+    /// end whose first frames stall — a window, an XR session — would otherwise be timed out
+    /// by the host while it warms up).
+    pub start_ready: bool,
+}
+
+impl RoomOptions {
+    /// Create room `name` with an embedded signaling server on `127.0.0.1:3536`.
+    pub fn host(name: impl Into<String>) -> Self {
+        RoomOptions {
+            name: name.into(),
+            host: true,
+            signal: None,
+            bind: SocketAddr::from(([127, 0, 0, 1], 3536)),
+            ice_servers: Vec::new(),
+            ice_username: None,
+            ice_credential: None,
+            connect_timeout: Duration::from_secs(15),
+            room_key: None,
+            condition: None,
+            send: SendPolicy {
+                rate_hz: 20.0,
+                position_threshold_m: 0.005,
+                particle_threshold_m: 0.005,
+                ..SendPolicy::default()
+            },
+            peer: PeerConfig::default(),
+            messages: MessageTypes::new(),
+            start_ready: true,
+        }
+    }
+
+    /// Join room `name` through the signaling server at `signal`.
+    pub fn join(name: impl Into<String>, signal: impl Into<String>) -> Self {
+        RoomOptions {
+            host: false,
+            signal: Some(signal.into()),
+            ..RoomOptions::host(name)
+        }
+    }
+
+    /// Register the application's message type `M` (see [`RoomOptions::messages`]). A type
+    /// the scene file already names is accepted as it is.
+    pub fn with_message<M: Message>(mut self) -> Result<Self, RegisterError> {
+        if !self.messages.names().iter().any(|n| n == M::NAME) {
+            self.messages.register::<M>()?;
+        }
+        Ok(self)
+    }
+
+    /// The session configuration of `scene` under these options: the scene's classes with
+    /// [`send`](Self::send) under their own replication settings, the message table (built-in,
+    /// the scene's, then [`messages`](Self::messages)), the room key.
+    pub fn session_config(&self, scene: &Scene) -> Result<SessionConfig, OpenError> {
+        let mut cfg = scene.session_config(self.send.clone(), self.send.clone(), self.send.clone());
+        let mut types = MessageTypes::from_config(&cfg)
+            .ok_or_else(|| OpenError::Config("the scene names a message type twice".into()))?;
+        for n in self.messages.names() {
+            if !types.names().contains(n) {
+                types
+                    .register_name(n)
+                    .map_err(|e| OpenError::Config(e.to_string()))?;
+            }
+        }
+        types.configure(&mut cfg);
+        cfg.room_key = self.room_key.clone();
+        Ok(cfg)
+    }
+}
+
+/// Why a room could not be opened or could not go on.
+#[derive(Debug, thiserror::Error)]
+pub enum OpenError {
+    /// The options or the scene are wrong (nothing was opened).
+    #[error("{0}")]
+    Config(String),
+    /// Signaling or WebRTC failed, or no peer of the room answered in time.
+    #[error("{0}")]
+    Connect(String),
+    /// The room refused us, or the peer stopped.
+    #[error("{0}")]
+    Peer(String),
+}
+
+impl OpenError {
+    /// The process exit code the `softsync` binary uses for it: 2 for a usage or
+    /// configuration error, 3 for a connection or room failure.
+    pub fn exit_code(&self) -> u8 {
+        match self {
+            OpenError::Config(_) => 2,
+            OpenError::Connect(_) | OpenError::Peer(_) => 3,
+        }
+    }
+}
+
+/// How long a leaving peer waits for the transport to send its `Leave` before the process
+/// ends (the WebRTC thread sends it).
+pub const LEAVE_GRACE: Duration = Duration::from_millis(100);
+
+/// One peer in a room: the [`Peer`] (session, world, soft bodies, hands, avatar) on a real
+/// transport and clock, and the embedded signaling server a host may run.
+pub struct Room {
+    /// The peer: objects, hands, messages, the session and its stats.
+    pub peer: Peer,
+    transport: Box<dyn Transport>,
+    clock: Clock,
+    name: String,
+    signal_url: String,
+    signal: Option<SignalServer>,
+    ready: bool,
+    left: bool,
+    events: Vec<Event>,
+}
+
+impl Room {
+    /// Connect to room `opts.name` with `scene`: signaling (embedded for a host without
+    /// [`RoomOptions::signal`]), WebRTC, then host the room (spawning the scene's objects) or
+    /// join it through the first peer that answers. Blocks until a joiner has a data channel
+    /// to some peer of the room (the welcome follows as the room runs) or `connect_timeout`.
+    pub fn open(scene: Scene, opts: RoomOptions) -> Result<Room, OpenError> {
+        let cfg = opts.session_config(&scene)?;
+        let (signal, url) = match (&opts.signal, opts.host) {
+            (Some(u), _) => (None, u.clone()),
+            (None, true) => {
+                let s = SignalServer::start(opts.bind)
+                    .map_err(|e| OpenError::Connect(format!("signaling on {}: {e}", opts.bind)))?;
+                let url = s.url();
+                (Some(s), url)
+            }
+            (None, false) => {
+                return Err(OpenError::Config(
+                    "joining needs a signaling server's URL".into(),
+                ))
+            }
+        };
+        let mut mcfg = MatchboxConfig::new(
+            url.clone(),
+            opts.name.clone(),
+            if opts.host { Role::Host } else { Role::Join },
+        );
+        mcfg.ice_servers = opts.ice_servers.clone();
+        mcfg.ice_username = opts.ice_username.clone();
+        mcfg.ice_credential = opts.ice_credential.clone();
+        mcfg.connect_timeout = opts.connect_timeout.min(Duration::from_secs(30));
+        let started = std::time::Instant::now();
+        let mut transport =
+            MatchboxTransport::connect(&mcfg).map_err(|e| OpenError::Connect(e.to_string()))?;
+        let me = transport.local_id();
+        let now0 = Instant::ZERO;
+        let (session, contact) = if opts.host {
+            (Session::host(me, cfg, now0), None)
+        } else {
+            // The first data channel is our contact (a peer that is not the host redirects).
+            let c = loop {
+                if let Some(PeerEvent::Connected(p)) = transport.poll_peer_event() {
+                    break p;
+                }
+                if let Some(why) = transport.closed() {
+                    return Err(OpenError::Connect(format!(
+                        "signaling lost while joining: {why}"
+                    )));
+                }
+                if started.elapsed() > opts.connect_timeout {
+                    return Err(OpenError::Connect(format!(
+                        "room {:?}: no WebRTC connection to any of its peers within {:?}",
+                        opts.name, opts.connect_timeout
+                    )));
+                }
+                std::thread::sleep(Duration::from_millis(2));
+            };
+            (Session::join(me, c, cfg, now0), Some(c))
+        };
+        let transport: Box<dyn Transport> = match opts.condition.clone() {
+            Some(c) => Box::new(LinkConditioner::new(transport, c)),
+            None => Box::new(transport),
+        };
+        // The session's clock starts with the peer.
+        let clock = Clock::start();
+        let mut peer = Peer::new(clock.now(), session, contact, scene, opts.peer.clone())
+            .map_err(|e| OpenError::Config(e.to_string()))?;
+        if opts.host {
+            peer.open(clock.now())
+                .map_err(|e| OpenError::Peer(e.to_string()))?;
+        }
+        Ok(Room {
+            peer,
+            transport,
+            clock,
+            name: opts.name,
+            signal_url: url,
+            signal,
+            ready: opts.start_ready,
+            left: false,
+            events: Vec::new(),
+        })
+    }
+
+    /// A room on a transport the caller made (an in-memory hub in tests, another WebRTC
+    /// stack): `peer` is already built on a session of `transport.local_id()`.
+    pub fn with_transport(
+        name: impl Into<String>,
+        peer: Peer,
+        transport: Box<dyn Transport>,
+    ) -> Self {
+        Room {
+            peer,
+            transport,
+            clock: Clock::start(),
+            name: name.into(),
+            signal_url: String::new(),
+            signal: None,
+            ready: true,
+            left: false,
+            events: Vec::new(),
+        }
+    }
+
+    /// Now, on the session's clock.
+    pub fn now(&self) -> Instant {
+        self.clock.now()
+    }
+
+    /// The room's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The signaling server's URL (the embedded one's, on a host that runs it).
+    pub fn signal_url(&self) -> &str {
+        &self.signal_url
+    }
+
+    /// Whether this process runs the room's signaling server.
+    pub fn runs_signaling(&self) -> bool {
+        self.signal.is_some()
+    }
+
+    /// Whether the network is pumped (see [`RoomOptions::start_ready`]).
+    pub fn is_ready(&self) -> bool {
+        self.ready
+    }
+
+    /// The front end is up: start pumping the network, and count the join timeout from now.
+    /// Returns false if it already was.
+    pub fn set_ready(&mut self) -> bool {
+        if self.ready {
+            return false;
+        }
+        self.ready = true;
+        let now = self.now();
+        self.peer.restart_join_clock(now);
+        true
+    }
+
+    /// Whether [`leave`](Self::leave) was called.
+    pub fn has_left(&self) -> bool {
+        self.left
+    }
+
+    /// Network in: datagrams, link news, timers and the session's news, then what that sends.
+    /// The peer's events are kept for [`drain_events`](Self::drain_events). An error means
+    /// the peer cannot go on (refused, timed out, the room gone past rejoining).
+    pub fn network_in(&mut self) -> Result<(), OpenError> {
+        if !self.ready || self.left {
+            return Ok(());
+        }
+        let now = self.now();
+        while let Some((from, bytes)) = self.transport.recv(now) {
+            self.peer.handle_datagram(now, from, &bytes);
+        }
+        while let Some(e) = self.transport.poll_peer_event() {
+            self.peer.handle_link_event(e);
+        }
+        let pumped = self.peer.pump(now);
+        while let Some(e) = self.peer.poll_event() {
+            self.events.push(e);
+        }
+        match pumped {
+            Ok(()) => {
+                self.flush();
+                Ok(())
+            }
+            Err(e @ PeerError::NotWelcomed { .. }) => Err(OpenError::Peer(format!(
+                "connected to room {:?} but {e}",
+                self.name
+            ))),
+            Err(e) => Err(OpenError::Peer(e.to_string())),
+        }
+    }
+
+    /// The events since the last call, oldest first.
+    pub fn drain_events(&mut self) -> std::vec::Drain<'_, Event> {
+        self.events.drain(..)
+    }
+
+    /// One fixed step of the peer (after the hands were set) and what it sends. Nothing
+    /// before the peer is in the room or after it left.
+    pub fn step(&mut self) {
+        if !self.peer.joined() || self.left {
+            return;
+        }
+        let now = self.now();
+        self.peer.fixed_step(now);
+        self.flush();
+        while let Some(e) = self.peer.poll_event() {
+            self.events.push(e);
+        }
+    }
+
+    /// Network out: everything the peer has to send.
+    pub fn flush(&mut self) {
+        if !self.ready {
+            // Not before the front end is ready: a `Hello` flushed early makes the host count
+            // us a member, and time us out while we warm up.
+            return;
+        }
+        let now = self.now();
+        while let Some(t) = self.peer.poll_transmit(now) {
+            self.transport.send(now, &t);
+        }
+    }
+
+    /// Send a typed message through the room now (see [`Peer::send`]).
+    pub fn send<M: Message>(
+        &mut self,
+        to: MessageTarget,
+        delivery: Delivery,
+        msg: &M,
+    ) -> Result<u32, MessageRefusal> {
+        let now = self.now();
+        self.peer.send(now, to, delivery, msg)
+    }
+
+    /// Leave the room: a `Leave` to everyone (a host is replaced at once, authority returns),
+    /// and a moment for the transport to send it. Once only.
+    pub fn leave(&mut self) {
+        if self.left {
+            return;
+        }
+        self.left = true;
+        if self.peer.joined() {
+            let now = self.now();
+            self.peer.leave(now);
+            let now = self.now();
+            while let Some(t) = self.peer.poll_transmit(now) {
+                self.transport.send(now, &t);
+            }
+            std::thread::sleep(LEAVE_GRACE);
+        }
+    }
+}

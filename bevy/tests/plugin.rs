@@ -1,0 +1,234 @@
+//! The plugin in two bevy apps of one process, on net's in-memory hub (the WebRTC path is
+//! `tests/tests/examples.rs`): a joiner is welcomed, both apps keep the same entities for the
+//! room's objects, a message of the app's own type arrives as `Received<M>`, the stats
+//! resource follows the room, leaving on `AppExit` is seen by the host, and a joiner the room
+//! refuses gets `RoomFailed` and exit code 3.
+#![allow(clippy::unwrap_used, clippy::disallowed_methods, missing_docs)]
+
+use std::path::Path;
+use std::time::{Duration, Instant as WallInstant};
+
+use bevy::app::{App, AppExit, Update};
+use bevy::ecs::message::{MessageReader, Messages};
+use bevy::ecs::prelude::{ResMut, Resource};
+use bevy::MinimalPlugins;
+use serde::{Deserialize, Serialize};
+use softsync_bevy::peer::{Peer, PeerConfig, Scene};
+use softsync_bevy::prelude::*;
+use softsync_bevy::{RoomFailed, RoomOptions as Opts};
+use softsync_net::{Instant, MemoryHub, Session};
+
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+struct Greeting {
+    text: String,
+}
+impl RoomMessage for Greeting {
+    const NAME: &'static str = "example.greeting";
+}
+
+const HOST: PeerId = PeerId(7);
+const JOINER: PeerId = PeerId(8);
+
+fn scene() -> Scene {
+    Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/lab.ron")).unwrap()
+}
+
+/// A room of `me` on the hub: a host, or a joiner through the host.
+fn room(hub: &MemoryHub, me: PeerId, opts: &Opts) -> Room {
+    let scene = scene();
+    let cfg = opts.session_config(&scene).unwrap();
+    let (session, contact) = if me == HOST {
+        (Session::host(me, cfg, Instant::ZERO), None)
+    } else {
+        (Session::join(me, HOST, cfg, Instant::ZERO), Some(HOST))
+    };
+    let mut peer = Peer::new(
+        Instant::ZERO,
+        session,
+        contact,
+        scene,
+        PeerConfig::default(),
+    )
+    .unwrap();
+    if me == HOST {
+        peer.open(Instant::ZERO).unwrap();
+    }
+    Room::with_transport("lab", peer, Box::new(hub.endpoint(me)))
+}
+
+#[derive(Resource, Default)]
+struct Seen {
+    greetings: Vec<(PeerId, Greeting)>,
+    joined: bool,
+    peers_joined: Vec<PeerId>,
+    peers_left: Vec<PeerId>,
+}
+
+fn collect(
+    mut seen: ResMut<Seen>,
+    mut events: MessageReader<RoomEvent>,
+    mut greetings: MessageReader<Received<Greeting>>,
+) {
+    for RoomEvent(e) in events.read() {
+        match e {
+            SoftsyncEvent::Room(RoomNews::Joined { .. }) => seen.joined = true,
+            SoftsyncEvent::Room(RoomNews::PeerJoined(p)) => seen.peers_joined.push(*p),
+            SoftsyncEvent::Room(RoomNews::PeerLeft(p)) => seen.peers_left.push(*p),
+            _ => {}
+        }
+    }
+    for g in greetings.read() {
+        seen.greetings.push((g.from, g.msg.clone()));
+    }
+}
+
+fn app(room: Room) -> App {
+    let mut app = App::new();
+    app.add_plugins(MinimalPlugins)
+        .add_plugins(SoftsyncPlugin::default())
+        .add_room(room)
+        .add_room_message::<Greeting>()
+        .init_resource::<Seen>()
+        .add_systems(Update, collect);
+    app
+}
+
+/// Frames of both apps until `done` or 10 s of wall time.
+fn run_until(apps: &mut [&mut App], mut done: impl FnMut(&mut [&mut App]) -> bool) {
+    let start = WallInstant::now();
+    while !done(apps) {
+        assert!(start.elapsed() < Duration::from_secs(10), "timed out");
+        for a in apps.iter_mut() {
+            a.update();
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
+/// (id, class, has a SoftBody component) of every non-avatar entity, sorted.
+fn entities(app: &mut App) -> Vec<(u32, String, bool)> {
+    let mut q = app
+        .world_mut()
+        .query::<(&NetObject, Option<&SoftBody>, Option<&AvatarPart>)>();
+    let mut v: Vec<_> = q
+        .iter(app.world())
+        .filter(|(_, _, a)| a.is_none())
+        .map(|(o, s, _)| (o.id.0, o.class.clone(), s.is_some()))
+        .collect();
+    v.sort();
+    v
+}
+
+fn exit_code(app: &App) -> Option<u8> {
+    let msgs = app.world().get_resource::<Messages<AppExit>>()?;
+    msgs.iter_current_update_messages().next().map(|e| match e {
+        AppExit::Success => 0,
+        AppExit::Error(c) => c.get(),
+    })
+}
+
+#[test]
+fn two_apps_share_the_room_its_entities_and_a_message_of_their_own_type() {
+    let hub = MemoryHub::new(1200);
+    let opts = Opts::host("lab").with_message::<Greeting>().unwrap();
+    let mut host = app(room(&hub, HOST, &opts));
+    let mut joiner = app(room(&hub, JOINER, &opts));
+    run_until(&mut [&mut host, &mut joiner], |a| {
+        a[1].world().resource::<Seen>().joined && entities(a[1]).len() == 3
+    });
+    // The same objects, classes and kinds of body on both sides.
+    let (h, j) = (entities(&mut host), entities(&mut joiner));
+    assert_eq!(h, j);
+    let classes: Vec<_> = h.iter().map(|(_, c, s)| (c.as_str(), *s)).collect();
+    assert_eq!(
+        classes,
+        [("block", false), ("bell", false), ("softball", true)]
+    );
+    assert!(host
+        .world()
+        .resource::<Seen>()
+        .peers_joined
+        .contains(&JOINER));
+    // The joiner's entities stand where the host's objects are.
+    let mut q = joiner
+        .world_mut()
+        .query::<(&NetObject, &bevy::transform::components::Transform)>();
+    let block = q
+        .iter(joiner.world())
+        .find(|(o, _)| o.class == "block")
+        .unwrap()
+        .1
+        .translation;
+    assert!(
+        (block.x - 0.25).abs() < 0.01 && (block.y - 0.78).abs() < 0.02,
+        "{block:?}"
+    );
+    // Stats on both sides.
+    for (a, me, is_host) in [(&host, HOST, true), (&joiner, JOINER, false)] {
+        let s = a.world().resource::<RoomStats>();
+        assert_eq!(
+            (s.me, s.host, s.is_host, s.members),
+            (Some(me), Some(HOST), is_host, 2)
+        );
+        assert!(s.joined && s.objects >= 3);
+    }
+    // A message of our own type, from a system's point of view: sent on the room, received
+    // as `Received<Greeting>` on the other app.
+    let hi = Greeting {
+        text: "hello".into(),
+    };
+    joiner
+        .world_mut()
+        .non_send_mut::<Room>()
+        .send(MessageTarget::Host, Delivery::Reliable, &hi)
+        .unwrap();
+    run_until(&mut [&mut host, &mut joiner], |a| {
+        !a[0].world().resource::<Seen>().greetings.is_empty()
+    });
+    assert_eq!(host.world().resource::<Seen>().greetings, [(JOINER, hi)]);
+    // The joiner's app exits: the plugin says Leave, the host hears it at once (no timeout).
+    joiner.world_mut().write_message(AppExit::Success);
+    joiner.update();
+    assert!(joiner.world().non_send::<Room>().has_left());
+    let left_at = WallInstant::now();
+    run_until(&mut [&mut host], |a| {
+        a[0].world().resource::<Seen>().peers_left.contains(&JOINER)
+    });
+    assert!(
+        left_at.elapsed() < Duration::from_millis(500),
+        "{:?}",
+        left_at.elapsed()
+    );
+}
+
+#[test]
+fn a_joiner_the_room_refuses_gets_room_failed_and_exit_code_3() {
+    let hub = MemoryHub::new(1200);
+    let mut host = app(room(&hub, HOST, &Opts::host("lab")));
+    // Another message table: another room configuration, refused at the handshake.
+    #[derive(Serialize, Deserialize)]
+    struct Other;
+    impl RoomMessage for Other {
+        const NAME: &'static str = "other.type";
+    }
+    let mut joiner = app(room(
+        &hub,
+        JOINER,
+        &Opts::host("lab").with_message::<Other>().unwrap(),
+    ));
+    joiner.add_systems(
+        Update,
+        |mut f: MessageReader<RoomFailed>, mut seen: ResMut<Seen>| {
+            if f.read().next().is_some() {
+                seen.peers_left.push(PeerId(0));
+            }
+        },
+    );
+    let mut code = None;
+    run_until(&mut [&mut host, &mut joiner], |a| {
+        code = code.or(exit_code(a[1]));
+        code.is_some()
+    });
+    assert_eq!(code, Some(3));
+    assert_eq!(joiner.world().resource::<Seen>().peers_left, [PeerId(0)]);
+}
