@@ -10,8 +10,6 @@
 //! ```
 #![allow(clippy::print_stdout, missing_docs)]
 
-use std::time::Duration;
-
 use bevy::app::ScheduleRunnerPlugin;
 use bevy::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -34,52 +32,36 @@ struct Settings {
     seconds: f32,
 }
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
+fn main() -> Result<AppExit, Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let arg = |flag: &str| {
+    let flag = |f: &str| {
         args.iter()
-            .position(|a| a == flag)
+            .position(|a| a == f)
             .and_then(|i| args.get(i + 1))
     };
-    let scene = arg("--scene").cloned();
-    let scene =
-        scene.unwrap_or_else(|| concat!(env!("CARGO_MANIFEST_DIR"), "/examples/lab.ron").into());
-    let seconds: f32 = arg("--seconds").map_or(Ok(30.0), |s| s.parse())?;
-    let opts = match args.iter().take(3).map(String::as_str).collect::<Vec<_>>()[..] {
-        ["host", room, bind, ..] if !bind.starts_with("--") => RoomOptions {
-            bind: bind.parse()?,
-            ..RoomOptions::host(room)
-        },
-        ["host", room, ..] => RoomOptions::host(room),
-        ["join", room, url, ..] => RoomOptions::join(room, url),
-        _ => {
-            return Err(
-                "usage: bell host ROOM [BIND] | join ROOM SIGNAL_URL [--ring] [--seconds S]".into(),
-            )
-        }
-    };
-    let room = Room::open(
-        Scene::load(scene.as_ref())?,
-        opts.with_message::<BellRung>()?,
-    )?;
+    let scene = flag("--scene").map_or(
+        concat!(env!("CARGO_MANIFEST_DIR"), "/examples/lab.ron"),
+        |s| s,
+    );
+    let seconds: f32 = flag("--seconds").map_or(Ok(30.0), |s| s.parse())?;
+    let opts = RoomOptions::from_args(&args)?.with_message::<BellRung>()?;
+    let room = Room::open(Scene::load(scene.as_ref())?, opts)?;
     println!("peer={} signal={}", room.peer.me().0, room.signal_url());
-    let settings = Settings {
-        ring_on_entry: args.iter().any(|a| a == "--ring"),
-        seconds,
-    };
-    let exit = App::new()
-        .add_plugins(MinimalPlugins.set(ScheduleRunnerPlugin::run_loop(Duration::from_millis(2))))
+    let ring_on_entry = args.iter().any(|a| a == "--ring");
+    Ok(App::new()
+        .add_plugins(MinimalPlugins.set(ScheduleRunnerPlugin::run_loop(
+            std::time::Duration::from_millis(2),
+        )))
         .add_plugins(SoftsyncPlugin::default())
         .add_room(room)
         .add_room_message::<BellRung>()
-        .insert_resource(settings)
+        .insert_resource(Settings {
+            ring_on_entry,
+            seconds,
+        })
         .init_resource::<BellRung>()
         .add_systems(Update, (hear, press).chain())
-        .run();
-    std::process::exit(match exit {
-        AppExit::Success => 0,
-        AppExit::Error(code) => code.get().into(),
-    });
+        .run())
 }
 
 /// The bell as others ring it (the room does not echo our own rings back to us).

@@ -10,8 +10,6 @@
 //! bevy/examples/lab.ron` (it logs the greeting), and the example hears its bot's `say`.
 #![allow(clippy::print_stdout, missing_docs)]
 
-use std::time::Duration;
-
 use bevy::app::ScheduleRunnerPlugin;
 use bevy::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -30,49 +28,32 @@ impl RoomMessage for Greeting {
 #[derive(Resource)]
 struct RunFor(f32);
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
+fn main() -> Result<AppExit, Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let arg = |flag: &str| {
+    let flag = |f: &str| {
         args.iter()
-            .position(|a| a == flag)
+            .position(|a| a == f)
             .and_then(|i| args.get(i + 1))
     };
-    let scene = match arg("--scene") {
-        Some(f) => f.clone(),
-        None => concat!(env!("CARGO_MANIFEST_DIR"), "/examples/lab.ron").to_owned(),
-    };
-    let seconds: f32 = arg("--seconds").map_or(Ok(30.0), |s| s.parse())?;
-    let opts = match args.iter().take(3).map(String::as_str).collect::<Vec<_>>()[..] {
-        ["host", room, bind, ..] if !bind.starts_with("--") => RoomOptions {
-            bind: bind.parse()?,
-            ..RoomOptions::host(room)
-        },
-        ["host", room, ..] => RoomOptions::host(room),
-        ["join", room, url, ..] => RoomOptions::join(room, url),
-        _ => {
-            return Err("usage: hello_room host ROOM [BIND] | join ROOM SIGNAL_URL \
-                         [--scene FILE] [--seconds S]"
-                .into())
-        }
-    };
-    let room = Room::open(
-        Scene::load(scene.as_ref())?,
-        opts.with_message::<Greeting>()?,
-    )?;
+    let scene = flag("--scene").map_or(
+        concat!(env!("CARGO_MANIFEST_DIR"), "/examples/lab.ron"),
+        |s| s,
+    );
+    let seconds: f32 = flag("--seconds").map_or(Ok(30.0), |s| s.parse())?;
+    let opts = RoomOptions::from_args(&args)?.with_message::<Greeting>()?;
+    let room = Room::open(Scene::load(scene.as_ref())?, opts)?;
     println!("peer={} signal={}", room.peer.me().0, room.signal_url());
-    let exit = App::new()
-        .add_plugins(MinimalPlugins.set(ScheduleRunnerPlugin::run_loop(Duration::from_millis(2))))
+    Ok(App::new()
+        .add_plugins(MinimalPlugins.set(ScheduleRunnerPlugin::run_loop(
+            std::time::Duration::from_millis(2),
+        )))
         .add_plugins(SoftsyncPlugin::default())
         .add_room(room)
         .add_room_message::<Greeting>()
         .add_room_message::<Say>() // the built-in chat line (a `softsync` bot's `say`)
         .insert_resource(RunFor(seconds))
         .add_systems(Update, (greet, listen, stop))
-        .run();
-    std::process::exit(match exit {
-        AppExit::Success => 0,
-        AppExit::Error(code) => code.get().into(),
-    });
+        .run())
 }
 
 /// Say hello once in the room; a host welcomes each newcomer.

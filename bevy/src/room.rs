@@ -111,6 +111,35 @@ impl RoomOptions {
         }
     }
 
+    /// The command line of a small softsync app: `host ROOM [BIND]` (an embedded signaling
+    /// server on BIND, `127.0.0.1:3536` by default; port 0 picks a free one) or `join ROOM
+    /// SIGNAL_URL`, as its first words; later words (the app's own flags) are left to the app.
+    pub fn from_args(args: &[String]) -> Result<Self, OpenError> {
+        let usage = || {
+            OpenError::Config(
+                "usage: host ROOM [BIND] | join ROOM SIGNAL_URL, then the app's flags".into(),
+            )
+        };
+        let word = |i: usize| {
+            args.get(i)
+                .map(String::as_str)
+                .filter(|w| !w.starts_with("--"))
+        };
+        match (word(0), word(1), word(2)) {
+            (Some("host"), Some(room), bind) => {
+                let mut o = RoomOptions::host(room);
+                if let Some(b) = bind {
+                    o.bind = b.parse().map_err(|e| {
+                        OpenError::Config(format!("bind address {b:?}: {e} (e.g. 127.0.0.1:3536)"))
+                    })?;
+                }
+                Ok(o)
+            }
+            (Some("join"), Some(room), Some(url)) => Ok(RoomOptions::join(room, url)),
+            _ => Err(usage()),
+        }
+    }
+
     /// Register the application's message type `M` (see [`RoomOptions::messages`]). A type
     /// the scene file already names is accepted as it is.
     pub fn with_message<M: Message>(mut self) -> Result<Self, RegisterError> {

@@ -232,3 +232,22 @@ fn a_joiner_the_room_refuses_gets_room_failed_and_exit_code_3() {
     assert_eq!(code, Some(3));
     assert_eq!(joiner.world().resource::<Seen>().peers_left, [PeerId(0)]);
 }
+
+#[test]
+fn the_small_apps_command_line_is_read_or_refused_with_its_usage() {
+    let a = |s: &str| s.split_whitespace().map(String::from).collect::<Vec<_>>();
+    let o = Opts::from_args(&a("host lab 127.0.0.1:0 --seconds 3")).unwrap();
+    assert!(o.host && o.name == "lab" && o.bind.port() == 0 && o.signal.is_none());
+    let o = Opts::from_args(&a("host lab --ring")).unwrap();
+    assert_eq!(o.bind.port(), 3536);
+    let o = Opts::from_args(&a("join lab ws://127.0.0.1:3536")).unwrap();
+    assert!(!o.host && o.signal.as_deref() == Some("ws://127.0.0.1:3536"));
+    for bad in ["", "join lab", "join lab --scene x", "visit lab", "host"] {
+        let e = Opts::from_args(&a(bad)).unwrap_err().to_string();
+        assert!(e.contains("usage"), "{bad:?}: {e}");
+    }
+    let e = Opts::from_args(&a("host lab nowhere"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("bind address \"nowhere\""), "{e}");
+}
