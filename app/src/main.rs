@@ -276,8 +276,12 @@ fn front_end(asked: FrontEnd) -> Result<FrontEnd, Failure> {
 fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     // Check every input before opening anything.
     let front = front_end(a.front)?;
-    let scene =
-        Scene::by_name(&a.scene, &assets_dir(a.assets.as_deref())).map_err(Failure::usage)?;
+    // Meshes load and every soft class is clustered now: seconds for a big mesh (a spinner on
+    // a terminal, nothing when piped).
+    let loading = softsync_benchkit::Progress::spinner(format!("loading scene {}", a.scene));
+    let scene = Scene::by_name(&a.scene, &assets_dir(a.assets.as_deref()));
+    loading.finish();
+    let scene = scene.map_err(Failure::usage)?;
     #[cfg(feature = "desktop")]
     let focus = match a.view.focus.as_deref() {
         None => None,

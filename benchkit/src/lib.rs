@@ -1,10 +1,11 @@
 //! `softsync-benchkit`: what softsync's benchmarks share, and nothing a product needs:
 //! nearest-rank percentiles ([`stats`]), `RESULT` lines and CSV files ([`output`]), line
-//! charts as SVG ([`chart`]), the thesis's reference tables ([`thesis`]) and recorded
+//! charts as SVG ([`chart`]), progress bars on a terminal ([`progress`]), the thesis's reference tables ([`thesis`]) and recorded
 //! soft-body traces ([`trace`]).
 
 pub mod chart;
 pub mod output;
+pub mod progress;
 pub mod rng;
 pub mod stats;
 pub mod thesis;
@@ -15,5 +16,6 @@ pub use plotters;
 
 pub use chart::{write_svg, ChartError, ChartStyle, LineChart, Series};
 pub use output::{Csv, ResultLine};
+pub use progress::Progress;
 pub use rng::SplitMix64;
 pub use stats::{median, percentile, percentile_of_sorted, Summary};

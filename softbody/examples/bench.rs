@@ -240,6 +240,8 @@ fn main() {
     let mut p860_sleep_median = 0.0;
     // --quick: the step table on icosphere4 only (the RESULT lines and the chart use it).
     let step_meshes = if quick { &meshes[1..] } else { &meshes[..] };
+    let progress =
+        softsync_benchkit::Progress::new((step_meshes.len() * kinds.len()) as u64, "step table");
     for &(mname, mesh) in step_meshes {
         let (p, t) = welded(mesh);
         let dense = SoftBodyConfig {
@@ -252,6 +254,7 @@ fn main() {
         let (_, ref_poke) = trace(ScenarioKind::Poke, mesh, dense.clone(), steps);
         let (_, ref_sq) = trace(ScenarioKind::Squeeze, mesh, dense, steps);
         for kind in kinds {
+            progress.set_message(format!("{mname} {kind}"));
             let mut curve = Vec::new();
             for &target in &[120usize, 250, 430, 860] {
                 let m = method_for(kind, &p, &t, target);
@@ -304,8 +307,10 @@ fn main() {
             if mname == "icosphere4" {
                 curves.push((kind.to_string(), curve));
             }
+            progress.inc();
         }
     }
+    progress.finish();
     csv.write(out.join("step.csv")).unwrap();
 
     // ---- Tables 5-8 side by side with the thesis's figures.

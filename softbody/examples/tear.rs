@@ -365,7 +365,9 @@ fn main() {
     };
     let mut rows = Vec::new();
     let mut results = Vec::new();
+    let progress = softsync_benchkit::Progress::new(meshes.len() as u64, "meshes");
     for (name, mesh, paper1, paper3) in meshes {
+        progress.set_message(name);
         let welded = mesh.weld(1e-6);
         let (vertices, faces) = (welded.positions.len(), welded.triangles.len());
         let mut rng = Rng(0x7ea5);
@@ -538,10 +540,12 @@ fn main() {
                 .field("rapier_cells", row.volumetric_cells);
         }
         results.push(line.to_string());
-        println!("{}", results[results.len() - 2]);
-        println!("{}", results[results.len() - 1]);
+        progress.result(&results[results.len() - 2]);
+        progress.result(&results[results.len() - 1]);
+        progress.inc();
         rows.push(row);
     }
+    progress.finish();
     if quick {
         println!("(--quick: nothing written)");
         return;

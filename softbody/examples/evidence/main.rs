@@ -220,8 +220,12 @@ fn measure_curves(
     );
     let former = (!quick).then(|| run(kind, mesh, &former_reference()).unwrap());
     let mut out = Vec::new();
+    let progress = softsync_benchkit::Progress::new(specs.len() as u64, kind.name());
     for spec in specs {
-        let Some(t) = run(kind, mesh, spec) else {
+        progress.set_message(spec.label());
+        let t = run(kind, mesh, spec);
+        progress.inc();
+        let Some(t) = t else {
             continue;
         };
         let change = shape_change(&t.samples, &reference.samples);
@@ -246,12 +250,13 @@ fn measure_curves(
             verdict: t.verdict,
             old_rms_mm,
         };
-        println!(
+        progress.result(format_args!(
             "  {:<32} {:>6} particles {:>8.3} ms  shape rms {:>6.2} mm  max {:>6.1} mm  raw {:>6.1} mm  vol {:.3} rest {:.2} mm {}",
             p.label, p.particles, p.ms, p.rms_mm, p.max_mm, p.raw_mm, p.min_volume, p.rest_mm, p.verdict
-        );
+        ));
         out.push(p);
     }
+    progress.finish();
     (
         out,
         ReferenceRow {
