@@ -27,6 +27,7 @@ pub mod quant;
 pub mod reliable;
 pub mod rng;
 pub mod session;
+pub mod share;
 pub mod stats;
 pub mod time;
 pub mod transport;
