@@ -7,9 +7,12 @@
 //! settings and meshes (see [`Scene::content_digest`]), so a joiner with another scene is
 //! refused at the handshake with a clear reason.
 
+mod bundle;
 mod file;
 
 use std::path::{Path, PathBuf};
+
+pub use bundle::MAX_BUNDLE_BYTES;
 
 use glam::{EulerRot, Quat, Vec3};
 use softsync_net::{

@@ -8,6 +8,29 @@ use glam::Vec3;
 use super::{Mesh, MAX_MESH_ELEMENTS};
 use crate::SoftBodyError;
 
+/// The external buffer files a glTF document names (relative to its folder, checked to stay
+/// inside it as [`Mesh::from_gltf_slice`] checks them).
+pub(super) fn external_buffers(bytes: &[u8], src: &Path) -> Result<Vec<String>, SoftBodyError> {
+    let gltf = gltf::Gltf::from_slice(bytes)
+        .map_err(|e| SoftBodyError::malformed(src, format!("invalid glTF: {e}")))?;
+    let mut out = Vec::new();
+    for buffer in gltf.buffers() {
+        if let gltf::buffer::Source::Uri(uri) = buffer.source() {
+            if uri.starts_with("data:") {
+                continue;
+            }
+            if uri.contains("..") || uri.starts_with('/') || uri.contains(':') {
+                return Err(SoftBodyError::malformed(
+                    src,
+                    format!("glTF buffer URI `{uri}` leaves the file's folder"),
+                ));
+            }
+            out.push(uri.to_owned());
+        }
+    }
+    Ok(out)
+}
+
 impl Mesh {
     /// Parses a glTF 2.0 document (JSON `.gltf` or binary `.glb`): every triangle primitive of
     /// every mesh, with node transforms of the default scene applied. Buffers come from the GLB

@@ -113,6 +113,32 @@ impl Mesh {
         }
     }
 
+    /// The files [`Mesh::load`] reads for `path`, relative to its folder: the file itself and,
+    /// for a `.gltf`, its external buffers (`data:` URIs and a GLB's own chunk need nothing
+    /// else). So a mesh can be copied elsewhere whole (a scene shared with a joiner).
+    pub fn files_read(path: impl AsRef<Path>) -> Result<Vec<String>, SoftBodyError> {
+        let path = path.as_ref();
+        let name = path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .ok_or_else(|| SoftBodyError::malformed(path, "not a file name"))?
+            .to_owned();
+        let is_gltf = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| e.eq_ignore_ascii_case("gltf"));
+        if !is_gltf {
+            return Ok(vec![name]);
+        }
+        let bytes = std::fs::read(path).map_err(|source| SoftBodyError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let mut files = vec![name];
+        files.extend(gltf::external_buffers(&bytes, path)?);
+        Ok(files)
+    }
+
     /// Checks the mesh is usable: non-empty, finite, indices in range, no triangle repeating a
     /// vertex. The error names `source` and what is wrong.
     pub fn validate(&self, source: impl AsRef<Path>) -> Result<(), SoftBodyError> {
