@@ -131,10 +131,11 @@ struct PeerOpts {
     #[arg(long, value_name = "HZ", default_value_t = 60.0, value_parser = positive::<1000>)]
     sim_hz: f64,
     /// A scene file (.ron), or the name of one in --assets: thesis-room or bench-ball. The
-    /// host spawns its objects; a joiner with other classes, settings, meshes or message
-    /// types is refused at the handshake.
-    #[arg(long, default_value = "thesis-room")]
-    scene: String,
+    /// host spawns its objects (default: thesis-room). A joiner without --scene receives the
+    /// room's scene and meshes from the first peer it reaches; one with a scene of other
+    /// classes, settings, meshes or message types is refused at the handshake.
+    #[arg(long)]
+    scene: Option<String>,
     /// Where the shipped scenes and meshes are (default: ./assets, or next to the binary).
     #[arg(long, value_name = "DIR")]
     assets: Option<PathBuf>,
@@ -346,8 +347,8 @@ pub struct PeerArgs {
     pub bind: SocketAddr,
     /// External signaling URL.
     pub signal: Option<String>,
-    /// Scene name.
-    pub scene: String,
+    /// Scene name or file (a joiner without one receives the room's).
+    pub scene: Option<String>,
     /// Bot script source.
     pub bot: Option<String>,
     /// Run time.

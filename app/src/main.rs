@@ -27,6 +27,7 @@ use softsync_bevy::{Room, RoomOptions, SoftsyncApp, SoftsyncPlugin};
 use softsync_interaction::HandConfig;
 use softsync_net::SendPolicy;
 use softsync_net_matchbox::SignalServer;
+use softsync_peer::scene::DEFAULT_SCENE;
 use softsync_peer::{bot, Bot, PeerConfig, Scene};
 
 use crate::cli::{Command, FrontEnd, PeerArgs, UsageError};
@@ -273,29 +274,46 @@ fn front_end(asked: FrontEnd) -> Result<FrontEnd, Failure> {
     }
 }
 
+/// The inputs that need the scene: `--focus` names one of its classes (returned), the bot's
+/// script only classes it has.
+fn scene_checks(
+    a: &PeerArgs,
+    bot: Option<&Bot>,
+    scene: &Scene,
+) -> Result<Option<softsync_peer::Kind>, Failure> {
+    if let Some(b) = bot {
+        b.check(scene).map_err(Failure::usage)?;
+    }
+    let Some(k) = a.view.focus.as_deref() else {
+        return Ok(None);
+    };
+    scene.kind(k).map(Some).ok_or_else(|| {
+        Failure::usage(format!(
+            "--focus: {k:?} is not a class of scene {} ({})",
+            scene.name,
+            scene
+                .object_classes()
+                .map(|(_, c)| c.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ))
+    })
+}
+
 fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     // Check every input before opening anything.
     let front = front_end(a.front)?;
     // Meshes load and every soft class is clustered now: seconds for a big mesh (a spinner on
-    // a terminal, nothing when piped).
-    let loading = softsync_benchkit::Progress::spinner(format!("loading scene {}", a.scene));
-    let scene = Scene::by_name(&a.scene, &assets_dir(a.assets.as_deref()));
-    loading.finish();
-    let scene = scene.map_err(Failure::usage)?;
-    #[cfg(feature = "desktop")]
-    let focus = match a.view.focus.as_deref() {
-        None => None,
-        Some(k) => Some(scene.kind(k).ok_or_else(|| {
-            Failure::usage(format!(
-                "--focus: {k:?} is not a class of scene {} ({})",
-                scene.name,
-                scene
-                    .object_classes()
-                    .map(|(_, c)| c.name.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ))
-        })?),
+    // a terminal, nothing when piped). A joiner without --scene receives the room's.
+    let scene = match (&a.scene, a.host) {
+        (None, false) => None,
+        (name, _) => {
+            let name = name.as_deref().unwrap_or(DEFAULT_SCENE);
+            let loading = softsync_benchkit::Progress::spinner(format!("loading scene {name}"));
+            let scene = Scene::by_name(name, &assets_dir(a.assets.as_deref()));
+            loading.finish();
+            Some(scene.map_err(Failure::usage)?)
+        }
     };
     #[cfg(feature = "desktop")]
     if let Some(d) = &a.view.screenshot_dir {
@@ -303,8 +321,8 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
             .map_err(|e| Failure::usage(format!("--screenshot-dir {}: {e}", d.display())))?;
     }
     let bot = a.bot.as_deref().map(load_bot).transpose()?;
-    if let Some(b) = &bot {
-        b.check(&scene).map_err(Failure::usage)?;
+    if let Some(scene) = &scene {
+        scene_checks(&a, bot.as_ref(), scene)?;
     }
     let dump = match &a.dump {
         Some(p) => Some(
@@ -350,10 +368,32 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     // A desktop or VR peer enters the room once its front end renders (`Room::set_ready`).
     opts.start_ready = front == FrontEnd::Headless;
     let started = std::time::Instant::now();
-    let room = Room::open(scene, opts).map_err(|e| Failure {
+    let opened = match scene {
+        Some(scene) => Room::open(scene, opts),
+        None => Room::open_fetching_scene(opts),
+    };
+    let mut room = opened.map_err(|e| Failure {
         code: e.exit_code(),
         msg: e.to_string(),
     })?;
+    if let Some(f) = room.fetched_scene() {
+        println!(
+            "scene {} from peer {}: {} bytes in {:.0} ms ({} requests), kept in {}",
+            room.peer.scene().name,
+            f.from.0,
+            f.bytes,
+            f.fetch.as_secs_f64() * 1e3,
+            f.requests,
+            room.peer.scene().path.display()
+        );
+        // The checks that needed the scene, now that there is one.
+        if let Err(e) = scene_checks(&a, bot.as_ref(), room.peer.scene()) {
+            room.leave();
+            return Err(e);
+        }
+    }
+    #[cfg(feature = "desktop")]
+    let focus = scene_checks(&a, bot.as_ref(), room.peer.scene())?;
     if room.runs_signaling() {
         println!("signaling on {}", room.signal_url());
     }

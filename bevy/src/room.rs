@@ -7,14 +7,18 @@
 #![allow(clippy::disallowed_methods)]
 
 use std::net::SocketAddr;
+use std::path::PathBuf;
 use std::time::Duration;
 
 use softsync_net::messages::{Message, MessageTypes, RegisterError};
+use softsync_net::share::{self, BlobFetch, BlobServer};
+use softsync_net::PeerId;
 use softsync_net::{
     ConditionerConfig, Delivery, Instant, LinkConditioner, MessageRefusal, MessageTarget,
     PeerEvent, RoomKey, SendPolicy, Session, SessionConfig, Transport,
 };
 use softsync_net_matchbox::{MatchboxConfig, MatchboxTransport, Role, SignalServer};
+use softsync_peer::scene::MAX_BUNDLE_BYTES;
 use softsync_peer::{Event, Peer, PeerConfig, PeerError, Scene};
 
 /// The session's clock: microseconds since the room was opened, on this machine's clock.
@@ -74,6 +78,9 @@ pub struct RoomOptions {
     /// end whose first frames stall — a window, an XR session — would otherwise be timed out
     /// by the host while it warms up).
     pub start_ready: bool,
+    /// Where a joiner without the scene ([`Room::open_fetching_scene`]) keeps the scene it
+    /// receives (a folder per scene, named by its digest).
+    pub scene_cache: PathBuf,
 }
 
 impl RoomOptions {
@@ -99,6 +106,7 @@ impl RoomOptions {
             peer: PeerConfig::default(),
             messages: MessageTypes::new(),
             start_ready: true,
+            scene_cache: std::env::temp_dir().join("softsync-scenes"),
         }
     }
 
@@ -211,6 +219,22 @@ pub struct Room {
     ready: bool,
     left: bool,
     events: Vec<Event>,
+    /// Serves our scene to joiners without one (built at the first request).
+    share: Option<BlobServer>,
+    fetched: Option<FetchedScene>,
+}
+
+/// How a joiner received the room's scene ([`Room::open_fetching_scene`]).
+#[derive(Clone, Debug)]
+pub struct FetchedScene {
+    /// The peer that sent it.
+    pub from: PeerId,
+    /// The bundle's size (the scene file and its meshes).
+    pub bytes: u64,
+    /// From the first request to the verified bundle.
+    pub fetch: Duration,
+    /// Requests sent (more than the chunks when some were lost).
+    pub requests: u64,
 }
 
 impl Room {
@@ -219,7 +243,27 @@ impl Room {
     /// join it through the first peer that answers. Blocks until a joiner has a data channel
     /// to some peer of the room (the welcome follows as the room runs) or `connect_timeout`.
     pub fn open(scene: Scene, opts: RoomOptions) -> Result<Room, OpenError> {
-        let cfg = opts.session_config(&scene)?;
+        Self::open_with(Some(scene), opts)
+    }
+
+    /// Join room `opts.name` without a scene of our own: the first peer of the room we reach
+    /// sends its scene (the scene file and its meshes, SHA-256 verified, kept under
+    /// [`RoomOptions::scene_cache`]), then we join as [`open`](Self::open) does. Every member
+    /// serves the scene it runs, so the first contact need not be the host.
+    pub fn open_fetching_scene(opts: RoomOptions) -> Result<Room, OpenError> {
+        if opts.host {
+            return Err(OpenError::Config(
+                "a host opens its own scene (Room::open)".into(),
+            ));
+        }
+        Self::open_with(None, opts)
+    }
+
+    fn open_with(scene: Option<Scene>, opts: RoomOptions) -> Result<Room, OpenError> {
+        // Wrong options fail before anything opens.
+        if let Some(scene) = &scene {
+            opts.session_config(scene)?;
+        }
         let (signal, url) = match (&opts.signal, opts.host) {
             (Some(u), _) => (None, u.clone()),
             (None, true) => {
@@ -244,12 +288,18 @@ impl Room {
         mcfg.ice_credential = opts.ice_credential.clone();
         mcfg.connect_timeout = opts.connect_timeout.min(Duration::from_secs(30));
         let started = std::time::Instant::now();
-        let mut transport =
-            MatchboxTransport::connect(&mcfg).map_err(|e| OpenError::Connect(e.to_string()))?;
+        let mut transport: Box<MatchboxTransport> = Box::new(
+            MatchboxTransport::connect(&mcfg).map_err(|e| OpenError::Connect(e.to_string()))?,
+        );
         let me = transport.local_id();
         let now0 = Instant::ZERO;
-        let (session, contact) = if opts.host {
-            (Session::host(me, cfg, now0), None)
+        let mut fetched = None;
+        let (scene, session, contact) = if opts.host {
+            let Some(scene) = scene else {
+                return Err(OpenError::Config("a host needs a scene".into()));
+            };
+            let cfg = opts.session_config(&scene)?;
+            (scene, Session::host(me, cfg, now0), None)
         } else {
             // The first data channel is our contact (a peer that is not the host redirects).
             let c = loop {
@@ -269,11 +319,20 @@ impl Room {
                 }
                 std::thread::sleep(Duration::from_millis(2));
             };
-            (Session::join(me, c, cfg, now0), Some(c))
+            let scene = match scene {
+                Some(s) => s,
+                None => {
+                    let (s, f) = fetch_scene(transport.as_mut(), c, &opts, started)?;
+                    fetched = Some(f);
+                    s
+                }
+            };
+            let cfg = opts.session_config(&scene)?;
+            (scene, Session::join(me, c, cfg, now0), Some(c))
         };
         let transport: Box<dyn Transport> = match opts.condition.clone() {
-            Some(c) => Box::new(LinkConditioner::new(transport, c)),
-            None => Box::new(transport),
+            Some(c) => Box::new(LinkConditioner::new(*transport, c)),
+            None => transport,
         };
         // The session's clock starts with the peer.
         let clock = Clock::start();
@@ -293,6 +352,8 @@ impl Room {
             ready: opts.start_ready,
             left: false,
             events: Vec::new(),
+            share: None,
+            fetched,
         })
     }
 
@@ -313,7 +374,21 @@ impl Room {
             ready: true,
             left: false,
             events: Vec::new(),
+            share: None,
+            fetched: None,
         }
+    }
+
+    /// How we received the room's scene, if we did ([`Room::open_fetching_scene`]).
+    pub fn fetched_scene(&self) -> Option<&FetchedScene> {
+        self.fetched.as_ref()
+    }
+
+    /// Requests for our scene answered, and refused (malformed, or over a requester's rate).
+    pub fn scene_requests(&self) -> (u64, u64) {
+        self.share
+            .as_ref()
+            .map_or((0, 0), |s| (s.served, s.refused))
     }
 
     /// Now, on the session's clock.
@@ -367,7 +442,11 @@ impl Room {
         }
         let now = self.now();
         while let Some((from, bytes)) = self.transport.recv(now) {
-            self.peer.handle_datagram(now, from, &bytes);
+            if share::is_share(&bytes) {
+                self.serve_scene(now, from, &bytes);
+            } else {
+                self.peer.handle_datagram(now, from, &bytes);
+            }
         }
         while let Some(e) = self.transport.poll_peer_event() {
             self.peer.handle_link_event(e);
@@ -386,6 +465,19 @@ impl Room {
                 self.name
             ))),
             Err(e) => Err(OpenError::Peer(e.to_string())),
+        }
+    }
+
+    /// A joiner without the scene asks for ours: the bundle is built at the first request
+    /// (from the files the scene was loaded from), or every request is told why there is none.
+    fn serve_scene(&mut self, now: Instant, from: PeerId, datagram: &[u8]) {
+        let scene = self.peer.scene();
+        let server = self.share.get_or_insert_with(|| match scene.bundle() {
+            Ok(b) => BlobServer::new(b),
+            Err(why) => BlobServer::unavailable(why),
+        });
+        if let Some(t) = server.handle(now, from, datagram) {
+            self.transport.send(now, &t);
         }
     }
 
@@ -449,4 +541,52 @@ impl Room {
             std::thread::sleep(LEAVE_GRACE);
         }
     }
+}
+
+/// Fetch the room's scene from `from` before we have a session: requests out, chunks in
+/// (other datagrams that arrive meanwhile are dropped: nobody sends us the session's before
+/// our `Hello`), the verified bundle written under the cache and loaded.
+fn fetch_scene(
+    transport: &mut MatchboxTransport,
+    from: PeerId,
+    opts: &RoomOptions,
+    started: std::time::Instant,
+) -> Result<(Scene, FetchedScene), OpenError> {
+    let clock = Clock::start();
+    let left = opts.connect_timeout.saturating_sub(started.elapsed());
+    let mut fetch = BlobFetch::new(clock.now(), from, MAX_BUNDLE_BYTES, left);
+    let blob = loop {
+        let now = clock.now();
+        while let Some(t) = fetch.poll_transmit(now) {
+            transport.send(now, &t);
+        }
+        while let Some((peer, bytes)) = transport.recv(now) {
+            if share::is_share(&bytes) {
+                fetch.handle(peer, &bytes);
+            }
+        }
+        if let Some(outcome) = fetch.outcome() {
+            break outcome.map_err(|e| {
+                OpenError::Connect(format!(
+                    "room {:?}: the scene from peer {}: {e}",
+                    opts.name, from.0
+                ))
+            })?;
+        }
+        if let Some(why) = transport.closed() {
+            return Err(OpenError::Connect(format!(
+                "signaling lost while receiving the scene: {why}"
+            )));
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    };
+    let fetched = FetchedScene {
+        from,
+        bytes: blob.len() as u64,
+        fetch: Duration::from_micros(clock.now().as_micros()),
+        requests: fetch.requests,
+    };
+    let scene = Scene::from_bundle(&blob, &opts.scene_cache)
+        .map_err(|e| OpenError::Config(format!("the scene peer {} sent: {e}", from.0)))?;
+    Ok((scene, fetched))
 }
