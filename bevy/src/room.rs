@@ -11,7 +11,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use softsync_net::messages::{Message, MessageTypes, RegisterError};
-use softsync_net::share::{self, BlobFetch, BlobServer};
+use softsync_net::share::{self, BlobFetch, BlobServer, FetchError};
 use softsync_net::PeerId;
 use softsync_net::{
     ConditionerConfig, Delivery, Instant, LinkConditioner, MessageRefusal, MessageTarget,
@@ -221,6 +221,8 @@ pub struct Room {
     events: Vec<Event>,
     /// Serves our scene to joiners without one (built at the first request).
     share: Option<BlobServer>,
+    /// The room's key, which a joiner proves to be sent the scene.
+    room_key: Option<RoomKey>,
     fetched: Option<FetchedScene>,
 }
 
@@ -353,6 +355,7 @@ impl Room {
             left: false,
             events: Vec::new(),
             share: None,
+            room_key: opts.room_key.clone(),
             fetched,
         })
     }
@@ -375,6 +378,7 @@ impl Room {
             left: false,
             events: Vec::new(),
             share: None,
+            room_key: None,
             fetched: None,
         }
     }
@@ -472,9 +476,13 @@ impl Room {
     /// (from the files the scene was loaded from), or every request is told why there is none.
     fn serve_scene(&mut self, now: Instant, from: PeerId, datagram: &[u8]) {
         let scene = self.peer.scene();
-        let server = self.share.get_or_insert_with(|| match scene.bundle() {
-            Ok(b) => BlobServer::new(b),
-            Err(why) => BlobServer::unavailable(why),
+        let (key, me) = (self.room_key.clone(), self.peer.me());
+        let server = self.share.get_or_insert_with(|| {
+            match scene.bundle() {
+                Ok(b) => BlobServer::new(b),
+                Err(why) => BlobServer::unavailable(why),
+            }
+            .with_key(key, me)
         });
         if let Some(t) = server.handle(now, from, datagram) {
             self.transport.send(now, &t);
@@ -554,7 +562,9 @@ fn fetch_scene(
 ) -> Result<(Scene, FetchedScene), OpenError> {
     let clock = Clock::start();
     let left = opts.connect_timeout.saturating_sub(started.elapsed());
-    let mut fetch = BlobFetch::new(clock.now(), from, MAX_BUNDLE_BYTES, left);
+    let me = transport.local_id();
+    let mut fetch = BlobFetch::new(clock.now(), from, MAX_BUNDLE_BYTES, left)
+        .with_key(opts.room_key.as_ref(), me);
     let blob = loop {
         let now = clock.now();
         while let Some(t) = fetch.poll_transmit(now) {
@@ -566,11 +576,22 @@ fn fetch_scene(
             }
         }
         if let Some(outcome) = fetch.outcome() {
-            break outcome.map_err(|e| {
-                OpenError::Connect(format!(
+            break outcome.map_err(|e| match e {
+                // Said as the handshake says it.
+                FetchError::Unavailable(why) if why == share::NEEDS_KEY => {
+                    OpenError::Peer(match opts.room_key {
+                        None => format!(
+                            "room {:?}: the room needs a key and this peer has none \
+                             (--room-key-file, or SOFTSYNC_ROOM_KEY)",
+                            opts.name
+                        ),
+                        Some(_) => format!("room {:?}: wrong room key", opts.name),
+                    })
+                }
+                e => OpenError::Connect(format!(
                     "room {:?}: the scene from peer {}: {e}",
                     opts.name, from.0
-                ))
+                )),
             })?;
         }
         if let Some(why) = transport.closed() {

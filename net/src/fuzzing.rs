@@ -18,6 +18,24 @@ pub fn decode_all(data: &[u8]) {
     };
     let _ = Control::decode(data);
     let _ = decode_state_block(64, data, |_| Some(layout));
+    // The scene-sharing datagrams: the decoder, a server and a fetch fed the bytes as they
+    // are and behind the share marker.
+    let mut shared = vec![crate::share::SHARE_MARKER];
+    shared.extend_from_slice(data);
+    for bytes in [data, &shared[..]] {
+        let _ = crate::share::ShareMsg::decode(bytes);
+        let mut server = crate::share::BlobServer::new(vec![7; 3000]);
+        let _ = server.handle(Instant::ZERO, PeerId(2), bytes);
+        let mut fetch = crate::share::BlobFetch::new(
+            Instant::ZERO,
+            PeerId(1),
+            1 << 16,
+            std::time::Duration::from_secs(1),
+        );
+        let _ = fetch.poll_transmit(Instant::ZERO);
+        fetch.handle(PeerId(1), bytes);
+        let _ = fetch.outcome();
+    }
     if let Ok((_, sections)) = decode_packet(data) {
         for s in sections {
             match s {

@@ -13,7 +13,8 @@
 //! # Wire
 //! Datagrams that start with [`SHARE_MARKER`] (never a session's first byte: that is the
 //! protocol version, or 0 for a refusal). Then a kind byte:
-//! - `1` request: varint offset, varint length;
+//! - `1` request: varint offset, varint length, and in a room with a key a 32-byte proof
+//!   ([`RoomKey::scene_proof`]);
 //! - `2` chunk: 32-byte SHA-256 of the whole blob, varint total length, varint offset, the
 //!   bytes (the rest of the datagram);
 //! - `3` unavailable: a UTF-8 reason (the rest, ≤ 200 bytes).
@@ -26,6 +27,7 @@ use std::time::Duration;
 use crate::bits::{write_varint, ByteReader};
 use crate::error::{decode_err, NetError};
 use crate::ids::PeerId;
+use crate::session::RoomKey;
 use crate::time::Instant;
 use crate::transport::Transmit;
 
@@ -35,6 +37,8 @@ pub const SHARE_MARKER: u8 = 0xF5;
 pub const CHUNK_BYTES: usize = 1024;
 /// What a server sends one requester at most, bytes per second.
 pub const SERVE_BYTES_PER_S: f64 = 8.0 * 1024.0 * 1024.0;
+/// The reason a server with a key gives a request without a valid proof.
+pub const NEEDS_KEY: &str = "the room needs its key";
 /// Longest reason an `unavailable` answer carries.
 pub const MAX_REASON: usize = 200;
 
@@ -64,6 +68,8 @@ pub enum ShareMsg<'a> {
         offset: u64,
         /// How many (the server sends at most [`CHUNK_BYTES`]).
         len: u32,
+        /// In a room with a key: [`RoomKey::scene_proof`] of the requester and the server.
+        proof: Option<[u8; 32]>,
     },
     /// Bytes of the blob.
     Chunk {
@@ -85,10 +91,13 @@ impl ShareMsg<'_> {
     pub fn encode(&self) -> Vec<u8> {
         let mut out = vec![SHARE_MARKER];
         match self {
-            ShareMsg::Request { offset, len } => {
+            ShareMsg::Request { offset, len, proof } => {
                 out.push(KIND_REQUEST);
                 write_varint(&mut out, *offset);
                 write_varint(&mut out, u64::from(*len));
+                if let Some(p) = proof {
+                    out.extend_from_slice(p);
+                }
             }
             ShareMsg::Chunk {
                 digest,
@@ -125,10 +134,16 @@ impl ShareMsg<'_> {
             KIND_REQUEST => {
                 let offset = r.varint()?;
                 let len = r.varint_u32()?;
-                if !r.is_empty() {
-                    return Err(decode_err(r.pos(), "bytes after a request"));
-                }
-                Ok(ShareMsg::Request { offset, len })
+                let proof = match bytes.len() - r.pos() {
+                    0 => None,
+                    32 => {
+                        let mut p = [0u8; 32];
+                        p.copy_from_slice(r.take(32)?);
+                        Some(p)
+                    }
+                    _ => return Err(decode_err(r.pos(), "a request's proof is 32 bytes")),
+                };
+                Ok(ShareMsg::Request { offset, len, proof })
             }
             KIND_CHUNK => {
                 let mut digest = [0u8; 32];
@@ -170,6 +185,8 @@ impl ShareMsg<'_> {
 #[derive(Debug)]
 pub struct BlobServer {
     blob: Result<(Vec<u8>, [u8; 32]), String>,
+    /// A room with a key: requests must prove it, for this server's id.
+    key: Option<(RoomKey, PeerId)>,
     budget: BTreeMap<PeerId, (Instant, f64)>,
     /// Requests answered with a chunk.
     pub served: u64,
@@ -183,6 +200,7 @@ impl BlobServer {
         let digest = sha256(&blob);
         BlobServer {
             blob: Ok((blob, digest)),
+            key: None,
             budget: BTreeMap::new(),
             served: 0,
             refused: 0,
@@ -193,10 +211,18 @@ impl BlobServer {
     pub fn unavailable(why: impl Into<String>) -> Self {
         BlobServer {
             blob: Err(why.into()),
+            key: None,
             budget: BTreeMap::new(),
             served: 0,
             refused: 0,
         }
+    }
+
+    /// Serve only requests that prove the room's key ([`RoomKey::scene_proof`] of the
+    /// requester and `me`); others are told the room needs its key.
+    pub fn with_key(mut self, key: Option<RoomKey>, me: PeerId) -> Self {
+        self.key = key.map(|k| (k, me));
+        self
     }
 
     /// The blob's digest, if there is one.
@@ -206,11 +232,20 @@ impl BlobServer {
 
     /// The answer to a share datagram from `from`, if it deserves one.
     pub fn handle(&mut self, now: Instant, from: PeerId, datagram: &[u8]) -> Option<Transmit> {
-        let Ok(ShareMsg::Request { offset, len }) = ShareMsg::decode(datagram) else {
+        let Ok(ShareMsg::Request { offset, len, proof }) = ShareMsg::decode(datagram) else {
             self.refused += 1;
             return None;
         };
+        let proven = match (&self.key, proof) {
+            (None, _) => true,
+            (Some((key, me)), Some(p)) => key.verify_scene_proof(from, *me, &p),
+            (Some(_), None) => false,
+        };
         let msg = match &self.blob {
+            _ if !proven => {
+                self.refused += 1;
+                ShareMsg::Unavailable(NEEDS_KEY.into())
+            }
             Err(why) => ShareMsg::Unavailable(why.clone()),
             Ok((blob, digest)) => {
                 let total = blob.len() as u64;
@@ -300,6 +335,7 @@ pub struct BlobFetch {
     asked: BTreeMap<u64, Instant>,
     next_chunk: u64,
     outcome: Option<Result<(), FetchError>>,
+    proof: Option<[u8; 32]>,
     /// Requests sent (retries included).
     pub requests: u64,
     /// Datagrams ignored: malformed, from another peer, or a chunk not asked for.
@@ -323,9 +359,16 @@ impl BlobFetch {
             asked: BTreeMap::new(),
             next_chunk: 0,
             outcome: None,
+            proof: None,
             requests: 0,
             ignored: 0,
         }
+    }
+
+    /// In a room with a key: prove it ([`RoomKey::scene_proof`] of `me` and the source).
+    pub fn with_key(mut self, key: Option<&RoomKey>, me: PeerId) -> Self {
+        self.proof = key.map(|k| k.scene_proof(me, self.from));
+        self
     }
 
     /// The peer asked.
@@ -382,6 +425,7 @@ impl BlobFetch {
         let msg = ShareMsg::Request {
             offset: chunk * CHUNK_BYTES as u64,
             len: CHUNK_BYTES as u32,
+            proof: self.proof,
         };
         Some(Transmit {
             to: self.from,

@@ -438,6 +438,42 @@ fn render() -> String {
     writeln!(w, "## Rooms with a key\n").unwrap();
     writeln!(w, "A host whose configuration has a room key answers a `Hello` that passed every other check with `Challenge` (a 16-byte nonce, the same one again for a repeated `Hello`) instead of `Welcome`. The joiner answers `Proof`: HMAC-SHA256 under the key of `\"softsync-join-v1\" ‖ nonce ‖ joiner id (u64 LE) ‖ host id (u64 LE)`. A matching proof is admitted (`Welcome`, snapshot, …); another gets `Refused` \"wrong room key\"; a joiner without a key ends with a refusal of its own. The secret never crosses the wire, and a proof opens nothing but the one challenge it answers.\n").unwrap();
 
+    writeln!(w, "## Scene sharing (before a session)\n").unwrap();
+    {
+        use softsync_net::share::{ShareMsg, CHUNK_BYTES, SERVE_BYTES_PER_S, SHARE_MARKER};
+        let req = ShareMsg::Request {
+            offset: 2048,
+            len: CHUNK_BYTES as u32,
+            proof: None,
+        }
+        .encode();
+        let data = [0xAB; 4];
+        let chunk = ShareMsg::Chunk {
+            digest: [0x11; 32],
+            total: 2052,
+            offset: 2048,
+            data: &data,
+        }
+        .encode();
+        let no = ShareMsg::Unavailable("no scene".into()).encode();
+        writeln!(w, "A joiner without the room's scene asks the first peer it reaches for it before it says `Hello`; every member answers with the scene it runs (the scene file and the files it reads, one bincode blob, `peer/src/scene/bundle.rs`). These datagrams start with `0x{SHARE_MARKER:02X}`, never a protocol version, and go on the transport's reliable channel; the session never sees them (`net/src/share.rs`). The joiner asks for {CHUNK_BYTES}-byte chunks by offset, up to 32 at a time, asks again for any not answered within 300 ms, refuses a blob over its bound (64 MiB) before allocating it, and takes it only whole and with the SHA-256 every chunk carries; a member sends one requester at most {} MiB/s.\n", SERVE_BYTES_PER_S / 1048576.0).unwrap();
+        writeln!(w, "| datagram | layout | example |\n|---|---|---|").unwrap();
+        writeln!(
+            w,
+            "| request | `F5 01`, varint offset, varint length, in a room with a key a 32-byte proof (HMAC-SHA256 under the key of `\"softsync-scene-v1\" ‖ requester id ‖ server id`, u64 LE; a request without one is answered `unavailable` \"the room needs its key\") | `{}` ({} bytes) |",
+            hex(&req),
+            req.len()
+        )
+        .unwrap();
+        writeln!(w, "| chunk | `F5 02`, 32-byte SHA-256 of the blob, varint total, varint offset, the bytes | `{} … {}` ({} bytes for 4 of data) |", hex(&chunk[..4]), hex(&chunk[34..]), chunk.len()).unwrap();
+        writeln!(
+            w,
+            "| unavailable | `F5 03`, UTF-8 reason ≤ 200 bytes | `{}` |\n",
+            hex(&no)
+        )
+        .unwrap();
+    }
+
     writeln!(w, "## Refusal datagram (version-independent)\n").unwrap();
     let r = encode_refusal(
         "protocol version mismatch: host speaks 1, you speak 2",

@@ -58,9 +58,17 @@ fn two_process_sync(test: &str, condition: Option<&str>) {
     let mut bot_args = vec!["join", "--room", "sync", "--signal", &url, "--bot", &script];
     bot_args.extend(["--duration", "13", "--dump", jd.to_str().unwrap()]);
     bot_args.extend(&common);
+    let host_id = host.peer_id();
     let mut bot = Proc::spawn(&dir, "bot", &bot_args);
     assert_eq!(bot.wait_exit(Duration::from_secs(40)), 0, "{}", bot.logs());
     let out = bot.stdout();
+    // The bot has no --scene: the host sent it the room's, the bunny's mesh with it.
+    let got = out
+        .lines()
+        .find(|l| l.starts_with(&format!("scene thesis-room from peer {host_id}: ")))
+        .unwrap_or_else(|| panic!("the bot did not receive the scene\n{}", bot.logs()));
+    let bytes: u64 = got.split_whitespace().nth(5).unwrap().parse().unwrap();
+    assert!(bytes > 110_000, "{got}");
     assert!(out.contains("authority-asked"), "{}", bot.logs());
     assert!(
         out.contains("grabbed object"),

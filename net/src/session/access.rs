@@ -55,6 +55,29 @@ impl RoomKey {
         Some(RoomKey::new(secret, u64::from_le_bytes(seed)))
     }
 
+    /// The proof a peer without a session shows a member to be sent the room's scene
+    /// (`crate::share`): HMAC-SHA256 of `"softsync-scene-v1" ‖ requester ‖ server` (ids as u64
+    /// LE). Bound to both ids; it opens nothing but the scene of a room whose key it holds.
+    pub fn scene_proof(&self, requester: PeerId, server: PeerId) -> [u8; 32] {
+        let mut ctx = hmac::Context::with_key(&self.key);
+        ctx.update(b"softsync-scene-v1");
+        ctx.update(&requester.0.to_le_bytes());
+        ctx.update(&server.0.to_le_bytes());
+        let mut out = [0u8; 32];
+        out.copy_from_slice(ctx.sign().as_ref());
+        out
+    }
+
+    /// Whether `proof` is [`scene_proof`](Self::scene_proof)`(requester, server)` (constant
+    /// time).
+    pub fn verify_scene_proof(&self, requester: PeerId, server: PeerId, proof: &[u8]) -> bool {
+        let mut msg = Vec::with_capacity(17 + 16);
+        msg.extend_from_slice(b"softsync-scene-v1");
+        msg.extend_from_slice(&requester.0.to_le_bytes());
+        msg.extend_from_slice(&server.0.to_le_bytes());
+        hmac::verify(&self.key, &msg, proof).is_ok()
+    }
+
     fn proof(&self, nonce: &[u8; 16], joiner: PeerId, host: PeerId) -> hmac::Tag {
         let mut ctx = hmac::Context::with_key(&self.key);
         ctx.update(b"softsync-join-v1");

@@ -59,7 +59,7 @@ fn run(data: &[u8], seed: u64, loss: f64, max: u64) -> (Result<Vec<u8>, FetchErr
             }
         }
         wire = later;
-        now = now + Duration::from_millis(5);
+        now += Duration::from_millis(5);
     }
 }
 
@@ -180,7 +180,7 @@ fn a_peer_with_nothing_to_share_says_why_and_a_silent_one_times_out() {
         while f.poll_transmit(now).is_some() {
             asked += 1;
         }
-        now = now + Duration::from_millis(50);
+        now += Duration::from_millis(50);
     }
     assert!(matches!(
         f.outcome(),
@@ -197,6 +197,7 @@ fn a_server_answers_a_flood_within_its_rate_and_ignores_junk() {
     let req = ShareMsg::Request {
         offset: 0,
         len: 1 << 30,
+        proof: None,
     }
     .encode();
     let mut bytes = 0;
@@ -224,6 +225,7 @@ fn a_server_answers_a_flood_within_its_rate_and_ignores_junk() {
     let past = ShareMsg::Request {
         offset: 50_000,
         len: 10,
+        proof: None,
     };
     assert!(s.handle(later, PeerId(6), &past.encode()).is_none());
     assert!(s.handle(later, PeerId(6), &[SHARE_MARKER, 9, 9]).is_none());
@@ -259,4 +261,58 @@ proptest! {
         let mut s = BlobServer::new(vec![1; 3000]);
         let _ = s.handle(Instant::ZERO, JOINER, &bytes);
     }
+}
+
+#[test]
+fn a_room_with_a_key_shares_its_scene_only_with_a_keyholder() {
+    let key = RoomKey::new(b"the room's secret", 1);
+    let other = RoomKey::new(b"another secret", 1);
+    let data = blob(2500, 8);
+    let mut server = BlobServer::new(data.clone()).with_key(Some(key.clone()), HOST);
+    let fetch_with = |k: Option<&RoomKey>, me: PeerId, server: &mut BlobServer| {
+        let mut f =
+            BlobFetch::new(Instant::ZERO, HOST, 1 << 20, Duration::from_secs(5)).with_key(k, me);
+        let mut now = Instant::ZERO;
+        loop {
+            if let Some(o) = f.outcome() {
+                return o;
+            }
+            while let Some(t) = f.poll_transmit(now) {
+                if let Some(a) = server.handle(now, me, &t.payload) {
+                    f.handle(HOST, &a.payload);
+                }
+            }
+            now += Duration::from_millis(10);
+        }
+    };
+    assert_eq!(fetch_with(Some(&key), JOINER, &mut server).unwrap(), data);
+    for (k, why) in [(None, "no key"), (Some(&other), "another key")] {
+        let e = fetch_with(k, JOINER, &mut server).unwrap_err();
+        assert!(
+            matches!(&e, FetchError::Unavailable(r) if r.contains("needs its key")),
+            "{why}: {e}"
+        );
+    }
+    // A proof is bound to the requester: another peer replaying it is refused.
+    let stolen = key.scene_proof(JOINER, HOST);
+    let req = ShareMsg::Request {
+        offset: 0,
+        len: 1024,
+        proof: Some(stolen),
+    }
+    .encode();
+    let a = server.handle(Instant::ZERO, PeerId(77), &req).unwrap();
+    assert!(matches!(
+        ShareMsg::decode(&a.payload).unwrap(),
+        ShareMsg::Unavailable(_)
+    ));
+    // A request with a proof of the wrong length does not decode.
+    let mut bad = ShareMsg::Request {
+        offset: 0,
+        len: 1024,
+        proof: None,
+    }
+    .encode();
+    bad.extend_from_slice(&[0; 31]);
+    assert!(ShareMsg::decode(&bad).is_err());
 }
