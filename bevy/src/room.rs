@@ -296,6 +296,7 @@ impl Room {
         let me = transport.local_id();
         let now0 = Instant::ZERO;
         let mut fetched = None;
+        let mut link_news = Vec::new();
         let (scene, session, contact) = if opts.host {
             let Some(scene) = scene else {
                 return Err(OpenError::Config("a host needs a scene".into()));
@@ -324,7 +325,8 @@ impl Room {
             let scene = match scene {
                 Some(s) => s,
                 None => {
-                    let (s, f) = fetch_scene(transport.as_mut(), c, &opts, started)?;
+                    let (s, f) =
+                        fetch_scene(transport.as_mut(), c, &opts, started, &mut link_news)?;
                     fetched = Some(f);
                     s
                 }
@@ -343,6 +345,10 @@ impl Room {
         if opts.host {
             peer.open(clock.now())
                 .map_err(|e| OpenError::Peer(e.to_string()))?;
+        }
+        // Data channels that opened while we fetched the scene: contacts for the join.
+        for e in link_news {
+            peer.handle_link_event(e);
         }
         Ok(Room {
             peer,
@@ -551,48 +557,106 @@ impl Room {
     }
 }
 
-/// Fetch the room's scene from `from` before we have a session: requests out, chunks in
-/// (other datagrams that arrive meanwhile are dropped: nobody sends us the session's before
-/// our `Hello`), the verified bundle written under the cache and loaded.
+/// How long a contact may stay silent before a joiner asks the next one for the scene (another
+/// joiner that reached us first has no scene to give and says so at once; this is for one
+/// that says nothing).
+const SCENE_CONTACT_PATIENCE: Duration = Duration::from_millis(1500);
+
+/// Fetch the room's scene before we have a session, from `first` or, when it has none to give
+/// (a joiner like us) or stays silent, from the next peer we have a data channel to; link
+/// news seen meanwhile go to `link_news` for the peer. Another joiner's request is answered
+/// that we are not in the room yet; other datagrams are dropped (nobody sends us the
+/// session's before our `Hello`). The verified bundle is written under the cache and loaded.
 fn fetch_scene(
     transport: &mut MatchboxTransport,
-    from: PeerId,
+    first: PeerId,
     opts: &RoomOptions,
     started: std::time::Instant,
+    link_news: &mut Vec<PeerEvent>,
 ) -> Result<(Scene, FetchedScene), OpenError> {
     let clock = Clock::start();
-    let left = opts.connect_timeout.saturating_sub(started.elapsed());
     let me = transport.local_id();
-    let mut fetch = BlobFetch::new(clock.now(), from, MAX_BUNDLE_BYTES, left)
-        .with_key(opts.room_key.as_ref(), me);
+    let remaining = || opts.connect_timeout.saturating_sub(started.elapsed());
+    let start_fetch = |from: PeerId, now: Instant| {
+        BlobFetch::new(now, from, MAX_BUNDLE_BYTES, remaining())
+            .with_key(opts.room_key.as_ref(), me)
+    };
+    let mut contacts: Vec<PeerId> = vec![first];
+    let mut tried = 1;
+    let mut fetch = start_fetch(first, clock.now());
+    let mut asked_at = clock.now();
     let blob = loop {
         let now = clock.now();
+        while let Some(e) = transport.poll_peer_event() {
+            if let PeerEvent::Connected(p) = e {
+                if !contacts.contains(&p) {
+                    contacts.push(p);
+                }
+            }
+            link_news.push(e);
+        }
         while let Some(t) = fetch.poll_transmit(now) {
             transport.send(now, &t);
         }
         while let Some((peer, bytes)) = transport.recv(now) {
-            if share::is_share(&bytes) {
-                fetch.handle(peer, &bytes);
+            match share::ShareMsg::decode(&bytes) {
+                Ok(share::ShareMsg::Request { .. }) => {
+                    let no = share::ShareMsg::Unavailable(share::NOT_IN_ROOM.into());
+                    transport.send(
+                        now,
+                        &softsync_net::Transmit {
+                            to: peer,
+                            payload: no.encode(),
+                            reliable: true,
+                        },
+                    );
+                }
+                Ok(_) => fetch.handle(peer, &bytes),
+                Err(_) => {}
             }
         }
-        if let Some(outcome) = fetch.outcome() {
-            break outcome.map_err(|e| match e {
-                // Said as the handshake says it.
-                FetchError::Unavailable(why) if why == share::NEEDS_KEY => {
-                    OpenError::Peer(match opts.room_key {
-                        None => format!(
-                            "room {:?}: the room needs a key and this peer has none \
-                             (--room-key-file, or SOFTSYNC_ROOM_KEY)",
-                            opts.name
-                        ),
-                        Some(_) => format!("room {:?}: wrong room key", opts.name),
-                    })
-                }
-                e => OpenError::Connect(format!(
-                    "room {:?}: the scene from peer {}: {e}",
-                    opts.name, from.0
-                )),
-            })?;
+        let from = fetch.source();
+        let unable = match fetch.outcome() {
+            Some(Ok(blob)) => break blob,
+            Some(Err(FetchError::Unavailable(why))) if why == share::NOT_IN_ROOM => true,
+            Some(Err(e)) => {
+                return Err(match e {
+                    // Said as the handshake says it.
+                    FetchError::Unavailable(why) if why == share::NEEDS_KEY => {
+                        OpenError::Peer(match opts.room_key {
+                            None => format!(
+                                "room {:?}: the room needs a key and this peer has none \
+                                 (--room-key-file, or SOFTSYNC_ROOM_KEY)",
+                                opts.name
+                            ),
+                            Some(_) => format!("room {:?}: wrong room key", opts.name),
+                        })
+                    }
+                    e => OpenError::Connect(format!(
+                        "room {:?}: the scene from peer {}: {e}",
+                        opts.name, from.0
+                    )),
+                });
+            }
+            None => {
+                fetch.progress().1.is_none()
+                    && now.saturating_since(asked_at) > SCENE_CONTACT_PATIENCE
+            }
+        };
+        if unable {
+            // The next contact (round and round: one that had nothing may be in the room by now).
+            let next = contacts[tried % contacts.len()];
+            tried += 1;
+            fetch = start_fetch(next, now);
+            asked_at = now;
+        }
+        if started.elapsed() > opts.connect_timeout {
+            return Err(OpenError::Connect(format!(
+                "room {:?}: no peer sent the room's scene within {:?} (asked {} of them)",
+                opts.name,
+                opts.connect_timeout,
+                contacts.len()
+            )));
         }
         if let Some(why) = transport.closed() {
             return Err(OpenError::Connect(format!(
@@ -601,6 +665,7 @@ fn fetch_scene(
         }
         std::thread::sleep(Duration::from_millis(2));
     };
+    let from = fetch.source();
     let fetched = FetchedScene {
         from,
         bytes: blob.len() as u64,

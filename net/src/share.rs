@@ -37,6 +37,9 @@ pub const SHARE_MARKER: u8 = 0xF5;
 pub const CHUNK_BYTES: usize = 1024;
 /// What a server sends one requester at most, bytes per second.
 pub const SERVE_BYTES_PER_S: f64 = 8.0 * 1024.0 * 1024.0;
+/// What a peer that is not in the room yet (another joiner) answers a request with: the
+/// fetcher asks the next peer.
+pub const NOT_IN_ROOM: &str = "not in the room yet";
 /// The reason a server with a key gives a request without a valid proof.
 pub const NEEDS_KEY: &str = "the room needs its key";
 /// Longest reason an `unavailable` answer carries.

@@ -146,11 +146,26 @@ impl Scene {
                 std::fs::create_dir_all(parent)
                     .map_err(|e| format!("scene cache {}: {e}", parent.display()))?;
             }
-            std::fs::write(&path, bytes)
-                .map_err(|e| format!("scene cache {}: {e}", path.display()))?;
+            write_atomically(&path, bytes)?;
         }
         Scene::load(&dir.join(&b.scene))
     }
+}
+
+/// Write `path` so that a reader sees the old file or the new one, never half of one: other
+/// processes fetching the same scene write the same folder (the same bytes) at the same time.
+fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), String> {
+    static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(format!(".partial-{}-{n}", std::process::id()));
+    let tmp = PathBuf::from(tmp);
+    std::fs::write(&tmp, bytes)
+        .and_then(|()| std::fs::rename(&tmp, path))
+        .map_err(|e| {
+            let _ = std::fs::remove_file(&tmp);
+            format!("scene cache {}: {e}", path.display())
+        })
 }
 
 #[cfg(test)]
@@ -180,6 +195,27 @@ mod tests {
         assert_eq!(back.content_digest(), scene.content_digest());
         assert_eq!(back.name, scene.name);
         assert!(back.path.starts_with(&c));
+        let _ = std::fs::remove_dir_all(&c);
+    }
+
+    #[test]
+    fn peers_unpacking_the_same_scene_at_once_each_load_it_whole() {
+        // Several joiners of one room on one machine write the same cache folder together
+        // (seen live: a reader found a file another had just truncated).
+        let scene = Scene::by_name("bench-ball", &assets()).unwrap();
+        let blob = std::sync::Arc::new(scene.bundle().unwrap());
+        let c = cache("race");
+        for _ in 0..5 {
+            let threads: Vec<_> = (0..4)
+                .map(|_| {
+                    let (blob, c) = (blob.clone(), c.clone());
+                    std::thread::spawn(move || Scene::from_bundle(&blob, &c).map(|s| s.name))
+                })
+                .collect();
+            for t in threads {
+                assert_eq!(t.join().unwrap().unwrap(), "bench-ball");
+            }
+        }
         let _ = std::fs::remove_dir_all(&c);
     }
 
