@@ -51,6 +51,11 @@
 //! }
 //! ```
 //!
+//! A joiner needs no copy of the scene: [`Room::open_fetching_scene`] receives the room's scene
+//! file and meshes from the first peer it reaches (SHA-256 verified, paths checked, kept under
+//! [`RoomOptions::scene_cache`]); every `Room` serves the scene it runs, in a room with a key
+//! only to peers that prove it.
+//!
 //! The crate is headless (bevy's app, ECS, time and transforms): draw the entities with
 //! bevy's renderer, or not at all (a bot, a server). `docs/GUIDE.md` walks through a room of
 //! your own from `cargo add` on; `examples/` has two programs.

@@ -219,10 +219,9 @@ pub struct Room {
     ready: bool,
     left: bool,
     events: Vec<Event>,
-    /// Serves our scene to joiners without one (built at the first request).
+    /// Serves our scene to joiners without one (built at the first request; in a room with a
+    /// key, only to those that prove it).
     share: Option<BlobServer>,
-    /// The room's key, which a joiner proves to be sent the scene.
-    room_key: Option<RoomKey>,
     fetched: Option<FetchedScene>,
 }
 
@@ -361,7 +360,6 @@ impl Room {
             left: false,
             events: Vec::new(),
             share: None,
-            room_key: opts.room_key.clone(),
             fetched,
         })
     }
@@ -384,7 +382,6 @@ impl Room {
             left: false,
             events: Vec::new(),
             share: None,
-            room_key: None,
             fetched: None,
         }
     }
@@ -482,7 +479,10 @@ impl Room {
     /// (from the files the scene was loaded from), or every request is told why there is none.
     fn serve_scene(&mut self, now: Instant, from: PeerId, datagram: &[u8]) {
         let scene = self.peer.scene();
-        let (key, me) = (self.room_key.clone(), self.peer.me());
+        let (key, me) = (
+            self.peer.session().config().room_key.clone(),
+            self.peer.me(),
+        );
         let server = self.share.get_or_insert_with(|| {
             match scene.bundle() {
                 Ok(b) => BlobServer::new(b),

@@ -251,3 +251,56 @@ fn the_small_apps_command_line_is_read_or_refused_with_its_usage() {
         .to_string();
     assert!(e.contains("bind address \"nowhere\""), "{e}");
 }
+
+/// A joiner without the scene, speaking the share protocol to a room on the hub: the room's
+/// `network_in` serves its scene, and in a room with a key only to a keyholder.
+#[test]
+fn a_room_serves_its_scene_and_in_a_keyed_room_only_to_a_keyholder() {
+    use softsync_net::share::{BlobFetch, FetchError, NEEDS_KEY};
+    use softsync_net::{RoomKey, Transport};
+    let hub = MemoryHub::new(1200);
+    let key = RoomKey::new(b"the lab's secret", 1);
+    let mut opts = Opts::host("lab");
+    opts.room_key = Some(key.clone());
+    let mut host = room(&hub, HOST, &opts);
+    let mut joiner = hub.endpoint(JOINER);
+    let mut fetch = |k: Option<&RoomKey>| {
+        let max = softsync_bevy::peer::scene::MAX_BUNDLE_BYTES;
+        let mut f =
+            BlobFetch::new(host.now(), HOST, max, Duration::from_secs(5)).with_key(k, JOINER);
+        let start = WallInstant::now();
+        loop {
+            if let Some(o) = f.outcome() {
+                return o;
+            }
+            assert!(start.elapsed() < Duration::from_secs(10), "no answer");
+            let now = host.now();
+            while let Some(t) = f.poll_transmit(now) {
+                joiner.send(now, &t);
+            }
+            host.network_in().unwrap();
+            while let Some((from, bytes)) = joiner.recv(host.now()) {
+                f.handle(from, &bytes);
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    };
+    for (k, why) in [
+        (None, "no key"),
+        (Some(&RoomKey::new(b"a guess", 1)), "another key"),
+    ] {
+        match fetch(k) {
+            Err(FetchError::Unavailable(r)) => assert_eq!(r, NEEDS_KEY, "{why}"),
+            other => panic!("{why}: {other:?}"),
+        }
+    }
+    let blob = fetch(Some(&key)).unwrap();
+    let dir = std::env::temp_dir().join(format!("softsync-plugin-share-{}", std::process::id()));
+    let got = Scene::from_bundle(&blob, &dir).unwrap();
+    assert_eq!(got.content_digest(), host.peer.scene().content_digest());
+    assert_eq!(got.messages, ["example.greeting", "example.bell"]);
+    // Every chunk once (no loss on the hub), and the two refusals answered.
+    let chunks = blob.len().div_ceil(softsync_net::share::CHUNK_BYTES) as u64;
+    assert_eq!(host.scene_requests(), (chunks + 2, 2));
+    let _ = std::fs::remove_dir_all(&dir);
+}
