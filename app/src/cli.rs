@@ -155,6 +155,11 @@ struct PeerOpts {
     /// SOFTSYNC_ROOM_KEY. Use 16 or more random bytes.
     #[arg(long, value_name = "FILE")]
     room_key_file: Option<PathBuf>,
+    /// Notice a dead host or member in a few hundred ms instead of a second: 50 ms heartbeats
+    /// and a timeout that adapts to each link's loss and jitter (every peer of the room
+    /// should say it; a peer whose frames stall for 250 ms or more is then taken for dead).
+    #[arg(long)]
+    fast_detection: bool,
     /// No stats lines.
     #[arg(long)]
     quiet: bool,
@@ -375,6 +380,8 @@ pub struct PeerArgs {
     pub rejoin_limit: u32,
     /// The room secret's file.
     pub room_key_file: Option<PathBuf>,
+    /// The adaptive failure detector and 50 ms heartbeats.
+    pub fast_detection: bool,
     /// No stats lines.
     pub quiet: bool,
     /// Spawn no avatar.
@@ -582,6 +589,7 @@ fn peer_args(
         connect_timeout: Duration::from_secs_f64(p.connect_timeout),
         rejoin_limit: p.rejoin_limit,
         room_key_file: p.room_key_file,
+        fast_detection: p.fast_detection,
         quiet: p.quiet,
         no_avatar: p.no_avatar,
         front,

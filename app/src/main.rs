@@ -344,6 +344,7 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     opts.ice_servers = a.ice.clone();
     opts.connect_timeout = a.connect_timeout;
     opts.room_key = room_key(a.room_key_file.as_deref())?;
+    opts.fast_detection = a.fast_detection;
     opts.condition = a.condition.clone();
     opts.send = SendPolicy {
         rate_hz: a.send_rate_hz,

@@ -81,6 +81,10 @@ pub struct RoomOptions {
     /// Where a joiner without the scene ([`Room::open_fetching_scene`]) keeps the scene it
     /// receives (a folder per scene, named by its digest).
     pub scene_cache: PathBuf,
+    /// The adaptive failure detector with 50 ms heartbeats
+    /// ([`SessionConfig::fast_detection`]): a dead host is replaced in a few hundred ms
+    /// rather than a second. Every peer of the room should set it.
+    pub fast_detection: bool,
 }
 
 impl RoomOptions {
@@ -107,6 +111,7 @@ impl RoomOptions {
             messages: MessageTypes::new(),
             start_ready: true,
             scene_cache: std::env::temp_dir().join("softsync-scenes"),
+            fast_detection: false,
         }
     }
 
@@ -173,7 +178,11 @@ impl RoomOptions {
         }
         types.configure(&mut cfg);
         cfg.room_key = self.room_key.clone();
-        Ok(cfg)
+        Ok(if self.fast_detection {
+            cfg.fast_detection()
+        } else {
+            cfg
+        })
     }
 }
 

@@ -205,6 +205,40 @@ impl Harness {
         self.step();
     }
 
+    /// Kill the host and run in `frame`s until a surviving peer is host: how long that took
+    /// (the failure detector's time plus the takeover), or `None` within `limit`.
+    pub fn time_to_new_host(&mut self, limit: Duration, frame: Duration) -> Option<Duration> {
+        let old = self.host_index()?;
+        self.kill(old);
+        let start = self.now;
+        while self.now.saturating_since(start) <= limit {
+            self.advance(frame);
+            if self.host_index().is_some() {
+                return Some(self.now.saturating_since(start));
+            }
+        }
+        None
+    }
+
+    /// Host changes any peer has seen so far (with nobody killed: false alarms).
+    pub fn host_changes(&self) -> usize {
+        self.peers
+            .iter()
+            .flat_map(|p| &p.events)
+            .filter(|e| matches!(e, Event::HostChanged { .. }))
+            .count()
+    }
+
+    /// Host changes and members seen leaving, by any peer, so far (with nobody killed and
+    /// nobody leaving: every one is a false alarm of a failure detector).
+    pub fn failure_verdicts(&self) -> usize {
+        self.peers
+            .iter()
+            .flat_map(|p| &p.events)
+            .filter(|e| matches!(e, Event::HostChanged { .. } | Event::PeerLeft(_)))
+            .count()
+    }
+
     /// Run in frames of `frame`, calling `f(harness)` before each (the application's frame).
     pub fn run_frames(
         &mut self,

@@ -37,7 +37,8 @@ pub use error::NetError;
 pub use ids::{AuthorityEpoch, ClassId, NetId, PeerId, Term};
 pub use interp::InterpolationConfig;
 pub use policy::{
-    AuthorityPolicy, ClassConfig, MessageConfig, SendPolicy, SessionConfig, SoftBodyMode,
+    AuthorityPolicy, ClassConfig, FailureDetector, MessageConfig, SendPolicy, SessionConfig,
+    SoftBodyMode,
 };
 pub use session::{DisplayedState, Event, ObjectState, RoomKey, Session};
 pub use stats::Stats;

@@ -332,6 +332,8 @@ pub(crate) struct Link {
     pub last_ping: Option<Instant>,
     /// When we last heard from it (liveness).
     pub last_heard: Option<Instant>,
+    /// The gaps between datagrams from it (the adaptive failure detector).
+    pub gaps: ArrivalGaps,
     /// Datagram sequences.
     pub seq: DatagramSeq,
     /// Its clock.
@@ -547,5 +549,76 @@ mod tests {
         assert!(!k.any_due(), "asked 10 ms ago");
         k.want(NetId(1), t + gap, gap);
         assert_eq!(k.due(), vec![NetId(1)]);
+    }
+}
+
+/// The last [`ArrivalGaps::WINDOW`] gaps between datagrams from a peer, for the adaptive
+/// failure detector ([`crate::policy::FailureDetector::Adaptive`]).
+#[derive(Debug, Default, Clone)]
+pub(crate) struct ArrivalGaps {
+    gaps_ms: std::collections::VecDeque<f32>,
+}
+
+impl ArrivalGaps {
+    /// Gaps kept.
+    pub const WINDOW: usize = 64;
+    /// Gaps needed before the statistics are used.
+    pub const MIN_SAMPLES: usize = 16;
+
+    /// A datagram arrived `gap` after the one before it.
+    pub fn record(&mut self, gap: Duration) {
+        if self.gaps_ms.len() == Self::WINDOW {
+            self.gaps_ms.pop_front();
+        }
+        self.gaps_ms.push_back(gap.as_secs_f32() * 1e3);
+    }
+
+    /// Forget the history (a stall of ours, a rejoin).
+    pub fn clear(&mut self) {
+        self.gaps_ms.clear();
+    }
+
+    /// The silence after which the peer is gone, from the gaps and the heartbeat interval
+    /// `hb` (a live peer with the adaptive detector pings at most 1.5 `hb` apart): the share
+    /// of gaps longer than 1.75 `hb` estimates the chance `q` that a heartbeat is lost (at
+    /// least 1 %), so `k` lost in a row, `q^k`, is below 10^−phi for `k = ⌈phi / −log₁₀ q⌉`
+    /// heartbeats; to those `k + ½` intervals come `deviations` standard deviations of the
+    /// other gaps (jitter).
+    /// Within `[min, max]`; `max` until there are enough gaps.
+    pub fn timeout(
+        &self,
+        hb: Duration,
+        phi: f32,
+        deviations: f32,
+        min: Duration,
+        max: Duration,
+    ) -> Duration {
+        let n = self.gaps_ms.len();
+        if n < Self::MIN_SAMPLES {
+            return max;
+        }
+        // A live peer pings at most 1.5 intervals apart (a ping whenever it was quiet for
+        // half of one); a gap past 1.75 means something was lost.
+        let unit = hb.as_secs_f32() * 1e3;
+        let long = self.gaps_ms.iter().filter(|g| **g > 1.75 * unit).count();
+        let q = (long as f32 / n as f32).clamp(0.01, 0.9);
+        let k = (-phi.max(0.5) / q.log10()).ceil().clamp(1.0, 40.0);
+        let short: Vec<f32> = self
+            .gaps_ms
+            .iter()
+            .copied()
+            .filter(|g| *g <= 1.75 * unit)
+            .collect();
+        let sd = if short.len() >= 2 {
+            let m = short.iter().sum::<f32>() / short.len() as f32;
+            (short.iter().map(|g| (g - m).powi(2)).sum::<f32>() / (short.len() - 1) as f32).sqrt()
+        } else {
+            0.0
+        };
+        let t_ms = unit * (k + 0.5) + deviations * sd;
+        if !t_ms.is_finite() {
+            return max;
+        }
+        Duration::from_secs_f32((t_ms / 1e3).max(0.0)).clamp(min, max)
     }
 }

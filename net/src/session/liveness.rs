@@ -10,6 +10,7 @@ use std::time::Duration;
 use super::migration::heir;
 use super::{Role, Session, Transmit};
 use crate::ids::{PeerId, Term};
+use crate::policy::FailureDetector;
 use crate::time::Instant;
 use crate::wire::encode_refusal;
 
@@ -131,11 +132,17 @@ impl Session {
             return;
         }
         let hb = self.cfg.heartbeat_interval;
+        // The adaptive detector reads the rhythm of the gaps: a ping whenever the link was
+        // quiet for half an interval keeps every gap within 1.5 intervals when nothing is lost.
+        let quiet_for = match self.cfg.detector {
+            FailureDetector::Fixed => hb,
+            FailureDetector::Adaptive { .. } => hb / 2,
+        };
         for p in self.others() {
             let l = self.links.entry(p).or_default();
             // Any datagram is a heartbeat: an explicit ping only if the link was quiet,
             // and at least once a second for the RTT estimate.
-            let quiet = l.last_sent.is_none_or(|t| now >= t + hb);
+            let quiet = l.last_sent.is_none_or(|t| now >= t + quiet_for);
             let rtt_due = l
                 .last_ping
                 .is_none_or(|t| now >= t + Duration::from_secs(1));
@@ -196,6 +203,8 @@ impl Session {
             if let Some(h) = l.last_heard.as_mut() {
                 *h = (*h + gap).min(now);
             }
+            // What arrived during our stall comes in a burst: not the link's rhythm.
+            l.gaps.clear();
         }
         if gap >= self.cfg.peer_timeout {
             self.stalls.stalled(now);
@@ -234,15 +243,38 @@ impl Session {
         });
     }
 
-    /// Whether we heard from `p` within the peer timeout (we are always alive).
+    /// How long `p` may be silent before it is gone: the peer timeout, or with the adaptive
+    /// detector what its link's gaps say.
+    pub(super) fn silence_allowed(&self, p: PeerId) -> Duration {
+        match (self.cfg.detector, self.links.get(&p)) {
+            (
+                FailureDetector::Adaptive {
+                    phi,
+                    deviations,
+                    min_timeout,
+                },
+                Some(l),
+            ) => l.gaps.timeout(
+                self.cfg.heartbeat_interval,
+                phi,
+                deviations,
+                min_timeout,
+                self.cfg.peer_timeout,
+            ),
+            _ => self.cfg.peer_timeout,
+        }
+    }
+
+    /// Whether we heard from `p` within the silence it is allowed (we are always alive).
     pub(super) fn alive(&self, p: PeerId, now: Instant) -> bool {
         if p == self.local {
             return true;
         }
+        let allowed = self.silence_allowed(p);
         self.links
             .get(&p)
             .and_then(|l| l.last_heard)
-            .is_some_and(|h| now < h + self.cfg.peer_timeout)
+            .is_some_and(|h| now < h + allowed)
     }
 
     /// The host drops members silent past the timeout; a member whose host is silent takes

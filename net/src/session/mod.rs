@@ -457,7 +457,7 @@ impl Session {
             t = min_opt(t, l.reliable.next_deadline());
             if self.members.contains_key(p) && *p != self.local {
                 if let Some(h) = l.last_heard {
-                    t = min_opt(t, Some(h + self.cfg.peer_timeout));
+                    t = min_opt(t, Some(h + self.silence_allowed(*p)));
                 }
             }
         }

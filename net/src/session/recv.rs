@@ -141,6 +141,9 @@ impl Session {
         sections: Vec<Section<'_>>,
     ) {
         let link = self.links.entry(from).or_default();
+        if let Some(before) = link.last_heard {
+            link.gaps.record(now.saturating_since(before));
+        }
         link.last_heard = Some(now);
         let ls = self.stats.links.entry(from).or_default();
         if !known {
