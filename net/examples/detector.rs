@@ -110,10 +110,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .map(|r| (r.2, r.3 as f64))
             .collect();
         let mut series = Series::new("adaptive (phi 1 to 12)", BLUE, adaptive);
-        series.notes = rows
-            .iter()
-            .filter_map(|r| r.1.map(|phi| (format!("phi {phi}"), (r.2, r.3 as f64))))
-            .collect();
+        // One note per point: thresholds that land on the same point share it.
+        let mut notes: Vec<(String, (f64, f64))> = Vec::new();
+        for r in rows.iter().filter(|r| r.1.is_some()) {
+            let at = (r.2, r.3 as f64);
+            let phi = r.1.unwrap_or_default();
+            match notes.iter_mut().find(|(_, p)| *p == at) {
+                Some((text, _)) => *text = format!("{text}, {phi}"),
+                None => notes.push((format!("phi {phi}"), at)),
+            }
+        }
+        series.notes = notes;
         let ymax = rows.iter().map(|r| r.3).max().unwrap_or(0) as f64 + 1.0;
         let xmax = rows.iter().map(|r| r.2).fold(0.0, f64::max) * 1.1;
         write_svg(
