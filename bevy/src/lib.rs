@@ -2,8 +2,8 @@
 //!
 //! Open a [`Room`] (host one, or join one by name through a signaling server) with your
 //! scene file, add it and [`SoftsyncPlugin`] to your app, and the room runs in bevy's frame:
-//! every networked object is an entity ([`NetObject`], with [`SoftBody`] or [`AvatarPart`]
-//! where they apply, and a `Transform` that follows the room), what happens arrives as
+//! every networked object is an entity ([`NetObject`], with [`SoftBody`], [`AvatarPart`] or
+//! our own [`Hand`] where they apply, and a `Transform` that follows the room), what happens arrives as
 //! [`RoomEvent`] bevy messages, your own message types as [`Received<M>`], and [`RoomStats`]
 //! says how the room is doing. The `softsync` binary is built on this crate.
 //!
@@ -65,7 +65,7 @@ pub mod plugin;
 pub mod room;
 
 pub use plugin::{
-    AvatarPart, NetEntities, NetObject, Received, RoomEvent, RoomFailed, RoomStats, SoftBody,
+    AvatarPart, Hand, NetEntities, NetObject, Received, RoomEvent, RoomFailed, RoomStats, SoftBody,
     SoftsyncApp, SoftsyncPlugin, SoftsyncSet,
 };
 pub use room::{Clock, FetchedScene, OpenError, Room, RoomOptions, LEAVE_GRACE};
@@ -77,8 +77,8 @@ pub use softsync_peer as peer;
 /// What an app on this crate uses most.
 pub mod prelude {
     pub use crate::plugin::{
-        AvatarPart, NetEntities, NetObject, Received, RoomEvent, RoomFailed, RoomStats, SoftBody,
-        SoftsyncApp, SoftsyncPlugin, SoftsyncSet,
+        AvatarPart, Hand, NetEntities, NetObject, Received, RoomEvent, RoomFailed, RoomStats,
+        SoftBody, SoftsyncApp, SoftsyncPlugin, SoftsyncSet,
     };
     pub use crate::room::{Room, RoomOptions};
     pub use softsync_net::messages::Message as RoomMessage;

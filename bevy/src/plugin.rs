@@ -120,6 +120,8 @@ pub struct NetObject {
     pub owner: Option<PeerId>,
     /// Whether this peer owns it.
     pub mine: bool,
+    /// Whether one of our hands hovers over it (in reach to grab).
+    pub hovered: bool,
 }
 
 /// A soft body's entity (with [`NetObject`]).
@@ -130,6 +132,17 @@ pub struct SoftBody {
     /// Topology changes (cuts, tears) applied so far: a renderer rebuilds its triangles when
     /// this grows.
     pub topology: u32,
+}
+
+/// One of this peer's own hands, on its avatar hand's entity (with [`NetObject`] and
+/// [`AvatarPart`]): which hand and what it holds now. Drive it in [`SoftsyncSet::Input`]
+/// with `room.peer.set_hand_input(index, …)` (a controller, the mouse, a `softsync_peer::Bot`).
+#[derive(Component, Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Hand {
+    /// 0 left, 1 right.
+    pub index: usize,
+    /// The object it holds, if any.
+    pub holding: Option<NetId>,
 }
 
 /// An avatar part's entity (with [`NetObject`]): a head or a hand of some peer.
@@ -357,7 +370,12 @@ fn mirror(
     mut commands: Commands,
     room: Option<NonSendMut<Room>>,
     mut ents: ResMut<NetEntities>,
-    mut q: Query<(&mut Transform, &mut NetObject, Option<&mut SoftBody>)>,
+    mut q: Query<(
+        &mut Transform,
+        &mut NetObject,
+        Option<&mut SoftBody>,
+        Option<&mut Hand>,
+    )>,
 ) {
     let Some(mut room) = room else { return };
     let now = room.now();
@@ -371,6 +389,9 @@ fn mirror(
         keep
     });
     let ids: Vec<NetId> = peer.objects().keys().copied().collect();
+    let hovered = peer.hovered_ids();
+    let parts = peer.avatar_parts();
+    let hand_of = |id: NetId| (0..2).find(|i| parts[1 + i] == Some(id));
     for id in ids {
         let Some(o) = peer.objects().get(&id).cloned() else {
             continue;
@@ -395,6 +416,7 @@ fn mirror(
                 class: peer.scene().name_of(o.kind).to_owned(),
                 owner,
                 mine: owner == Some(me),
+                hovered: hovered.contains(&id),
             };
             let mut ec = commands.spawn((obj, pose.unwrap_or(Transform::IDENTITY)));
             if let Some(s) = soft {
@@ -406,12 +428,28 @@ fn mirror(
                     hand: o.kind == Kind::HAND,
                 });
             }
+            if let Some(index) = hand_of(id) {
+                ec.insert(Hand {
+                    index,
+                    holding: peer.held(index).map(|(h, _)| h),
+                });
+            }
             ents.0.insert(id, ec.id());
             continue;
         };
-        let Ok((mut tf, mut obj, soft_c)) = q.get_mut(e) else {
+        let Ok((mut tf, mut obj, soft_c, hand_c)) = q.get_mut(e) else {
             continue;
         };
+        if let (Some(mut h), Some(index)) = (hand_c, hand_of(id)) {
+            let holding = peer.held(index).map(|(h, _)| h);
+            if h.holding != holding {
+                h.holding = holding;
+            }
+        }
+        let is_hovered = hovered.contains(&id);
+        if obj.hovered != is_hovered {
+            obj.hovered = is_hovered;
+        }
         if let Some(p) = pose {
             if *tf != p {
                 *tf = p;

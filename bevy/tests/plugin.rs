@@ -13,7 +13,7 @@ use bevy::ecs::message::{MessageReader, Messages};
 use bevy::ecs::prelude::{ResMut, Resource};
 use bevy::MinimalPlugins;
 use serde::{Deserialize, Serialize};
-use softsync_bevy::peer::{Peer, PeerConfig, Scene};
+use softsync_bevy::peer::{Peer, Scene};
 use softsync_bevy::prelude::*;
 use softsync_bevy::{RoomFailed, RoomOptions as Opts};
 use softsync_net::{Instant, MemoryHub, Session};
@@ -42,14 +42,7 @@ fn room(hub: &MemoryHub, me: PeerId, opts: &Opts) -> Room {
     } else {
         (Session::join(me, HOST, cfg, Instant::ZERO), Some(HOST))
     };
-    let mut peer = Peer::new(
-        Instant::ZERO,
-        session,
-        contact,
-        scene,
-        PeerConfig::default(),
-    )
-    .unwrap();
+    let mut peer = Peer::new(Instant::ZERO, session, contact, scene, opts.peer.clone()).unwrap();
     if me == HOST {
         peer.open(Instant::ZERO).unwrap();
     }
@@ -94,6 +87,7 @@ fn app(room: Room) -> App {
 }
 
 /// Frames of both apps until `done` or 10 s of wall time.
+#[track_caller]
 fn run_until(apps: &mut [&mut App], mut done: impl FnMut(&mut [&mut App]) -> bool) {
     let start = WallInstant::now();
     while !done(apps) {
@@ -303,4 +297,91 @@ fn a_room_serves_its_scene_and_in_a_keyed_room_only_to_a_keyholder() {
     let chunks = blob.len().div_ceil(softsync_net::share::CHUNK_BYTES) as u64;
     assert_eq!(host.scene_requests(), (chunks + 2, 2));
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Our own hands are entities with `Hand`: a bot driving them in `SoftsyncSet::Input` reaches
+/// for the soft ball and grabs it (the host grants authority), and the right hand's `holding`
+/// says so; the ball's entity is hovered on the way.
+#[test]
+fn a_bot_in_the_input_set_grabs_and_the_hand_entity_says_what_it_holds() {
+    use bevy::app::FixedUpdate;
+    use bevy::ecs::schedule::IntoScheduleConfigs;
+    use bevy::ecs::system::NonSendMut;
+    use softsync_bevy::peer::{bot, Bot};
+    use softsync_bevy::{Hand, SoftsyncSet};
+    let hub = MemoryHub::new(1200);
+    let mut opts = Opts::host("lab");
+    // A hand that reaches exactly, as the binary gives bots (a physical hand body would shove
+    // the block it reaches for).
+    opts.peer.hand.physical_controller = false;
+    opts.peer.hand.hover_radius_m = 0.03;
+    let mut host = app(room(&hub, HOST, &opts));
+    let mut joiner = app(room(&hub, JOINER, &opts));
+    let script = bot::parse("wait 0.3; reach right softball in 1; grab right; wait 5").unwrap();
+    joiner.insert_non_send(Bot::new(script)).add_systems(
+        FixedUpdate,
+        (|mut room: NonSendMut<Room>, mut bot: NonSendMut<Bot>| {
+            if room.peer.joined() {
+                let now = room.now();
+                bot.step(now, &mut room.peer, None);
+                while bot.poll_message().is_some() {}
+            }
+        })
+        .in_set(SoftsyncSet::Input),
+    );
+    let hands = |a: &mut App| {
+        let mut q = a.world_mut().query::<(&Hand, &NetObject)>();
+        let mut v: Vec<(Hand, bool)> = q.iter(a.world()).map(|(h, o)| (*h, o.mine)).collect();
+        v.sort_by_key(|(h, _)| h.index);
+        v
+    };
+    run_until(&mut [&mut host, &mut joiner], |a| hands(a[1]).len() == 2);
+    let h = hands(&mut joiner);
+    assert_eq!(
+        h,
+        [
+            (
+                Hand {
+                    index: 0,
+                    holding: None
+                },
+                true
+            ),
+            (
+                Hand {
+                    index: 1,
+                    holding: None
+                },
+                true
+            )
+        ]
+    );
+    let block = entities(&mut joiner)
+        .iter()
+        .find(|e| e.1 == "softball")
+        .unwrap()
+        .0;
+    let mut hovered = false;
+    run_until(&mut [&mut host, &mut joiner], |a| {
+        let mut q = a[1].world_mut().query::<&NetObject>();
+        hovered |= q.iter(a[1].world()).any(|o| o.id.0 == block && o.hovered);
+        let h = hands(a[1]);
+        if std::env::var("DEBUG_HANDS").is_ok() {
+            let r = a[1].world().non_send::<Room>();
+            eprintln!(
+                "{:?} held {:?} hovered {:?}",
+                h,
+                r.peer.held(1).map(|x| x.0),
+                r.peer.hovered_ids()
+            );
+        }
+        h[1].0.holding.map(|id| id.0) == Some(block)
+    });
+    assert!(hovered, "the ball was never hovered on the way");
+    // The host sees the joiner own the ball it holds.
+    run_until(&mut [&mut host, &mut joiner], |a| {
+        let mut q = a[0].world_mut().query::<&NetObject>();
+        q.iter(a[0].world())
+            .any(|o| o.id.0 == block && o.owner == Some(JOINER))
+    });
 }
