@@ -300,8 +300,10 @@ fn a_room_serves_its_scene_and_in_a_keyed_room_only_to_a_keyholder() {
 }
 
 /// Our own hands are entities with `Hand`: a bot driving them in `SoftsyncSet::Input` reaches
-/// for the soft ball and grabs it (the host grants authority), and the right hand's `holding`
-/// says so; the ball's entity is hovered on the way.
+/// for the host's rigid block (kinematic on the joiner until it is granted) and grabs it
+/// through the authority request, and the right hand's `holding` says so; the block's entity
+/// is hovered on the way. (Until this test, a rigid prop another peer owned could not be
+/// hovered at all: only dynamic bodies were targets.)
 #[test]
 fn a_bot_in_the_input_set_grabs_and_the_hand_entity_says_what_it_holds() {
     use bevy::app::FixedUpdate;
@@ -317,7 +319,7 @@ fn a_bot_in_the_input_set_grabs_and_the_hand_entity_says_what_it_holds() {
     opts.peer.hand.hover_radius_m = 0.03;
     let mut host = app(room(&hub, HOST, &opts));
     let mut joiner = app(room(&hub, JOINER, &opts));
-    let script = bot::parse("wait 0.3; reach right softball in 1; grab right; wait 5").unwrap();
+    let script = bot::parse("wait 0.3; reach right block in 1; grab right; wait 5").unwrap();
     joiner.insert_non_send(Bot::new(script)).add_systems(
         FixedUpdate,
         (|mut room: NonSendMut<Room>, mut bot: NonSendMut<Bot>| {
@@ -358,7 +360,7 @@ fn a_bot_in_the_input_set_grabs_and_the_hand_entity_says_what_it_holds() {
     );
     let block = entities(&mut joiner)
         .iter()
-        .find(|e| e.1 == "softball")
+        .find(|e| e.1 == "block")
         .unwrap()
         .0;
     let mut hovered = false;
@@ -377,8 +379,8 @@ fn a_bot_in_the_input_set_grabs_and_the_hand_entity_says_what_it_holds() {
         }
         h[1].0.holding.map(|id| id.0) == Some(block)
     });
-    assert!(hovered, "the ball was never hovered on the way");
-    // The host sees the joiner own the ball it holds.
+    assert!(hovered, "the block was never hovered on the way");
+    // The host sees the joiner own the block it holds.
     run_until(&mut [&mut host, &mut joiner], |a| {
         let mut q = a[0].world_mut().query::<&NetObject>();
         q.iter(a[0].world())

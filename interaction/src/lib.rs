@@ -256,6 +256,11 @@ impl Interaction {
         // Hover (4.1, Figure 4.1): everything grabbable within the hover sphere.
         let cfg = self.hands[i].config.clone();
         let ball = Ball::new(cfg.hover_radius_m);
+        // Physical controllers (this hand's and the others') are kinematic bodies too: never
+        // targets.
+        let controllers: Vec<RigidBodyHandle> = (0..self.hands.len())
+            .filter_map(|h| self.controller_body(h))
+            .collect();
         let mut filter = QueryFilter::default().exclude_sensors();
         if let Some(c) = controller {
             filter = filter.exclude_rigid_body(c);
@@ -280,6 +285,15 @@ impl Interaction {
                 }
                 Some(SoftPart::Center(sh)) => Target::SoftCenter(sh),
                 None if body.is_dynamic() => Target::Rigid(bh),
+                // A rigid prop someone else owns is kinematic here (moved to the owner's
+                // state): still a target, and grabbing it asks for authority. A kinematic body
+                // of our own (a controller, a moving platform) is not.
+                None if body.is_kinematic()
+                    && !controllers.contains(&bh)
+                    && !own.is_local(Target::Rigid(bh).object()) =>
+                {
+                    Target::Rigid(bh)
+                }
                 None => continue,
             };
             let d = body.translation().distance(pos);
