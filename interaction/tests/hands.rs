@@ -782,3 +782,42 @@ fn release_all_forgets_holds_and_waits_without_a_throw() {
     r.step(Vec3::ZERO + at, 1.0, &AllLocal);
     assert_eq!(r.hands.held(r.hand), Some(Target::Rigid(b)));
 }
+
+/// A rigid prop another peer owns is kinematic here (driven to the owner's state): the hand
+/// hovers it and a grip asks for authority, as for a dynamic one. A kinematic body of our own
+/// (a moving platform, a controller) is no target.
+#[test]
+fn a_kinematic_prop_someone_else_owns_is_a_target_and_asks_for_authority() {
+    let mut r = Rig::new(HandConfig::default());
+    r.world.gravity = Vec3::ZERO;
+    let b = r
+        .world
+        .insert_body(RigidBodyBuilder::kinematic_position_based().translation(Vec3::ZERO));
+    r.world
+        .insert_collider(ColliderBuilder::cuboid(0.03, 0.03, 0.03), Some(b));
+    r.world.step();
+    // Ours: not hovered, nothing asked.
+    r.step(Vec3::ZERO, 0.0, &AllLocal);
+    assert!(r.hands.hovered(r.hand).is_empty());
+    r.step(Vec3::ZERO, 1.0, &AllLocal);
+    assert!(
+        !r.events().iter().any(|e| matches!(
+            e,
+            InteractionEvent::AuthorityRequested { .. } | InteractionEvent::Grabbed { .. }
+        )),
+        "our own kinematic body was taken"
+    );
+    r.step(Vec3::ZERO, 0.0, &AllLocal);
+    let _ = r.events();
+    // Someone else's: hovered, and the grip asks for it.
+    r.step(Vec3::ZERO, 0.0, &NotMine);
+    assert_eq!(r.hands.hovered(r.hand).len(), 1);
+    r.step(Vec3::ZERO, 1.0, &NotMine);
+    assert!(
+        r.events().contains(&InteractionEvent::AuthorityRequested {
+            hand: r.hand,
+            object: ObjectRef::Rigid(b)
+        }),
+        "no authority request for someone else's kinematic prop"
+    );
+}
