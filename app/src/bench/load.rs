@@ -1,0 +1,226 @@
+//! `softsync bench room-load`: a host and bots in one room on real WebRTC, for growing room
+//! sizes — uplink and downlink rates, grabs taken and refused, join times, and whether every
+//! peer agrees on members and owners at one moment.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use softsync_benchkit::{Csv, Progress, ResultLine};
+
+use super::Proc;
+use crate::report::{read_dump, DumpLine};
+
+/// One room-load measurement.
+struct LoadRow {
+    peers: usize,
+    host_up: f64,
+    host_down: f64,
+    bot_up: f64,
+    grabs: usize,
+    failed_grabs: usize,
+    slowest_join_ms: f64,
+    agree: bool,
+}
+
+fn window_rate(lines: &[DumpLine], from_wall: u64, to_wall: u64) -> Option<(f64, f64)> {
+    let at = |w: u64| {
+        lines
+            .iter()
+            .filter(|l| l.wall_ms <= w)
+            .max_by_key(|l| l.wall_ms)
+    };
+    let (a, b) = (at(from_wall)?, at(to_wall)?);
+    let dt = (b.t - a.t).max(0.1);
+    Some((
+        b.up_bytes.saturating_sub(a.up_bytes) as f64 / dt,
+        b.down_bytes.saturating_sub(a.down_bytes) as f64 / dt,
+    ))
+}
+
+/// A host and `n` bots (the host counted among the peers) in one room for `seconds`: each
+/// bot in turn reaches for an object, grabs it (authority requests contend), squeezes, lets
+/// go and sways. Traffic of the host (the relay) and of the bots, grabs taken and refused,
+/// and whether every peer lists the same members and owners at one moment.
+fn load_one(dir: &Path, peers: usize, seconds: f64) -> Result<LoadRow, String> {
+    const OBJECTS: [&str; 7] = [
+        "bunny", "softbox", "softball", "block", "can", "ball", "plate",
+    ];
+    let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>();
+    let (_signal, url) = Proc::signal(dir, &format!("load{peers}-signal"))?;
+    let room = format!("load{peers}");
+    let total = seconds + 8.0;
+    let hd = dir.join(format!("{room}-host.jsonl"));
+    let mut host = Proc::spawn(
+        dir,
+        &format!("{room}-host"),
+        &s(&[
+            "host",
+            "--room",
+            &room,
+            "--signal",
+            &url,
+            "--quiet",
+            "--bot",
+            "wave",
+            "--dump-hz",
+            "4",
+            "--dump",
+            &hd.display().to_string(),
+            "--duration",
+            &(total + 2.0).to_string(),
+        ]),
+    )?;
+    host.line("hosting", Duration::from_secs(20))?;
+    let mut bots = Vec::new();
+    for k in 1..peers {
+        let obj = OBJECTS[(k - 1) % OBJECTS.len()];
+        let script = format!(
+            "wait 0.5; reach right {obj} in 0.8; grab right timeout 1.5; squeeze right 0.015 in 0.4; \
+             release right; offset right 0 0.1 0 in 0.4; wave all 0.08 2 2; loop"
+        );
+        let d = dir.join(format!("{room}-b{k}.jsonl"));
+        bots.push((
+            Proc::spawn(
+                dir,
+                &format!("{room}-b{k}"),
+                &s(&[
+                    "join",
+                    "--room",
+                    &room,
+                    "--signal",
+                    &url,
+                    "--quiet",
+                    "--bot",
+                    &script,
+                    "--dump-hz",
+                    "4",
+                    "--dump",
+                    &d.display().to_string(),
+                    "--duration",
+                    &total.to_string(),
+                ]),
+            )?,
+            d,
+        ));
+    }
+    let start = Instant::now();
+    let mut slowest = 0.0f64;
+    for (b, _) in &bots {
+        b.line("joined", Duration::from_secs(60))?;
+        slowest = slowest.max(start.elapsed().as_secs_f64() * 1e3);
+    }
+    let from = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64);
+    let to = from + (seconds * 1000.0) as u64;
+    for (b, _) in &mut bots {
+        b.wait(Duration::from_secs_f64(total + 60.0))?;
+    }
+    host.wait(Duration::from_secs(30))?;
+    let hlines = read_dump(&hd).map_err(|e| e.to_string())?;
+    let (host_up, host_down) = window_rate(&hlines, from, to).ok_or("host dump too short")?;
+    let mut bot_up = 0.0;
+    let mut views = vec![hlines];
+    let (mut grabs, mut failed) = (0, 0);
+    for (b, d) in &bots {
+        let lines = read_dump(d).map_err(|e| e.to_string())?;
+        bot_up += window_rate(&lines, from, to).ok_or("bot dump too short")?.0;
+        views.push(lines);
+        let out = std::fs::read_to_string(&b.out).unwrap_or_default();
+        grabs += out.matches("grabbed object").count();
+        failed += out.matches("nothing taken").count();
+    }
+    // One moment, every view: the same members, the same owner for every object.
+    let moment = to;
+    let snapshot = |v: &Vec<DumpLine>| {
+        v.iter()
+            .filter(|l| l.wall_ms <= moment)
+            .max_by_key(|l| l.wall_ms)
+            .map(|l| {
+                let owners: BTreeMap<u32, u64> =
+                    l.objects.iter().map(|o| (o.id, o.owner)).collect();
+                (l.members.clone(), owners)
+            })
+    };
+    let first = snapshot(&views[0]);
+    let agree = first.is_some()
+        && first.as_ref().is_some_and(|f| f.0.len() == peers)
+        && views.iter().all(|v| snapshot(v) == first);
+    Ok(LoadRow {
+        peers,
+        host_up,
+        host_down,
+        bot_up: bot_up / (peers - 1).max(1) as f64,
+        grabs,
+        failed_grabs: failed,
+        slowest_join_ms: slowest,
+        agree,
+    })
+}
+
+/// `softsync bench room-load`: rooms of growing size on real WebRTC.
+pub fn room_load(out: &Path, seconds: f64, sizes: &[usize]) -> Result<(), String> {
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let scratch = std::env::temp_dir().join(format!("softsync-load-{}", std::process::id()));
+    std::fs::create_dir_all(&scratch).map_err(|e| e.to_string())?;
+    let mut csv = Csv::new(&[
+        "peers",
+        "host_up_bytes_per_s",
+        "host_down_bytes_per_s",
+        "bot_up_bytes_per_s",
+        "grabs",
+        "refused_grabs",
+        "slowest_join_ms",
+        "agree",
+    ]);
+    let mut md = format!(
+        "# softsync room load\n\nGenerated by `scripts/bench-net-live --load` (= `softsync bench room-load` in a network namespace): a host and bots in one room on real WebRTC over loopback, {seconds} s measured; every bot loops reach → grab (authority requests contend) → squeeze → release → sway. One machine runs every peer (2 cores here).\n\n| peers | host up B/s | host down B/s | bot up B/s | grabs taken | grabs refused | all joined after ms | members and owners agree |\n|---:|---:|---:|---:|---:|---:|---:|:---:|\n"
+    );
+    let progress = Progress::new(sizes.len() as u64, "rooms");
+    for &n in sizes {
+        progress.set_message(format!("{n} peers"));
+        let r = load_one(&scratch, n, seconds)?;
+        progress.inc();
+        csv.row([
+            r.peers.to_string(),
+            format!("{:.0}", r.host_up),
+            format!("{:.0}", r.host_down),
+            format!("{:.0}", r.bot_up),
+            r.grabs.to_string(),
+            r.failed_grabs.to_string(),
+            format!("{:.0}", r.slowest_join_ms),
+            r.agree.to_string(),
+        ]);
+        let _ = writeln!(
+            md,
+            "| {} | {:.0} | {:.0} | {:.0} | {} | {} | {:.0} | {} |",
+            r.peers,
+            r.host_up,
+            r.host_down,
+            r.bot_up,
+            r.grabs,
+            r.failed_grabs,
+            r.slowest_join_ms,
+            if r.agree { "yes" } else { "NO" }
+        );
+        progress.result(
+            ResultLine::new("live.load")
+                .field("peers", r.peers)
+                .fixed("host_up_bytes_per_s", r.host_up, 0)
+                .fixed("host_down_bytes_per_s", r.host_down, 0)
+                .fixed("bot_up_bytes_per_s", r.bot_up, 0)
+                .field("grabs", r.grabs)
+                .field("refused", r.failed_grabs)
+                .fixed("join_ms", r.slowest_join_ms, 0)
+                .field("agree", r.agree),
+        );
+    }
+    progress.finish();
+    csv.write(out.join("load.csv")).map_err(|e| e.to_string())?;
+    std::fs::write(out.join("load.md"), &md).map_err(|e| e.to_string())?;
+    print!("{md}");
+    let _ = std::fs::remove_dir_all(&scratch);
+    Ok(())
+}
