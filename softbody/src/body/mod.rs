@@ -9,14 +9,18 @@
 //! cut makes of it. Tears and cuts are given in the *rest frame*: relative to the rest center,
 //! in the center body's local frame (see [`SoftBody::rest_vertices`]).
 //!
-//! Just over 800 lines: the struct's fields, its build (`BodyPlan`) and its per-step work
-//! (restoring, wake, deformation) read each other's invariants and are one owned part; the
-//! parts that stand alone already live in `set`, `handle` and `topology`.
+//! The struct's fields, its build (`BodyPlan`) and its per-step work (restoring, wake,
+//! deformation) read each other's invariants and are one owned part; the parts that stand
+//! alone live in `set`, `handle`, `topology`, `access` (getters, `apply_state`) and `level`
+//! (a resolution change while running, and the blend that hides it).
 
+mod access;
+mod level;
 pub(crate) mod handle;
 pub(crate) mod set;
 mod topology;
 
+pub use level::Activity;
 pub use topology::{StageClock, TearTimings};
 
 use glam::{Quat, Vec3};
@@ -80,6 +84,11 @@ pub struct SoftBody {
     rest_volume_m3: f32,
     size_m: f32,
     non_finite_recoveries: u64,
+    /// A resolution change's correction still shown (see `level`).
+    blend: level::Blend,
+    /// Center and every particle asleep at the last step, nothing driven: the step skipped
+    /// the body (an untouched resting body costs one bounds query).
+    dormant: bool,
 }
 
 fn groups(bit: u32, self_collisions: bool) -> (InteractionGroups, InteractionGroups) {
@@ -122,6 +131,9 @@ pub(crate) struct Spawn {
     pub(crate) angvel: Vec3,
     /// Per particle, world space; empty for none.
     pub(crate) displacement: Vec<Vec3>,
+    /// A center body (and its collider) already in the world to keep, instead of a new one:
+    /// a resolution change keeps its body's center, contacts and all.
+    pub(crate) keep_center: Option<(RigidBodyHandle, Option<ColliderHandle>)>,
 }
 
 impl Spawn {
@@ -133,6 +145,7 @@ impl Spawn {
         linvel: Vec3::ZERO,
         angvel: Vec3::ZERO,
         displacement: Vec::new(),
+        keep_center: None,
     };
 
     fn place(&self, p: Vec3) -> Vec3 {
@@ -165,6 +178,16 @@ impl BodyPlan {
     /// Welds and clusters `mesh` (baked: the body's local frame is the world's at rest) and
     /// builds the center's collider shape.
     pub(crate) fn new(mesh: &Mesh, config: SoftBodyConfig) -> Result<Self, SoftBodyError> {
+        Self::centred(mesh, config, None)
+    }
+
+    /// As [`new`](Self::new), with the rest center at `rest_center` instead of the particles'
+    /// mean (a resolution change keeps its body's center, so the center does not move).
+    pub(crate) fn centred(
+        mesh: &Mesh,
+        config: SoftBodyConfig,
+        rest_center: Option<Vec3>,
+    ) -> Result<Self, SoftBodyError> {
         let welded = mesh.weld(config.weld_epsilon_m);
         let soft: Vec<bool> = match &config.soft_region {
             Some(r) => welded.positions.iter().map(|p| r.contains(*p)).collect(),
@@ -195,7 +218,9 @@ impl BodyPlan {
             map0
         };
         // Thesis 3.2.1 / Figure 3.8: the center is the mean of the particles.
-        let rest_center = map.rest_particles.iter().copied().sum::<Vec3>() / map.len() as f32;
+        let rest_center = rest_center.unwrap_or_else(|| {
+            map.rest_particles.iter().copied().sum::<Vec3>() / map.len() as f32
+        });
         let rest_offsets: Vec<Vec3> = map
             .rest_particles
             .iter()
@@ -279,16 +304,22 @@ impl BodyPlan {
                 .angvel(spawn.angvel),
         }
         .pose(Pose::from_parts(center_at, spawn.rotation));
-        let center = world.insert_body(center_builder);
-        let center_collider = center_shape.map(|builder| {
-            world.insert_collider(
-                builder
-                    .mass(config.center_mass_kg)
-                    .friction(config.friction)
-                    .collision_groups(cg),
-                Some(center),
-            )
-        });
+        let (center, center_collider) = match spawn.keep_center {
+            Some(kept) => kept,
+            None => {
+                let center = world.insert_body(center_builder);
+                let collider = center_shape.map(|builder| {
+                    world.insert_collider(
+                        builder
+                            .mass(config.center_mass_kg)
+                            .friction(config.friction)
+                            .collision_groups(cg),
+                        Some(center),
+                    )
+                });
+                (center, collider)
+            }
+        };
 
         let mut particles = Vec::with_capacity(map.len());
         let mut particle_colliders = Vec::with_capacity(map.len());
@@ -364,6 +395,8 @@ impl BodyPlan {
             size_m,
             config,
             non_finite_recoveries: 0,
+            blend: level::Blend::default(),
+            dormant: false,
         };
         body.deform(world);
         body
@@ -427,8 +460,13 @@ impl SoftBody {
                 hi = hi.max(x);
             }
         }
-        if sleeping > 0 {
-            self.wake_if_approached(world, lo, hi);
+        let woke = sleeping > 0 && self.wake_if_approached(world, lo, hi);
+        self.dormant = !woke
+            && sleeping == self.particles.len()
+            && self.drives.iter().all(Option::is_none)
+            && world.bodies.get(self.center).is_some_and(|b| b.is_sleeping());
+        if self.dormant {
+            return;
         }
         let max_dv = self.config.max_velocity_change_mps;
         let thesis = self.config.restoring == RestoringScheme::Thesis;
@@ -489,7 +527,7 @@ impl SoftBody {
     /// body with sleeping particles checks each step for a moving collider, not its own, in
     /// its bounds (expanded by the largest particle radius plus 1 cm) and wakes all its
     /// particles if there is one. Soft CCD on the particles covers faster approaches.
-    fn wake_if_approached(&mut self, world: &mut PhysicsWorld, lo: Vec3, hi: Vec3) {
+    fn wake_if_approached(&mut self, world: &mut PhysicsWorld, lo: Vec3, hi: Vec3) -> bool {
         let margin = self
             .particle_radius_m
             .iter()
@@ -527,6 +565,7 @@ impl SoftBody {
                 }
             }
         }
+        intruder
     }
 
     /// Thesis 3.3 and Appendix A.11–A.12 in closed form: each vertex is its rest position moved
@@ -548,6 +587,9 @@ impl SoftBody {
             let u = x - (c + r * self.rest_offsets[i]);
             self.displacement[i] = if u.is_finite() { u } else { Vec3::ZERO };
         }
+        let blending = self.blend.active();
+        let r_inv = r.inverse();
+        let mut converged = true;
         for (v, out) in self.vertices.iter_mut().enumerate() {
             let mut p = c + r * self.rest_vertices[v];
             if self.map.soft_vertex[v] {
@@ -556,7 +598,16 @@ impl SoftBody {
                     p += self.displacement[pi as usize] * w;
                 }
             }
+            if blending {
+                let sim = r_inv * (p - c);
+                let shown = self.blend.follow(v, sim);
+                converged &= shown.distance_squared(sim) < 2.5e-9;
+                p = c + r * shown;
+            }
             *out = p;
+        }
+        if blending {
+            self.blend.finish_step(converged);
         }
         // Normals: area-weighted face normals accumulated into normal slots.
         self.slot_normals.iter_mut().for_each(|n| *n = Vec3::ZERO);
@@ -588,196 +639,6 @@ impl SoftBody {
         }
     }
 
-    /// The configuration it was built with.
-    pub fn config(&self) -> &SoftBodyConfig {
-        &self.config
-    }
-
-    /// The particle map.
-    pub fn particle_map(&self) -> &ParticleMap {
-        &self.map
-    }
-
-    /// The welded mesh (topology used for volume and metrics).
-    pub fn welded(&self) -> &WeldedMesh {
-        &self.welded
-    }
-
-    /// Rapier handle of the center body.
-    pub fn center(&self) -> RigidBodyHandle {
-        self.center
-    }
-
-    /// Rapier handle of the center's collider (world mode).
-    pub fn center_collider(&self) -> Option<ColliderHandle> {
-        self.center_collider
-    }
-
-    /// Rapier handles of the particle bodies.
-    pub fn particles(&self) -> &[RigidBodyHandle] {
-        &self.particles
-    }
-
-    /// Rapier handles of the particle colliders.
-    pub fn particle_colliders(&self) -> &[Option<ColliderHandle>] {
-        &self.particle_colliders
-    }
-
-    /// Collider radius of each particle, metres.
-    pub fn particle_radii_m(&self) -> &[f32] {
-        &self.particle_radius_m
-    }
-
-    /// Number of particles.
-    pub fn num_particles(&self) -> usize {
-        self.particles.len()
-    }
-
-    /// Particle positions, world space.
-    pub fn particle_positions(&self, world: &PhysicsWorld) -> Vec<Vec3> {
-        self.particles
-            .iter()
-            .map(|h| {
-                world
-                    .bodies
-                    .get(*h)
-                    .map(|b| b.translation())
-                    .unwrap_or(Vec3::ZERO)
-            })
-            .collect()
-    }
-
-    /// Particle rest positions relative to the center, in the center's frame.
-    pub fn rest_offsets(&self) -> &[Vec3] {
-        &self.rest_offsets
-    }
-
-    /// Center pose (translation, rotation).
-    pub fn center_pose(&self, world: &PhysicsWorld) -> (Vec3, Quat) {
-        world
-            .bodies
-            .get(self.center)
-            .map(|b| (b.translation(), *b.rotation()))
-            .unwrap_or((Vec3::ZERO, Quat::IDENTITY))
-    }
-
-    /// Puts the body in a replicated state: center pose and world-space particle positions,
-    /// velocities zeroed, mesh deformed to match. For a peer that shows a body another peer
-    /// simulates, and for the peer that just received authority. Refuses a wrong particle
-    /// count or non-finite values, changing nothing.
-    pub fn apply_state(
-        &mut self,
-        world: &mut PhysicsWorld,
-        center_pos: Vec3,
-        center_rot: Quat,
-        particles: &[Vec3],
-    ) -> Result<(), SoftBodyError> {
-        if particles.len() != self.particles.len() {
-            return Err(SoftBodyError::Config(format!(
-                "state has {} particles, the body {}",
-                particles.len(),
-                self.particles.len()
-            )));
-        }
-        if !(center_pos.is_finite() && center_rot.is_finite() && center_rot.length_squared() > 0.5)
-            || particles.iter().any(|p| !p.is_finite())
-        {
-            return Err(SoftBodyError::Config("state is not finite".into()));
-        }
-        if let Some(c) = world.bodies.get_mut(self.center) {
-            c.set_position(
-                rapier3d::prelude::Pose::from_parts(center_pos, center_rot.normalize()),
-                true,
-            );
-            if c.is_dynamic() {
-                c.set_linvel(Vec3::ZERO, true);
-                c.set_angvel(Vec3::ZERO, true);
-            }
-        }
-        for (&h, &p) in self.particles.iter().zip(particles) {
-            if let Some(b) = world.bodies.get_mut(h) {
-                b.set_translation(p, true);
-                b.set_linvel(Vec3::ZERO, true);
-            }
-        }
-        self.deform(world);
-        Ok(())
-    }
-
-    /// Drives particle `i` to `goal` (a grab of one particle, thesis 4.1.2), or releases it.
-    pub fn set_particle_drive(&mut self, i: usize, goal: Option<Vec3>) {
-        if let Some(d) = self.drives.get_mut(i) {
-            *d = goal.filter(|g| g.is_finite());
-        }
-    }
-
-    /// Deformed welded vertices, world space (after the last step).
-    pub fn vertices(&self) -> &[Vec3] {
-        &self.vertices
-    }
-
-    /// Welded rest vertices in the rest frame: relative to the rest center, in the center
-    /// body's local frame (a vertex is at `center + rotation · rest` when undeformed).
-    pub fn rest_vertices(&self) -> &[Vec3] {
-        &self.rest_vertices
-    }
-
-    /// The rest center in the frame the mesh was given in at insertion (the world then); the
-    /// rest frame is that frame moved to this point.
-    pub fn rest_center(&self) -> Vec3 {
-        self.rest_center
-    }
-
-    /// The render mesh at rest, in the rest frame, after every tear so far: the mesh tears
-    /// and cuts act on and peers compare (`cut::topology_hash`).
-    pub fn rest_mesh(&self) -> &Mesh {
-        &self.rest_mesh
-    }
-
-    /// Every tear box applied so far (those that removed or split a face), in the rest frame.
-    pub fn tear_boxes(&self) -> &[TearBoxPlanes] {
-        &self.tear_boxes
-    }
-
-    /// What the particle update of the last tear did.
-    pub fn last_particle_update(&self) -> ParticleUpdateStats {
-        self.last_particle_update
-    }
-
-    /// Where the last tear segment's time went, stage by stage.
-    pub fn last_tear_timings(&self) -> TearTimings {
-        self.last_tear_timings
-    }
-
-    /// Deformed render vertex positions, ready for a renderer.
-    pub fn render_positions(&self) -> &[Vec3] {
-        &self.render_positions
-    }
-
-    /// Recomputed render vertex normals.
-    pub fn render_normals(&self) -> &[Vec3] {
-        &self.render_normals
-    }
-
-    /// Render triangles (indices into the render vertices).
-    pub fn render_triangles(&self) -> &[[u32; 3]] {
-        &self.render_triangles
-    }
-
-    /// Enclosed volume of the rest mesh, m³.
-    pub fn rest_volume_m3(&self) -> f32 {
-        self.rest_volume_m3
-    }
-
-    /// Largest extent of the rest mesh, metres.
-    pub fn size_m(&self) -> f32 {
-        self.size_m
-    }
-
-    /// How many times a non-finite particle state was reset (should stay 0).
-    pub fn non_finite_recoveries(&self) -> u64 {
-        self.non_finite_recoveries
-    }
 }
 
 /// True for a kinematic body that moves this step or a dynamic body that is awake: what can

@@ -173,6 +173,43 @@ impl SoftBodySet {
         Ok(plans.iter().map(|(p, _)| p.map.len()).collect())
     }
 
+    /// Rebuilds body `handle` clustered with `config` (another resolution of the same rest
+    /// mesh), where it is now and moving as it moves, and returns its new handle; the old
+    /// handle is gone. The change shows no pop: the mesh is where it was, and the difference
+    /// the new particles cannot hold fades out at most 0.5 mm per step (see
+    /// [`SoftBody::is_blending`]). Particle drives are dropped (a hand holding the body takes
+    /// its new particle at its next update). Refused, changing nothing, for an unknown handle,
+    /// a torn body, or a config or clustering that fails.
+    pub fn reconfigure(
+        &mut self,
+        handle: SoftBodyHandle,
+        world: &mut PhysicsWorld,
+        config: SoftBodyConfig,
+    ) -> Result<SoftBodyHandle, SoftBodyError> {
+        config.validate()?;
+        let planned = self
+            .get(handle)
+            .ok_or_else(|| SoftBodyError::Config(format!("soft body {handle:?} is not in this set")))?
+            .plan_reconfigure(world, config)?;
+        // the particles go, the center stays (with its collision bit pair)
+        let Some(old) = self.take(handle) else {
+            return Err(SoftBodyError::Config(format!("soft body {handle:?} is not in this set")));
+        };
+        for &p in &old.particles {
+            world.remove_body(p);
+        }
+        let bit = match old
+            .center_collider
+            .and_then(|c| world.colliders.get(c))
+            .map(|c| c.collision_groups().memberships.bits())
+        {
+            Some(b) if b.trailing_zeros() >= 1 => b.trailing_zeros() - 1,
+            _ => self.next_group_bit(),
+        };
+        let body = planned.instantiate(world, bit);
+        Ok(self.insert_built(body))
+    }
+
     /// Which soft body (and which part of it) a rapier body belongs to, if any.
     pub fn part_of(&self, body: RigidBodyHandle) -> Option<SoftPart> {
         self.owners.get(&body).map(|&(h, p)| match p {
@@ -183,6 +220,15 @@ impl SoftBodySet {
 
     /// Removes a soft body and its rapier bodies.
     pub fn remove(&mut self, handle: SoftBodyHandle, world: &mut PhysicsWorld) -> Option<SoftBody> {
+        let body = self.take(handle)?;
+        for &h in body.particles.iter().chain(std::iter::once(&body.center)) {
+            world.remove_body(h);
+        }
+        Some(body)
+    }
+
+    /// Takes a body out of the set, leaving its rapier bodies in the world.
+    fn take(&mut self, handle: SoftBodyHandle) -> Option<SoftBody> {
         let slot = self.slots.get_mut(handle.index as usize)?;
         if slot.0 != handle.generation {
             return None;
@@ -192,9 +238,6 @@ impl SoftBodySet {
         self.owners.remove(&body.center);
         for p in &body.particles {
             self.owners.remove(p);
-        }
-        for &h in body.particles.iter().chain(std::iter::once(&body.center)) {
-            world.remove_body(h);
         }
         Some(body)
     }
@@ -254,7 +297,10 @@ impl SoftBodySet {
     pub fn post_physics(&mut self, world: &PhysicsWorld) {
         for (_, b) in self.slots.iter_mut() {
             if let Some(b) = b {
-                b.deform(world);
+                // a dormant body did not move: its mesh is as it was
+                if !b.dormant || b.blend.active() {
+                    b.deform(world);
+                }
             }
         }
     }

@@ -302,6 +302,7 @@ impl SoftBody {
                 linvel: vc,
                 angvel: wc,
                 displacement,
+                keep_center: None,
             };
             out.push((plan, spawn));
         }

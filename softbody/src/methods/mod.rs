@@ -15,7 +15,9 @@
 //! | [`native`] | rapier 0.36's own soft bodies as a model |
 //! | [`scene`] | rest / drop / squeeze / poke / impact scenarios for any model |
 //! | [`choice`] | cheapest method meeting an error and frame budget, from measured curves |
+//! | [`auto`] | `method: auto` at run time: a resolution ladder probed at load, a per-body controller |
 
+pub mod auto;
 pub mod builders;
 pub mod choice;
 pub mod ispc;

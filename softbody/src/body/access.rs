@@ -1,0 +1,206 @@
+//! The body's read side and its replicated-state entry point: getters over its rapier
+//! bodies, particle map and meshes, `apply_state` for replicas, and particle drives.
+
+use glam::{Quat, Vec3};
+use rapier3d::prelude::{ColliderHandle, PhysicsWorld, RigidBodyHandle};
+
+use super::{SoftBody, TearTimings};
+use crate::cluster::ParticleMap;
+use crate::config::SoftBodyConfig;
+use crate::cut::particles::ParticleUpdateStats;
+use crate::cut::TearBoxPlanes;
+use crate::mesh::{Mesh, WeldedMesh};
+use crate::SoftBodyError;
+
+impl SoftBody {
+    /// The configuration it was built with.
+    pub fn config(&self) -> &SoftBodyConfig {
+        &self.config
+    }
+
+    /// The particle map.
+    pub fn particle_map(&self) -> &ParticleMap {
+        &self.map
+    }
+
+    /// The welded mesh (topology used for volume and metrics).
+    pub fn welded(&self) -> &WeldedMesh {
+        &self.welded
+    }
+
+    /// Rapier handle of the center body.
+    pub fn center(&self) -> RigidBodyHandle {
+        self.center
+    }
+
+    /// Rapier handle of the center's collider (world mode).
+    pub fn center_collider(&self) -> Option<ColliderHandle> {
+        self.center_collider
+    }
+
+    /// Rapier handles of the particle bodies.
+    pub fn particles(&self) -> &[RigidBodyHandle] {
+        &self.particles
+    }
+
+    /// Rapier handles of the particle colliders.
+    pub fn particle_colliders(&self) -> &[Option<ColliderHandle>] {
+        &self.particle_colliders
+    }
+
+    /// Collider radius of each particle, metres.
+    pub fn particle_radii_m(&self) -> &[f32] {
+        &self.particle_radius_m
+    }
+
+    /// Number of particles.
+    pub fn num_particles(&self) -> usize {
+        self.particles.len()
+    }
+
+    /// Particle positions, world space.
+    pub fn particle_positions(&self, world: &PhysicsWorld) -> Vec<Vec3> {
+        self.particles
+            .iter()
+            .map(|h| {
+                world
+                    .bodies
+                    .get(*h)
+                    .map(|b| b.translation())
+                    .unwrap_or(Vec3::ZERO)
+            })
+            .collect()
+    }
+
+    /// Particle rest positions relative to the center, in the center's frame.
+    pub fn rest_offsets(&self) -> &[Vec3] {
+        &self.rest_offsets
+    }
+
+    /// Center pose (translation, rotation).
+    pub fn center_pose(&self, world: &PhysicsWorld) -> (Vec3, Quat) {
+        world
+            .bodies
+            .get(self.center)
+            .map(|b| (b.translation(), *b.rotation()))
+            .unwrap_or((Vec3::ZERO, Quat::IDENTITY))
+    }
+
+    /// Puts the body in a replicated state: center pose and world-space particle positions,
+    /// velocities zeroed, mesh deformed to match. For a peer that shows a body another peer
+    /// simulates, and for the peer that just received authority. Refuses a wrong particle
+    /// count or non-finite values, changing nothing.
+    pub fn apply_state(
+        &mut self,
+        world: &mut PhysicsWorld,
+        center_pos: Vec3,
+        center_rot: Quat,
+        particles: &[Vec3],
+    ) -> Result<(), SoftBodyError> {
+        if particles.len() != self.particles.len() {
+            return Err(SoftBodyError::Config(format!(
+                "state has {} particles, the body {}",
+                particles.len(),
+                self.particles.len()
+            )));
+        }
+        if !(center_pos.is_finite() && center_rot.is_finite() && center_rot.length_squared() > 0.5)
+            || particles.iter().any(|p| !p.is_finite())
+        {
+            return Err(SoftBodyError::Config("state is not finite".into()));
+        }
+        if let Some(c) = world.bodies.get_mut(self.center) {
+            c.set_position(
+                rapier3d::prelude::Pose::from_parts(center_pos, center_rot.normalize()),
+                true,
+            );
+            if c.is_dynamic() {
+                c.set_linvel(Vec3::ZERO, true);
+                c.set_angvel(Vec3::ZERO, true);
+            }
+        }
+        for (&h, &p) in self.particles.iter().zip(particles) {
+            if let Some(b) = world.bodies.get_mut(h) {
+                b.set_translation(p, true);
+                b.set_linvel(Vec3::ZERO, true);
+            }
+        }
+        self.deform(world);
+        Ok(())
+    }
+
+    /// Drives particle `i` to `goal` (a grab of one particle, thesis 4.1.2), or releases it.
+    pub fn set_particle_drive(&mut self, i: usize, goal: Option<Vec3>) {
+        if let Some(d) = self.drives.get_mut(i) {
+            *d = goal.filter(|g| g.is_finite());
+        }
+    }
+
+    /// Deformed welded vertices, world space (after the last step).
+    pub fn vertices(&self) -> &[Vec3] {
+        &self.vertices
+    }
+
+    /// Welded rest vertices in the rest frame: relative to the rest center, in the center
+    /// body's local frame (a vertex is at `center + rotation · rest` when undeformed).
+    pub fn rest_vertices(&self) -> &[Vec3] {
+        &self.rest_vertices
+    }
+
+    /// The rest center in the frame the mesh was given in at insertion (the world then); the
+    /// rest frame is that frame moved to this point.
+    pub fn rest_center(&self) -> Vec3 {
+        self.rest_center
+    }
+
+    /// The render mesh at rest, in the rest frame, after every tear so far: the mesh tears
+    /// and cuts act on and peers compare (`cut::topology_hash`).
+    pub fn rest_mesh(&self) -> &Mesh {
+        &self.rest_mesh
+    }
+
+    /// Every tear box applied so far (those that removed or split a face), in the rest frame.
+    pub fn tear_boxes(&self) -> &[TearBoxPlanes] {
+        &self.tear_boxes
+    }
+
+    /// What the particle update of the last tear did.
+    pub fn last_particle_update(&self) -> ParticleUpdateStats {
+        self.last_particle_update
+    }
+
+    /// Where the last tear segment's time went, stage by stage.
+    pub fn last_tear_timings(&self) -> TearTimings {
+        self.last_tear_timings
+    }
+
+    /// Deformed render vertex positions, ready for a renderer.
+    pub fn render_positions(&self) -> &[Vec3] {
+        &self.render_positions
+    }
+
+    /// Recomputed render vertex normals.
+    pub fn render_normals(&self) -> &[Vec3] {
+        &self.render_normals
+    }
+
+    /// Render triangles (indices into the render vertices).
+    pub fn render_triangles(&self) -> &[[u32; 3]] {
+        &self.render_triangles
+    }
+
+    /// Enclosed volume of the rest mesh, m³.
+    pub fn rest_volume_m3(&self) -> f32 {
+        self.rest_volume_m3
+    }
+
+    /// Largest extent of the rest mesh, metres.
+    pub fn size_m(&self) -> f32 {
+        self.size_m
+    }
+
+    /// How many times a non-finite particle state was reset (should stay 0).
+    pub fn non_finite_recoveries(&self) -> u64 {
+        self.non_finite_recoveries
+    }
+}
