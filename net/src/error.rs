@@ -39,6 +39,11 @@ pub enum NetError {
     /// The room's object id space is used up.
     #[error("no object ids left in this room")]
     IdsExhausted,
+    /// A state entry of particles laid out for another resolution of the object than ours
+    /// (sent before or after a resolution change we have not seen yet): it cannot be parsed,
+    /// so the rest of its block is skipped.
+    #[error("state of object {0:?} laid out for another resolution")]
+    OtherLayout(NetId),
 }
 
 /// Shorthand for a decode error.

@@ -15,6 +15,7 @@ pub fn decode_all(data: &[u8]) {
     let layout = EntryLayout {
         class: &class,
         particles: 300,
+        generation: 0,
     };
     let _ = Control::decode(data);
     let _ = decode_state_block(64, data, |_| Some(layout));

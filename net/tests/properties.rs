@@ -285,7 +285,7 @@ proptest! {
     #[test]
     fn state_entries_round_trip(entries in prop::collection::vec(arb_entry(100), 1..12)) {
         let class = soft_class();
-        let layout = EntryLayout { class: &class, particles: 100 };
+        let layout = EntryLayout { class: &class, particles: 100, generation: 0 };
         let mut entries = entries;
         entries.sort_by_key(|e| e.id);
         let mut w = BitWriter::new();
@@ -331,7 +331,7 @@ proptest! {
         }
         let _ = Control::decode(&bytes);
         let class = soft_class();
-        let layout = EntryLayout { class: &class, particles: 300 };
+        let layout = EntryLayout { class: &class, particles: 300, generation: 0 };
         let _ = decode_state_block(64, &bytes, |_| Some(layout));
         if let Ok((_, sections)) = decode_packet(&data) {
             for s in sections {

@@ -151,6 +151,7 @@ fn render() -> String {
     writeln!(w, "| eg | id − previous id in this block (first: id − 0) |").unwrap();
     writeln!(w, "| 4 | authority epoch tag (`(grant + 7·term) mod 16`); a mismatch drops the entry (stale owner) |").unwrap();
     writeln!(w, "| eg | part |").unwrap();
+    writeln!(w, "| 2 | particle chunks only (part ≥ 1): the object's layout generation mod 4 (resolution changes in its topology log, `method: auto`); a chunk of another generation ends the block's parsing (its length is unknown), the entries before it are kept |").unwrap();
     writeln!(w, "| {} | entry sequence |", wire::ENTRY_SEQ_BITS).unwrap();
     writeln!(w, "| 1 | keyframe |").unwrap();
     writeln!(
@@ -174,6 +175,7 @@ fn render() -> String {
     let layout = EntryLayout {
         class: rigid,
         particles: 0,
+        generation: 0,
     };
     let key = StateEntry {
         id: NetId(3),
@@ -216,6 +218,7 @@ fn render() -> String {
     let sl = EntryLayout {
         class: sb,
         particles: 60,
+        generation: 0,
     };
     let chunk = StateEntry {
         id: NetId(4),

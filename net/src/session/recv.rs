@@ -226,6 +226,7 @@ impl Session {
                 Some(EntryLayout {
                     class: cfg.classes.get(usize::from(o.info.class.0))?,
                     particles: o.info.particles,
+                    generation: o.topology.generation(),
                 })
             });
             let entries = match parsed {

@@ -477,6 +477,7 @@ impl Session {
                         EntryLayout {
                             class,
                             particles: o.info.particles,
+                            generation: o.topology.generation(),
                         },
                     ))
                 });

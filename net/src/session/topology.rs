@@ -69,6 +69,8 @@ pub(crate) struct TopologyLog {
     pub entries: Vec<TopologyEvent>,
     /// Start of the current one-second rate window, and events accepted in it.
     window: Option<(Instant, u32)>,
+    /// Resolution changes in `entries`: the object's particle layout generation.
+    resolutions: u32,
 }
 
 impl TopologyLog {
@@ -86,6 +88,26 @@ impl TopologyLog {
         true
     }
 
+    /// The particle layout generation: resolution changes in the log (the same on every
+    /// peer that has the same log, late joiners and pieces of a cut included).
+    pub(crate) fn generation(&self) -> u8 {
+        self.resolutions as u8
+    }
+
+    fn push(&mut self, event: TopologyEvent) {
+        self.resolutions += u32::from(matches!(event, TopologyEvent::Resolution { .. }));
+        self.entries.push(event);
+    }
+
+    /// Replaces the log (a cut's piece starts with its parent's).
+    pub(crate) fn set_entries(&mut self, entries: Vec<TopologyEvent>) {
+        self.resolutions = entries
+            .iter()
+            .filter(|e| matches!(e, TopologyEvent::Resolution { .. }))
+            .count() as u32;
+        self.entries = entries;
+    }
+
     /// A log entry `seq` from our host.
     fn receive(&mut self, seq: u32, event: TopologyEvent) -> Received {
         let seq = seq as usize;
@@ -96,8 +118,12 @@ impl TopologyLog {
             return Received::Duplicate;
         }
         let rewrote = seq < self.entries.len();
-        self.entries.truncate(seq);
-        self.entries.push(event);
+        if rewrote {
+            let mut kept = std::mem::take(&mut self.entries);
+            kept.truncate(seq);
+            self.set_entries(kept);
+        }
+        self.push(event);
         if rewrote {
             Received::Rewrote
         } else {
@@ -188,6 +214,7 @@ impl Session {
             }
             _ => pieces.is_empty(),
         } && event.valid();
+        let old_particles = o.info.particles;
         if !well_formed {
             refused.malformed += 1;
             return;
@@ -204,10 +231,56 @@ impl Session {
             self.host_cut(now, from, id, event, &pieces);
             return;
         }
+        if let TopologyEvent::Resolution { particles, .. } = event {
+            // the new layout replaces the old one in the owner's particle budget
+            let owned: u64 = self
+                .objects
+                .iter()
+                .filter(|o| o.info.owner == from)
+                .map(|o| u64::from(o.info.particles))
+                .sum();
+            let after = owned - u64::from(old_particles) + u64::from(particles);
+            if after > self.cfg.max_particles_per_peer as u64 {
+                self.topology_refused.no_room += 1;
+                return;
+            }
+        }
+        let Some(o) = self.objects.get_mut(id) else {
+            return;
+        };
         let seq = o.topology.entries.len() as u32;
-        o.topology.entries.push(event);
+        o.topology.push(event);
         self.broadcast(now, &Control::Topology { id, seq, event }, None);
+        if let TopologyEvent::Resolution { particles, .. } = event {
+            self.relayout(id, particles);
+        }
         self.events.push_back(Event::Topology { id, seq, event });
+    }
+
+    /// Object `id`'s particle layout changed to `particles` (a live resolution change): its
+    /// grid state, snapshots, what we published, the entries waiting to go and the delta
+    /// chains on every link are of the old layout and go; the owner publishes anew.
+    pub(super) fn relayout(&mut self, id: NetId, particles: u32) {
+        let Some(class) = self
+            .objects
+            .get(id)
+            .and_then(|o| self.cfg.classes.get(usize::from(o.info.class.0)))
+        else {
+            return;
+        };
+        let zero = class.particle_quantizer().quantize(glam::Vec3::ZERO);
+        if let Some(o) = self.objects.get_mut(id) {
+            o.info.particles = particles;
+            o.particles = vec![zero; particles as usize];
+            o.published = None;
+            o.buffer = Default::default();
+            o.rest = false;
+        }
+        for l in self.links.values_mut() {
+            l.pending.retain(|e| e.id != id);
+            l.send.forget_object(id);
+            l.recv.forget_object(id);
+        }
     }
 
     /// Host: a cut of `id` by `from` into pieces of `pieces` particles each.
@@ -287,7 +360,7 @@ impl Session {
             };
             self.insert_object(now, info.clone(), None);
             if let Some(o) = self.objects.get_mut(piece_id) {
-                o.topology.entries = log.clone();
+                o.topology.set_entries(log.clone());
                 if from != self.local {
                     o.source = Some(from);
                 }
@@ -333,8 +406,14 @@ impl Session {
             self.stats.refused_controls += 1;
             return;
         };
+        // entries the object's spawn announced are its history (a late join, a cut's piece):
+        // its spawn already has their particle count; later ones are live
+        let live = seq >= o.info.topology;
         match o.topology.receive(seq, event) {
             Received::Appended | Received::Rewrote => {
+                if let (true, TopologyEvent::Resolution { particles, .. }) = (live, event) {
+                    self.relayout(id, particles);
+                }
                 self.events.push_back(Event::Topology { id, seq, event });
             }
             Received::Duplicate => {}
@@ -362,11 +441,15 @@ mod tests {
 
     /// Host 1 with members 2 and 3; peer 2 owns a soft object (returned).
     fn room() -> (Wire, NetId) {
+        room_with(config())
+    }
+
+    fn room_with(cfg: crate::policy::SessionConfig) -> (Wire, NetId) {
         let mut w = Wire::new();
-        w.add(Session::host(PeerId(1), config(), w.now));
-        w.add(Session::join(PeerId(2), PeerId(1), config(), w.now));
+        w.add(Session::host(PeerId(1), cfg.clone(), w.now));
+        w.add(Session::join(PeerId(2), PeerId(1), cfg.clone(), w.now));
         w.settle();
-        w.add(Session::join(PeerId(3), PeerId(1), config(), w.now));
+        w.add(Session::join(PeerId(3), PeerId(1), cfg, w.now));
         w.settle();
         let st = ObjectState {
             pos: Vec3::new(0.0, 1.0, 0.0),
@@ -525,6 +608,159 @@ mod tests {
                 assert!(matches!(log[1], TopologyEvent::Cut { keep, .. } if keep as usize == k));
             }
         }
+    }
+
+    fn state(n: usize, spread: f32) -> ObjectState {
+        ObjectState {
+            pos: Vec3::new(0.0, 1.0, 0.0),
+            rot: Quat::IDENTITY,
+            particles: (0..n)
+                .map(|i| Vec3::new(0.0, 1.0, 0.0) + Vec3::X * spread * i as f32)
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn a_resolution_change_relays_the_object_out_everywhere_and_late_joiners_get_it() {
+        let (mut w, id) = room();
+        let now = w.now;
+        w.get(2).publish_state(now, id, &state(4, 0.01)).unwrap();
+        w.settle();
+        assert_eq!(w.get(3).latest_state(id).unwrap().particles.len(), 4);
+        let change = TopologyEvent::Resolution {
+            level: 2,
+            particles: 9,
+        };
+        w.get(2).request_topology(now, id, change, vec![]).unwrap();
+        // until the host confirms, the owner's layout is the old one
+        assert!(w.get(2).publish_state(now, id, &state(9, 0.01)).is_err());
+        w.get(2).publish_state(now, id, &state(4, 0.02)).unwrap();
+        w.settle();
+        for p in 1..=3 {
+            assert_eq!(topo_events(&mut w, p), vec![(id, 0, change)], "peer {p}");
+        }
+        let now = w.now;
+        assert!(matches!(
+            w.get(2).publish_state(now, id, &state(4, 0.01)),
+            Err(NetError::InvalidState(_))
+        ));
+        for _ in 0..5 {
+            w.now = w.now + Duration::from_millis(100);
+            let now = w.now;
+            w.get(2).publish_state(now, id, &state(9, 0.015)).unwrap();
+            w.settle();
+        }
+        for p in [1, 3] {
+            let got = w.get(p).latest_state(id).unwrap();
+            assert_eq!(got.particles.len(), 9, "peer {p}");
+            assert!(
+                got.particles[8].distance(state(9, 0.015).particles[8]) < 1e-3,
+                "peer {p}: {got:?}"
+            );
+            assert_eq!(w.get(p).stats().decode_errors, 0);
+        }
+        // a late joiner: the spawn has 9 particles, the log's change is history
+        w.add(Session::join(PeerId(4), PeerId(1), config(), w.now));
+        w.settle();
+        for _ in 0..3 {
+            w.now = w.now + Duration::from_millis(100);
+            let now = w.now;
+            w.get(2).publish_state(now, id, &state(9, 0.012)).unwrap();
+            w.settle();
+        }
+        assert_eq!(w.get(4).topology_log(id).unwrap(), &[change]);
+        let got = w.get(4).latest_state(id).unwrap();
+        assert_eq!(got.particles.len(), 9);
+        assert!(got.particles[8].distance(state(9, 0.012).particles[8]) < 1e-3);
+    }
+
+    #[test]
+    fn a_resolution_over_the_owners_particle_budget_or_out_of_range_is_refused() {
+        let cfg = crate::policy::SessionConfig {
+            max_particles_per_peer: 100,
+            ..config()
+        };
+        let (mut w, id) = room_with(cfg);
+        let now = w.now;
+        // the new layout replaces the old one in the budget: 100 fits, 101 does not
+        let fits = TopologyEvent::Resolution {
+            level: 1,
+            particles: 100,
+        };
+        let too_many = TopologyEvent::Resolution {
+            level: 2,
+            particles: 101,
+        };
+        w.get(2).request_topology(now, id, too_many, vec![]).unwrap();
+        w.settle();
+        assert_eq!(w.get(1).topology_refusals().no_room, 1);
+        assert!(w.get(3).topology_log(id).unwrap().is_empty());
+        w.get(2).request_topology(now, id, fits, vec![]).unwrap();
+        w.settle();
+        assert_eq!(w.get(3).topology_log(id).unwrap(), &[fits]);
+        for bad in [
+            TopologyEvent::Resolution {
+                level: crate::wire::MAX_RESOLUTION_LEVELS,
+                particles: 5,
+            },
+            TopologyEvent::Resolution {
+                level: 0,
+                particles: 0,
+            },
+        ] {
+            let msg = Control::Topology {
+                id,
+                seq: 0,
+                event: bad,
+            };
+            assert!(Control::decode(&msg.encode()).is_err(), "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn a_particle_chunk_of_another_layout_ends_its_block_without_an_error() {
+        use crate::policy::{ClassConfig, SendPolicy, SoftBodyMode};
+        use crate::wire::{
+            decode_state_block, ChunkEnc, EntryLayout, PartBody, StateBlockWriter, StateEntry,
+        };
+        let class = ClassConfig::soft_body("s", SendPolicy::default(), SoftBodyMode::Particles);
+        let layout = |generation| EntryLayout {
+            class: &class,
+            particles: 8,
+            generation,
+        };
+        let chunk = |id| StateEntry {
+            id: NetId(id),
+            epoch_tag: 0,
+            seq: 1,
+            key: true,
+            base: 0,
+            rest: false,
+            body: PartBody::Chunk {
+                chunk: 0,
+                values: ChunkEnc::Abs(vec![[1, 2, 3]; 8]),
+            },
+        };
+        let mut wr = StateBlockWriter::new(10_000);
+        wr.push(&chunk(1), &layout(0));
+        wr.push(&chunk(2), &layout(1));
+        wr.push(&chunk(3), &layout(0));
+        let (count, bytes) = wr.finish();
+        // the receiver is at generation 0 for objects 1 and 3, 2 for object 2 (it saw two
+        // changes; the sender one): object 2's chunk ends the block, 1's is kept
+        let (got, complete) = decode_state_block(count as u32, &bytes, |id| {
+            Some(if id == NetId(2) { layout(2) } else { layout(0) })
+        })
+        .unwrap();
+        assert_eq!(got.len(), 1);
+        assert!(!complete);
+        // and a transform part needs no layout: it never carries the generation
+        let (all, complete) = decode_state_block(count as u32, &bytes, |id| {
+            Some(if id == NetId(2) { layout(1) } else { layout(0) })
+        })
+        .unwrap();
+        assert_eq!(all.len(), 3);
+        assert!(complete);
     }
 
     #[test]

@@ -222,6 +222,14 @@ pub enum TopologyEvent {
         /// Which piece this object is.
         keep: u8,
     },
+    /// `method: auto`: the object's soft body now runs at resolution `level` of its class's
+    /// ladder, with `particles` particles; its replicated particle layout changes with it.
+    Resolution {
+        /// Level in the class's ladder, coarsest 0.
+        level: u8,
+        /// Particles at that level.
+        particles: u32,
+    },
 }
 
 /// The unit of [`TopologyEvent`] coordinates, metres (10 µm).
@@ -230,10 +238,13 @@ pub const TOPOLOGY_QUANTUM_M: f32 = 1e-5;
 pub const MAX_TOPOLOGY_COORD: i32 = 1_000_000;
 /// Most pieces one cut may make.
 pub const MAX_CUT_PIECES: usize = 16;
+/// Levels a [`TopologyEvent::Resolution`] may name.
+pub const MAX_RESOLUTION_LEVELS: u8 = 16;
 
 impl TopologyEvent {
     /// Within bounds: coordinates at most [`MAX_TOPOLOGY_COORD`], a non-zero normal, a piece
-    /// index below [`MAX_CUT_PIECES`].
+    /// index below [`MAX_CUT_PIECES`], a level below [`MAX_RESOLUTION_LEVELS`] with 1 to
+    /// [`MAX_PARTICLES`] particles.
     pub fn valid(&self) -> bool {
         let small = |a: &[i32; 3]| {
             a.iter()
@@ -250,6 +261,9 @@ impl TopologyEvent {
                 small(point)
                     && normal.iter().any(|&n| n != 0)
                     && usize::from(*keep) < MAX_CUT_PIECES
+            }
+            TopologyEvent::Resolution { level, particles } => {
+                *level < MAX_RESOLUTION_LEVELS && *particles >= 1 && *particles <= MAX_PARTICLES
             }
         }
     }

@@ -13,7 +13,7 @@ mod message;
 mod state;
 
 pub use control::{
-    Control, DenyReason, SpawnInfo, TopologyEvent, MAX_CUT_PIECES, MAX_TOPOLOGY_COORD,
+    Control, DenyReason, SpawnInfo, TopologyEvent, MAX_CUT_PIECES, MAX_RESOLUTION_LEVELS, MAX_TOPOLOGY_COORD,
     TOPOLOGY_QUANTUM_M,
 };
 pub use message::{
@@ -30,7 +30,7 @@ use crate::error::{decode_err, NetError};
 use crate::ids::{NetId, Term};
 
 /// Version byte at offset 0 of every datagram.
-pub const PROTOCOL_VERSION: u8 = 4;
+pub const PROTOCOL_VERSION: u8 = 5;
 /// First byte of the version-independent refusal datagram.
 pub const REFUSAL_MARKER: u8 = 0;
 /// Largest reliable control message (bytes), also the bincode decode limit.

@@ -9,6 +9,10 @@ use crate::quant::{read_quat, write_quat, QuatQ};
 
 use super::{ENTRY_SEQ_BITS, ENTRY_SEQ_MOD};
 
+/// Bits of the layout generation a particle chunk carries.
+const LAYOUT_BITS: u32 = 2;
+const LAYOUT_MASK: u8 = (1 << LAYOUT_BITS) - 1;
+
 /// Position payload of a transform part.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PosEnc {
@@ -72,6 +76,9 @@ pub struct EntryLayout<'a> {
     pub class: &'a ClassConfig,
     /// Particles of the object.
     pub particles: u32,
+    /// The object's layout generation (resolution changes so far; the low 2 bits go with
+    /// every particle chunk, so a chunk of another layout is recognised, not misparsed).
+    pub generation: u8,
 }
 
 impl EntryLayout<'_> {
@@ -99,6 +106,9 @@ impl StateEntry {
     pub fn encode_body(&self, layout: &EntryLayout, w: &mut BitWriter) {
         w.write(u32::from(self.epoch_tag & 0xF), 4);
         w.write_exp_golomb(self.part());
+        if self.part() > 0 {
+            w.write(u32::from(layout.generation & LAYOUT_MASK), LAYOUT_BITS);
+        }
         w.write(u32::from(self.seq % ENTRY_SEQ_MOD), ENTRY_SEQ_BITS);
         w.write_bool(self.key);
         w.write_bool(self.rest);
@@ -187,6 +197,9 @@ impl StateEntry {
     ) -> Result<StateEntry, NetError> {
         let epoch_tag = r.read(4)? as u8;
         let part = r.read_exp_golomb()?;
+        if part > 0 && r.read(LAYOUT_BITS)? as u8 != layout.generation & LAYOUT_MASK {
+            return Err(NetError::OtherLayout(id));
+        }
         let seq = r.read(ENTRY_SEQ_BITS)? as u8;
         let key = r.read_bool()?;
         let rest = r.read_bool()?;
@@ -362,7 +375,10 @@ pub fn decode_state_block_sized<'c>(
             return Ok((out, false));
         };
         let at = r.bits_read();
-        let entry = StateEntry::decode_body(id, &layout, &mut r)?;
+        let entry = match StateEntry::decode_body(id, &layout, &mut r) {
+            Err(NetError::OtherLayout(_)) => return Ok((out, false)),
+            e => e?,
+        };
         out.push((entry, r.bits_read() - at));
         prev = Some(id);
     }
@@ -442,6 +458,7 @@ mod tests {
         let layout = EntryLayout {
             class: &class,
             particles: 60,
+            generation: 0,
         };
         for list in [
             vec![(3u32, [1i32, -2, 3])],
@@ -491,6 +508,7 @@ mod tests {
         let layout = EntryLayout {
             class: &class,
             particles: 0,
+            generation: 0,
         };
         let mut w = StateBlockWriter::new(10_000);
         let mut written = Vec::new();
@@ -518,6 +536,7 @@ mod tests {
         let layout = EntryLayout {
             class: &class,
             particles: 0,
+            generation: 0,
         };
         let e = transform_entry(1, 0);
         let mut probe = StateBlockWriter::new(usize::MAX);
