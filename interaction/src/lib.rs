@@ -20,7 +20,7 @@ use softsync_softbody::rapier3d::parry::shape::Ball;
 use softsync_softbody::rapier3d::prelude::{
     ColliderBuilder, PhysicsWorld, Pose, QueryFilter, RigidBodyBuilder, RigidBodyHandle,
 };
-use softsync_softbody::{SoftBodySet, SoftPart};
+use softsync_softbody::{SoftBodyHandle, SoftBodySet, SoftPart};
 
 pub use config::{ConfigError, HandConfig, HoldMode, SoftGrab};
 pub use events::InteractionEvent;
@@ -202,6 +202,58 @@ impl Interaction {
                     self.events
                         .push_back(InteractionEvent::GrabDenied { hand: i, object });
                 }
+            }
+        }
+    }
+
+    /// Soft body `old` was replaced by `new` (another resolution of it): holds, waits, hovers
+    /// and rest watches on `old` move to `new`, a held particle `i` becoming particle
+    /// `particle(i)` of `new` (`None`: the hand lets go, without a throw). A holding hand
+    /// takes its offsets anew at the next update, so the body does not jump to the hand.
+    pub fn replace_soft(
+        &mut self,
+        old: SoftBodyHandle,
+        new: SoftBodyHandle,
+        particle: impl Fn(u32) -> Option<u32>,
+    ) {
+        let map = |t: Target| -> Option<Target> {
+            match t {
+                Target::SoftCenter(h) if h == old => Some(Target::SoftCenter(new)),
+                Target::SoftParticle(h, i) if h == old => {
+                    particle(i).map(|j| Target::SoftParticle(new, j))
+                }
+                t => Some(t),
+            }
+        };
+        for h in &mut self.hands {
+            h.state = match h.state {
+                HandState::Waiting { target } => match map(target) {
+                    Some(target) => HandState::Waiting { target },
+                    None => HandState::Free,
+                },
+                HandState::Holding { target, .. } if target.object() == ObjectRef::Soft(old) => {
+                    match map(target) {
+                        Some(target) => HandState::Holding {
+                            target,
+                            offset_m: Vec3::NAN,
+                            offset_rot: Quat::IDENTITY,
+                        },
+                        None => HandState::Free,
+                    }
+                }
+                s => s,
+            };
+            h.hovered.retain_mut(|hv| match map(hv.target) {
+                Some(t) => {
+                    hv.target = t;
+                    true
+                }
+                None => false,
+            });
+        }
+        for r in &mut self.resting {
+            if r.0 == ObjectRef::Soft(old) {
+                r.0 = ObjectRef::Soft(new);
             }
         }
     }

@@ -103,4 +103,8 @@ pub struct Counters {
     pub rejoins: u64,
     /// Topology log entries (tears, lifts, cuts) applied to our mirror.
     pub topology_events: u64,
+    /// `method: auto`: resolution changes we asked for as an owner.
+    pub resolution_requests: u64,
+    /// `method: auto`: our bodies' mode changes (asleep, touched, squeezed) as their owner.
+    pub auto_mode_changes: u64,
 }

@@ -45,6 +45,9 @@ pub struct MirroredObject {
     pub pose: (Vec3, Quat),
     /// Entries of its topology log applied to its body.
     pub topology: u32,
+    /// Its resolution level (`method: auto`), if a resolution change named one; `None`: the
+    /// class's spawn level.
+    pub level: Option<u8>,
 }
 
 /// The local world and the networked objects in it.
@@ -145,6 +148,7 @@ impl Mirror {
                 avatar_of,
                 pose: (Vec3::ZERO, Quat::IDENTITY),
                 topology: 0,
+                level: None,
             },
         );
     }
@@ -185,6 +189,7 @@ impl Mirror {
     /// are objects of their own).
     pub(crate) fn apply_topology(
         &mut self,
+        scene: &Scene,
         id: NetId,
         event: &TopologyEvent,
     ) -> Result<(), TopologyError> {
@@ -218,10 +223,32 @@ impl Mirror {
                 }
                 let kept =
                     kept.ok_or_else(|| TopologyError(format!("the cut made no piece {keep}")))?;
-                self.by_ref.remove(&ObjectRef::Soft(h));
-                self.by_ref.insert(ObjectRef::Soft(kept), id);
+                self.replace_soft(id, h, kept);
+            }
+            TopologyEvent::Resolution { level, particles } => {
+                let kind = o.kind;
+                let config = scene
+                    .level_config(kind, usize::from(*level))
+                    .ok_or_else(|| {
+                        TopologyError(format!(
+                            "{} has no resolution level {level}",
+                            scene.name_of(kind)
+                        ))
+                    })?;
+                let new = self
+                    .soft
+                    .reconfigure(h, &mut self.world, config.clone())
+                    .map_err(|e| TopologyError(e.to_string()))?;
+                self.replace_soft(id, h, new);
                 if let Some(o) = self.objects.get_mut(&id) {
-                    o.body = LocalBody::Soft(kept);
+                    o.level = Some(*level);
+                }
+                let n = self.soft.get(new).map_or(0, |b| b.num_particles());
+                if n != *particles as usize {
+                    return Err(TopologyError(format!(
+                        "level {level} of {} has {n} particles here, {particles} at its owner",
+                        scene.name_of(kind)
+                    )));
                 }
             }
         }
@@ -229,6 +256,16 @@ impl Mirror {
             o.topology += 1;
         }
         Ok(())
+    }
+
+    /// Object `id`'s soft body `old` was replaced by `new` (a cut's piece, another
+    /// resolution).
+    fn replace_soft(&mut self, id: NetId, old: SoftBodyHandle, new: SoftBodyHandle) {
+        self.by_ref.remove(&ObjectRef::Soft(old));
+        self.by_ref.insert(ObjectRef::Soft(new), id);
+        if let Some(o) = self.objects.get_mut(&id) {
+            o.body = LocalBody::Soft(new);
+        }
     }
 
     /// Set the pose of a pose-only object (an avatar part).

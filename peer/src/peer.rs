@@ -9,6 +9,7 @@
 //! news, calls [`Peer::pump`] and [`Peer::fixed_step`] with `now`, and sends what
 //! [`Peer::poll_transmit`] gives it.
 
+mod auto;
 pub(crate) mod topology;
 
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
@@ -78,6 +79,8 @@ pub struct Peer {
     counters: Counters,
     /// Per hand: the scalpel its trigger holds (see `topology`).
     scalpels: [topology::Scalpel; 2],
+    /// `method: auto` bodies we own.
+    auto: auto::AutoBodies,
     sim_time_s: f64,
     steps: u64,
     last_step_at: Instant,
@@ -135,6 +138,7 @@ impl Peer {
             events: VecDeque::new(),
             counters: Counters::default(),
             scalpels: Default::default(),
+            auto: Default::default(),
             sim_time_s: 0.0,
             steps: 0,
             last_step_at: Instant::ZERO,
@@ -506,6 +510,7 @@ impl Peer {
         }
         self.use_scalpels(now);
         self.mirror.soft.step(&mut self.mirror.world, dt);
+        self.run_auto(now);
         // Remote soft bodies: show exactly the interpolated state again after the step.
         for id in &remote {
             let soft = matches!(
@@ -533,6 +538,11 @@ impl Peer {
                 continue;
             };
             let s = self.mirror.body_state(o.body, o.pose);
+            let layout = self.session.particles_of(id).map(|n| n as usize);
+            if matches!(o.body, LocalBody::Soft(_)) && layout != Some(s.particles.len()) {
+                // a resolution change the session has and our body gets at the next pump
+                continue;
+            }
             if let Err(e) = self.session.publish_state(now, id, &s) {
                 let msg = format!("not publishing {}: {e}", self.scene.name_of(o.kind));
                 self.events.push_back(Event::Warning(msg));

@@ -29,7 +29,8 @@ struct Press {
 impl Press {
     fn new() -> Self {
         let mut world = PhysicsWorld::new();
-        let floor = world.insert_body(RigidBodyBuilder::fixed().translation(Vec3::new(0.0, -0.5, 0.0)));
+        let floor =
+            world.insert_body(RigidBodyBuilder::fixed().translation(Vec3::new(0.0, -0.5, 0.0)));
         world.insert_collider(ColliderBuilder::cuboid(1.0, 0.5, 1.0), Some(floor));
         let plate = world.insert_body(
             RigidBodyBuilder::kinematic_position_based().translation(Vec3::new(0.0, 0.12, 0.0)),
@@ -37,7 +38,11 @@ impl Press {
         world.insert_collider(ColliderBuilder::cuboid(0.2, 0.005, 0.2), Some(plate));
         let mesh = Mesh::cuboid(Vec3::splat(0.05), 10);
         let mesh = Mesh {
-            positions: mesh.positions.iter().map(|p| *p + Vec3::Y * 0.052).collect(),
+            positions: mesh
+                .positions
+                .iter()
+                .map(|p| *p + Vec3::Y * 0.052)
+                .collect(),
             ..mesh
         };
         let mut set = SoftBodySet::new();
@@ -68,7 +73,10 @@ fn plate_y(step: u32) -> f32 {
 }
 
 fn max_diff(a: &[Vec3], b: &[Vec3]) -> f32 {
-    a.iter().zip(b).map(|(x, y)| x.distance(*y)).fold(0.0, f32::max)
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| x.distance(*y))
+        .fold(0.0, f32::max)
 }
 
 #[test]
@@ -128,8 +136,14 @@ fn a_switch_to_a_finer_resolution_mid_squeeze_moves_no_vertex_more_than_a_millim
 fn a_torn_body_and_an_unknown_handle_are_refused_and_nothing_changes() {
     let mut p = Press::new();
     let n = p.set.len();
-    let gone = p.set.reconfigure(p.body, &mut p.world, config(0.02)).unwrap();
-    assert!(p.set.reconfigure(p.body, &mut p.world, config(0.02)).is_err());
+    let gone = p
+        .set
+        .reconfigure(p.body, &mut p.world, config(0.02))
+        .unwrap();
+    assert!(p
+        .set
+        .reconfigure(p.body, &mut p.world, config(0.02))
+        .is_err());
     assert!(p.set.get(gone).is_some());
     assert_eq!(p.set.len(), n);
     let bad = SoftBodyConfig {
@@ -144,7 +158,10 @@ fn a_torn_body_and_an_unknown_handle_are_refused_and_nothing_changes() {
         blade: Vec3::new(0.0, -0.03, 0.0),
     };
     p.set.tear(gone, &mut p.world, &seg).unwrap();
-    let e = p.set.reconfigure(gone, &mut p.world, config(0.015)).unwrap_err();
+    let e = p
+        .set
+        .reconfigure(gone, &mut p.world, config(0.015))
+        .unwrap_err();
     assert!(e.to_string().contains("torn"), "{e}");
     assert!(p.set.get(gone).is_some());
 }
@@ -154,7 +171,10 @@ fn the_probe_orders_the_ladder_and_picks_levels_within_the_budgets() {
     fn clock() -> f64 {
         use std::sync::OnceLock;
         static T0: OnceLock<std::time::Instant> = OnceLock::new();
-        T0.get_or_init(std::time::Instant::now).elapsed().as_secs_f64() * 1e3
+        T0.get_or_init(std::time::Instant::now)
+            .elapsed()
+            .as_secs_f64()
+            * 1e3
     }
     let mesh = Mesh::cuboid(Vec3::splat(0.05), 6);
     let settings = AutoSettings {
@@ -167,11 +187,18 @@ fn the_probe_orders_the_ladder_and_picks_levels_within_the_budgets() {
     assert!(ladder.particles[0] < ladder.particles[1] && ladder.particles[1] < ladder.particles[2]);
     ladder.probe(&mesh, &settings, clock).unwrap();
     let p = &ladder.probed;
-    assert_eq!(p[2].error_mm, 0.0, "the finest level is the probe's reference");
-    assert!(p.iter().all(|c| c.error_mm.is_finite() && c.cost_ms.is_finite()));
+    assert_eq!(
+        p[2].error_mm, 0.0,
+        "the finest level is the probe's reference"
+    );
+    assert!(p
+        .iter()
+        .all(|c| c.error_mm.is_finite() && c.cost_ms.is_finite()));
     assert!(p[0].error_mm > 0.0);
     // everything fits a lax budget: touch is the cheapest, squeeze the most accurate
-    let cheapest = (0..3).min_by(|&a, &b| p[a].cost_ms.total_cmp(&p[b].cost_ms)).unwrap();
+    let cheapest = (0..3)
+        .min_by(|&a, &b| p[a].cost_ms.total_cmp(&p[b].cost_ms))
+        .unwrap();
     assert_eq!(ladder.touch, cheapest);
     assert_eq!(ladder.squeeze, 2);
     // a budget nothing but the finest meets: touch goes there; no cost budget: squeeze = touch
@@ -206,4 +233,3 @@ fn a_sleeping_body_skips_its_step_and_wakes_when_something_moves_into_it() {
     assert!(!p.set.get(p.body).unwrap().activity(&p.world).asleep);
     assert!(moved > 0.005, "moved {moved}");
 }
-

@@ -6,128 +6,13 @@
 //! the pieces owned by the client, showing the same positions once at rest.
 #![allow(clippy::unwrap_used, missing_docs)]
 
-use std::path::PathBuf;
+mod common;
+
 use std::time::Duration;
 
-use glam::{Quat, Vec3};
-use softsync_interaction::{HandInput, HandSample};
-use softsync_net::transport::HubEndpoint;
-use softsync_net::{
-    ConditionerConfig, Instant, LinkConditioner, MemoryHub, NetId, PeerId, SendPolicy, Session,
-    Transport,
-};
-use softsync_peer::{Event, Peer, PeerConfig, Scene};
-
-const DT: f32 = 1.0 / 90.0;
-const HOST: PeerId = PeerId(100);
-const CLIENT: PeerId = PeerId(101);
-
-struct Node {
-    peer: Peer,
-    link: LinkConditioner<HubEndpoint>,
-    warnings: Vec<String>,
-}
-
-impl Node {
-    fn new(hub: &MemoryHub, me: PeerId, seed: u64) -> Self {
-        let assets = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets");
-        let scene = Scene::by_name("thesis-room", &assets).unwrap();
-        let policy = SendPolicy::default();
-        let cfg = scene.session_config(policy.clone(), policy.clone(), policy);
-        let (session, contact) = if me == HOST {
-            (Session::host(me, cfg, Instant::ZERO), None)
-        } else {
-            (Session::join(me, HOST, cfg, Instant::ZERO), Some(HOST))
-        };
-        let config = PeerConfig {
-            dt_s: DT,
-            avatar: false,
-            ..PeerConfig::default()
-        };
-        let mut peer = Peer::new(Instant::ZERO, session, contact, scene, config).unwrap();
-        if me == HOST {
-            peer.open(Instant::ZERO).unwrap();
-        }
-        let link = ConditionerConfig {
-            seed,
-            latency: Duration::from_millis(20),
-            jitter: Duration::from_millis(5),
-            loss: 0.02,
-            ..ConditionerConfig::default()
-        };
-        Node {
-            peer,
-            link: LinkConditioner::new(hub.endpoint(me), link),
-            warnings: Vec::new(),
-        }
-    }
-
-    fn frame(&mut self, now: Instant) {
-        self.frame_with(now, None);
-    }
-
-    /// A frame with the right hand's input (position, trigger) if given.
-    fn frame_with(&mut self, now: Instant, hand: Option<(Vec3, f32)>) {
-        while let Some((from, bytes)) = self.link.recv(now) {
-            self.peer.handle_datagram(now, from, &bytes);
-        }
-        while let Some(e) = self.link.poll_peer_event() {
-            self.peer.handle_link_event(e);
-        }
-        self.peer.pump(now).unwrap();
-        if self.peer.joined() {
-            if let Some((p, trigger)) = hand {
-                let input = HandInput {
-                    sample: HandSample {
-                        position_m: p,
-                        rotation: Quat::IDENTITY,
-                        time_s: now.as_secs_f64(),
-                    },
-                    grip: 0.0,
-                    trigger,
-                };
-                self.peer.set_hand_input(1, input);
-            }
-            self.peer.fixed_step(now);
-        }
-        while let Some(t) = self.peer.poll_transmit(now) {
-            self.link.send(now, &t);
-        }
-        while let Some(e) = self.peer.poll_event() {
-            if let Event::Warning(w) = e {
-                self.warnings.push(w);
-            }
-        }
-    }
-
-    /// The objects of class `name`.
-    fn id_of(&self, name: &str) -> Vec<NetId> {
-        let kind = self.peer.scene().kind(name);
-        self.peer
-            .objects()
-            .iter()
-            .filter(|(_, o)| Some(o.kind) == kind)
-            .map(|(id, _)| *id)
-            .collect()
-    }
-}
-
-struct Room {
-    nodes: [Node; 2],
-    now: Instant,
-}
-
-impl Room {
-    fn run(&mut self, d: Duration) {
-        let end = self.now + d;
-        while self.now < end {
-            for n in &mut self.nodes {
-                n.frame(self.now);
-            }
-            self.now += Duration::from_secs_f32(DT);
-        }
-    }
-}
+use common::hub::{Node, Room, CLIENT, DT, HOST};
+use glam::Vec3;
+use softsync_net::{Instant, MemoryHub};
 
 #[test]
 fn a_client_tears_the_bunny_and_cuts_the_box_and_the_host_shows_the_same_pieces() {

@@ -332,7 +332,13 @@ impl Session {
         self.objects.get(id).map(|o| o.info.epoch)
     }
 
-    /// Class of an object.
+    /// An object's particle count (its layout: set at spawn, changed by a resolution change
+    /// in its topology log, which the application applies at the [`Event::Topology`]).
+    pub fn particles_of(&self, id: NetId) -> Option<u32> {
+        self.objects.get(id).map(|o| o.info.particles)
+    }
+
+    /// An object's class.
     pub fn class_of(&self, id: NetId) -> Option<ClassId> {
         self.objects.get(id).map(|o| o.info.class)
     }

@@ -691,7 +691,9 @@ mod tests {
             level: 2,
             particles: 101,
         };
-        w.get(2).request_topology(now, id, too_many, vec![]).unwrap();
+        w.get(2)
+            .request_topology(now, id, too_many, vec![])
+            .unwrap();
         w.settle();
         assert_eq!(w.get(1).topology_refusals().no_room, 1);
         assert!(w.get(3).topology_log(id).unwrap().is_empty());

@@ -218,15 +218,38 @@ impl Peer {
     /// next one. A failure is a warning: the body keeps its last shape.
     pub(super) fn on_topology(&mut self, now: Instant, id: NetId, seq: u32, event: TopologyEvent) {
         let applied = self.mirror.topology_applied(id);
+        let body_before = self.mirror.objects.get(&id).map(|o| o.body);
+        let particles_before = match body_before {
+            Some(LocalBody::Soft(h)) => self
+                .mirror
+                .soft
+                .get(h)
+                .map(|b| b.particle_positions(&self.mirror.world))
+                .unwrap_or_default(),
+            _ => Vec::new(),
+        };
         let result = if seq == applied {
-            self.mirror.apply_topology(id, &event)
+            self.mirror.apply_topology(&self.scene, id, &event)
         } else {
             let log = self.session.topology_log(id).unwrap_or(&[]).to_vec();
             self.rebuild(now, id).and_then(|()| {
                 log.iter()
-                    .try_for_each(|e| self.mirror.apply_topology(id, e))
+                    .try_for_each(|e| self.mirror.apply_topology(&self.scene, id, e))
             })
         };
+        if let (
+            TopologyEvent::Resolution { .. },
+            Some(LocalBody::Soft(old)),
+            Some(LocalBody::Soft(new)),
+        ) = (
+            event,
+            body_before,
+            self.mirror.objects.get(&id).map(|o| o.body),
+        ) {
+            if old != new {
+                self.hands_follow(old, new, &particles_before);
+            }
+        }
         match result {
             Ok(()) => self.counters.topology_events += 1,
             Err(e) => {

@@ -36,7 +36,11 @@ use softsync_net::{AuthorityPolicy, SendPolicy};
 use softsync_softbody::rapier3d::prelude::{ColliderBuilder, PhysicsWorld};
 use softsync_softbody::{Mesh, SoftBodyConfig, SoftBodySet};
 
-use super::{avatar_classes, rotation_deg, BodyClass, Class, FixedBox, Kind, Placed, Scene, Shape};
+use softsync_softbody::methods::auto::AutoSettings;
+
+use super::{
+    avatar_classes, rotation_deg, AutoClass, BodyClass, Class, FixedBox, Kind, Placed, Scene, Shape,
+};
 
 /// A scene file's extension.
 pub const SCENE_EXTENSION: &str = ".ron";
@@ -132,6 +136,23 @@ enum BodyFile {
     },
     /// The particle method's settings: any field of `SoftBodyConfig`, the rest default.
     Soft(SoftBodyConfig),
+    /// `method: auto`: the particle method at the resolution the object needs now (asleep
+    /// at rest, the cheapest level within `error_budget_mm` when touched, the most accurate
+    /// within `cost_budget_ms` when squeezed); `soft` is the 1× level. Fields left out take
+    /// the defaults of `softbody::methods::auto::AutoSettings`.
+    Auto {
+        soft: SoftBodyConfig,
+        #[serde(default)]
+        error_budget_mm: Option<f32>,
+        #[serde(default)]
+        cost_budget_ms: Option<f32>,
+        #[serde(default)]
+        resolutions: Option<Vec<f32>>,
+        #[serde(default)]
+        squeeze_mm: Option<f32>,
+        #[serde(default)]
+        rest_s: Option<f32>,
+    },
 }
 
 #[derive(Deserialize)]
@@ -436,7 +457,8 @@ fn friction(v: f32) -> Result<f32, String> {
 
 /// One class, checked, its mesh loaded, a soft class built once in a scratch world.
 fn class(c: ClassFile, dir: &Path) -> Result<Class, String> {
-    let soft = matches!(c.body, BodyFile::Soft(_));
+    let mut auto = None;
+    let soft = matches!(c.body, BodyFile::Soft(_) | BodyFile::Auto { .. });
     let shape = match c.shape {
         ShapeFile::Ball {
             radius,
@@ -479,7 +501,7 @@ fn class(c: ClassFile, dir: &Path) -> Result<Class, String> {
             size_m: size("shape.size_m", size_m)?,
         },
     };
-    let body = match c.body {
+    let mut body = match c.body {
         BodyFile::Rigid {
             density,
             friction: f,
@@ -496,6 +518,30 @@ fn class(c: ClassFile, dir: &Path) -> Result<Class, String> {
         }
         BodyFile::Soft(cfg) => {
             cfg.validate().map_err(|e| format!("body: {e}"))?;
+            BodyClass::Soft(Box::new(cfg))
+        }
+        BodyFile::Auto {
+            soft: cfg,
+            error_budget_mm,
+            cost_budget_ms,
+            resolutions,
+            squeeze_mm,
+            rest_s,
+        } => {
+            cfg.validate().map_err(|e| format!("body.soft: {e}"))?;
+            let d = AutoSettings::default();
+            let settings = AutoSettings {
+                error_budget_mm: error_budget_mm.unwrap_or(d.error_budget_mm),
+                cost_budget_ms: cost_budget_ms.unwrap_or(d.cost_budget_ms),
+                resolutions: resolutions.unwrap_or(d.resolutions),
+                squeeze_mm: squeeze_mm.unwrap_or(d.squeeze_mm),
+                rest_s: rest_s.unwrap_or(d.rest_s),
+                ..d
+            };
+            settings
+                .validate()
+                .map_err(|e| format!("body: {}", e.to_string().replace("auto.", "")))?;
+            auto = Some(settings);
             BodyClass::Soft(Box::new(cfg))
         }
     };
@@ -524,13 +570,20 @@ fn class(c: ClassFile, dir: &Path) -> Result<Class, String> {
         } if soft => Some(Mesh::cuboid(*half_extents_m, *subdivisions)),
         _ => None,
     };
-    if let (BodyClass::Soft(cfg), Some(m)) = (&body, &mesh) {
+    let mut auto_class = None;
+    if let (BodyClass::Soft(cfg), Some(m)) = (&mut body, &mesh) {
         // Built once now: a setting that fails only on a real mesh (too few particles, no
         // hull for the centre) stops the scene here, not at the first spawn.
         let mut world = PhysicsWorld::new();
         SoftBodySet::new()
             .insert(m, (**cfg).clone(), &mut world)
             .map_err(|e| format!("body: a soft body of this shape cannot be built: {e}"))?;
+        if let Some(settings) = auto {
+            let a = AutoClass::new(m, cfg, settings).map_err(|e| format!("body: {e}"))?;
+            // objects spawn at the 1x level on every peer; their owner moves them from there
+            **cfg = a.ladder.configs[a.base].clone();
+            auto_class = Some(Box::new(a));
+        }
     }
     Ok(Class {
         name: c.name,
@@ -540,6 +593,7 @@ fn class(c: ClassFile, dir: &Path) -> Result<Class, String> {
         replication: c.replication,
         authority: c.authority,
         mesh,
+        auto: auto_class,
     })
 }
 
@@ -564,6 +618,10 @@ fn digest(scene: &Scene) -> u64 {
     };
     for c in &scene.classes {
         eat(format!("{}|{:?}|{:?}|", c.name, c.shape, c.body).as_bytes());
+        if let Some(a) = &c.auto {
+            // the ladder, not the probe's figures (they are this machine's)
+            eat(format!("auto|{:?}|{:?}|", a.settings, a.ladder.configs).as_bytes());
+        }
         if let Some(m) = &c.mesh {
             for p in &m.positions {
                 for x in p.to_array() {

@@ -18,6 +18,7 @@ use glam::{EulerRot, Quat, Vec3};
 use softsync_net::{
     AuthorityPolicy, ClassConfig, ClassId, SendPolicy, SessionConfig, SoftBodyMode,
 };
+use softsync_softbody::methods::auto::{AutoMode, AutoSettings, Ladder};
 use softsync_softbody::rapier3d::prelude::*;
 use softsync_softbody::{Mesh, SoftBodyConfig};
 
@@ -121,6 +122,53 @@ pub struct Class {
     /// A soft class's mesh, sized and centred, or a rigid mesh class's points (loaded with
     /// the scene, so a missing file stops the scene, not the first spawn).
     mesh: Option<Mesh>,
+    /// A soft class with `method: auto`: its resolution ladder.
+    pub auto: Option<Box<AutoClass>>,
+}
+
+/// A soft class's `method: auto` (see `softbody::methods::auto`): the ladder of resolutions,
+/// probed on this machine when the scene loaded, and the level objects spawn at.
+#[derive(Clone, Debug)]
+pub struct AutoClass {
+    /// Budgets and hysteresis.
+    pub settings: AutoSettings,
+    /// The levels, what the probe measured, the touch and squeeze levels it picked.
+    pub ladder: Ladder,
+    /// The level objects spawn at on every peer (the one nearest 1×).
+    pub base: usize,
+}
+
+impl AutoClass {
+    /// Builds and probes the ladder of `base` for `mesh` (the probe: a few hundred steps of
+    /// each level; its clock is this machine's).
+    pub fn new(mesh: &Mesh, base: &SoftBodyConfig, settings: AutoSettings) -> Result<Self, String> {
+        let mut ladder = Ladder::new(mesh, base, &settings).map_err(|e| e.to_string())?;
+        let base = ladder.touch;
+        ladder
+            .probe(mesh, &settings, wall_ms)
+            .map_err(|e| format!("auto probe: {e}"))?;
+        Ok(AutoClass {
+            settings,
+            ladder,
+            base,
+        })
+    }
+
+    /// The level for a mode.
+    pub fn level(&self, mode: AutoMode) -> usize {
+        self.ladder.level(mode)
+    }
+}
+
+/// Milliseconds of this process's wall clock (the auto probe's timer).
+fn wall_ms() -> f64 {
+    use std::sync::OnceLock;
+    static START: OnceLock<std::time::Instant> = OnceLock::new();
+    START
+        .get_or_init(std::time::Instant::now)
+        .elapsed()
+        .as_secs_f64()
+        * 1e3
 }
 
 impl std::fmt::Debug for Class {
@@ -417,7 +465,22 @@ impl Scene {
         }
     }
 
-    /// A soft class's settings.
+    /// A soft class's `method: auto`, if it has one.
+    pub fn auto(&self, kind: Kind) -> Option<&AutoClass> {
+        self.class(kind)?.auto.as_deref()
+    }
+
+    /// A soft class's settings at resolution `level` (`method: auto`; any other soft class
+    /// has level 0 only).
+    pub fn level_config(&self, kind: Kind, level: usize) -> Option<&SoftBodyConfig> {
+        match self.auto(kind) {
+            Some(a) => a.ladder.configs.get(level),
+            None if level == 0 => self.soft_config(kind),
+            None => None,
+        }
+    }
+
+    /// A soft class's settings (for `method: auto`, its spawn level's).
     pub fn soft_config(&self, kind: Kind) -> Option<&SoftBodyConfig> {
         match &self.class(kind)?.body {
             BodyClass::Soft(c) => Some(c),
@@ -445,6 +508,7 @@ fn avatar_classes() -> [Class; 2] {
         replication: ReplicationFile::default(),
         authority: AuthorityPolicy::Free,
         mesh: None,
+        auto: None,
     };
     [
         part("head", Vec3::new(0.08, 0.1, 0.09)),

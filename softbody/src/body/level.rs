@@ -33,6 +33,9 @@ pub struct Activity {
     pub max_displacement_m: f32,
     /// The center's linear speed, m/s.
     pub speed_mps: f32,
+    /// The fastest particle's speed relative to the body's rigid motion, m/s: how fast the
+    /// body is changing shape.
+    pub deformation_speed_mps: f32,
     /// The center and every particle are asleep.
     pub asleep: bool,
 }
@@ -44,8 +47,9 @@ pub(crate) struct Blend {
     shown: Vec<Vec3>,
     steps: u32,
     active: bool,
-    /// The next deformation shows the shown mesh as it is (the switch itself).
-    hold: bool,
+    /// Set by the step for its deformation: only a step moves the shown mesh toward the
+    /// simulated one (a replica's `apply_state` before and after the step does not).
+    stepping: bool,
 }
 
 impl Blend {
@@ -56,17 +60,18 @@ impl Blend {
     /// The most a shown vertex may move toward the simulated one this step: `BLEND_STEP_M`
     /// for `MAX_BLEND_STEPS` steps, then doubling every 30 steps (a body squeezed faster than
     /// the fade still converges).
+    pub(crate) fn start_step(&mut self) {
+        self.stepping = self.active;
+    }
+
     fn limit_m(&self) -> f32 {
-        if self.hold {
-            return 0.0;
-        }
         let over = self.steps.saturating_sub(MAX_BLEND_STEPS) / 30;
         BLEND_STEP_M * (1u32 << over.min(16)) as f32
     }
 
     /// The shown position of vertex `v` (center-frame deformation `sim`), moved toward `sim`.
     pub(crate) fn follow(&mut self, v: usize, sim: Vec3) -> Vec3 {
-        let limit = self.limit_m();
+        let limit = if self.stepping { self.limit_m() } else { 0.0 };
         match self.shown.get_mut(v) {
             Some(q) => {
                 let d = sim - *q;
@@ -85,7 +90,7 @@ impl Blend {
     /// After a step's vertices: ends the blend once every shown vertex is at its simulated
     /// place (`converged`).
     pub(crate) fn finish_step(&mut self, converged: bool) {
-        if std::mem::take(&mut self.hold) {
+        if !std::mem::take(&mut self.stepping) {
             return;
         }
         self.steps += 1;
@@ -124,7 +129,18 @@ impl SoftBody {
                 .particles
                 .iter()
                 .all(|h| world.bodies.get(*h).is_none_or(|b| b.is_sleeping()));
+        let (c, vc, wc) = center.map_or((Vec3::ZERO, Vec3::ZERO, Vec3::ZERO), |b| {
+            (b.translation(), b.linvel(), b.angvel())
+        });
+        let deformation_speed_mps = self
+            .particles
+            .iter()
+            .filter_map(|h| world.bodies.get(*h))
+            .map(|b| (b.linvel() - vc - wc.cross(b.translation() - c)).length())
+            .filter(|v| v.is_finite())
+            .fold(0.0f32, f32::max);
         Activity {
+            deformation_speed_mps,
             driven: self.drives.iter().any(Option::is_some),
             max_displacement_m: self
                 .displacement
@@ -169,14 +185,15 @@ impl SoftBody {
                 "a torn body keeps its resolution".into(),
             ));
         }
-        let center = world
-            .bodies
-            .get(self.center)
-            .ok_or_else(|| SoftBodyError::Config("the body's center is not in this world".into()))?;
+        let center = world.bodies.get(self.center).ok_or_else(|| {
+            SoftBodyError::Config("the body's center is not in this world".into())
+        })?;
         let (c, r) = (center.translation(), *center.rotation());
         let (vc, wc) = (center.linvel(), center.angvel());
         if !(c.is_finite() && r.is_finite() && vc.is_finite() && wc.is_finite()) {
-            return Err(SoftBodyError::Config("the body's center state is not finite".into()));
+            return Err(SoftBodyError::Config(
+                "the body's center state is not finite".into(),
+            ));
         }
         // The rest mesh in the frame the body was built in, so a soft region still applies.
         let baked = crate::Mesh {
@@ -276,7 +293,7 @@ impl SoftBody {
             shown,
             steps: 0,
             active: true,
-            hold: true,
+            stepping: false,
         };
         self.deform(world);
     }

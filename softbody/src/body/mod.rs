@@ -15,8 +15,8 @@
 //! (a resolution change while running, and the blend that hides it).
 
 mod access;
-mod level;
 pub(crate) mod handle;
+mod level;
 pub(crate) mod set;
 mod topology;
 
@@ -218,9 +218,8 @@ impl BodyPlan {
             map0
         };
         // Thesis 3.2.1 / Figure 3.8: the center is the mean of the particles.
-        let rest_center = rest_center.unwrap_or_else(|| {
-            map.rest_particles.iter().copied().sum::<Vec3>() / map.len() as f32
-        });
+        let rest_center = rest_center
+            .unwrap_or_else(|| map.rest_particles.iter().copied().sum::<Vec3>() / map.len() as f32);
         let rest_offsets: Vec<Vec3> = map
             .rest_particles
             .iter()
@@ -464,7 +463,10 @@ impl SoftBody {
         self.dormant = !woke
             && sleeping == self.particles.len()
             && self.drives.iter().all(Option::is_none)
-            && world.bodies.get(self.center).is_some_and(|b| b.is_sleeping());
+            && world
+                .bodies
+                .get(self.center)
+                .is_some_and(|b| b.is_sleeping());
         if self.dormant {
             return;
         }
@@ -638,7 +640,6 @@ impl SoftBody {
                 .normalize_or_zero();
         }
     }
-
 }
 
 /// True for a kinematic body that moves this step or a dynamic body that is awake: what can

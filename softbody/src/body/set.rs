@@ -189,11 +189,15 @@ impl SoftBodySet {
         config.validate()?;
         let planned = self
             .get(handle)
-            .ok_or_else(|| SoftBodyError::Config(format!("soft body {handle:?} is not in this set")))?
+            .ok_or_else(|| {
+                SoftBodyError::Config(format!("soft body {handle:?} is not in this set"))
+            })?
             .plan_reconfigure(world, config)?;
         // the particles go, the center stays (with its collision bit pair)
         let Some(old) = self.take(handle) else {
-            return Err(SoftBodyError::Config(format!("soft body {handle:?} is not in this set")));
+            return Err(SoftBodyError::Config(format!(
+                "soft body {handle:?} is not in this set"
+            )));
         };
         for &p in &old.particles {
             world.remove_body(p);
@@ -299,6 +303,7 @@ impl SoftBodySet {
             if let Some(b) = b {
                 // a dormant body did not move: its mesh is as it was
                 if !b.dormant || b.blend.active() {
+                    b.blend.start_step();
                     b.deform(world);
                 }
             }

@@ -42,11 +42,13 @@ pub struct AutoSettings {
     pub cost_budget_ms: f32,
     /// Resolution factors of the ladder: cluster radii times these, coarsest (largest) first.
     pub resolutions: Vec<f32>,
-    /// A particle displaced this far from its rest target is a squeeze, mm.
+    /// A particle displaced this much further from its rest target than when the body was
+    /// last calm (a body resting on a table is already displaced a little) is a squeeze, mm.
     pub squeeze_mm: f32,
     /// Seconds a squeeze must stay under half `squeeze_mm` before the body goes back down.
     pub settle_s: f32,
-    /// Seconds a body must be still and free (no particle over 1 mm, under 2 cm/s) to sleep.
+    /// Seconds a body must be still and free (not held, under 2 cm/s, its shape changing
+    /// under 1 cm/s) to sleep.
     pub rest_s: f32,
     /// Seconds in a mode before the body may go down from it.
     pub min_dwell_s: f32,
@@ -304,12 +306,15 @@ fn probe_run(
     let height = (hi.y - lo.y).max(1e-3);
     let half = ((hi - lo).max_element() * 0.5 + 0.05).max(0.1);
     let mut world = PhysicsWorld::new();
-    let floor = world.insert_body(RigidBodyBuilder::fixed().translation(glam::Vec3::new(0.0, -0.5, 0.0)));
-    world.insert_collider(ColliderBuilder::cuboid(half * 4.0, 0.5, half * 4.0), Some(floor));
+    let floor =
+        world.insert_body(RigidBodyBuilder::fixed().translation(glam::Vec3::new(0.0, -0.5, 0.0)));
+    world.insert_collider(
+        ColliderBuilder::cuboid(half * 4.0, 0.5, half * 4.0),
+        Some(floor),
+    );
     let top0 = height + 0.002 + 0.01 + 0.005;
     let plate = world.insert_body(
-        RigidBodyBuilder::kinematic_position_based()
-            .translation(glam::Vec3::new(0.0, top0, 0.0)),
+        RigidBodyBuilder::kinematic_position_based().translation(glam::Vec3::new(0.0, top0, 0.0)),
     );
     world.insert_collider(ColliderBuilder::cuboid(half, 0.005, half), Some(plate));
     let mut set = SoftBodySet::new();
@@ -382,6 +387,9 @@ pub struct AutoController {
     since_s: f64,
     /// Since when the conditions to go down have held, seconds.
     calm_since_s: Option<f64>,
+    /// The largest particle displacement when the body was last calm (its resting
+    /// deformation), metres: squeezes are measured from it.
+    baseline_m: Option<f32>,
 }
 
 impl AutoController {
@@ -391,6 +399,7 @@ impl AutoController {
             mode: AutoMode::Touched,
             since_s: now_s,
             calm_since_s: None,
+            baseline_m: None,
         }
     }
 
@@ -407,7 +416,12 @@ impl AutoController {
         settings: &AutoSettings,
     ) -> Option<AutoMode> {
         let squeeze_m = settings.squeeze_mm * 1e-3;
-        let up = if a.max_displacement_m >= squeeze_m {
+        let still = !a.driven && a.speed_mps < 0.02 && a.deformation_speed_mps < 0.01;
+        if still && self.mode != AutoMode::Squeezed {
+            self.baseline_m = Some(a.max_displacement_m);
+        }
+        let extra = a.max_displacement_m - *self.baseline_m.get_or_insert(a.max_displacement_m);
+        let up = if extra >= squeeze_m {
             Some(AutoMode::Squeezed)
         } else if self.mode == AutoMode::Asleep && (!a.asleep || a.driven) {
             Some(AutoMode::Touched)
@@ -420,10 +434,8 @@ impl AutoController {
             }
         }
         let calm = match self.mode {
-            AutoMode::Squeezed => a.max_displacement_m < 0.5 * squeeze_m,
-            AutoMode::Touched => {
-                !a.driven && a.max_displacement_m < 1e-3 && a.speed_mps < 0.02
-            }
+            AutoMode::Squeezed => extra < 0.5 * squeeze_m,
+            AutoMode::Touched => still,
             AutoMode::Asleep => false,
         };
         if !calm {
@@ -463,6 +475,7 @@ mod tests {
             driven,
             max_displacement_m: d_mm * 1e-3,
             speed_mps: v,
+            deformation_speed_mps: v,
             asleep,
         }
     }
@@ -471,13 +484,25 @@ mod tests {
     fn the_controller_goes_up_at_once_and_down_only_after_calm_and_dwell() {
         let s = AutoSettings::default();
         let mut c = AutoController::new(0.0);
+        // a resting body deformed 4 mm by its own weight is not squeezed: its baseline
+        assert_eq!(c.update(0.0, &act(4.0, 0.0, false, false), &s), None);
+        assert_eq!(c.update(0.05, &act(0.0, 0.0, false, false), &s), None);
         // still and free for rest_s: asleep
         assert_eq!(c.update(0.1, &act(0.0, 0.0, false, false), &s), None);
-        assert_eq!(c.update(1.2, &act(0.0, 0.0, false, false), &s), Some(AutoMode::Asleep));
+        assert_eq!(
+            c.update(1.2, &act(0.0, 0.0, false, false), &s),
+            Some(AutoMode::Asleep)
+        );
         // a grab wakes it at once
-        assert_eq!(c.update(1.3, &act(0.0, 0.0, true, false), &s), Some(AutoMode::Touched));
+        assert_eq!(
+            c.update(1.3, &act(0.0, 0.0, true, false), &s),
+            Some(AutoMode::Touched)
+        );
         // a squeeze: up at once
-        assert_eq!(c.update(1.31, &act(8.0, 0.0, true, false), &s), Some(AutoMode::Squeezed));
+        assert_eq!(
+            c.update(1.31, &act(8.0, 0.0, true, false), &s),
+            Some(AutoMode::Squeezed)
+        );
         // it eases to 4 mm (over half of 6): stays squeezed, however long
         assert_eq!(c.update(3.0, &act(4.0, 0.0, true, false), &s), None);
         // under 3 mm, but flapping: each spike restarts the settle time
@@ -485,7 +510,10 @@ mod tests {
         assert_eq!(c.update(3.4, &act(3.5, 0.0, true, false), &s), None);
         assert_eq!(c.update(3.5, &act(2.0, 0.0, true, false), &s), None);
         assert_eq!(c.update(3.9, &act(2.0, 0.0, true, false), &s), None);
-        assert_eq!(c.update(4.01, &act(2.0, 0.0, true, false), &s), Some(AutoMode::Touched));
+        assert_eq!(
+            c.update(4.01, &act(2.0, 0.0, true, false), &s),
+            Some(AutoMode::Touched)
+        );
         // held: never sleeps
         assert_eq!(c.update(9.0, &act(0.0, 0.0, true, false), &s), None);
         assert_eq!(c.update(20.0, &act(0.0, 0.0, true, false), &s), None);
@@ -499,13 +527,19 @@ mod tests {
         };
         let mut c = AutoController::new(0.0);
         for k in 0..100 {
-            assert_eq!(c.update(k as f64 * 0.1, &act(0.0, 0.5, false, false), &s), None);
+            assert_eq!(
+                c.update(k as f64 * 0.1, &act(0.0, 0.5, false, false), &s),
+                None
+            );
         }
         let mut c = AutoController::new(0.0);
         assert_eq!(c.update(0.0, &act(0.0, 0.0, false, false), &s), None);
         // calm for 1.5 s (over rest_s) but the mode is younger than min_dwell_s
         assert_eq!(c.update(1.5, &act(0.0, 0.0, false, false), &s), None);
-        assert_eq!(c.update(2.0, &act(0.0, 0.0, false, false), &s), Some(AutoMode::Asleep));
+        assert_eq!(
+            c.update(2.0, &act(0.0, 0.0, false, false), &s),
+            Some(AutoMode::Asleep)
+        );
     }
 
     #[test]
@@ -514,11 +548,19 @@ mod tests {
             resolutions: vec![1.0, 2.0],
             ..AutoSettings::default()
         };
-        assert!(bad.validate().unwrap_err().to_string().contains("decreasing"));
+        assert!(bad
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("decreasing"));
         let bad = AutoSettings {
             error_budget_mm: f32::NAN,
             ..AutoSettings::default()
         };
-        assert!(bad.validate().unwrap_err().to_string().contains("error_budget_mm"));
+        assert!(bad
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("error_budget_mm"));
     }
 }

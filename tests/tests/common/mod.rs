@@ -8,6 +8,7 @@
 )]
 
 pub mod dump;
+pub mod hub;
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};

@@ -1,0 +1,141 @@
+//! Two `softsync_peer::Peer`s in-process on virtual time, on net's in-memory hub behind the
+//! seeded link conditioner (20 ms, 5 ms jitter, 2 % loss): a host and a client, each with a
+//! scene of its own choosing, stepped frame by frame with an optional hand input.
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use glam::{Quat, Vec3};
+use softsync_interaction::{HandInput, HandSample};
+use softsync_net::transport::HubEndpoint;
+use softsync_net::{
+    ConditionerConfig, Instant, LinkConditioner, MemoryHub, NetId, PeerId, SendPolicy, Session,
+    Transport,
+};
+use softsync_peer::{Event, Peer, PeerConfig, Scene};
+
+pub const DT: f32 = 1.0 / 90.0;
+pub const HOST: PeerId = PeerId(100);
+pub const CLIENT: PeerId = PeerId(101);
+
+pub struct Node {
+    pub peer: Peer,
+    pub link: LinkConditioner<HubEndpoint>,
+    pub warnings: Vec<String>,
+}
+
+impl Node {
+    /// The shipped scene `name` (or a path).
+    pub fn new(hub: &MemoryHub, me: PeerId, seed: u64) -> Self {
+        Self::with_scene(hub, me, seed, "thesis-room")
+    }
+
+    pub fn with_scene(hub: &MemoryHub, me: PeerId, seed: u64, name: &str) -> Self {
+        let assets = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets");
+        let scene = Scene::by_name(name, &assets).unwrap();
+        Self::with(hub, me, seed, scene)
+    }
+
+    pub fn with(hub: &MemoryHub, me: PeerId, seed: u64, scene: Scene) -> Self {
+        let policy = SendPolicy::default();
+        let cfg = scene.session_config(policy.clone(), policy.clone(), policy);
+        let (session, contact) = if me == HOST {
+            (Session::host(me, cfg, Instant::ZERO), None)
+        } else {
+            (Session::join(me, HOST, cfg, Instant::ZERO), Some(HOST))
+        };
+        let config = PeerConfig {
+            dt_s: DT,
+            avatar: false,
+            ..PeerConfig::default()
+        };
+        let mut peer = Peer::new(Instant::ZERO, session, contact, scene, config).unwrap();
+        if me == HOST {
+            peer.open(Instant::ZERO).unwrap();
+        }
+        let link = ConditionerConfig {
+            seed,
+            latency: Duration::from_millis(20),
+            jitter: Duration::from_millis(5),
+            loss: 0.02,
+            ..ConditionerConfig::default()
+        };
+        Node {
+            peer,
+            link: LinkConditioner::new(hub.endpoint(me), link),
+            warnings: Vec::new(),
+        }
+    }
+
+    pub fn frame(&mut self, now: Instant) {
+        self.frame_with(now, None);
+    }
+
+    /// A frame with the right hand's input (position, trigger) if given.
+    pub fn frame_with(&mut self, now: Instant, hand: Option<(Vec3, f32)>) {
+        let input = hand.map(|(p, trigger)| HandInput {
+            sample: HandSample {
+                position_m: p,
+                rotation: Quat::IDENTITY,
+                time_s: now.as_secs_f64(),
+            },
+            grip: 0.0,
+            trigger,
+        });
+        self.frame_input(now, input);
+    }
+
+    /// A frame with the right hand's full input if given.
+    pub fn frame_input(&mut self, now: Instant, input: Option<HandInput>) {
+        while let Some((from, bytes)) = self.link.recv(now) {
+            self.peer.handle_datagram(now, from, &bytes);
+        }
+        while let Some(e) = self.link.poll_peer_event() {
+            self.peer.handle_link_event(e);
+        }
+        self.peer.pump(now).unwrap();
+        if self.peer.joined() {
+            if let Some(input) = input {
+                self.peer.set_hand_input(1, input);
+            }
+            self.peer.fixed_step(now);
+        }
+        while let Some(t) = self.peer.poll_transmit(now) {
+            self.link.send(now, &t);
+        }
+        while let Some(e) = self.peer.poll_event() {
+            if let Event::Warning(w) = e {
+                self.warnings.push(w);
+            }
+        }
+    }
+
+    /// The objects of class `name`.
+    pub fn id_of(&self, name: &str) -> Vec<NetId> {
+        let kind = self.peer.scene().kind(name);
+        self.peer
+            .objects()
+            .iter()
+            .filter(|(_, o)| Some(o.kind) == kind)
+            .map(|(id, _)| *id)
+            .collect()
+    }
+}
+
+pub struct Room {
+    pub nodes: [Node; 2],
+    pub now: Instant,
+}
+
+impl Room {
+    pub fn run(&mut self, d: Duration) {
+        let end = self.now + d;
+        while self.now < end {
+            for n in &mut self.nodes {
+                n.frame(self.now);
+            }
+            self.now += Duration::from_secs_f32(DT);
+        }
+    }
+}
