@@ -80,6 +80,20 @@ enum BenchSub {
         #[arg(long)]
         quick: bool,
     },
+    /// `method: auto` against every soft body at its finest and at its 1x level: the
+    /// thesis room (assets/thesis-room-auto.ron) in-process, one bot script, step cost and
+    /// the error each soft body shows (`RESULT framework.auto`).
+    Auto {
+        /// Output directory.
+        #[arg(long, default_value = "docs/results/auto")]
+        out: PathBuf,
+        /// Seconds of the script (it takes 15; less cuts it short).
+        #[arg(long, default_value_t = 16.0, value_parser = positive::<600>)]
+        seconds: f64,
+        /// Where the shipped scenes and meshes are (default: ./assets, or next to the binary).
+        #[arg(long)]
+        assets: Option<PathBuf>,
+    },
     /// Rooms of growing size.
     RoomLoad {
         /// Output directory.
@@ -328,6 +342,15 @@ pub enum Command {
         /// Fewer configurations.
         quick: bool,
     },
+    /// `method: auto` against fixed resolutions.
+    BenchAuto {
+        /// Output directory.
+        out: PathBuf,
+        /// Seconds of the script.
+        seconds: f64,
+        /// The assets folder, if given.
+        assets: Option<PathBuf>,
+    },
     /// Rooms of growing size.
     BenchRoomLoad {
         /// Output directory.
@@ -518,6 +541,18 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
             out,
             seconds,
             quick,
+        },
+        Sub::Bench {
+            which:
+                BenchSub::Auto {
+                    out,
+                    seconds,
+                    assets,
+                },
+        } => Command::BenchAuto {
+            out,
+            seconds,
+            assets,
         },
         Sub::Bench {
             which:

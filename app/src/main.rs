@@ -94,6 +94,14 @@ fn run(args: &[String]) -> Result<ExitCode, Failure> {
             bench::net_live(&out, seconds, quick).map_err(Failure::runtime)?;
             Ok(ExitCode::SUCCESS)
         }
+        Command::BenchAuto {
+            out,
+            seconds,
+            assets,
+        } => {
+            bench::auto(&out, seconds, &assets_dir(assets.as_deref())).map_err(Failure::runtime)?;
+            Ok(ExitCode::SUCCESS)
+        }
         Command::BenchRoomLoad {
             out,
             seconds,

@@ -232,4 +232,7 @@ fn a_sleeping_body_skips_its_step_and_wakes_when_something_moves_into_it() {
     }
     assert!(!p.set.get(p.body).unwrap().activity(&p.world).asleep);
     assert!(moved > 0.005, "moved {moved}");
+    // and it rests where it did, on the floor under the plate, not through it
+    let c = p.set.get(p.body).unwrap().center_pose(&p.world).0;
+    assert!(c.y > 0.03 && c.y < 0.07, "center at {c}");
 }

@@ -161,3 +161,51 @@ fn the_owner_moves_the_box_between_levels_as_it_is_used_and_the_replica_follows(
     }
     assert!(room.nodes[1].peer.counters().resolution_requests >= 2);
 }
+
+/// The short version of `scripts/bench-auto`: the binary's `bench auto` over the first 4 s of
+/// its script (the soft ball's grab and squeeze) writes its tables and a RESULT line with
+/// every field; the error is a measurement, bounded only to catch a broken comparison.
+#[test]
+fn bench_auto_writes_its_tables_and_result_line() {
+    let dir = common::scratch("bench-auto");
+    let out = std::process::Command::new(common::binary())
+        .args(["bench", "auto", "--seconds", "4", "--out"])
+        .arg(&dir)
+        .arg("--assets")
+        .arg(common::repo_file("assets"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("RESULT framework.auto "))
+        .unwrap_or_else(|| panic!("no RESULT line: {stdout}"));
+    for key in [
+        "frame_ms",
+        "fixed_frame_ms",
+        "base_frame_ms",
+        "worst_error_mm",
+    ] {
+        let v: f64 = common::field(line, key).parse().unwrap();
+        assert!(v.is_finite() && v >= 0.0, "{key}={v}");
+    }
+    let worst: f64 = common::field(line, "worst_error_mm").parse().unwrap();
+    assert!(worst < 50.0, "{line}");
+    for f in [
+        "auto.csv",
+        "auto_frames.csv",
+        "auto_ladders.csv",
+        "auto.svg",
+    ] {
+        assert!(dir.join(f).is_file(), "{f}");
+    }
+    let ladders = std::fs::read_to_string(dir.join("auto_ladders.csv")).unwrap();
+    for class in ["bunny", "softball", "softbox"] {
+        assert!(ladders.contains(class), "{ladders}");
+    }
+}

@@ -18,8 +18,10 @@
 //! `softsync bench room-load` (rooms of growing size) is in [`load`]; both spawn peers with
 //! this module's [`Proc`].
 
+mod auto;
 mod load;
 
+pub use auto::auto;
 pub use load::room_load;
 
 use std::collections::BTreeMap;

@@ -163,10 +163,12 @@ impl SoftBody {
         self.blend.max_step_m()
     }
 
-    /// Puts the center and every particle to sleep (a body at rest that should cost nothing
-    /// until something touches it).
+    /// Puts every particle to sleep (a body at rest that should cost nothing until
+    /// something touches it): while they sleep, nothing drives them and the center is still,
+    /// the step skips the body. The center is left to rapier (it sleeps when it rests): put
+    /// to sleep by hand on a body that rapier then wakes, its contacts could be lost.
     pub fn sleep(&mut self, world: &mut PhysicsWorld) {
-        for &h in self.particles.iter().chain(std::iter::once(&self.center)) {
+        for &h in &self.particles {
             if let Some(b) = world.bodies.get_mut(h) {
                 b.sleep();
             }

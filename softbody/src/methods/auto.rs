@@ -16,7 +16,8 @@
 //!   sleep and its step is skipped, it costs one bounds query), touched (the touch level),
 //!   squeezed (the squeeze level). Up is immediate — a grab, a contact that wakes it, a
 //!   squeeze deeper than [`AutoSettings::squeeze_mm`]; down waits: a squeeze must stay under
-//!   half that depth for [`AutoSettings::settle_s`], and a body must be still and free for
+//!   half that depth (or the body be still: not held, its shape no longer changing) for
+//!   [`AutoSettings::settle_s`], and a body must be still and free for
 //!   [`AutoSettings::rest_s`] before it sleeps, and no mode is left before
 //!   [`AutoSettings::min_dwell_s`] — so it does not flap.
 //!
@@ -143,6 +144,10 @@ pub fn scaled(config: &SoftBodyConfig, factor: f32) -> SoftBodyConfig {
 /// One soft class's levels, what the probe measured, and the two levels it picked.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Ladder {
+    /// The resolution factor of each level (from [`AutoSettings::resolutions`]; a factor that
+    /// clusters to as many particles as the level before it is left out: it would cost a
+    /// switch and change nothing).
+    pub resolutions: Vec<f32>,
     /// The config of each level, coarsest first.
     pub configs: Vec<SoftBodyConfig>,
     /// Particles of each level.
@@ -167,23 +172,28 @@ impl Ladder {
     ) -> Result<Self, SoftBodyError> {
         settings.validate()?;
         let mut configs = Vec::new();
-        let mut particles = Vec::new();
+        let mut particles: Vec<usize> = Vec::new();
+        let mut resolutions = Vec::new();
         for (i, f) in settings.resolutions.iter().enumerate() {
             let c = scaled(base, *f);
             c.validate()
                 .map_err(|e| SoftBodyError::Config(format!("auto level {i} (×{f}): {e}")))?;
             let plan = crate::body::BodyPlan::new(mesh, c.clone())
                 .map_err(|e| SoftBodyError::Config(format!("auto level {i} (×{f}): {e}")))?;
+            if particles.last() == Some(&plan.map.len()) {
+                continue;
+            }
             particles.push(plan.map.len());
             configs.push(c);
+            resolutions.push(*f);
         }
-        let base_level = settings
-            .resolutions
+        let base_level = resolutions
             .iter()
             .enumerate()
             .min_by(|a, b| (a.1 - 1.0).abs().total_cmp(&(b.1 - 1.0).abs()))
             .map_or(0, |(i, _)| i);
         Ok(Ladder {
+            resolutions,
             configs,
             particles,
             probed: Vec::new(),
@@ -210,7 +220,7 @@ impl Ladder {
         };
         self.probed = runs
             .iter()
-            .zip(&settings.resolutions)
+            .zip(&self.resolutions)
             .map(|(r, f)| Candidate {
                 spec: MethodSpec {
                     cell_frac: *f,
@@ -434,7 +444,9 @@ impl AutoController {
             }
         }
         let calm = match self.mode {
-            AutoMode::Squeezed => extra < 0.5 * squeeze_m,
+            // eased off, or held still by what presses it (a body resting deformed on a
+            // table after a drop: its shape no longer changes, its baseline is now)
+            AutoMode::Squeezed => extra < 0.5 * squeeze_m || still,
             AutoMode::Touched => still,
             AutoMode::Asleep => false,
         };
@@ -538,6 +550,30 @@ mod tests {
         assert_eq!(c.update(1.5, &act(0.0, 0.0, false, false), &s), None);
         assert_eq!(
             c.update(2.0, &act(0.0, 0.0, false, false), &s),
+            Some(AutoMode::Asleep)
+        );
+    }
+
+    #[test]
+    fn a_body_left_deformed_but_still_goes_back_down_and_its_new_baseline_holds() {
+        let s = AutoSettings::default();
+        let mut c = AutoController::new(0.0);
+        assert_eq!(c.update(0.0, &act(0.0, 0.0, false, false), &s), None);
+        // dropped: 9 mm on impact, moving
+        assert_eq!(
+            c.update(0.1, &act(9.0, 0.3, false, false), &s),
+            Some(AutoMode::Squeezed)
+        );
+        // resting deformed by 5 mm (over half the squeeze), still: down after settle_s
+        assert_eq!(c.update(0.7, &act(5.0, 0.0, false, false), &s), None);
+        assert_eq!(
+            c.update(1.3, &act(5.0, 0.0, false, false), &s),
+            Some(AutoMode::Touched)
+        );
+        // 5 mm is its baseline now: not a squeeze, and it sleeps
+        assert_eq!(c.update(1.4, &act(5.0, 0.0, false, false), &s), None);
+        assert_eq!(
+            c.update(2.5, &act(5.0, 0.0, false, false), &s),
             Some(AutoMode::Asleep)
         );
     }
