@@ -21,6 +21,17 @@ use softsync_net_matchbox::{MatchboxConfig, MatchboxTransport, Role, SignalServe
 use softsync_peer::scene::MAX_BUNDLE_BYTES;
 use softsync_peer::{Event, Peer, PeerConfig, PeerError, Scene};
 
+/// Milliseconds on this process's wall clock (the `method: auto` probe's timer).
+pub fn wall_ms() -> f64 {
+    use std::sync::OnceLock;
+    static START: OnceLock<std::time::Instant> = OnceLock::new();
+    START
+        .get_or_init(std::time::Instant::now)
+        .elapsed()
+        .as_secs_f64()
+        * 1e3
+}
+
 /// The session's clock: microseconds since the room was opened, on this machine's clock.
 #[derive(Clone, Copy, Debug)]
 pub struct Clock {
@@ -342,6 +353,9 @@ impl Room {
             let cfg = opts.session_config(&scene)?;
             (scene, Session::join(me, c, cfg, now0), Some(c))
         };
+        // `method: auto`: this machine's costs of each resolution level
+        let mut scene = scene;
+        scene.probe_auto(wall_ms).map_err(OpenError::Config)?;
         let transport: Box<dyn Transport> = match opts.condition.clone() {
             Some(c) => Box::new(LinkConditioner::new(*transport, c)),
             None => transport,

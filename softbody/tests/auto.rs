@@ -168,13 +168,11 @@ fn a_torn_body_and_an_unknown_handle_are_refused_and_nothing_changes() {
 
 #[test]
 fn the_probe_orders_the_ladder_and_picks_levels_within_the_budgets() {
+    // a virtual clock: every reading 1 ms later than the last (time is an argument)
     fn clock() -> f64 {
-        use std::sync::OnceLock;
-        static T0: OnceLock<std::time::Instant> = OnceLock::new();
-        T0.get_or_init(std::time::Instant::now)
-            .elapsed()
-            .as_secs_f64()
-            * 1e3
+        use std::sync::atomic::{AtomicU64, Ordering};
+        static T: AtomicU64 = AtomicU64::new(0);
+        T.fetch_add(1, Ordering::Relaxed) as f64
     }
     let mesh = Mesh::cuboid(Vec3::splat(0.05), 6);
     let settings = AutoSettings {

@@ -43,7 +43,9 @@ const SCENE: &str = r#"Scene(
 
 fn scene() -> Scene {
     let assets = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets");
-    Scene::parse(SCENE, &assets.join("auto-test.ron")).unwrap()
+    let mut s = Scene::parse(SCENE, &assets.join("auto-test.ron")).unwrap();
+    s.probe_auto(common::wall_ms).unwrap();
+    s
 }
 
 /// The object's level and particle count on a peer.

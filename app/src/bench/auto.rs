@@ -42,11 +42,14 @@ reach right softbox in 0.6; grab right; squeeze right 0.025 in 0.4; wait 1; rele
 offset right 0 0.15 0 in 0.4; wait 3
 ";
 
+/// One soft object in one frame: its id, its level, its surface's vertices.
+type SoftFrame = (NetId, Option<u8>, Vec<glam::Vec3>);
+
 /// One run: step costs and, per soft object per frame, its vertices.
 struct Run {
     step_ms: Vec<f64>,
     /// Per frame: (object, level, vertices).
-    frames: Vec<Vec<(NetId, Option<u8>, Vec<glam::Vec3>)>>,
+    frames: Vec<Vec<SoftFrame>>,
     particles: Vec<usize>,
     /// The soft objects' class names.
     classes: BTreeMap<NetId, String>,
@@ -195,7 +198,8 @@ fn time_at_levels(run: &Run, id: NetId) -> String {
 /// `softsync bench auto`.
 pub fn auto(out: &Path, seconds: f64, assets: &Path) -> Result<(), String> {
     std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
-    let scene = Scene::by_name("thesis-room-auto", assets)?;
+    let mut scene = Scene::by_name("thesis-room-auto", assets)?;
+    scene.probe_auto(softsync_bevy::wall_ms)?;
     let mut ladders = Csv::new(&[
         "class",
         "level",

@@ -645,7 +645,7 @@ mod tests {
             Err(NetError::InvalidState(_))
         ));
         for _ in 0..5 {
-            w.now = w.now + Duration::from_millis(100);
+            w.now += Duration::from_millis(100);
             let now = w.now;
             w.get(2).publish_state(now, id, &state(9, 0.015)).unwrap();
             w.settle();
@@ -663,7 +663,7 @@ mod tests {
         w.add(Session::join(PeerId(4), PeerId(1), config(), w.now));
         w.settle();
         for _ in 0..3 {
-            w.now = w.now + Duration::from_millis(100);
+            w.now += Duration::from_millis(100);
             let now = w.now;
             w.get(2).publish_state(now, id, &state(9, 0.012)).unwrap();
             w.settle();

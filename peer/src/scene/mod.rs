@@ -20,7 +20,7 @@ use softsync_net::{
 };
 use softsync_softbody::methods::auto::{AutoMode, AutoSettings, Ladder};
 use softsync_softbody::rapier3d::prelude::*;
-use softsync_softbody::{Mesh, SoftBodyConfig};
+use softsync_softbody::{Mesh, SoftBodyConfig, StageClock};
 
 pub use file::{ReplicationFile, SCENE_EXTENSION};
 
@@ -127,7 +127,7 @@ pub struct Class {
 }
 
 /// A soft class's `method: auto` (see `softbody::methods::auto`): the ladder of resolutions,
-/// probed on this machine when the scene loaded, and the level objects spawn at.
+/// probed on this machine ([`Scene::probe_auto`]), and the level objects spawn at.
 #[derive(Clone, Debug)]
 pub struct AutoClass {
     /// Budgets and hysteresis.
@@ -139,14 +139,11 @@ pub struct AutoClass {
 }
 
 impl AutoClass {
-    /// Builds and probes the ladder of `base` for `mesh` (the probe: a few hundred steps of
-    /// each level; its clock is this machine's).
+    /// Builds the ladder of `base` for `mesh` (each level clustered once); until
+    /// [`Scene::probe_auto`], both picks are the spawn level.
     pub fn new(mesh: &Mesh, base: &SoftBodyConfig, settings: AutoSettings) -> Result<Self, String> {
-        let mut ladder = Ladder::new(mesh, base, &settings).map_err(|e| e.to_string())?;
+        let ladder = Ladder::new(mesh, base, &settings).map_err(|e| e.to_string())?;
         let base = ladder.touch;
-        ladder
-            .probe(mesh, &settings, wall_ms)
-            .map_err(|e| format!("auto probe: {e}"))?;
         Ok(AutoClass {
             settings,
             ladder,
@@ -158,17 +155,6 @@ impl AutoClass {
     pub fn level(&self, mode: AutoMode) -> usize {
         self.ladder.level(mode)
     }
-}
-
-/// Milliseconds of this process's wall clock (the auto probe's timer).
-fn wall_ms() -> f64 {
-    use std::sync::OnceLock;
-    static START: OnceLock<std::time::Instant> = OnceLock::new();
-    START
-        .get_or_init(std::time::Instant::now)
-        .elapsed()
-        .as_secs_f64()
-        * 1e3
 }
 
 impl std::fmt::Debug for Class {
@@ -463,6 +449,22 @@ impl Scene {
             Some(c) => Err(format!("{} is not a soft body", c.name)),
             None => Err(format!("class {} is not in scene {}", kind.0, self.name)),
         }
+    }
+
+    /// Probes every `method: auto` class's ladder on this machine (a few hundred steps of
+    /// each level, timed with `clock`, in milliseconds: the I/O layer's, e.g. `Room::open`'s)
+    /// and picks its touch and squeeze levels. Until then an auto body stays at its spawn
+    /// level (it still sleeps at rest). Only the owner of an object decides its level, so
+    /// peers whose machines pick differently still agree on every object.
+    pub fn probe_auto(&mut self, clock: StageClock) -> Result<(), String> {
+        for c in &mut self.classes {
+            if let (Some(a), Some(mesh)) = (c.auto.as_deref_mut(), c.mesh.as_ref()) {
+                a.ladder
+                    .probe(mesh, &a.settings, clock)
+                    .map_err(|e| format!("class {}: auto probe: {e}", c.name))?;
+            }
+        }
+        Ok(())
     }
 
     /// A soft class's `method: auto`, if it has one.

@@ -9,7 +9,7 @@
 //!   (those are for other meshes and settings than a user's class): each level is dropped on
 //!   a floor and squeezed to 30 % of its height by a plate, at 60 Hz, and its cost per step
 //!   (median, the caller's clock) and its error against the finest level (the worst RMS
-//!   distance of the surface over the run) are measured. [`choice::choose`] then picks the
+//!   distance of the surface over the run) are measured. [`choose`] then picks the
 //!   **touch level** (the cheapest within the error budget) and the **squeeze level** (the
 //!   most accurate within the cost budget, never coarser than the touch level).
 //! - **The controller** ([`AutoController`]): asleep (an untouched resting body: its bodies

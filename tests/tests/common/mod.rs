@@ -52,6 +52,12 @@ pub fn require_netns() {
     );
 }
 
+/// Milliseconds on the wall clock (`Scene::probe_auto`'s timer).
+pub fn wall_ms() -> f64 {
+    static START: std::sync::OnceLock<Instant> = std::sync::OnceLock::new();
+    START.get_or_init(Instant::now).elapsed().as_secs_f64() * 1e3
+}
+
 pub fn scratch(test: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("softsync-{test}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
