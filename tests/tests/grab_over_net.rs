@@ -7,102 +7,42 @@
 //! and both peers show the same shape, back at rest.
 #![allow(clippy::unwrap_used, missing_docs)]
 
-use std::path::PathBuf;
+mod common;
+
 use std::time::Duration;
 
+use common::hub::{Node, CLIENT, DT, HOST};
 use glam::{Quat, Vec3};
 use softsync_interaction::{HandConfig, HandInput, HandSample};
-use softsync_net::transport::HubEndpoint;
-use softsync_net::{
-    ConditionerConfig, Instant, LinkConditioner, MemoryHub, NetId, ObjectState, PeerId, SendPolicy,
-    Session, Transport,
-};
-use softsync_peer::{Event, Peer, PeerConfig, Scene};
+use softsync_net::{Instant, MemoryHub, NetId, ObjectState, PeerId};
+use softsync_peer::{Event, PeerConfig, Scene};
 
-const DT: f32 = 1.0 / 90.0;
-const HOST: PeerId = PeerId(100);
-const CLIENT: PeerId = PeerId(101);
 const RIGHT: usize = 1;
 
-/// One peer and the link it sends on, as a driver would hold them.
-struct Node {
-    peer: Peer,
-    link: LinkConditioner<HubEndpoint>,
-    /// Every event the peer said, with the time.
-    events: Vec<(Instant, Event)>,
+/// A peer of the `bench-ball` room with a hand that reaches exactly, as the app gives bots.
+fn node(hub: &MemoryHub, me: PeerId, seed: u64) -> Node {
+    let assets = common::repo_file("assets");
+    let scene = Scene::by_name("bench-ball", &assets).unwrap();
+    let config = PeerConfig {
+        hand: HandConfig {
+            physical_controller: false,
+            hover_radius_m: 0.015,
+            ..HandConfig::default()
+        },
+        dt_s: DT,
+        ..PeerConfig::default()
+    };
+    Node::with_config(hub, me, seed, scene, config)
 }
 
-impl Node {
-    fn new(hub: &MemoryHub, me: PeerId, seed: u64) -> Self {
-        let assets = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets");
-        let scene = Scene::by_name("bench-ball", &assets).unwrap();
-        let policy = SendPolicy::default();
-        let cfg = scene.session_config(policy.clone(), policy.clone(), policy);
-        let (session, contact) = if me == HOST {
-            (Session::host(me, cfg, Instant::ZERO), None)
-        } else {
-            (Session::join(me, HOST, cfg, Instant::ZERO), Some(HOST))
-        };
-        let config = PeerConfig {
-            hand: HandConfig {
-                // A hand that reaches exactly, as the app gives bots.
-                physical_controller: false,
-                hover_radius_m: 0.015,
-                ..HandConfig::default()
-            },
-            dt_s: DT,
-            ..PeerConfig::default()
-        };
-        let mut peer = Peer::new(Instant::ZERO, session, contact, scene, config).unwrap();
-        if me == HOST {
-            peer.open(Instant::ZERO).unwrap();
-        }
-        let link = ConditionerConfig {
-            seed,
-            latency: Duration::from_millis(20),
-            jitter: Duration::from_millis(5),
-            loss: 0.02,
-            ..ConditionerConfig::default()
-        };
-        Node {
-            peer,
-            link: LinkConditioner::new(hub.endpoint(me), link),
-            events: Vec::new(),
-        }
-    }
+/// One frame of a driver, the right hand's input if given; the peer must say no warning.
+fn frame(n: &mut Node, now: Instant, hand: Option<HandInput>) {
+    n.frame_input(now, hand);
+    assert!(n.warnings.is_empty(), "{:?}", n.warnings);
+}
 
-    /// One frame of a driver: network in, timers, (hand input and) a fixed step, network out.
-    fn frame(&mut self, now: Instant, hand: Option<HandInput>) {
-        while let Some((from, bytes)) = self.link.recv(now) {
-            self.peer.handle_datagram(now, from, &bytes);
-        }
-        while let Some(e) = self.link.poll_peer_event() {
-            self.peer.handle_link_event(e);
-        }
-        self.peer.pump(now).unwrap();
-        if self.peer.joined() {
-            if let Some(input) = hand {
-                self.peer.set_hand_input(RIGHT, input);
-            }
-            self.peer.fixed_step(now);
-        }
-        while let Some(t) = self.peer.poll_transmit(now) {
-            self.link.send(now, &t);
-        }
-        while let Some(e) = self.peer.poll_event() {
-            assert!(!matches!(e, Event::Warning(_)), "{e:?}");
-            self.events.push((now, e));
-        }
-    }
-
-    /// When the peer first said something matching `f`.
-    fn first(&self, f: impl Fn(&Event) -> bool) -> Option<Instant> {
-        self.events.iter().find(|(_, e)| f(e)).map(|(t, _)| *t)
-    }
-
-    fn ball(&mut self, now: Instant, id: NetId) -> ObjectState {
-        self.peer.shown_state(now, id).unwrap()
-    }
+fn ball(n: &mut Node, now: Instant, id: NetId) -> ObjectState {
+    n.peer.shown_state(now, id).unwrap()
 }
 
 fn max_distance(a: &[Vec3], b: &[Vec3]) -> f32 {
@@ -116,16 +56,16 @@ fn max_distance(a: &[Vec3], b: &[Vec3]) -> f32 {
 #[test]
 fn a_client_grabs_a_host_owned_soft_body_through_authority_and_the_host_sees_it() {
     let hub = MemoryHub::new(1200);
-    let mut host = Node::new(&hub, HOST, 3);
-    let mut client = Node::new(&hub, CLIENT, 4);
+    let mut host = node(&hub, HOST, 3);
+    let mut client = node(&hub, CLIENT, 4);
     let step = Duration::from_secs_f32(DT);
     let mut now = Instant::ZERO;
 
     // The client joins; the ball falls onto the table and settles.
     for _ in 0..(2.0 / DT) as usize {
         now += step;
-        host.frame(now, None);
-        client.frame(now, None);
+        frame(&mut host, now, None);
+        frame(&mut client, now, None);
     }
     assert!(client.peer.joined(), "the client never joined");
     assert!(host
@@ -140,7 +80,7 @@ fn a_client_grabs_a_host_owned_soft_body_through_authority_and_the_host_sees_it(
     assert_eq!(client.peer.session().owner(id), Some(HOST));
 
     // The client's right hand, on the ball's particle farthest along +x.
-    let rest = client.ball(now, id);
+    let rest = ball(&mut client, now, id);
     let (grabbed, start) = rest
         .particles
         .iter()
@@ -174,18 +114,18 @@ fn a_client_grabs_a_host_owned_soft_body_through_authority_and_the_host_sees_it(
             grip,
             trigger: 0.0,
         };
-        host.frame(now, None);
-        client.frame(now, Some(input));
+        frame(&mut host, now, None);
+        frame(&mut client, now, Some(input));
         if granted_at.is_none() {
             granted_at = client.first(|e| *e == Event::AuthorityGained(id));
-            let shown = client.ball(now, id).particles[grabbed];
+            let shown = ball(&mut client, now, id).particles[grabbed];
             moved_before_grant = moved_before_grant.max(shown.distance(start));
         }
         if released_at.is_none() {
             released_at = client.first(|e| matches!(e, Event::GrabEnded { .. }));
         }
         if granted_at.is_some() && released_at.is_none() {
-            let shown = host.ball(now, id).particles[grabbed];
+            let shown = ball(&mut host, now, id).particles[grabbed];
             host_saw_pull = host_saw_pull.max(shown.x - start.x);
         }
         if released_at.is_some()
@@ -236,7 +176,7 @@ fn a_client_grabs_a_host_owned_soft_body_through_authority_and_the_host_sees_it(
     assert_eq!(host.peer.session().owner(id), Some(HOST));
     assert_eq!(client.peer.session().owner(id), Some(HOST));
     // Both peers show the same shape, back at rest.
-    let (a, b) = (host.ball(now, id), client.ball(now, id));
+    let (a, b) = (ball(&mut host, now, id), ball(&mut client, now, id));
     let apart = max_distance(&a.particles, &b.particles);
     assert!(apart < 0.002, "peers disagree by {apart} m");
     let off_rest = max_distance(&a.particles, &rest.particles);

@@ -235,21 +235,9 @@ impl SoftBody {
                 Vec3::ZERO
             }
         };
-        let displacement = (0..plan.map.len())
-            .map(|i| {
-                let (ids, ws) = plan.map.particle_vertices.row(i);
-                let (mut sum, mut total) = (Vec3::ZERO, 0.0f32);
-                for (&v, &w) in ids.iter().zip(ws) {
-                    sum += displaced(old_of_new[v as usize] as usize) * w;
-                    total += w;
-                }
-                if total > 0.0 {
-                    sum / total
-                } else {
-                    Vec3::ZERO
-                }
-            })
-            .collect();
+        let displacement = super::topology::mean_displacements(&plan.map, |v| {
+            Some(displaced(old_of_new[v as usize] as usize))
+        });
         let spawn = Spawn {
             origin: self.rest_center,
             translation: c,

@@ -278,23 +278,9 @@ impl SoftBody {
                 .collect();
             // A new particle starts displaced by the weighted mean displacement of its old
             // vertices, so the piece keeps (a smoothed copy of) its deformation.
-            let displacement = (0..plan.map.len())
-                .map(|i| {
-                    let (ids, ws) = plan.map.particle_vertices.row(i);
-                    let (mut sum, mut total) = (Vec3::ZERO, 0.0f32);
-                    for (&v, &w) in ids.iter().zip(ws) {
-                        if let Some(o) = source[v as usize] {
-                            sum += displaced(o as usize) * w;
-                            total += w;
-                        }
-                    }
-                    if total > 0.0 {
-                        sum / total
-                    } else {
-                        Vec3::ZERO
-                    }
-                })
-                .collect();
+            let displacement = mean_displacements(&plan.map, |v| {
+                source[v as usize].map(|o| displaced(o as usize))
+            });
             let spawn = Spawn {
                 origin: self.rest_center,
                 translation: c,
@@ -308,6 +294,32 @@ impl SoftBody {
         }
         Ok(out)
     }
+}
+
+/// Per particle of `map`: the weighted mean of its vertices' displacements (`displaced(v)`,
+/// `None` for a vertex that had none), so a body built anew keeps (a smoothed copy of) the
+/// deformation of the one it replaces.
+pub(super) fn mean_displacements(
+    map: &crate::cluster::ParticleMap,
+    displaced: impl Fn(u32) -> Option<Vec3>,
+) -> Vec<Vec3> {
+    (0..map.len())
+        .map(|i| {
+            let (ids, ws) = map.particle_vertices.row(i);
+            let (mut sum, mut total) = (Vec3::ZERO, 0.0f32);
+            for (&v, &w) in ids.iter().zip(ws) {
+                if let Some(d) = displaced(v) {
+                    sum += d * w;
+                    total += w;
+                }
+            }
+            if total > 0.0 {
+                sum / total
+            } else {
+                Vec3::ZERO
+            }
+        })
+        .collect()
 }
 
 /// [`Mesh::weld`] for a mesh whose render vertices of one vertex share its position exactly

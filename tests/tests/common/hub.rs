@@ -23,6 +23,8 @@ pub struct Node {
     pub peer: Peer,
     pub link: LinkConditioner<HubEndpoint>,
     pub warnings: Vec<String>,
+    /// Every other event the peer said, with the time.
+    pub events: Vec<(Instant, Event)>,
 }
 
 impl Node {
@@ -38,17 +40,27 @@ impl Node {
     }
 
     pub fn with(hub: &MemoryHub, me: PeerId, seed: u64, scene: Scene) -> Self {
+        let config = PeerConfig {
+            dt_s: DT,
+            avatar: false,
+            ..PeerConfig::default()
+        };
+        Self::with_config(hub, me, seed, scene, config)
+    }
+
+    pub fn with_config(
+        hub: &MemoryHub,
+        me: PeerId,
+        seed: u64,
+        scene: Scene,
+        config: PeerConfig,
+    ) -> Self {
         let policy = SendPolicy::default();
         let cfg = scene.session_config(policy.clone(), policy.clone(), policy);
         let (session, contact) = if me == HOST {
             (Session::host(me, cfg, Instant::ZERO), None)
         } else {
             (Session::join(me, HOST, cfg, Instant::ZERO), Some(HOST))
-        };
-        let config = PeerConfig {
-            dt_s: DT,
-            avatar: false,
-            ..PeerConfig::default()
         };
         let mut peer = Peer::new(Instant::ZERO, session, contact, scene, config).unwrap();
         if me == HOST {
@@ -65,6 +77,7 @@ impl Node {
             peer,
             link: LinkConditioner::new(hub.endpoint(me), link),
             warnings: Vec::new(),
+            events: Vec::new(),
         }
     }
 
@@ -105,10 +118,16 @@ impl Node {
             self.link.send(now, &t);
         }
         while let Some(e) = self.peer.poll_event() {
-            if let Event::Warning(w) = e {
-                self.warnings.push(w);
+            match e {
+                Event::Warning(w) => self.warnings.push(w),
+                e => self.events.push((now, e)),
             }
         }
+    }
+
+    /// When the peer first said something matching `f`.
+    pub fn first(&self, f: impl Fn(&Event) -> bool) -> Option<Instant> {
+        self.events.iter().find(|(_, e)| f(e)).map(|(t, _)| *t)
     }
 
     /// The objects of class `name`.
