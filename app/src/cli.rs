@@ -153,9 +153,18 @@ struct PeerOpts {
     /// Where the shipped scenes and meshes are (default: ./assets, or next to the binary).
     #[arg(long, value_name = "DIR")]
     assets: Option<PathBuf>,
-    /// An ICE server (stun:/turn:), repeatable; default none (LAN/loopback).
+    /// An ICE server (stun:HOST:PORT, turn:HOST:PORT?transport=udp), repeatable; default none
+    /// (LAN/loopback). Peers in two homes behind NAT routers reach each other through a TURN
+    /// server (README: deploying a room server).
     #[arg(long, value_name = "URL")]
     ice: Vec<String>,
+    /// The TURN servers' username (coturn's long-term credentials: `user=NAME:PASSWORD`).
+    #[arg(long, value_name = "NAME", requires = "ice")]
+    ice_user: Option<String>,
+    /// A file holding the TURN password (kept off the command line); or set
+    /// SOFTSYNC_ICE_CREDENTIAL.
+    #[arg(long, value_name = "FILE", requires = "ice_user")]
+    ice_credential_file: Option<PathBuf>,
     /// Give up joining after S seconds.
     #[arg(long, value_name = "S", default_value_t = 15.0, value_parser = positive::<3600>)]
     connect_timeout: f64,
@@ -397,6 +406,10 @@ pub struct PeerArgs {
     pub assets: Option<PathBuf>,
     /// ICE servers.
     pub ice: Vec<String>,
+    /// TURN username.
+    pub ice_user: Option<String>,
+    /// The file with the TURN password.
+    pub ice_credential_file: Option<PathBuf>,
     /// Join timeout.
     pub connect_timeout: Duration,
     /// How many times to join again after the room went on without us.
@@ -621,6 +634,8 @@ fn peer_args(
         sim_hz: p.sim_hz.max(10.0),
         assets: p.assets,
         ice: p.ice,
+        ice_user: p.ice_user,
+        ice_credential_file: p.ice_credential_file,
         connect_timeout: Duration::from_secs_f64(p.connect_timeout),
         rejoin_limit: p.rejoin_limit,
         room_key_file: p.room_key_file,

@@ -9,6 +9,7 @@ mod desktop;
 mod driver;
 mod plugins;
 mod report;
+mod stderr_log;
 #[cfg(feature = "desktop")]
 mod view;
 #[cfg(feature = "vr")]
@@ -68,6 +69,7 @@ impl From<UsageError> for Failure {
 }
 
 fn main() -> ExitCode {
+    stderr_log::install();
     let args: Vec<String> = std::env::args().skip(1).collect();
     match run(&args) {
         Ok(code) => code,
@@ -207,6 +209,24 @@ fn view_config(a: &PeerArgs, desktop: bool) -> view::ViewConfig {
 
 /// The room's key: `--room-key-file`, or `SOFTSYNC_ROOM_KEY`, or none. Its challenges are
 /// seeded from the system's random source.
+/// The TURN password: `--ice-credential-file`, else SOFTSYNC_ICE_CREDENTIAL (for a username).
+fn ice_credential(a: &PeerArgs) -> Result<Option<String>, Failure> {
+    if a.ice_user.is_none() {
+        return Ok(None);
+    }
+    if let Some(f) = &a.ice_credential_file {
+        let text = std::fs::read_to_string(f)
+            .map_err(|e| Failure::usage(format!("--ice-credential-file {}: {e}", f.display())))?;
+        return Ok(Some(text.trim_end_matches(['\n', '\r']).to_owned()));
+    }
+    match std::env::var("SOFTSYNC_ICE_CREDENTIAL") {
+        Ok(c) => Ok(Some(c)),
+        Err(_) => Err(Failure::usage(
+            "--ice-user needs a password: --ice-credential-file FILE or SOFTSYNC_ICE_CREDENTIAL",
+        )),
+    }
+}
+
 fn room_key(file: Option<&Path>) -> Result<Option<softsync_net::RoomKey>, Failure> {
     let secret = match file {
         Some(f) => std::fs::read(f)
@@ -350,6 +370,8 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     opts.signal = a.signal.clone();
     opts.bind = a.bind;
     opts.ice_servers = a.ice.clone();
+    opts.ice_username = a.ice_user.clone();
+    opts.ice_credential = ice_credential(&a)?;
     opts.connect_timeout = a.connect_timeout;
     opts.room_key = room_key(a.room_key_file.as_deref())?;
     opts.fast_detection = a.fast_detection;
