@@ -36,6 +36,11 @@ pub struct Harness {
     pub peers: Vec<HarnessPeer>,
     cfg: SessionConfig,
     link: ConditionerConfig,
+    /// A peer whose session says it was dropped joins the host it names with a fresh session
+    /// at once, as the peer layer does (off by default: tests of the drop itself look at it).
+    pub auto_rejoin: bool,
+    /// Times peers joined again that way.
+    pub rejoins: usize,
 }
 
 impl Harness {
@@ -48,6 +53,8 @@ impl Harness {
             peers: Vec::new(),
             cfg,
             link,
+            auto_rejoin: false,
+            rejoins: 0,
         };
         for _ in 0..n {
             h.add_peer();
@@ -168,6 +175,16 @@ impl Harness {
                     any = true;
                 }
                 while let Some(e) = p.session.poll_event() {
+                    if let (true, Event::Dropped { host, .. }) = (self.auto_rejoin, &e) {
+                        // what the old session still had to say goes first
+                        while let Some(t) = p.session.poll_transmit(now) {
+                            p.transport.send(now, &t);
+                        }
+                        let me = p.session.local_id();
+                        p.session = Session::join(me, *host, self.cfg.clone(), now);
+                        self.rejoins += 1;
+                        any = true;
+                    }
                     p.events.push(e);
                 }
             }

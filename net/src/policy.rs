@@ -198,6 +198,14 @@ pub struct SessionConfig {
     /// How a silent peer is judged gone (a local choice, not part of the digest).
     #[serde(default)]
     pub detector: FailureDetector,
+    /// How long a peer keeps sending beacons to peers its room lost (a partition shorter
+    /// than this heals into one room; see `session::heal`). Not part of the digest.
+    #[serde(default = "default_heal_window")]
+    pub heal_window: Duration,
+}
+
+fn default_heal_window() -> Duration {
+    Duration::from_secs(300)
 }
 
 /// How a silent peer is judged gone: a fixed timeout, or one that adapts to each link.
@@ -298,6 +306,7 @@ impl Default for SessionConfig {
             messages: MessageConfig::default(),
             room_key: None,
             detector: FailureDetector::Fixed,
+            heal_window: default_heal_window(),
         }
     }
 }

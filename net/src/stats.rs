@@ -81,6 +81,14 @@ pub struct Stats {
     pub dropped_old_term: u64,
     /// Datagrams that failed to decode.
     pub decode_errors: u64,
+    /// Beacons sent to peers the room lost (partition healing).
+    pub beacons_sent: u64,
+    /// Beacons heard from another room of ours (a partition healed).
+    pub beacons_heard: u64,
+    /// Beacons ignored in a room with a key: no valid tag.
+    pub beacons_refused: u64,
+    /// Times this peer's room yielded to another after a partition (0 or 1 per session).
+    pub merges: u64,
     /// Delta updates whose base was missing (a keyframe was requested).
     pub chain_breaks: u64,
     /// Entries too large for any datagram (never sent).

@@ -142,7 +142,8 @@ fn render() -> String {
     )
     .unwrap();
     writeln!(w, "| {} | state ack | `u8` newest datagram sequence with state received, `u32` bits for the 32 before it (bit i = newest − 1 − i) |", tag::STATE_ACK).unwrap();
-    writeln!(w, "| {} | message | `varint` length ≤ {}, bincode-2 `AppMessage` with `seq` 0 and `delivery` Unreliable (an unreliable application message) |\n", tag::MESSAGE, wire::MAX_CONTROL_LEN).unwrap();
+    writeln!(w, "| {} | message | `varint` length ≤ {}, bincode-2 `AppMessage` with `seq` 0 and `delivery` Unreliable (an unreliable application message) |", tag::MESSAGE, wire::MAX_CONTROL_LEN).unwrap();
+    writeln!(w, "| {} | beacon | alone in its datagram: `u64` configuration digest, `u64` host id, `varint` the host's join order, `varint` member count — a room's summary, sent once per peer timeout to the peers it lost (not departed) for `heal_window` (300 s): when a partition heals, a peer that hears another room of the same digest compares the two (more members wins; then the host that joined first; then the lower host id) and either answers with its own beacon or yields: a host sends each member a refusal naming the winning host, and every peer of the yielding room joins that host anew |\n", tag::BEACON).unwrap();
     writeln!(w, "Unknown tags, truncated fields, lengths beyond the datagram, over-long varints or entry counts that cannot fit the block are decode errors; the datagram is dropped and counted.\n").unwrap();
 
     writeln!(w, "## State entries (bit-packed)\n").unwrap();
@@ -482,7 +483,7 @@ fn render() -> String {
         "protocol version mismatch: host speaks 1, you speak 2",
         Term(1),
     );
-    writeln!(w, "`[0, host version, reason length ≤ 200, UTF-8 reason, varint term]`, sent by a host to a peer it will not take: one whose datagrams carry another version byte, a member it timed out, or a peer still speaking for an older term (the term then tells that peer the room elected a newer host while it was out of touch; a refusal of a newer term than the receiver's stops a stalled host). Decoders read the term only if present. E.g. `{}` … `{}`.\n", hex(&r[..12]), hex(&r[r.len() - 1..])).unwrap();
+    writeln!(w, "`[0, host version, reason length ≤ 200, UTF-8 reason, varint term, optional u64 LE host to join instead]`, sent by a host to a peer it will not take: one whose datagrams carry another version byte, a member it timed out, or a peer still speaking for an older term (the term then tells that peer the room elected a newer host while it was out of touch; a refusal of a newer term than the receiver's stops a stalled host). Decoders read the term, and the host to join instead, only if present (a room yielding after a partition names the winning host: its members join it). E.g. `{}` … `{}`.\n", hex(&r[..12]), hex(&r[r.len() - 1..])).unwrap();
 
     writeln!(w, "## A real exchange\n").unwrap();
     writeln!(w, "Host 100 and client 101, no loss; the client spawns an avatar hand and moves it 5 cm (every datagram produced by `Session`):\n").unwrap();
@@ -538,6 +539,7 @@ fn render() -> String {
                 wire::Section::State { .. } => "state",
                 wire::Section::StateAck { .. } => "state ack",
                 wire::Section::Message(_) => "message",
+                wire::Section::Beacon(_) => "beacon",
             })
             .collect();
         writeln!(

@@ -103,6 +103,9 @@ pub struct Counters {
     pub rejoins: u64,
     /// Topology log entries (tears, lifts, cuts) applied to our mirror.
     pub topology_events: u64,
+    /// Objects we owned when the room went on without us or our room yielded to another
+    /// after a partition: what we did to them apart was dropped when we joined again.
+    pub discarded_objects: u64,
     /// `method: auto`: resolution changes we asked for as an owner.
     pub resolution_requests: u64,
     /// `method: auto`: our bodies' mode changes (asleep, touched, squeezed) as their owner.

@@ -81,6 +81,8 @@ pub struct Peer {
     scalpels: [topology::Scalpel; 2],
     /// `method: auto` bodies we own.
     auto: auto::AutoBodies,
+    /// Datagrams an old session had still to send when we rejoined.
+    leftover: VecDeque<Transmit>,
     sim_time_s: f64,
     steps: u64,
     last_step_at: Instant,
@@ -139,6 +141,7 @@ impl Peer {
             counters: Counters::default(),
             scalpels: Default::default(),
             auto: Default::default(),
+            leftover: VecDeque::new(),
             sim_time_s: 0.0,
             steps: 0,
             last_step_at: Instant::ZERO,
@@ -217,6 +220,9 @@ impl Peer {
     /// The next datagram to send. Drain after [`Peer::pump`], [`Peer::fixed_step`] and
     /// [`Peer::leave`].
     pub fn poll_transmit(&mut self, now: Instant) -> Option<Transmit> {
+        if let Some(t) = self.leftover.pop_front() {
+            return Some(t);
+        }
         self.session.poll_transmit(now)
     }
 
@@ -243,6 +249,19 @@ impl Peer {
     /// rebuilds the objects, and `Joined` respawns our avatar.
     fn rejoin(&mut self, now: Instant, host: PeerId, reason: String) {
         self.counters.rejoins += 1;
+        // what we owned here and did while apart is not the room's: counted, then dropped
+        let me = self.me();
+        self.counters.discarded_objects += self
+            .mirror
+            .objects
+            .iter()
+            .filter(|(id, o)| !o.kind.is_avatar() && self.session.owner(**id) == Some(me))
+            .count() as u64;
+        // what the old session still had to send goes first (a yielding host's word to its
+        // members, after a partition healed)
+        while let Some(t) = self.session.poll_transmit(now) {
+            self.leftover.push_back(t);
+        }
         self.hands.release_all();
         self.mirror.clear();
         self.avatar.clear();

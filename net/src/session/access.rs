@@ -78,6 +78,29 @@ impl RoomKey {
         hmac::verify(&self.key, &msg, proof).is_ok()
     }
 
+    /// The tag of a beacon (`session::heal`): HMAC-SHA256 of `"softsync-beacon-v1" ‖ digest
+    /// ‖ host ‖ host join ‖ members ‖ term ‖ from ‖ to` (integers LE), first 16 bytes.
+    pub(crate) fn beacon_tag(
+        &self,
+        s: &crate::wire::RoomSummary,
+        term: crate::ids::Term,
+        from: PeerId,
+        to: PeerId,
+    ) -> [u8; 16] {
+        let mut ctx = hmac::Context::with_key(&self.key);
+        ctx.update(b"softsync-beacon-v1");
+        ctx.update(&s.digest.to_le_bytes());
+        ctx.update(&s.host.0.to_le_bytes());
+        ctx.update(&s.host_join.to_le_bytes());
+        ctx.update(&s.members.to_le_bytes());
+        ctx.update(&term.0.to_le_bytes());
+        ctx.update(&from.0.to_le_bytes());
+        ctx.update(&to.0.to_le_bytes());
+        let mut out = [0u8; 16];
+        out.copy_from_slice(ctx.sign().as_ref().get(..16).unwrap_or(&[0; 16]));
+        out
+    }
+
     fn proof(&self, nonce: &[u8; 16], joiner: PeerId, host: PeerId) -> hmac::Tag {
         let mut ctx = hmac::Context::with_key(&self.key);
         ctx.update(b"softsync-join-v1");

@@ -28,6 +28,7 @@ mod access;
 mod authority;
 mod control;
 mod delta;
+mod heal;
 mod join;
 pub mod link;
 mod liveness;
@@ -223,6 +224,8 @@ pub struct Session {
     last_relay_at: Option<Instant>,
     messages: messages::Messages,
     challenges: access::Challenges,
+    /// Peers the room lost, and the beacons that heal a partition.
+    heal: heal::Heal,
 }
 
 impl Session {
@@ -253,6 +256,7 @@ impl Session {
             last_relay_at: None,
             messages: messages::Messages::default(),
             challenges: access::Challenges::default(),
+            heal: heal::Heal::default(),
         }
     }
 
@@ -449,7 +453,7 @@ impl Session {
         if self.role == Role::Refused {
             return None;
         }
-        let mut t = Some(self.schedule.next_heartbeat);
+        let mut t = min_opt(Some(self.schedule.next_heartbeat), self.heal_deadline());
         for (c, tick) in self.schedule.next_tick.iter().enumerate() {
             let owns = self
                 .objects
@@ -489,6 +493,7 @@ impl Session {
         self.note_time(now);
         self.heartbeat(now);
         self.check_liveness(now);
+        self.heal_tick(now);
         self.forget_silent_strangers(now);
         self.send_ticks(now);
         self.advance_deliveries(now);

@@ -34,6 +34,13 @@ impl Session {
             return;
         }
         let datagram = decode_datagram(bytes);
+        // A beacon of another room of ours (a partition healed) is heard whoever sends it: a
+        // peer our room dropped, a stranger, another term (see `heal`).
+        if let Ok(Datagram::Packet { header, sections }) = &datagram {
+            if let [Section::Beacon(summary)] = sections.as_slice() {
+                return self.on_beacon(now, from, header.term, *summary);
+            }
+        }
         if self.role == Role::Host && self.dropped.contains(from) {
             // A fresh session of the dropped peer (term 0: it joins again) is heard out as any
             // joiner, with fresh link state (its sequences start over); the rest is answered
@@ -119,7 +126,8 @@ impl Session {
             self.role = Role::Refused;
             self.events.push_back(if was_in {
                 Event::Dropped {
-                    host: from,
+                    // our host yielding to another room names it (a partition healed)
+                    host: refusal.rejoin.filter(|_| from_our_host).unwrap_or(from),
                     reason: refusal.reason,
                 }
             } else {
@@ -197,6 +205,8 @@ impl Session {
                 Section::State { count, bits } => states.push((count, bits)),
                 Section::StateAck { latest, mask } => self.on_state_ack(from, latest, mask),
                 Section::Message(m) => unreliable.push(m),
+                // only ever alone in its datagram (handled above); mixed in, ignored
+                Section::Beacon(_) => {}
             }
         }
         for c in controls {

@@ -27,7 +27,7 @@ pub use state::{
 
 use crate::bits::{write_varint, ByteReader};
 use crate::error::{decode_err, NetError};
-use crate::ids::{NetId, Term};
+use crate::ids::{NetId, PeerId, Term};
 
 /// Version byte at offset 0 of every datagram.
 pub const PROTOCOL_VERSION: u8 = 5;
@@ -58,6 +58,65 @@ pub mod tag {
     pub const STATE_ACK: u8 = 7;
     /// An unreliable application message (bincode [`AppMessage`](super::AppMessage)).
     pub const MESSAGE: u8 = 8;
+    /// A room's summary, sent to peers it lost (a partition may have healed).
+    pub const BEACON: u8 = 9;
+}
+
+/// What a peer tells the peers its room lost (timed out, not left), so that two rooms a
+/// partition made can become one when it heals: the room's configuration digest, its host,
+/// the host's join order and the member count. [`RoomSummary::beats`] is the merge rule.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RoomSummary {
+    /// [`SessionConfig::digest`](crate::SessionConfig::digest): only the same room merges.
+    pub digest: u64,
+    /// Its host.
+    pub host: PeerId,
+    /// The host's join order in the room (the original room's numbering: both sides of a
+    /// partition keep it).
+    pub host_join: u32,
+    /// Its members, the host included.
+    pub members: u32,
+    /// In a room with a key: HMAC-SHA256 (first 16 bytes) under it of the summary, the
+    /// sender's term and both peers' ids (`RoomKey::beacon_tag`); a keyed room ignores a
+    /// beacon without a valid one, so no outsider can make it yield.
+    pub tag: Option<[u8; 16]>,
+}
+
+impl RoomSummary {
+    /// The merge rule: the room with more members wins (fewer people lose what they did
+    /// while apart); between equal rooms, the one whose host joined first (the longest
+    /// history); then the lower host id. A total order every peer computes alike, so exactly
+    /// one of two rooms yields.
+    pub fn beats(&self, other: &RoomSummary) -> bool {
+        (
+            self.members,
+            std::cmp::Reverse(self.host_join),
+            std::cmp::Reverse(self.host.0),
+        ) > (
+            other.members,
+            std::cmp::Reverse(other.host_join),
+            std::cmp::Reverse(other.host.0),
+        )
+    }
+}
+
+/// A datagram holding one beacon section (`header`'s term is the sender's).
+pub fn encode_beacon(header: &PacketHeader, s: &RoomSummary) -> Vec<u8> {
+    let mut out = Vec::with_capacity(32);
+    header.write(&mut out);
+    out.push(tag::BEACON);
+    out.extend_from_slice(&s.digest.to_le_bytes());
+    out.extend_from_slice(&s.host.0.to_le_bytes());
+    write_varint(&mut out, u64::from(s.host_join));
+    write_varint(&mut out, u64::from(s.members));
+    match &s.tag {
+        Some(t) => {
+            out.push(16);
+            out.extend_from_slice(t);
+        }
+        None => out.push(0),
+    }
+    out
 }
 
 /// Bits of the per-(link, object, part) entry sequence number.
@@ -142,6 +201,8 @@ pub enum Section<'a> {
     },
     /// An unreliable application message, decoded and validated.
     Message(AppMessage),
+    /// A room's summary, for merging after a partition.
+    Beacon(RoomSummary),
 }
 
 /// Largest keyframe-request list.
@@ -225,6 +286,34 @@ pub fn decode_packet(bytes: &[u8]) -> Result<(PacketHeader, Vec<Section<'_>>), N
                     return Err(decode_err(at, "message section too long"));
                 }
                 Section::Message(decode_unreliable_message(r.take(len)?, at)?)
+            }
+            tag::BEACON => {
+                let mut u64_le = || -> Result<u64, NetError> {
+                    let b = r.take(8)?;
+                    let mut a = [0u8; 8];
+                    a.copy_from_slice(b);
+                    Ok(u64::from_le_bytes(a))
+                };
+                let digest = u64_le()?;
+                let host = PeerId(u64_le()?);
+                let host_join = r.varint_u32()?;
+                let members = r.varint_u32()?;
+                let tag = match r.u8()? {
+                    0 => None,
+                    16 => {
+                        let mut t = [0u8; 16];
+                        t.copy_from_slice(r.take(16)?);
+                        Some(t)
+                    }
+                    _ => return Err(decode_err(at, "beacon tag length")),
+                };
+                Section::Beacon(RoomSummary {
+                    digest,
+                    host,
+                    host_join,
+                    members,
+                    tag,
+                })
             }
             _ => return Err(decode_err(at, "unknown section tag")),
         };
@@ -421,12 +510,21 @@ pub struct Refusal {
     pub reason: String,
     /// The sender's room term; `None` from a sender that did not say (older encoders).
     pub term: Option<Term>,
+    /// Join this host instead (a room yielding to another after a partition healed); `None`
+    /// if not said.
+    pub rejoin: Option<PeerId>,
 }
 
 /// The version-independent refusal datagram: `[0, our_version, len, reason…, term varint]`.
 /// The trailing term lets a peer of an older term (a host that stalled while the room elected
 /// another) tell that the room moved on; decoders that stop after the reason still work.
 pub fn encode_refusal(reason: &str, term: Term) -> Vec<u8> {
+    encode_refusal_to(reason, term, None)
+}
+
+/// [`encode_refusal`] telling the peer which host to join instead (8 bytes, little-endian,
+/// after the term).
+pub fn encode_refusal_to(reason: &str, term: Term, rejoin: Option<PeerId>) -> Vec<u8> {
     let r = reason.as_bytes();
     // Cut at a character boundary, so the reason stays valid UTF-8.
     let mut n = r.len().min(200);
@@ -436,6 +534,9 @@ pub fn encode_refusal(reason: &str, term: Term) -> Vec<u8> {
     let mut out = vec![REFUSAL_MARKER, PROTOCOL_VERSION, n as u8];
     out.extend_from_slice(r.get(..n).unwrap_or_default());
     write_varint(&mut out, u64::from(term.0));
+    if let Some(h) = rejoin {
+        out.extend_from_slice(&h.0.to_le_bytes());
+    }
     out
 }
 
@@ -449,10 +550,16 @@ pub fn decode_refusal(bytes: &[u8]) -> Option<Refusal> {
     let n = r.u8().ok()? as usize;
     let text = r.take(n).ok()?;
     let term = r.varint_u32().ok().map(Term);
+    let rejoin = r.take(8).ok().map(|b| {
+        let mut a = [0u8; 8];
+        a.copy_from_slice(b);
+        PeerId(u64::from_le_bytes(a))
+    });
     Some(Refusal {
         version,
         reason: String::from_utf8_lossy(text).into_owned(),
         term,
+        rejoin,
     })
 }
 
@@ -470,6 +577,7 @@ mod tests {
                 version: PROTOCOL_VERSION,
                 reason: "room full".into(),
                 term: Some(Term(300)),
+                rejoin: None,
             }
         );
         // 199 ASCII bytes then a 2-byte character: the cut falls inside it
