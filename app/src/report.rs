@@ -195,8 +195,17 @@ impl StatsLine {
         };
         self.last = Some((now, st.up, st.down));
         let rtt = mean_rtt_ms(peer).map_or("-".to_owned(), |r| format!("{r:.2}ms"));
+        // a partition's beacons (session::heal), once there are any
+        let heal = if st.beacons_sent + st.beacons_heard > 0 {
+            format!(
+                " beacons={}/{} merges={}",
+                st.beacons_sent, st.beacons_heard, st.merges
+            )
+        } else {
+            String::new()
+        };
         let line = format!(
-            "stats t={:.1}s peer={} host={} term={} peers={} up={:.0}B/s down={:.0}B/s rtt={} owned={}/{}",
+            "stats t={:.1}s peer={} host={} term={} peers={} up={:.0}B/s down={:.0}B/s rtt={} owned={}/{}{heal}",
             now.as_secs_f64(),
             peer.me().0,
             session.host_id().map_or("-".into(), |h| h.0.to_string()),
