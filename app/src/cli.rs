@@ -38,6 +38,19 @@ enum Sub {
         #[arg(long, default_value = "127.0.0.1:3536", value_parser = address)]
         bind: SocketAddr,
     },
+    /// Print a join token for a room with a key: whoever shows it gets in once (the first
+    /// peer to use it; that peer may come back with it) until it expires.
+    Token {
+        /// The room it admits to.
+        #[arg(long, value_parser = room_name)]
+        room: String,
+        /// A file holding the room's secret (or SOFTSYNC_ROOM_KEY).
+        #[arg(long, value_name = "FILE")]
+        room_key_file: Option<PathBuf>,
+        /// Seconds it stays valid.
+        #[arg(long, default_value_t = 3600.0, value_parser = positive::<31_536_000>)]
+        valid: f64,
+    },
     /// Create the room and spawn the scene; embeds a signaling server on --bind unless
     /// --signal names one.
     Host {
@@ -178,6 +191,10 @@ struct PeerOpts {
     /// SOFTSYNC_ROOM_KEY. Use 16 or more random bytes.
     #[arg(long, value_name = "FILE")]
     room_key_file: Option<PathBuf>,
+    /// A join token (`softsync token`) for a room with a key, instead of the key (or set
+    /// SOFTSYNC_ROOM_TOKEN).
+    #[arg(long, value_name = "TOKEN", value_parser = token)]
+    room_token: Option<softsync_net::wire::RoomToken>,
     /// Notice a dead host or member in a few hundred ms instead of a second: 50 ms heartbeats
     /// and a timeout that adapts to each link's loss and jitter (every peer of the room
     /// should say it; a peer whose frames stall for 250 ms or more is then taken for dead).
@@ -279,6 +296,10 @@ fn ws_url(v: &str) -> Result<String, String> {
     }
 }
 
+fn token(v: &str) -> Result<softsync_net::wire::RoomToken, String> {
+    v.parse()
+}
+
 fn room_name(v: &str) -> Result<String, String> {
     if softsync_net_matchbox::valid_room_name(v) {
         Ok(v.to_owned())
@@ -360,6 +381,15 @@ pub enum Command {
         /// The assets folder, if given.
         assets: Option<PathBuf>,
     },
+    /// A join token.
+    Token {
+        /// The room.
+        room: String,
+        /// The secret's file.
+        room_key_file: Option<PathBuf>,
+        /// Seconds valid.
+        valid: f64,
+    },
     /// Rooms of growing size.
     BenchRoomLoad {
         /// Output directory.
@@ -416,6 +446,8 @@ pub struct PeerArgs {
     pub rejoin_limit: u32,
     /// The room secret's file.
     pub room_key_file: Option<PathBuf>,
+    /// A join token.
+    pub room_token: Option<softsync_net::wire::RoomToken>,
     /// The adaptive failure detector and 50 ms heartbeats.
     pub fast_detection: bool,
     /// No stats lines.
@@ -543,6 +575,15 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
     };
     Ok(match sub {
         Sub::Signal { bind } => Command::Signal { bind },
+        Sub::Token {
+            room,
+            room_key_file,
+            valid,
+        } => Command::Token {
+            room,
+            room_key_file,
+            valid,
+        },
         Sub::Bench {
             which:
                 BenchSub::NetLive {
@@ -639,6 +680,7 @@ fn peer_args(
         connect_timeout: Duration::from_secs_f64(p.connect_timeout),
         rejoin_limit: p.rejoin_limit,
         room_key_file: p.room_key_file,
+        room_token: p.room_token,
         fast_detection: p.fast_detection,
         quiet: p.quiet,
         no_avatar: p.no_avatar,

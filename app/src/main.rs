@@ -96,6 +96,28 @@ fn run(args: &[String]) -> Result<ExitCode, Failure> {
             bench::net_live(&out, seconds, quick).map_err(Failure::runtime)?;
             Ok(ExitCode::SUCCESS)
         }
+        Command::Token {
+            room,
+            room_key_file,
+            valid,
+        } => {
+            let Some(key) = room_key(room_key_file.as_deref())? else {
+                return Err(Failure::usage(
+                    "a token is signed with the room's key: --room-key-file FILE or SOFTSYNC_ROOM_KEY",
+                ));
+            };
+            let now = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_secs());
+            let nonce = random_nonce()
+                .ok_or_else(|| Failure::runtime("no system random source for the token"))?;
+            let token = key
+                .for_room(&room)
+                .issue_token(now + valid as u64, nonce)
+                .ok_or_else(|| Failure::runtime("the key names no room"))?;
+            println!("{token}");
+            Ok(ExitCode::SUCCESS)
+        }
         Command::BenchAuto {
             out,
             seconds,
@@ -225,6 +247,15 @@ fn ice_credential(a: &PeerArgs) -> Result<Option<String>, Failure> {
             "--ice-user needs a password: --ice-credential-file FILE or SOFTSYNC_ICE_CREDENTIAL",
         )),
     }
+}
+
+/// 16 random bytes from the system's source.
+fn random_nonce() -> Option<[u8; 16]> {
+    let mut n = [0u8; 16];
+    std::fs::File::open("/dev/urandom")
+        .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut n))
+        .ok()?;
+    Some(n)
 }
 
 fn room_key(file: Option<&Path>) -> Result<Option<softsync_net::RoomKey>, Failure> {
@@ -374,6 +405,14 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     opts.ice_credential = ice_credential(&a)?;
     opts.connect_timeout = a.connect_timeout;
     opts.room_key = room_key(a.room_key_file.as_deref())?;
+    opts.room_token = match (&a.room_token, std::env::var("SOFTSYNC_ROOM_TOKEN")) {
+        (Some(t), _) => Some(t.clone()),
+        (None, Ok(t)) => Some(
+            t.parse()
+                .map_err(|e| Failure::usage(format!("SOFTSYNC_ROOM_TOKEN: {e}")))?,
+        ),
+        (None, Err(_)) => None,
+    };
     opts.fast_detection = a.fast_detection;
     opts.condition = a.condition.clone();
     opts.send = SendPolicy {

@@ -74,8 +74,11 @@ pub struct RoomOptions {
     pub ice_credential: Option<String>,
     /// How long to wait for signaling, the first data channel and the host's welcome.
     pub connect_timeout: Duration,
-    /// The room's shared secret: only peers that know it get in.
+    /// The room's shared secret: only peers that know it get in (or show a join token it
+    /// signed, see [`RoomKey::issue_token`]).
     pub room_key: Option<RoomKey>,
+    /// A join token to show a room with a key when we hold no key.
+    pub room_token: Option<softsync_net::wire::RoomToken>,
     /// A seeded link conditioner over the real transport (loss and latency in tests).
     pub condition: Option<ConditionerConfig>,
     /// How often and how precisely objects are sent (the scene's classes refine it).
@@ -111,6 +114,7 @@ impl RoomOptions {
             ice_credential: None,
             connect_timeout: Duration::from_secs(15),
             room_key: None,
+            room_token: None,
             condition: None,
             send: SendPolicy {
                 rate_hz: 20.0,
@@ -188,7 +192,16 @@ impl RoomOptions {
             }
         }
         types.configure(&mut cfg);
-        cfg.room_key = self.room_key.clone();
+        // the key names this room (join tokens are bound to it) and carries this machine's
+        // wall clock at the session's time zero (now, within a frame), for token expiry
+        let unix_now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs());
+        cfg.room_key = self
+            .room_key
+            .clone()
+            .map(|k| k.for_room(&self.name).with_clock(unix_now));
+        cfg.room_token = self.room_token.clone();
         Ok(if self.fast_detection {
             cfg.fast_detection()
         } else {
@@ -502,12 +515,13 @@ impl Room {
     /// (from the files the scene was loaded from), or every request is told why there is none.
     fn serve_scene(&mut self, now: Instant, from: PeerId, datagram: &[u8]) {
         let scene = self.peer.scene();
-        let (key, me) = (
-            self.peer.session().config().room_key.clone(),
-            self.peer.me(),
-        );
+        let cfg = self.peer.session().config();
+        let (key, me) = (cfg.room_key.clone(), self.peer.me());
+        // in with a token, holding no key: we could not check a joiner's credentials
+        let keyless_member = key.is_none() && cfg.room_token.is_some();
         let server = self.share.get_or_insert_with(|| {
             match scene.bundle() {
+                _ if keyless_member => BlobServer::unavailable(share::CANNOT_CHECK.to_owned()),
                 Ok(b) => BlobServer::new(b),
                 Err(why) => BlobServer::unavailable(why),
             }
@@ -603,6 +617,7 @@ fn fetch_scene(
     let start_fetch = |from: PeerId, now: Instant| {
         BlobFetch::new(now, from, MAX_BUNDLE_BYTES, remaining())
             .with_key(opts.room_key.as_ref(), me)
+            .with_token(opts.room_token.clone())
     };
     let mut contacts: Vec<PeerId> = vec![first];
     let mut tried = 1;
@@ -641,18 +656,26 @@ fn fetch_scene(
         let from = fetch.source();
         let unable = match fetch.outcome() {
             Some(Ok(blob)) => break blob,
-            Some(Err(FetchError::Unavailable(why))) if why == share::NOT_IN_ROOM => true,
+            Some(Err(FetchError::Unavailable(why)))
+                if why == share::NOT_IN_ROOM || why == share::CANNOT_CHECK =>
+            {
+                true
+            }
             Some(Err(e)) => {
                 return Err(match e {
                     // Said as the handshake says it.
                     FetchError::Unavailable(why) if why == share::NEEDS_KEY => {
-                        OpenError::Peer(match opts.room_key {
-                            None => format!(
+                        OpenError::Peer(match (&opts.room_key, &opts.room_token) {
+                            (None, None) => format!(
                                 "room {:?}: the room needs a key and this peer has none \
-                                 (--room-key-file, or SOFTSYNC_ROOM_KEY)",
+                                 (--room-key-file, or SOFTSYNC_ROOM_KEY, or a join token: \
+                                 --room-token)",
                                 opts.name
                             ),
-                            Some(_) => format!("room {:?}: wrong room key", opts.name),
+                            (Some(_), _) => format!("room {:?}: wrong room key", opts.name),
+                            (None, Some(_)) => {
+                                format!("room {:?}: the join token is not this room's", opts.name)
+                            }
                         })
                     }
                     e => OpenError::Connect(format!(

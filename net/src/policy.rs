@@ -195,6 +195,10 @@ pub struct SessionConfig {
     /// sets the same secret. Not part of the digest, never serialised, never shown.
     #[serde(skip)]
     pub room_key: Option<crate::RoomKey>,
+    /// A join token to show when a room with a key challenges us and we hold no key
+    /// ([`RoomToken`](crate::wire::RoomToken)). Not part of the digest, never serialised.
+    #[serde(skip)]
+    pub room_token: Option<crate::wire::RoomToken>,
     /// How a silent peer is judged gone (a local choice, not part of the digest).
     #[serde(default)]
     pub detector: FailureDetector,
@@ -305,6 +309,7 @@ impl Default for SessionConfig {
             content_digest: 0,
             messages: MessageConfig::default(),
             room_key: None,
+            room_token: None,
             detector: FailureDetector::Fixed,
             heal_window: default_heal_window(),
         }

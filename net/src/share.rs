@@ -30,6 +30,7 @@ use crate::ids::PeerId;
 use crate::session::RoomKey;
 use crate::time::Instant;
 use crate::transport::Transmit;
+use crate::wire::RoomToken;
 
 /// First byte of every share datagram.
 pub const SHARE_MARKER: u8 = 0xF5;
@@ -40,6 +41,13 @@ pub const SERVE_BYTES_PER_S: f64 = 8.0 * 1024.0 * 1024.0;
 /// What a peer that is not in the room yet (another joiner) answers a request with: the
 /// fetcher asks the next peer.
 pub const NOT_IN_ROOM: &str = "not in the room yet";
+/// Longest token text a request carries.
+const MAX_TOKEN_TEXT: usize = 200;
+
+/// The reason a member of a room with a key that holds no key itself (it joined with a join
+/// token) gives every request: it cannot check them; ask another peer.
+pub const CANNOT_CHECK: &str = "this peer holds no room key to check yours: ask another peer";
+
 /// The reason a server with a key gives a request without a valid proof.
 pub const NEEDS_KEY: &str = "the room needs its key";
 /// Longest reason an `unavailable` answer carries.
@@ -73,6 +81,8 @@ pub enum ShareMsg<'a> {
         len: u32,
         /// In a room with a key: [`RoomKey::scene_proof`] of the requester and the server.
         proof: Option<[u8; 32]>,
+        /// Or, from a peer that holds no key, a join token of the room (its text form).
+        token: Option<RoomToken>,
     },
     /// Bytes of the blob.
     Chunk {
@@ -94,12 +104,19 @@ impl ShareMsg<'_> {
     pub fn encode(&self) -> Vec<u8> {
         let mut out = vec![SHARE_MARKER];
         match self {
-            ShareMsg::Request { offset, len, proof } => {
+            ShareMsg::Request {
+                offset,
+                len,
+                proof,
+                token,
+            } => {
                 out.push(KIND_REQUEST);
                 write_varint(&mut out, *offset);
                 write_varint(&mut out, u64::from(*len));
                 if let Some(p) = proof {
                     out.extend_from_slice(p);
+                } else if let Some(t) = token {
+                    out.extend_from_slice(t.to_string().as_bytes());
                 }
             }
             ShareMsg::Chunk {
@@ -137,16 +154,36 @@ impl ShareMsg<'_> {
             KIND_REQUEST => {
                 let offset = r.varint()?;
                 let len = r.varint_u32()?;
-                let proof = match bytes.len() - r.pos() {
-                    0 => None,
+                let (mut proof, mut token) = (None, None);
+                match bytes.len() - r.pos() {
+                    0 => {}
                     32 => {
                         let mut p = [0u8; 32];
                         p.copy_from_slice(r.take(32)?);
-                        Some(p)
+                        proof = Some(p);
                     }
-                    _ => return Err(decode_err(r.pos(), "a request's proof is 32 bytes")),
+                    n if n <= MAX_TOKEN_TEXT => {
+                        let at = r.pos();
+                        let text = std::str::from_utf8(r.take(n)?)
+                            .map_err(|_| decode_err(at, "a request's token is not text"))?;
+                        token = Some(
+                            text.parse::<RoomToken>()
+                                .map_err(|_| decode_err(at, "a request's token is malformed"))?,
+                        );
+                    }
+                    _ => {
+                        return Err(decode_err(
+                            r.pos(),
+                            "a request's proof is 32 bytes, a token at most 200",
+                        ))
+                    }
                 };
-                Ok(ShareMsg::Request { offset, len, proof })
+                Ok(ShareMsg::Request {
+                    offset,
+                    len,
+                    proof,
+                    token,
+                })
             }
             KIND_CHUNK => {
                 let mut digest = [0u8; 32];
@@ -235,14 +272,23 @@ impl BlobServer {
 
     /// The answer to a share datagram from `from`, if it deserves one.
     pub fn handle(&mut self, now: Instant, from: PeerId, datagram: &[u8]) -> Option<Transmit> {
-        let Ok(ShareMsg::Request { offset, len, proof }) = ShareMsg::decode(datagram) else {
+        let Ok(ShareMsg::Request {
+            offset,
+            len,
+            proof,
+            token,
+        }) = ShareMsg::decode(datagram)
+        else {
             self.refused += 1;
             return None;
         };
-        let proven = match (&self.key, proof) {
-            (None, _) => true,
-            (Some((key, me)), Some(p)) => key.verify_scene_proof(from, *me, &p),
-            (Some(_), None) => false,
+        let proven = match (&self.key, proof, token) {
+            (None, _, _) => true,
+            (Some((key, me)), Some(p), _) => key.verify_scene_proof(from, *me, &p),
+            // a token of this room, signed with its key (its expiry is the host's to check
+            // at the join: this server has no wall clock)
+            (Some((key, _)), None, Some(t)) => key.token_is_ours(&t),
+            (Some(_), None, None) => false,
         };
         let msg = match &self.blob {
             _ if !proven => {
@@ -339,6 +385,7 @@ pub struct BlobFetch {
     next_chunk: u64,
     outcome: Option<Result<(), FetchError>>,
     proof: Option<[u8; 32]>,
+    token: Option<RoomToken>,
     /// Requests sent (retries included).
     pub requests: u64,
     /// Datagrams ignored: malformed, from another peer, or a chunk not asked for.
@@ -363,6 +410,7 @@ impl BlobFetch {
             next_chunk: 0,
             outcome: None,
             proof: None,
+            token: None,
             requests: 0,
             ignored: 0,
         }
@@ -371,6 +419,12 @@ impl BlobFetch {
     /// In a room with a key: prove it ([`RoomKey::scene_proof`] of `me` and the source).
     pub fn with_key(mut self, key: Option<&RoomKey>, me: PeerId) -> Self {
         self.proof = key.map(|k| k.scene_proof(me, self.from));
+        self
+    }
+
+    /// In a room with a key, holding none: show this join token instead.
+    pub fn with_token(mut self, token: Option<RoomToken>) -> Self {
+        self.token = token;
         self
     }
 
@@ -429,6 +483,11 @@ impl BlobFetch {
             offset: chunk * CHUNK_BYTES as u64,
             len: CHUNK_BYTES as u32,
             proof: self.proof,
+            token: if self.proof.is_none() {
+                self.token.clone()
+            } else {
+                None
+            },
         };
         Some(Transmit {
             to: self.from,

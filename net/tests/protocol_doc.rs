@@ -424,6 +424,21 @@ fn render() -> String {
     ));
     examples.push(("Challenge", Control::Challenge { nonce: [0x5a; 16] }));
     examples.push(("Proof", Control::Proof { mac: [0xc3; 32] }));
+    let token = softsync_net::wire::RoomToken {
+        room: "lab".into(),
+        expires_unix: 1_800_003_600,
+        nonce: [0x11; 16],
+        mac: [0x22; 16],
+    };
+    examples.push(("TokenProof (room \"lab\")", Control::TokenProof { token }));
+    examples.push((
+        "TokenUsed",
+        Control::TokenUsed {
+            nonce: [0x11; 16],
+            peer: softsync_net::PeerId(101),
+            expires_unix: 1_800_003_600,
+        },
+    ));
     writeln!(
         w,
         "| message | example size (bytes) | example bytes |\n|---|---:|---|"
@@ -440,7 +455,7 @@ fn render() -> String {
     writeln!(w, "An application's own message travels in an `AppMessage` envelope: origin peer, the origin's number (from 1 per reliable or retained message, 0 for unreliable), kind (an index into `SessionConfig::messages.kinds`, whose names are part of the configuration digest checked at join), target (`Everyone`, `Peer(id)`, `OwnerOf(object)`, `Host`), delivery (`Reliable`, `Unreliable`, `Retained`, `ObjectState(object)`) and at most {} payload bytes. Reliable and retained ones go origin → host in a `Message` control message, and host → each target likewise; unreliable ones in a `message` section, relayed the same way. The host checks the origin (it must be the sender), the kind, the size, the origin's rate (token bucket, default {} per second, burst {}, plus the outbox bound, so a joiner's queued messages and resends to a new host pass) and its application filter, and answers a refused reliable message with `MessageRefused`. Once every target's link acknowledged the relayed copy (or the target left), the host tells the origin `MessagesDelivered` up to that number. The origin keeps undelivered messages (at most {}) and sends them again, in order, to a new host after a migration; a receiver delivers a reliable message only if its number is above the last it delivered from that origin, so each target gets it exactly once. The host, and every member, keeps the latest retained message of each kind, and of each kind and object for `ObjectState` (forgotten with the object), in the host's relay order (a retained message also goes back to its origin for that). A joiner receives them after the object snapshot, and members after a migration, as `Replay`: a replay sets the state without counting as the origin's live message, so the origin's earlier messages resent to the new host still arrive.\n", wire::MAX_MESSAGE_PAYLOAD, mc.rate_per_s, mc.burst, mc.max_outbox).unwrap();
 
     writeln!(w, "## Rooms with a key\n").unwrap();
-    writeln!(w, "A host whose configuration has a room key answers a `Hello` that passed every other check with `Challenge` (a 16-byte nonce, the same one again for a repeated `Hello`) instead of `Welcome`. The joiner answers `Proof`: HMAC-SHA256 under the key of `\"softsync-join-v1\" ‖ nonce ‖ joiner id (u64 LE) ‖ host id (u64 LE)`. A matching proof is admitted (`Welcome`, snapshot, …); another gets `Refused` \"wrong room key\"; a joiner without a key ends with a refusal of its own. The secret never crosses the wire, and a proof opens nothing but the one challenge it answers.\n").unwrap();
+    writeln!(w, "A host whose configuration has a room key answers a `Hello` that passed every other check with `Challenge` (a 16-byte nonce, the same one again for a repeated `Hello`) instead of `Welcome`. The joiner answers `Proof`: HMAC-SHA256 under the key of `\"softsync-join-v1\" ‖ nonce ‖ joiner id (u64 LE) ‖ host id (u64 LE)`. A matching proof is admitted (`Welcome`, snapshot, …); another gets `Refused` \"wrong room key\"; a joiner without a key ends with a refusal of its own. The secret never crosses the wire, and a proof opens nothing but the one challenge it answers. A joiner without the key may answer with `TokenProof`: a join token its holder issued (`softsync token`; text form `st1:ROOM:EXPIRES:NONCE:MAC`, the MAC the first 16 bytes of HMAC-SHA256 under the key of `\"softsync-token-v1\" ‖ room length (u64 LE) ‖ room ‖ expiry (u64 LE, Unix seconds) ‖ nonce`). The host admits it if the MAC is right, the room is its own, the expiry is after its clock and no other peer used that token; it then sends `TokenUsed` to every member (and to a later joiner after its snapshot), so a new host after a migration refuses the token's replay too. A host that itself joined with a token holds no key and admits nobody.\n").unwrap();
 
     writeln!(w, "## Scene sharing (before a session)\n").unwrap();
     {
@@ -449,6 +464,7 @@ fn render() -> String {
             offset: 2048,
             len: CHUNK_BYTES as u32,
             proof: None,
+            token: None,
         }
         .encode();
         let data = [0xAB; 4];

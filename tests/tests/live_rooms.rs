@@ -483,6 +483,33 @@ fn e_errors_are_clear_and_exit_non_zero() {
     assert!(err.contains("wrong room key"), "{err}");
     let (code, err) = join("key", &["--room-key-file", k]);
     assert_eq!(code, 0, "the keyholder was not let in: {err}");
+    // Join tokens (`softsync token`): one gets a keyless peer in (the scene fetched with it);
+    // the same token again, from another peer, is refused; so is another room's token.
+    let token = |room: &str| {
+        let out = std::process::Command::new(common::binary())
+            .args([
+                "token",
+                "--room",
+                room,
+                "--room-key-file",
+                k,
+                "--valid",
+                "600",
+            ])
+            .output()
+            .unwrap();
+        assert!(out.status.success());
+        String::from_utf8(out.stdout).unwrap().trim().to_owned()
+    };
+    let (t, other) = (token("keyed"), token("elsewhere"));
+    let (code, err) = join("token", &["--room-token", &t]);
+    assert_eq!(code, 0, "the token was not let in: {err}");
+    let (code, err) = join("token-again", &["--room-token", &t]);
+    assert_eq!(code, 3, "{err}");
+    assert!(err.contains("used by another peer"), "{err}");
+    let (code, err) = join("token-other-room", &["--room-token", &other]);
+    assert_eq!(code, 3, "{err}");
+    assert!(err.contains("not this room's"), "{err}");
     host.kill();
 
     let (code, err) = run(

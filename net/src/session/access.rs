@@ -18,7 +18,7 @@ use ring::hmac;
 use super::{Role, Session, MAX_STRANGERS};
 use crate::ids::PeerId;
 use crate::time::Instant;
-use crate::wire::Control;
+use crate::wire::{Control, RoomToken};
 
 /// A room's secret, as the session uses it (an HMAC-SHA256 key) and the seed its
 /// challenges are drawn from. Its `Debug` shows no key material.
@@ -28,6 +28,11 @@ pub struct RoomKey {
     nonce_seed: u64,
     /// HMAC of a fixed text under the key: keys compare by it, never by the secret.
     fingerprint: [u8; 32],
+    /// The room the key is for: join tokens name it (`None`: tokens are refused).
+    room: Option<String>,
+    /// Seconds since the Unix epoch at the session's time zero: a host checks token expiry
+    /// on it (`None`: tokens are refused, having no clock to expire on).
+    unix_at_zero: Option<u64>,
 }
 
 impl RoomKey {
@@ -43,7 +48,91 @@ impl RoomKey {
             key,
             nonce_seed,
             fingerprint,
+            room: None,
+            unix_at_zero: None,
         }
+    }
+
+    /// This key, for room `room` (join tokens are bound to it).
+    pub fn for_room(mut self, room: &str) -> Self {
+        self.room = Some(room.to_owned());
+        self
+    }
+
+    /// This key, with the wall clock at the session's time zero (seconds since the Unix
+    /// epoch; the I/O layer's), so a host can tell an expired join token.
+    pub fn with_clock(mut self, unix_at_zero: u64) -> Self {
+        self.unix_at_zero = Some(unix_at_zero);
+        self
+    }
+
+    fn token_mac(&self, room: &str, expires_unix: u64, nonce: &[u8; 16]) -> [u8; 16] {
+        let mut ctx = hmac::Context::with_key(&self.key);
+        ctx.update(b"softsync-token-v1");
+        ctx.update(&(room.len() as u64).to_le_bytes());
+        ctx.update(room.as_bytes());
+        ctx.update(&expires_unix.to_le_bytes());
+        ctx.update(nonce);
+        let mut out = [0u8; 16];
+        out.copy_from_slice(ctx.sign().as_ref().get(..16).unwrap_or(&[0; 16]));
+        out
+    }
+
+    /// A join token for this key's room (see [`for_room`](Self::for_room)) until
+    /// `expires_unix`; `nonce` must be random (the I/O layer draws it). `None` without a room.
+    pub fn issue_token(&self, expires_unix: u64, nonce: [u8; 16]) -> Option<RoomToken> {
+        let room = self.room.clone()?;
+        let mac = self.token_mac(&room, expires_unix, &nonce);
+        Some(RoomToken {
+            room,
+            expires_unix,
+            nonce,
+            mac,
+        })
+    }
+
+    /// Why `token` does not admit anyone at session time `now`, if it does not: signed by
+    /// another key or for another room, or expired (checked in constant time for the MAC).
+    pub fn check_token(&self, token: &RoomToken, now: Instant) -> Result<(), &'static str> {
+        let Some(room) = &self.room else {
+            return Err("this host takes no join tokens (its key names no room)");
+        };
+        let expected = self.token_mac(&token.room, token.expires_unix, &token.nonce);
+        let same = expected
+            .iter()
+            .zip(&token.mac)
+            .fold(0u8, |acc, (a, b)| acc | (a ^ b))
+            == 0;
+        if !same || token.room != *room {
+            return Err("the join token is not this room's");
+        }
+        let Some(zero) = self.unix_at_zero else {
+            return Err("this host has no clock to check join tokens on");
+        };
+        if zero.saturating_add(now.as_micros() / 1_000_000) >= token.expires_unix {
+            return Err("the join token expired");
+        }
+        Ok(())
+    }
+
+    /// Whether `token` is signed with this key for this key's room (its expiry aside).
+    pub fn token_is_ours(&self, token: &RoomToken) -> bool {
+        let Some(room) = &self.room else {
+            return false;
+        };
+        let expected = self.token_mac(&token.room, token.expires_unix, &token.nonce);
+        expected
+            .iter()
+            .zip(&token.mac)
+            .fold(0u8, |acc, (a, b)| acc | (a ^ b))
+            == 0
+            && token.room == *room
+    }
+
+    /// Seconds since the Unix epoch at session time `now`, if the key has a clock.
+    pub(crate) fn unix_now(&self, now: Instant) -> Option<u64> {
+        self.unix_at_zero
+            .map(|z| z.saturating_add(now.as_micros() / 1_000_000))
     }
 
     /// The key of `secret`, its nonce seed drawn from the system's random source (`None` if
@@ -145,18 +234,33 @@ impl PartialEq for RoomKey {
     }
 }
 
-/// The host's open challenges (nonce, and when it was issued).
+/// The host's open challenges (nonce, and when it was issued), and the join tokens used (by
+/// whom, until when): every member keeps the latter, so a new host knows them.
 #[derive(Debug, Default)]
 pub(crate) struct Challenges {
     open: BTreeMap<PeerId, ([u8; 16], Instant)>,
     issued: u64,
+    tokens_used: BTreeMap<[u8; 16], (PeerId, u64)>,
 }
+
+/// Most used tokens remembered (expired ones go first, then the soonest to expire).
+const MAX_TOKENS_USED: usize = 4096;
 
 impl Session {
     /// Host: a joiner passed the other checks. Without a room key it is admitted; with one
     /// it is challenged (the same nonce again for a repeated `Hello`). False if admitted.
     pub(super) fn challenge(&mut self, now: Instant, from: PeerId) -> bool {
         let Some(key) = self.cfg.room_key.clone() else {
+            if self.cfg.room_token.is_some() {
+                // we got in with a token and hold no key: we cannot check anyone's, and a
+                // room with a key must not open up because its host changed
+                self.stats.refused_joins += 1;
+                let reason = "this room's host joined with a token and holds no key: it \
+                              cannot admit anyone until a peer with the key hosts"
+                    .to_string();
+                self.send_control(now, from, &Control::Refused { reason });
+                return true;
+            }
             return false;
         };
         let nonce = match self.challenges.open.get(&from) {
@@ -186,18 +290,99 @@ impl Session {
 
     /// Joiner: our contact challenges us.
     pub(super) fn on_challenge(&mut self, now: Instant, from: PeerId, nonce: [u8; 16]) {
-        match self.cfg.room_key.clone() {
-            Some(key) => {
+        match (self.cfg.room_key.clone(), self.cfg.room_token.clone()) {
+            (Some(key), _) => {
                 let tag = key.proof(&nonce, self.local, from);
                 let mut mac = [0u8; 32];
                 mac.copy_from_slice(tag.as_ref().get(..32).unwrap_or(&[0; 32]));
                 self.send_control(now, from, &Control::Proof { mac });
             }
-            None => self.on_refused(
+            (None, Some(token)) => {
+                self.send_control(now, from, &Control::TokenProof { token });
+            }
+            (None, None) => self.on_refused(
                 "the room needs a key and this peer has none (--room-key-file, or \
-                 SOFTSYNC_ROOM_KEY)"
+                 SOFTSYNC_ROOM_KEY, or a join token: --room-token)"
                     .into(),
             ),
+        }
+    }
+
+    /// Host: a joiner shows a join token. Admitted if it is this room's, unexpired, and not
+    /// used by another peer; refused with the reason otherwise.
+    pub(super) fn on_token_proof(&mut self, now: Instant, from: PeerId, token: RoomToken) {
+        let Some(key) = self.cfg.room_key.clone() else {
+            self.stats.refused_controls += 1;
+            return;
+        };
+        if self.members.contains_key(&from) {
+            return;
+        }
+        if self.challenges.open.remove(&from).is_none() {
+            self.stats.refused_controls += 1;
+            let reason = "no open challenge for this peer (it expired): join again".to_string();
+            self.send_control(now, from, &Control::Refused { reason });
+            return;
+        }
+        let verdict = key.check_token(&token, now).and_then(|()| {
+            match self.challenges.tokens_used.get(&token.nonce) {
+                Some((p, _)) if *p != from => Err("the join token was used by another peer"),
+                _ => Ok(()),
+            }
+        });
+        if let Err(why) = verdict {
+            self.stats.refused_joins += 1;
+            self.send_control(now, from, &Control::Refused { reason: why.into() });
+            return;
+        }
+        self.admit(now, from);
+        if self.members.contains_key(&from) {
+            let used = Control::TokenUsed {
+                nonce: token.nonce,
+                peer: from,
+                expires_unix: token.expires_unix,
+            };
+            self.note_token_used(now, token.nonce, from, token.expires_unix);
+            self.broadcast(now, &used, None);
+        }
+    }
+
+    /// A token was used (by us as host, or our host says so).
+    pub(super) fn note_token_used(
+        &mut self,
+        now: Instant,
+        nonce: [u8; 16],
+        peer: PeerId,
+        expires_unix: u64,
+    ) {
+        let used = &mut self.challenges.tokens_used;
+        if let Some(t) = self.cfg.room_key.as_ref().and_then(|k| k.unix_now(now)) {
+            used.retain(|_, (_, exp)| *exp > t);
+        }
+        while used.len() >= MAX_TOKENS_USED {
+            let soonest = used.iter().min_by_key(|(_, (_, e))| *e).map(|(n, _)| *n);
+            match soonest {
+                Some(n) => used.remove(&n),
+                None => break,
+            };
+        }
+        used.insert(nonce, (peer, expires_unix));
+    }
+
+    /// Host: the used tokens, to a new member (after its snapshot).
+    pub(super) fn send_tokens_used(&mut self, now: Instant, to: PeerId) {
+        let all: Vec<Control> = self
+            .challenges
+            .tokens_used
+            .iter()
+            .map(|(nonce, (peer, expires_unix))| Control::TokenUsed {
+                nonce: *nonce,
+                peer: *peer,
+                expires_unix: *expires_unix,
+            })
+            .collect();
+        for c in all {
+            self.send_control(now, to, &c);
         }
     }
 
@@ -368,5 +553,142 @@ mod joining_guards {
             "keys compare by secret"
         );
         assert_ne!(RoomKey::new(b"same", 1), RoomKey::new(b"other", 1));
+    }
+}
+
+#[cfg(test)]
+mod tokens {
+    #![allow(clippy::unwrap_used)]
+    use super::super::testkit::{config, Wire};
+    use super::super::Event;
+    use super::*;
+
+    const SECRET: &[u8] = b"the lab's room secret, 16+ bytes";
+    /// The hosts' wall clock at their time zero.
+    const T0: u64 = 1_800_000_000;
+
+    fn key(seed: u64) -> RoomKey {
+        RoomKey::new(SECRET, seed).for_room("lab").with_clock(T0)
+    }
+
+    fn host_cfg(seed: u64) -> crate::SessionConfig {
+        let mut c = config();
+        c.room_key = Some(key(seed));
+        c
+    }
+
+    fn token_cfg(t: &RoomToken) -> crate::SessionConfig {
+        let mut c = config();
+        c.room_token = Some(t.clone());
+        c
+    }
+
+    fn refusal(w: &mut Wire, p: u64) -> Option<String> {
+        w.events(p).into_iter().find_map(|e| match e {
+            Event::Refused { reason } => Some(reason),
+            _ => None,
+        })
+    }
+
+    #[test]
+    fn a_token_admits_one_peer_that_may_come_back_and_nobody_else() {
+        let t = key(9).issue_token(T0 + 3600, [1; 16]).unwrap();
+        // the text form round-trips
+        assert_eq!(t.to_string().parse::<RoomToken>().unwrap(), t);
+        let mut w = Wire::new();
+        w.add(Session::host(PeerId(1), host_cfg(1), w.now));
+        w.add(Session::join(PeerId(2), PeerId(1), token_cfg(&t), w.now));
+        w.settle();
+        assert!(w.get(2).is_connected());
+        // another peer with the same token (stolen, or shared): refused
+        w.add(Session::join(PeerId(3), PeerId(1), token_cfg(&t), w.now));
+        w.settle();
+        let r = refusal(&mut w, 3).unwrap();
+        assert!(r.contains("used by another peer"), "{r}");
+        // peer 2 comes back with a fresh session and the same token: in again
+        w.peers.remove(&PeerId(2));
+        for _ in 0..30 {
+            w.now += std::time::Duration::from_millis(100);
+            let now = w.now;
+            w.get(1).handle_timeout(now);
+            w.settle();
+        }
+        w.add(Session::join(PeerId(2), PeerId(1), token_cfg(&t), w.now));
+        w.settle();
+        let ev = w.events(2);
+        assert!(w.get(2).is_connected(), "{ev:?} {:?}", w.get(1).members());
+        assert_eq!(w.get(1).members().len(), 2);
+    }
+
+    #[test]
+    fn an_expired_foreign_or_forged_token_is_refused_with_its_reason() {
+        let good = key(9).issue_token(T0 + 3600, [2; 16]).unwrap();
+        let expired = key(9).issue_token(T0 - 1, [3; 16]).unwrap();
+        let other_room = RoomKey::new(SECRET, 9)
+            .for_room("kitchen")
+            .issue_token(T0 + 3600, [4; 16])
+            .unwrap();
+        let other_key = RoomKey::new(b"another secret of 16+ bytes", 9)
+            .for_room("lab")
+            .issue_token(T0 + 3600, [5; 16])
+            .unwrap();
+        let mut forged = good.clone();
+        forged.expires_unix += 86_400; // a longer life, same signature
+        let mut w = Wire::new();
+        w.add(Session::host(PeerId(1), host_cfg(1), w.now));
+        for (p, t, why) in [
+            (2, &expired, "expired"),
+            (3, &other_room, "not this room's"),
+            (4, &other_key, "not this room's"),
+            (5, &forged, "not this room's"),
+        ] {
+            w.add(Session::join(PeerId(p), PeerId(1), token_cfg(t), w.now));
+            w.settle();
+            let r = refusal(&mut w, p).unwrap_or_default();
+            assert!(r.contains(why), "peer {p}: {r:?}");
+        }
+        assert_eq!(w.get(1).members().len(), 1);
+        // a host whose key has no clock takes no tokens at all
+        let mut w = Wire::new();
+        let mut c = config();
+        c.room_key = Some(RoomKey::new(SECRET, 1).for_room("lab"));
+        w.add(Session::host(PeerId(1), c, w.now));
+        w.add(Session::join(PeerId(2), PeerId(1), token_cfg(&good), w.now));
+        w.settle();
+        assert!(refusal(&mut w, 2).unwrap().contains("no clock"));
+    }
+
+    #[test]
+    fn a_new_host_after_a_migration_refuses_a_replayed_token_and_a_token_holder_admits_nobody() {
+        let t = key(9).issue_token(T0 + 3600, [6; 16]).unwrap();
+        let mut w = Wire::new();
+        w.add(Session::host(PeerId(1), host_cfg(1), w.now));
+        w.add(Session::join(PeerId(2), PeerId(1), host_cfg(2), w.now)); // holds the key
+        w.settle();
+        w.add(Session::join(PeerId(3), PeerId(1), token_cfg(&t), w.now));
+        w.settle();
+        assert!(w.get(3).is_connected());
+        // the host dies; peer 2 (the earliest joiner, with the key) takes over
+        w.peers.remove(&PeerId(1));
+        for _ in 0..30 {
+            w.now += std::time::Duration::from_millis(100);
+            let now = w.now;
+            for s in w.peers.values_mut() {
+                s.handle_timeout(now);
+            }
+            w.settle();
+        }
+        assert!(w.get(2).is_host());
+        // the token peer 3 used does not admit peer 4 at the new host either
+        w.add(Session::join(PeerId(4), PeerId(2), token_cfg(&t), w.now));
+        w.settle();
+        let r = refusal(&mut w, 4).unwrap();
+        assert!(r.contains("used by another peer"), "{r}");
+        // and a host that joined with a token (no key) admits nobody
+        let mut w = Wire::new();
+        w.add(Session::host(PeerId(1), token_cfg(&t), w.now));
+        w.add(Session::join(PeerId(5), PeerId(1), config(), w.now));
+        w.settle();
+        assert!(refusal(&mut w, 5).unwrap().contains("holds no key"));
     }
 }

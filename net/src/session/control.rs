@@ -104,6 +104,14 @@ impl Session {
                 self.on_challenge(now, from, nonce);
             }
             Control::Proof { mac } if self.role == Role::Host => self.on_proof(now, from, mac),
+            Control::TokenProof { token } if self.role == Role::Host => {
+                self.on_token_proof(now, from, token);
+            }
+            Control::TokenUsed {
+                nonce,
+                peer,
+                expires_unix,
+            } if from_host => self.note_token_used(now, nonce, peer, expires_unix),
             Control::Redirect { host }
                 if self.role == Role::Joining && from != host && Some(from) == self.host =>
             {

@@ -109,6 +109,7 @@ impl Session {
         self.send_control(now, from, &welcome);
         self.send_snapshot(now, from);
         self.send_retained(now, from);
+        self.send_tokens_used(now, from);
         self.broadcast(
             now,
             &Control::PeerJoined {

@@ -198,6 +198,7 @@ fn a_server_answers_a_flood_within_its_rate_and_ignores_junk() {
         offset: 0,
         len: 1 << 30,
         proof: None,
+        token: None,
     }
     .encode();
     let mut bytes = 0;
@@ -226,6 +227,7 @@ fn a_server_answers_a_flood_within_its_rate_and_ignores_junk() {
         offset: 50_000,
         len: 10,
         proof: None,
+        token: None,
     };
     assert!(s.handle(later, PeerId(6), &past.encode()).is_none());
     assert!(s.handle(later, PeerId(6), &[SHARE_MARKER, 9, 9]).is_none());
@@ -299,6 +301,7 @@ fn a_room_with_a_key_shares_its_scene_only_with_a_keyholder() {
         offset: 0,
         len: 1024,
         proof: Some(stolen),
+        token: None,
     }
     .encode();
     let a = server.handle(Instant::ZERO, PeerId(77), &req).unwrap();
@@ -311,6 +314,7 @@ fn a_room_with_a_key_shares_its_scene_only_with_a_keyholder() {
         offset: 0,
         len: 1024,
         proof: None,
+        token: None,
     }
     .encode();
     bad.extend_from_slice(&[0; 31]);

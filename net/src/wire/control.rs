@@ -193,6 +193,93 @@ pub enum Control {
         /// The MAC.
         mac: [u8; 32],
     },
+    /// Joiner → host, answering a `Challenge` without the key: a join token the key's holder
+    /// issued ([`RoomToken`]). It admits one peer (the first to show it; that peer may show it
+    /// again to rejoin) until it expires.
+    TokenProof {
+        /// The token.
+        token: RoomToken,
+    },
+    /// Host → members (and to a joiner after its snapshot): this token admitted `peer`; every
+    /// member keeps the list, so a new host after a migration refuses its replay too.
+    TokenUsed {
+        /// The token's nonce.
+        nonce: [u8; 16],
+        /// The peer it admitted.
+        peer: PeerId,
+        /// When it expires (seconds since the Unix epoch): forgotten after.
+        expires_unix: u64,
+    },
+}
+
+/// A join token: admission to room `room` until `expires_unix` (seconds since the Unix
+/// epoch, the host's clock), for one peer, signed by the holder of the room key: `mac` is the
+/// first 16 bytes of HMAC-SHA256 under the key of `"softsync-token-v1" ‖ room ‖ expires (u64
+/// LE) ‖ nonce`. Written `st1:ROOM:EXPIRES:NONCE:MAC` (hex) for the command line.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RoomToken {
+    /// The room's name.
+    pub room: String,
+    /// Expiry, seconds since the Unix epoch.
+    pub expires_unix: u64,
+    /// Random, from the issuer: what makes the token one of its kind.
+    pub nonce: [u8; 16],
+    /// The signature.
+    pub mac: [u8; 16],
+}
+
+/// Longest room name a token carries.
+pub const MAX_TOKEN_ROOM: usize = 64;
+
+impl std::fmt::Display for RoomToken {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let hex = |b: &[u8]| b.iter().map(|x| format!("{x:02x}")).collect::<String>();
+        write!(
+            f,
+            "st1:{}:{}:{}:{}",
+            self.room,
+            self.expires_unix,
+            hex(&self.nonce),
+            hex(&self.mac)
+        )
+    }
+}
+
+impl std::str::FromStr for RoomToken {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        let parts: Vec<&str> = s.trim().split(':').collect();
+        let [tag, room, expires, nonce, mac] = parts.as_slice() else {
+            return Err("a join token is st1:ROOM:EXPIRES:NONCE:MAC".into());
+        };
+        if *tag != "st1" {
+            return Err(format!("unknown token version {tag:?} (expected st1)"));
+        }
+        if room.is_empty() || room.len() > MAX_TOKEN_ROOM {
+            return Err(format!("token room: 1 to {MAX_TOKEN_ROOM} characters"));
+        }
+        let expires_unix = expires
+            .parse()
+            .map_err(|_| format!("token expiry {expires:?} is not a number"))?;
+        fn hex<const N: usize>(what: &str, s: &str) -> Result<[u8; N], String> {
+            if s.len() != 2 * N || !s.bytes().all(|b| b.is_ascii_hexdigit()) {
+                return Err(format!("token {what}: {} hex digits expected", 2 * N));
+            }
+            let mut out = [0u8; N];
+            for (i, o) in out.iter_mut().enumerate() {
+                *o = u8::from_str_radix(s.get(2 * i..2 * i + 2).unwrap_or("00"), 16)
+                    .map_err(|_| format!("token {what}: not hex"))?;
+            }
+            Ok(out)
+        }
+        Ok(RoomToken {
+            room: (*room).to_owned(),
+            expires_unix,
+            nonce: hex("nonce", nonce)?,
+            mac: hex("mac", mac)?,
+        })
+    }
 }
 
 /// One change of an object's mesh topology, in the object's rest frame (the frame of its
@@ -387,6 +474,9 @@ impl Control {
             Control::Topology { event, .. } => event.valid(),
             Control::Message(m) => m.valid() && m.delivery.is_reliable(),
             Control::Replay(m) => m.valid() && m.delivery.is_retained(),
+            Control::TokenProof { token } => {
+                !token.room.is_empty() && token.room.len() <= MAX_TOKEN_ROOM
+            }
             _ => true,
         };
         if ok {

@@ -13,8 +13,8 @@ mod message;
 mod state;
 
 pub use control::{
-    Control, DenyReason, SpawnInfo, TopologyEvent, MAX_CUT_PIECES, MAX_RESOLUTION_LEVELS,
-    MAX_TOPOLOGY_COORD, TOPOLOGY_QUANTUM_M,
+    Control, DenyReason, RoomToken, SpawnInfo, TopologyEvent, MAX_CUT_PIECES,
+    MAX_RESOLUTION_LEVELS, MAX_TOKEN_ROOM, MAX_TOPOLOGY_COORD, TOPOLOGY_QUANTUM_M,
 };
 pub use message::{
     AppMessage, Delivery, MessageKind, MessageRefusal, MessageTarget, ReceivedMessage,
