@@ -37,6 +37,10 @@ enum Sub {
         /// Listen address.
         #[arg(long, default_value = "127.0.0.1:3536", value_parser = address)]
         bind: SocketAddr,
+        /// Rooms on this server need this secret (or SOFTSYNC_ROOM_KEY): a peer shows its
+        /// proof or a join token, or is refused (HTTP 403) before it sees anyone.
+        #[arg(long, value_name = "FILE")]
+        room_key_file: Option<PathBuf>,
     },
     /// Print a join token for a room with a key: whoever shows it gets in once (the first
     /// peer to use it; that peer may come back with it) until it expires.
@@ -360,6 +364,8 @@ pub enum Command {
     Signal {
         /// Listen address.
         bind: SocketAddr,
+        /// The rooms' secret's file.
+        room_key_file: Option<PathBuf>,
     },
     /// A peer.
     Peer(Box<PeerArgs>),
@@ -574,7 +580,13 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
         return Ok(Command::Help(Cli::command().render_help().to_string()));
     };
     Ok(match sub {
-        Sub::Signal { bind } => Command::Signal { bind },
+        Sub::Signal {
+            bind,
+            room_key_file,
+        } => Command::Signal {
+            bind,
+            room_key_file,
+        },
         Sub::Token {
             room,
             room_key_file,

@@ -86,7 +86,10 @@ fn run(args: &[String]) -> Result<ExitCode, Failure> {
             print!("{text}");
             Ok(ExitCode::SUCCESS)
         }
-        Command::Signal { bind } => signal(bind),
+        Command::Signal {
+            bind,
+            room_key_file,
+        } => signal(bind, room_key(room_key_file.as_deref())?),
         Command::Peer(p) => peer(*p),
         Command::BenchNetLive {
             out,
@@ -137,8 +140,17 @@ fn run(args: &[String]) -> Result<ExitCode, Failure> {
     }
 }
 
-fn signal(bind: std::net::SocketAddr) -> Result<ExitCode, Failure> {
-    let server = SignalServer::start(bind).map_err(Failure::connect)?;
+fn signal(
+    bind: std::net::SocketAddr,
+    key: Option<softsync_net::RoomKey>,
+) -> Result<ExitCode, Failure> {
+    let keyed = key.is_some();
+    let server =
+        SignalServer::start_keyed(bind, softsync_net_matchbox::SignalLimits::default(), key)
+            .map_err(Failure::connect)?;
+    if keyed {
+        println!("rooms on this server need the room key (or a join token)");
+    }
     println!("signaling on {}", server.url());
     let mut last = Vec::new();
     loop {

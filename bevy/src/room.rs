@@ -301,8 +301,13 @@ impl Room {
         let (signal, url) = match (&opts.signal, opts.host) {
             (Some(u), _) => (None, u.clone()),
             (None, true) => {
-                let s = SignalServer::start(opts.bind)
-                    .map_err(|e| OpenError::Connect(format!("signaling on {}: {e}", opts.bind)))?;
+                // a room with a key keeps outsiders off its embedded signaling server too
+                let s = SignalServer::start_keyed(
+                    opts.bind,
+                    softsync_net_matchbox::SignalLimits::default(),
+                    opts.room_key.clone(),
+                )
+                .map_err(|e| OpenError::Connect(format!("signaling on {}: {e}", opts.bind)))?;
                 let url = s.url();
                 (Some(s), url)
             }
@@ -319,6 +324,8 @@ impl Room {
         );
         mcfg.ice_servers = opts.ice_servers.clone();
         mcfg.ice_username = opts.ice_username.clone();
+        mcfg.signal_proof = opts.room_key.as_ref().map(|k| k.signal_proof(&opts.name));
+        mcfg.signal_token = opts.room_token.as_ref().map(|t| t.to_string());
         mcfg.ice_credential = opts.ice_credential.clone();
         mcfg.connect_timeout = opts.connect_timeout.min(Duration::from_secs(30));
         let started = std::time::Instant::now();

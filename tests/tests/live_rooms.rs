@@ -511,6 +511,30 @@ fn e_errors_are_clear_and_exit_non_zero() {
     assert_eq!(code, 3, "{err}");
     assert!(err.contains("not this room's"), "{err}");
     host.kill();
+    // A keyed host's embedded signaling server refuses peers without the key or a token
+    // before they see anyone (HTTP 403); the token gets through it and into the room.
+    let (mut host, url) = embedded_host(&dir, "keyed-embedded", &["--room-key-file", k]);
+    host.peer_id();
+    let join_at = |name: &str, extra: &[&str]| {
+        let mut a = vec![
+            "join",
+            "--room",
+            "keyed-embedded",
+            "--signal",
+            &url,
+            "--duration",
+            "2",
+        ];
+        a.extend_from_slice(extra);
+        run(name, &a)
+    };
+    let (code, err) = join_at("signal-no-key", &[]);
+    assert_eq!(code, 3, "{err}");
+    assert!(err.contains("HTTP 403"), "{err}");
+    let t = token("keyed-embedded");
+    let (code, err) = join_at("signal-token", &["--room-token", &t]);
+    assert_eq!(code, 0, "{err}");
+    host.kill();
 
     let (code, err) = run(
         "flag",

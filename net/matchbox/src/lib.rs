@@ -26,6 +26,10 @@ pub use transport::{ConnectError, MatchboxConfig, MatchboxTransport, Role, Trans
 pub const VERSION_PARAM: &str = "softsync";
 /// Query parameter carrying the client's role (`host` or `join`).
 pub const ROLE_PARAM: &str = "role";
+/// Query parameter: the room key's proof for the signaling server (`RoomKey::signal_proof`).
+pub const PROOF_PARAM: &str = "proof";
+/// Query parameter: a join token for the signaling server.
+pub const TOKEN_PARAM: &str = "token";
 /// Response header in which the server names the protocol version it speaks.
 pub const VERSION_HEADER: &str = "x-softsync-protocol";
 /// Largest datagram we hand to matchbox (it silently drops messages over about 64 KiB; the

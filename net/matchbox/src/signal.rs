@@ -13,7 +13,10 @@ use matchbox_signaling::SignalingServer;
 use matchbox_socket::PeerId as MbPeerId;
 use softsync_net::PROTOCOL_VERSION;
 
-use crate::{valid_room_name, ROLE_PARAM, VERSION_HEADER, VERSION_PARAM};
+use softsync_net::wire::RoomToken;
+use softsync_net::RoomKey;
+
+use crate::{valid_room_name, PROOF_PARAM, ROLE_PARAM, TOKEN_PARAM, VERSION_HEADER, VERSION_PARAM};
 
 /// Why the signaling server could not start.
 #[derive(Debug, thiserror::Error)]
@@ -133,6 +136,17 @@ impl SignalServer {
 
     /// [`SignalServer::start`] with explicit limits.
     pub fn start_with(bind: SocketAddr, limits: SignalLimits) -> Result<Self, SignalError> {
+        Self::start_keyed(bind, limits, None)
+    }
+
+    /// [`SignalServer::start_with`] for rooms with a key: a connection must carry the key's
+    /// proof for its room (`RoomKey::signal_proof`) or an unexpired join token of it, else HTTP
+    /// 403 — outsiders do not even learn the peers' ids. `None`: every room is open.
+    pub fn start_keyed(
+        bind: SocketAddr,
+        limits: SignalLimits,
+        key: Option<RoomKey>,
+    ) -> Result<Self, SignalError> {
         let registry = Arc::new(Mutex::new(Registry::default()));
         let (tx, rx) = tokio::sync::oneshot::channel();
         let (r1, r2, r3) = (registry.clone(), registry.clone(), registry.clone());
@@ -155,6 +169,25 @@ impl SignalServer {
                         StatusCode::BAD_REQUEST,
                         format!("invalid room name {room:?}"),
                     ));
+                }
+                if let Some(k) = &key {
+                    let proof = meta.query_params.get(PROOF_PARAM).map(String::as_str);
+                    let token = meta
+                        .query_params
+                        .get(TOKEN_PARAM)
+                        .and_then(|t| t.parse::<RoomToken>().ok());
+                    let unix_now = std::time::SystemTime::now()
+                        .duration_since(std::time::UNIX_EPOCH)
+                        .map_or(0, |d| d.as_secs());
+                    if !k.admits_signal(&room, proof, token.as_ref(), unix_now) {
+                        return Err(refuse(
+                            StatusCode::FORBIDDEN,
+                            format!(
+                                "room {room:?} needs its key on this signaling server \
+                                 (--room-key-file, or a join token: --room-token)"
+                            ),
+                        ));
+                    }
                 }
                 let role = meta.query_params.get(ROLE_PARAM).map(String::as_str);
                 let mut reg = lock(&r1);

@@ -9,7 +9,10 @@ use matchbox_socket::{
 };
 use softsync_net::{Instant, PeerEvent, PeerId, Transmit, Transport, PROTOCOL_VERSION};
 
-use crate::{valid_room_name, DEFAULT_MTU, ROLE_PARAM, VERSION_HEADER, VERSION_PARAM};
+use crate::{
+    valid_room_name, DEFAULT_MTU, PROOF_PARAM, ROLE_PARAM, TOKEN_PARAM, VERSION_HEADER,
+    VERSION_PARAM,
+};
 
 /// Channel index of the unordered, no-retransmit channel (state, acks, pings).
 const UNRELIABLE: usize = 0;
@@ -48,6 +51,10 @@ pub struct MatchboxConfig {
     /// The protocol version announced to the signaling server (the build's own by default;
     /// tests set another to see the refusal).
     pub protocol_version: u8,
+    /// For a signaling server that wants the room's key: `RoomKey::signal_proof` of the room.
+    pub signal_proof: Option<String>,
+    /// Or a join token of the room (its text form).
+    pub signal_token: Option<String>,
 }
 
 impl MatchboxConfig {
@@ -63,6 +70,8 @@ impl MatchboxConfig {
             connect_timeout: Duration::from_secs(10),
             mtu: DEFAULT_MTU,
             protocol_version: PROTOCOL_VERSION,
+            signal_proof: None,
+            signal_token: None,
         }
     }
 
@@ -72,12 +81,18 @@ impl MatchboxConfig {
             Role::Host => "host",
             Role::Join => "join",
         };
-        format!(
+        let mut url = format!(
             "{}/{}?{VERSION_PARAM}={}&{ROLE_PARAM}={role}",
             self.signal_url.trim_end_matches('/'),
             self.room,
             self.protocol_version
-        )
+        );
+        if let Some(p) = &self.signal_proof {
+            url.push_str(&format!("&{PROOF_PARAM}={p}"));
+        } else if let Some(t) = &self.signal_token {
+            url.push_str(&format!("&{TOKEN_PARAM}={t}"));
+        }
+        url
     }
 }
 

@@ -115,6 +115,48 @@ impl RoomKey {
         Ok(())
     }
 
+    /// What a peer of room `room` shows the signaling server to be let in (hex): HMAC-SHA256
+    /// of `"softsync-signal-v1" ‖ room`. Bound to the room, not to a connection: it keeps
+    /// outsiders off the server (a captured URL is as good as the proof; use `wss://`).
+    pub fn signal_proof(&self, room: &str) -> String {
+        let mut ctx = hmac::Context::with_key(&self.key);
+        ctx.update(b"softsync-signal-v1");
+        ctx.update(room.as_bytes());
+        ctx.sign()
+            .as_ref()
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect()
+    }
+
+    /// The signaling server's check of a connection to room `room`: a right
+    /// [`signal_proof`](Self::signal_proof), or a join token of this key for that room that
+    /// has not expired at `unix_now`.
+    pub fn admits_signal(
+        &self,
+        room: &str,
+        proof: Option<&str>,
+        token: Option<&RoomToken>,
+        unix_now: u64,
+    ) -> bool {
+        if let Some(p) = proof {
+            let want = self.signal_proof(room);
+            return p.len() == want.len()
+                && p.bytes()
+                    .zip(want.bytes())
+                    .fold(0u8, |acc, (a, b)| acc | (a ^ b))
+                    == 0;
+        }
+        match token {
+            Some(t) => {
+                t.room == room
+                    && t.expires_unix > unix_now
+                    && self.clone().for_room(room).token_is_ours(t)
+            }
+            None => false,
+        }
+    }
+
     /// Whether `token` is signed with this key for this key's room (its expiry aside).
     pub fn token_is_ours(&self, token: &RoomToken) -> bool {
         let Some(room) = &self.room else {
