@@ -462,19 +462,12 @@ fn e_errors_are_clear_and_exit_non_zero() {
         &["--room-key-file", k],
     );
     host.peer_id();
-    let join = |name: &str, extra: &[&str]| {
-        let mut a = vec![
-            "join",
-            "--room",
-            "keyed",
-            "--signal",
-            &url,
-            "--duration",
-            "2",
-        ];
+    let join_in = |room: &str, url: &str, name: &str, extra: &[&str]| {
+        let mut a = vec!["join", "--room", room, "--signal", url, "--duration", "2"];
         a.extend_from_slice(extra);
         run(name, &a)
     };
+    let join = |name: &str, extra: &[&str]| join_in("keyed", &url, name, extra);
     let (code, err) = join("no-key", &[]);
     assert_eq!(code, 3, "{err}");
     assert!(err.contains("needs a key"), "{err}");
@@ -515,19 +508,7 @@ fn e_errors_are_clear_and_exit_non_zero() {
     // before they see anyone (HTTP 403); the token gets through it and into the room.
     let (mut host, url) = embedded_host(&dir, "keyed-embedded", &["--room-key-file", k]);
     host.peer_id();
-    let join_at = |name: &str, extra: &[&str]| {
-        let mut a = vec![
-            "join",
-            "--room",
-            "keyed-embedded",
-            "--signal",
-            &url,
-            "--duration",
-            "2",
-        ];
-        a.extend_from_slice(extra);
-        run(name, &a)
-    };
+    let join_at = |name: &str, extra: &[&str]| join_in("keyed-embedded", &url, name, extra);
     let (code, err) = join_at("signal-no-key", &[]);
     assert_eq!(code, 3, "{err}");
     assert!(err.contains("HTTP 403"), "{err}");
