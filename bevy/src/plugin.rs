@@ -129,9 +129,14 @@ pub struct NetObject {
 pub struct SoftBody {
     /// Its particles now (the method may change it: thesis clustering, tears).
     pub particles: usize,
-    /// Topology changes (cuts, tears) applied so far: a renderer rebuilds its triangles when
-    /// this grows.
+    /// Topology changes (cuts, tears, resolution changes) applied so far: a renderer rebuilds
+    /// its triangles when this grows.
     pub topology: u32,
+    /// `method: auto`: the resolution level it runs at (coarsest 0), `None` for its class's
+    /// spawn level or a class without `auto`.
+    pub level: Option<u8>,
+    /// `method: auto`, its owner's view: the particles sleep (an untouched body at rest).
+    pub asleep: bool,
 }
 
 /// One of this peer's own hands, on its avatar hand's entity (with [`NetObject`] and
@@ -401,6 +406,8 @@ fn mirror(
             LocalBody::Soft(h) => peer.soft_bodies().get(h).map(|b| SoftBody {
                 particles: b.particles().len(),
                 topology: o.topology,
+                level: o.level,
+                asleep: b.activity(peer.world()).asleep,
             }),
             _ => None,
         };
