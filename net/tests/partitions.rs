@@ -243,3 +243,40 @@ fn a_room_without_a_key_trusts_a_beacon_of_its_configuration() {
         }
     );
 }
+
+fn arb_summary() -> impl proptest::strategy::Strategy<Value = softsync_net::wire::RoomSummary> {
+    use proptest::prelude::*;
+    (0u32..6, 0u32..6, 0u64..4).prop_map(|(members, host_join, host)| {
+        softsync_net::wire::RoomSummary {
+            digest: 1,
+            host: PeerId(host),
+            host_join,
+            members,
+            tag: None,
+        }
+    })
+}
+
+proptest::proptest! {
+    /// The merge rule is a strict total order on rooms: of two different rooms exactly one
+    /// wins, and it is transitive — so every peer agrees which side yields, whatever order
+    /// beacons arrive in.
+    #[test]
+    fn the_merge_rule_is_a_strict_total_order(a in arb_summary(), b in arb_summary(), c in arb_summary()) {
+        let key = |s: &softsync_net::wire::RoomSummary| (s.members, s.host_join, s.host);
+        if key(&a) == key(&b) {
+            proptest::prop_assert!(!a.beats(&b) && !b.beats(&a));
+        } else {
+            proptest::prop_assert!(a.beats(&b) != b.beats(&a));
+        }
+        if a.beats(&b) && b.beats(&c) {
+            proptest::prop_assert!(a.beats(&c));
+        }
+    }
+
+    /// A join token's text form never panics the parser, whatever is given.
+    #[test]
+    fn any_text_parses_to_a_token_or_an_error(s in ".{0,120}") {
+        let _ = s.parse::<softsync_net::wire::RoomToken>();
+    }
+}
