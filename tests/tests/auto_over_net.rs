@@ -211,3 +211,71 @@ fn bench_auto_writes_its_tables_and_result_line() {
         assert!(ladders.contains(class), "{ladders}");
     }
 }
+
+/// A cut's pieces keep changing resolution, each with its own particle count (a piece is not
+/// its class's mesh): the client cuts the box in two, pulls one piece, and both peers rebuild
+/// that piece at the squeeze level with the same count the owner asked for.
+#[test]
+fn a_cut_piece_changes_resolution_with_its_own_particle_count_on_both_peers() {
+    let hub = MemoryHub::new(1200);
+    let mut room = Room {
+        nodes: [
+            Node::with(&hub, HOST, 13, scene()),
+            Node::with(&hub, CLIENT, 14, scene()),
+        ],
+        now: Instant::ZERO,
+    };
+    room.run(Duration::from_secs(2));
+    let id = room.nodes[1].id_of("squishy")[0];
+    let now = room.now;
+    room.nodes[1].peer.ask_authority(now, id);
+    room.run(Duration::from_millis(500));
+    let c = room.nodes[1].peer.shown_state(room.now, id).unwrap().pos;
+    let now = room.now;
+    room.nodes[1]
+        .peer
+        .cut(now, id, c, Vec3::new(1.0, 0.1, 0.0))
+        .unwrap();
+    room.run(Duration::from_secs(3));
+    let pieces = room.nodes[1].id_of("squishy");
+    assert_eq!(pieces.len(), 2, "{pieces:?}");
+    let piece = pieces[0];
+    // pull the piece's top particle up 6 cm and hold
+    let top = {
+        let n = &room.nodes[1];
+        let LocalBody::Soft(h) = n.peer.objects()[&piece].body else {
+            unreachable!()
+        };
+        n.peer
+            .soft_bodies()
+            .get(h)
+            .unwrap()
+            .particle_positions(n.peer.world())
+            .into_iter()
+            .max_by(|a, b| a.y.total_cmp(&b.y))
+            .unwrap()
+    };
+    for k in 0..150 {
+        let now = room.now;
+        let lift = 0.06 * ((k as f32 - 30.0) / 30.0).clamp(0.0, 1.0);
+        room.nodes[0].frame(now);
+        room.nodes[1].frame_input(now, hand(now, top + Vec3::Y * lift, 1.0));
+        room.now += Duration::from_secs_f32(DT);
+    }
+    let (owner_level, owner_n) = level(&room.nodes[1], piece);
+    let (replica_level, replica_n) = level(&room.nodes[0], piece);
+    assert_eq!(
+        owner_level,
+        Some(2),
+        "the pulled piece went to the squeeze level"
+    );
+    assert_eq!((replica_level, replica_n), (owner_level, owner_n));
+    assert_eq!(
+        room.nodes[0].peer.session().particles_of(piece),
+        Some(owner_n as u32)
+    );
+    for n in &room.nodes {
+        assert!(n.warnings.is_empty(), "{:?}", n.warnings);
+        assert_eq!(n.peer.counters().apply_errors, 0);
+    }
+}

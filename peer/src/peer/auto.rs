@@ -93,9 +93,21 @@ impl Peer {
             {
                 continue;
             }
+            // this body's own count at that level: a cut's piece is not its class's mesh
+            let Some(config) = auto.ladder.configs.get(want).cloned() else {
+                continue;
+            };
+            let Ok(particles) = self
+                .mirror
+                .soft
+                .particles_with(h, &self.mirror.world, config)
+            else {
+                state.asked = Some((level, t));
+                continue;
+            };
             let event = TopologyEvent::Resolution {
                 level,
-                particles: auto.ladder.particles[want] as u32,
+                particles: particles as u32,
             };
             if self
                 .session

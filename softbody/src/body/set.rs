@@ -173,6 +173,22 @@ impl SoftBodySet {
         Ok(plans.iter().map(|(p, _)| p.map.len()).collect())
     }
 
+    /// How many particles body `handle` would have clustered with `config` (what
+    /// [`reconfigure`](Self::reconfigure) would make of it: a cut's piece clusters its own
+    /// mesh, so its count is not its class's), changing nothing.
+    pub fn particles_with(
+        &self,
+        handle: SoftBodyHandle,
+        world: &PhysicsWorld,
+        config: SoftBodyConfig,
+    ) -> Result<usize, SoftBodyError> {
+        config.validate()?;
+        let body = self.get(handle).ok_or_else(|| {
+            SoftBodyError::Config(format!("soft body {handle:?} is not in this set"))
+        })?;
+        Ok(body.plan_reconfigure(world, config)?.plan.map.len())
+    }
+
     /// Rebuilds body `handle` clustered with `config` (another resolution of the same rest
     /// mesh), where it is now and moving as it moves, and returns its new handle; the old
     /// handle is gone. The change shows no pop: the mesh is where it was, and the difference
