@@ -317,8 +317,16 @@ impl Room {
                 ))
             }
         };
+        // `signal` may list several servers (comma-separated): the first that takes us is
+        // the room's (one unreachable, or not hosting the room, is passed over)
+        let urls: Vec<String> = url
+            .split(',')
+            .map(str::trim)
+            .filter(|u| !u.is_empty())
+            .map(str::to_owned)
+            .collect();
         let mut mcfg = MatchboxConfig::new(
-            url.clone(),
+            urls.first().cloned().unwrap_or_default(),
             opts.name.clone(),
             if opts.host { Role::Host } else { Role::Join },
         );
@@ -329,9 +337,27 @@ impl Room {
         mcfg.ice_credential = opts.ice_credential.clone();
         mcfg.connect_timeout = opts.connect_timeout.min(Duration::from_secs(30));
         let started = std::time::Instant::now();
-        let mut transport: Box<MatchboxTransport> = Box::new(
-            MatchboxTransport::connect(&mcfg).map_err(|e| OpenError::Connect(e.to_string()))?,
-        );
+        let mut tried = Vec::new();
+        let mut connected = None;
+        for u in &urls {
+            mcfg.signal_url = u.clone();
+            match MatchboxTransport::connect(&mcfg) {
+                Ok(t) => {
+                    connected = Some(t);
+                    break;
+                }
+                Err(
+                    e @ (softsync_net_matchbox::ConnectError::Unreachable { .. }
+                    | softsync_net_matchbox::ConnectError::RoomNotFound { .. }),
+                ) if urls.len() > 1 => tried.push(e.to_string()),
+                Err(e) => return Err(OpenError::Connect(e.to_string())),
+            }
+        }
+        let Some(t) = connected else {
+            return Err(OpenError::Connect(tried.join("; ")));
+        };
+        let url = mcfg.signal_url.clone();
+        let mut transport: Box<MatchboxTransport> = Box::new(t);
         let me = transport.local_id();
         let now0 = Instant::ZERO;
         let mut fetched = None;

@@ -476,6 +476,10 @@ fn e_errors_are_clear_and_exit_non_zero() {
     assert!(err.contains("wrong room key"), "{err}");
     let (code, err) = join("key", &["--room-key-file", k]);
     assert_eq!(code, 0, "the keyholder was not let in: {err}");
+    // several signaling servers: the unreachable one is passed over
+    let list = format!("{dead},{url}");
+    let (code, err) = join_in("keyed", &list, "list", &["--room-key-file", k]);
+    assert_eq!(code, 0, "{err}");
     // Join tokens (`softsync token`): one gets a keyless peer in (the scene fetched with it);
     // the same token again, from another peer, is refused; so is another room's token.
     let token = |room: &str| {

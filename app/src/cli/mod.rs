@@ -64,7 +64,8 @@ enum Sub {
         /// The embedded signaling server's address (port 0 picks one).
         #[arg(long, value_parser = address, conflicts_with = "signal")]
         bind: Option<SocketAddr>,
-        /// An external signaling server (ws:// or wss://).
+        /// An external signaling server (ws:// or wss://); several, comma-separated: the
+        /// first reachable one.
         #[arg(long, value_parser = ws_url)]
         signal: Option<String>,
         #[command(flatten)]
@@ -73,7 +74,8 @@ enum Sub {
     /// Enter a room as a headless peer (a bot when --bot is given), a desktop peer
     /// (--desktop) or a VR peer (--vr).
     Join {
-        /// The room's signaling server (e.g. ws://127.0.0.1:3536).
+        /// The room's signaling server (e.g. ws://127.0.0.1:3536); several, comma-separated,
+        /// are tried in order (one unreachable, or without the room, is passed over).
         #[arg(long, value_parser = ws_url)]
         signal: String,
         #[command(flatten)]

@@ -25,12 +25,14 @@ pub(super) fn address(v: &str) -> Result<SocketAddr, String> {
         .map_err(|_| format!("{v:?} is not an address like 127.0.0.1:3536"))
 }
 
+/// One `ws://` or `wss://` URL, or several separated by commas (tried in order).
 pub(super) fn ws_url(v: &str) -> Result<String, String> {
-    if v.starts_with("ws://") || v.starts_with("wss://") {
-        Ok(v.to_owned())
-    } else {
-        Err(format!("{v:?} is not a ws:// or wss:// URL"))
+    for u in v.split(',').map(str::trim) {
+        if !(u.starts_with("ws://") || u.starts_with("wss://")) {
+            return Err(format!("{u:?} is not a ws:// or wss:// URL"));
+        }
     }
+    Ok(v.to_owned())
 }
 
 pub(super) fn token(v: &str) -> Result<softsync_net::wire::RoomToken, String> {
