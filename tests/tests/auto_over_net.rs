@@ -60,6 +60,21 @@ fn level(n: &Node, id: NetId) -> (Option<u8>, usize) {
     )
 }
 
+/// The highest particle of object `id`'s soft body on a peer (where a hand grips to pull).
+fn top_particle(n: &Node, id: NetId) -> Vec3 {
+    let LocalBody::Soft(h) = n.peer.objects()[&id].body else {
+        panic!("not soft")
+    };
+    n.peer
+        .soft_bodies()
+        .get(h)
+        .unwrap()
+        .particle_positions(n.peer.world())
+        .into_iter()
+        .max_by(|a, b| a.y.total_cmp(&b.y))
+        .unwrap()
+}
+
 fn hand(now: Instant, at: Vec3, grip: f32) -> Option<HandInput> {
     Some(HandInput {
         sample: HandSample {
@@ -103,20 +118,7 @@ fn the_owner_moves_the_box_between_levels_as_it_is_used_and_the_replica_follows(
         "the resting box went to sleep: {host_modes}"
     );
     // The client's hand grips the box's top particle and pulls it up 8 cm.
-    let top = {
-        let n = &room.nodes[1];
-        let LocalBody::Soft(h) = n.peer.objects()[&id].body else {
-            unreachable!()
-        };
-        n.peer
-            .soft_bodies()
-            .get(h)
-            .unwrap()
-            .particle_positions(n.peer.world())
-            .into_iter()
-            .max_by(|a, b| a.y.total_cmp(&b.y))
-            .unwrap()
-    };
+    let top = top_particle(&room.nodes[1], id);
     let mut squeezed_seen = false;
     for k in 0..180 {
         let now = room.now;
@@ -241,20 +243,7 @@ fn a_cut_piece_changes_resolution_with_its_own_particle_count_on_both_peers() {
     assert_eq!(pieces.len(), 2, "{pieces:?}");
     let piece = pieces[0];
     // pull the piece's top particle up 6 cm and hold
-    let top = {
-        let n = &room.nodes[1];
-        let LocalBody::Soft(h) = n.peer.objects()[&piece].body else {
-            unreachable!()
-        };
-        n.peer
-            .soft_bodies()
-            .get(h)
-            .unwrap()
-            .particle_positions(n.peer.world())
-            .into_iter()
-            .max_by(|a, b| a.y.total_cmp(&b.y))
-            .unwrap()
-    };
+    let top = top_particle(&room.nodes[1], piece);
     for k in 0..150 {
         let now = room.now;
         let lift = 0.06 * ((k as f32 - 30.0) / 30.0).clamp(0.0, 1.0);

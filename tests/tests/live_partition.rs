@@ -10,19 +10,8 @@ mod common;
 #[test]
 fn a_live_partition_of_3_s_heals_into_one_room() {
     common::require_netns();
-    let out = std::process::Command::new("bash")
-        .arg(common::repo_file("scripts/partition-live"))
-        .arg("3")
-        .env("SOFTSYNC_BIN", common::binary())
-        .env("PARTITION", "all")
-        .output()
-        .unwrap();
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert!(out.status.success(), "{text}");
+    let (ok, text) = common::run_script("partition-live", &["3"], &[("PARTITION", "all")]);
+    assert!(ok, "{text}");
     let bot = text.lines().find(|l| l.starts_with("bot:")).unwrap();
     assert!(bot.ends_with("peers=2"), "{text}");
 }

@@ -12,18 +12,8 @@ mod common;
 #[test]
 fn a_peer_behind_nat_joins_through_the_turn_relay_and_grabs() {
     common::require_netns();
-    let out = std::process::Command::new("bash")
-        .arg(common::repo_file("scripts/nat-turn"))
-        .arg("public")
-        .env("SOFTSYNC_BIN", common::binary())
-        .output()
-        .unwrap();
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert!(out.status.success(), "{text}");
+    let (ok, text) = common::run_script("nat-turn", &["public"], &[]);
+    assert!(ok, "{text}");
     let result = text
         .lines()
         .find(|l| l.starts_with("RESULT wild.turn"))

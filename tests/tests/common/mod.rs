@@ -58,6 +58,24 @@ pub fn wall_ms() -> f64 {
     START.get_or_init(Instant::now).elapsed().as_secs_f64() * 1e3
 }
 
+/// Runs `scripts/NAME ARGS` with the built binary (inside the test's own namespace): whether
+/// it succeeded, and what it printed.
+pub fn run_script(name: &str, args: &[&str], env: &[(&str, &str)]) -> (bool, String) {
+    let out = Command::new("bash")
+        .arg(repo_file(&format!("scripts/{name}")))
+        .args(args)
+        .env("SOFTSYNC_BIN", binary())
+        .envs(env.iter().copied())
+        .output()
+        .unwrap();
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (out.status.success(), text)
+}
+
 pub fn scratch(test: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("softsync-{test}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
