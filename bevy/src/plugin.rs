@@ -407,7 +407,7 @@ fn mirror(
                 particles: b.particles().len(),
                 topology: o.topology,
                 level: o.level,
-                asleep: b.activity(peer.world()).asleep,
+                asleep: b.is_asleep(peer.world()),
             }),
             _ => None,
         };

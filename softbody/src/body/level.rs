@@ -121,14 +121,22 @@ pub(crate) struct Reconfigure {
 }
 
 impl SoftBody {
-    /// What the body is doing now.
-    pub fn activity(&self, world: &PhysicsWorld) -> Activity {
-        let center = world.bodies.get(self.center);
-        let asleep = center.is_some_and(|c| c.is_sleeping())
+    /// Whether the center and every particle sleep (cheaper than [`activity`](Self::activity)).
+    pub fn is_asleep(&self, world: &PhysicsWorld) -> bool {
+        world
+            .bodies
+            .get(self.center)
+            .is_some_and(|c| c.is_sleeping())
             && self
                 .particles
                 .iter()
-                .all(|h| world.bodies.get(*h).is_none_or(|b| b.is_sleeping()));
+                .all(|h| world.bodies.get(*h).is_none_or(|b| b.is_sleeping()))
+    }
+
+    /// What the body is doing now.
+    pub fn activity(&self, world: &PhysicsWorld) -> Activity {
+        let center = world.bodies.get(self.center);
+        let asleep = self.is_asleep(world);
         let (c, vc, wc) = center.map_or((Vec3::ZERO, Vec3::ZERO, Vec3::ZERO), |b| {
             (b.translation(), b.linvel(), b.angvel())
         });
