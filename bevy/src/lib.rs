@@ -62,6 +62,7 @@
 
 pub mod glue;
 pub mod plugin;
+pub mod pump;
 pub mod room;
 
 pub use plugin::{

@@ -16,15 +16,25 @@
 //! 4. `PostUpdate`, [`SoftsyncSet::NetOut`]: datagrams out.
 //! 5. `Last`, [`SoftsyncSet::Leave`]: on `AppExit`, a `Leave` to the room (a host is replaced
 //!    at once, authority returns).
+//!
+//! Between frames (after `Last` until before `First`: rendering, the window's or headset's
+//! wait) the [`Room`] is on the plugin's network thread ([`crate::pump::NetPump`],
+//! [`SoftsyncPlugin::net_thread`]), which keeps reading and answering the network every 2 ms, so
+//! a slow frame never slows the room. Systems of the frame see the room as usual; outside a
+//! frame (a test between `app.update()` calls) reach it with [`SoftsyncApp::with_room`].
 
 use std::collections::HashMap;
 use std::marker::PhantomData;
 
-use bevy::app::{App, AppExit, FixedUpdate, Last, Plugin, PostUpdate, PreUpdate, Update};
+use bevy::app::{
+    App, AppExit, First, FixedUpdate, Last, MainScheduleOrder, Plugin, PostUpdate, PreUpdate,
+    Update,
+};
 use bevy::ecs::entity::Entity;
 use bevy::ecs::message::{Message, MessageReader, MessageWriter};
 use bevy::ecs::prelude::{Commands, Component, Query, ResMut, Resource};
-use bevy::ecs::schedule::{IntoScheduleConfigs, SystemSet};
+use bevy::ecs::schedule::{IntoScheduleConfigs, ScheduleLabel, SystemSet};
+use bevy::ecs::world::World;
 use bevy::ecs::system::{NonSend, NonSendMut};
 use bevy::time::{Fixed, Time};
 use bevy::transform::components::Transform;
@@ -33,6 +43,7 @@ use softsync_net::{Delivery, MessageTarget, NetId, PeerId, Stats, Term};
 use softsync_peer::{Event, Kind, LocalBody};
 
 use crate::glue::transform;
+use crate::pump::NetPump;
 use crate::room::Room;
 
 /// Where the plugin's systems run; order your own against these.
@@ -184,6 +195,11 @@ pub struct SoftsyncPlugin {
     pub exit_on_failure: bool,
     /// Keep an entity per networked object ([`SoftsyncSet::Mirror`]).
     pub mirror_entities: bool,
+    /// Pump the network on a thread of its own between frames (see the module docs), so the
+    /// room's heartbeats, RTT and relaying do not depend on the frame rate. False: only the
+    /// frame pumps it (one pump per frame; a frame of 300 ms is then an RTT of 300 ms, and a
+    /// host that stalls longer than the peers' timeout is taken for dead).
+    pub net_thread: bool,
 }
 
 impl Default for SoftsyncPlugin {
@@ -191,6 +207,7 @@ impl Default for SoftsyncPlugin {
         SoftsyncPlugin {
             exit_on_failure: true,
             mirror_entities: true,
+            net_thread: true,
         }
     }
 }
@@ -220,6 +237,51 @@ impl Plugin for SoftsyncPlugin {
         if self.mirror_entities {
             app.add_systems(Update, mirror.in_set(SoftsyncSet::Mirror));
         }
+        if self.net_thread {
+            match NetPump::start() {
+                Ok(pump) => {
+                    app.insert_resource(Pump(pump))
+                        .init_schedule(RoomBack)
+                        .init_schedule(RoomAway)
+                        .add_systems(RoomBack, take_back)
+                        .add_systems(RoomAway, hand_off);
+                    let mut order = app.world_mut().resource_mut::<MainScheduleOrder>();
+                    order.insert_before(First, RoomBack);
+                    order.insert_after(Last, RoomAway);
+                }
+                // the room still runs, pumped by the frame alone
+                Err(e) => eprintln!("softsync: no network thread ({e}); the frame pumps the room"),
+            }
+        }
+    }
+}
+
+/// The plugin's network thread.
+#[derive(Resource)]
+struct Pump(NetPump);
+
+/// Before `First`: the room back from the network thread.
+#[derive(ScheduleLabel, Clone, Debug, PartialEq, Eq, Hash)]
+struct RoomBack;
+
+/// After `Last`: the room to the network thread until the next frame.
+#[derive(ScheduleLabel, Clone, Debug, PartialEq, Eq, Hash)]
+struct RoomAway;
+
+fn take_back(world: &mut World) {
+    if let Some(room) = world.get_resource::<Pump>().and_then(|p| p.0.take_back()) {
+        world.insert_non_send(room);
+    }
+}
+
+fn hand_off(world: &mut World) {
+    if !world.contains_resource::<Pump>() {
+        return;
+    }
+    if let Some(room) = world.remove_non_send::<Room>() {
+        if let Some(p) = world.get_resource::<Pump>() {
+            p.0.hand_off(room);
+        }
     }
 }
 
@@ -231,6 +293,9 @@ pub trait SoftsyncApp {
     /// Deliver messages of type `M` as [`Received<M>`] bevy messages (`M` must be in the
     /// room's message table: the scene's `messages` or [`crate::RoomOptions::with_message`]).
     fn add_room_message<M: RoomMessage + Send + Sync + 'static>(&mut self) -> &mut Self;
+    /// Run `f` on the room outside a frame (between `app.update()` calls the room may be on
+    /// the plugin's network thread, which pauses for it). `None` without a room.
+    fn with_room<R>(&mut self, f: impl FnOnce(&mut Room) -> R) -> Option<R>;
 }
 
 impl SoftsyncApp for App {
@@ -238,6 +303,19 @@ impl SoftsyncApp for App {
         let dt = f64::from(room.peer.config().dt_s);
         self.insert_resource(Time::<Fixed>::from_seconds(dt))
             .insert_non_send(room)
+    }
+
+    fn with_room<R>(&mut self, f: impl FnOnce(&mut Room) -> R) -> Option<R> {
+        let world = self.world_mut();
+        if let Some(mut room) = world.get_non_send_mut::<Room>() {
+            return Some(f(&mut room));
+        }
+        let mut room = world.get_resource::<Pump>()?.0.take_back()?;
+        let r = f(&mut room);
+        if let Some(p) = world.get_resource::<Pump>() {
+            p.0.hand_off(room);
+        }
+        Some(r)
     }
 
     fn add_room_message<M: RoomMessage + Send + Sync + 'static>(&mut self) -> &mut Self {

@@ -244,7 +244,7 @@ pub const LEAVE_GRACE: Duration = Duration::from_millis(100);
 pub struct Room {
     /// The peer: objects, hands, messages, the session and its stats.
     pub peer: Peer,
-    transport: Box<dyn Transport>,
+    transport: Box<dyn Transport + Send>,
     clock: Clock,
     name: String,
     signal_url: String,
@@ -256,6 +256,10 @@ pub struct Room {
     /// key, only to those that prove it).
     share: Option<BlobServer>,
     fetched: Option<FetchedScene>,
+    /// A failure met while pumped between frames, for the next [`Room::network_in`].
+    deferred: Option<OpenError>,
+    /// Pumps between frames ([`Room::pump_between_frames`]).
+    background_pumps: u64,
 }
 
 /// How a joiner received the room's scene ([`Room::open_fetching_scene`]).
@@ -402,7 +406,7 @@ impl Room {
         // `method: auto`: this machine's costs of each resolution level
         let mut scene = scene;
         scene.probe_auto(wall_ms).map_err(OpenError::Config)?;
-        let transport: Box<dyn Transport> = match opts.condition.clone() {
+        let transport: Box<dyn Transport + Send> = match opts.condition.clone() {
             Some(c) => Box::new(LinkConditioner::new(*transport, c)),
             None => transport,
         };
@@ -430,6 +434,8 @@ impl Room {
             events: Vec::new(),
             share: None,
             fetched,
+            deferred: None,
+            background_pumps: 0,
         })
     }
 
@@ -438,7 +444,7 @@ impl Room {
     pub fn with_transport(
         name: impl Into<String>,
         peer: Peer,
-        transport: Box<dyn Transport>,
+        transport: Box<dyn Transport + Send>,
     ) -> Self {
         Room {
             peer,
@@ -452,6 +458,8 @@ impl Room {
             events: Vec::new(),
             share: None,
             fetched: None,
+            deferred: None,
+            background_pumps: 0,
         }
     }
 
@@ -513,6 +521,9 @@ impl Room {
     /// The peer's events are kept for [`drain_events`](Self::drain_events). An error means
     /// the peer cannot go on (refused, timed out, the room gone past rejoining).
     pub fn network_in(&mut self) -> Result<(), OpenError> {
+        if let Some(e) = self.deferred.take() {
+            return Err(e);
+        }
         if !self.ready || self.left {
             return Ok(());
         }
@@ -542,6 +553,24 @@ impl Room {
             ))),
             Err(e) => Err(OpenError::Peer(e.to_string())),
         }
+    }
+
+    /// [`network_in`](Self::network_in) between frames ([`crate::pump::NetPump`]): the events
+    /// wait in the queue for [`drain_events`](Self::drain_events), a failure for the next
+    /// `network_in` (and nothing is pumped after it).
+    pub fn pump_between_frames(&mut self) {
+        if self.deferred.is_some() {
+            return;
+        }
+        self.background_pumps += 1;
+        if let Err(e) = self.network_in() {
+            self.deferred = Some(e);
+        }
+    }
+
+    /// How many times the network was pumped between frames (by the plugin's pump thread).
+    pub fn background_pumps(&self) -> u64 {
+        self.background_pumps
     }
 
     /// A joiner without the scene asks for ours: the bundle is built at the first request

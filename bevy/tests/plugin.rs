@@ -76,9 +76,13 @@ fn collect(
 }
 
 fn app(room: Room) -> App {
+    app_with(room, SoftsyncPlugin::default())
+}
+
+fn app_with(room: Room, plugin: SoftsyncPlugin) -> App {
     let mut app = App::new();
     app.add_plugins(MinimalPlugins)
-        .add_plugins(SoftsyncPlugin::default())
+        .add_plugins(plugin)
         .add_room(room)
         .add_room_message::<Greeting>()
         .init_resource::<Seen>()
@@ -172,9 +176,8 @@ fn two_apps_share_the_room_its_entities_and_a_message_of_their_own_type() {
         text: "hello".into(),
     };
     joiner
-        .world_mut()
-        .non_send_mut::<Room>()
-        .send(MessageTarget::Host, Delivery::Reliable, &hi)
+        .with_room(|r| r.send(MessageTarget::Host, Delivery::Reliable, &hi))
+        .unwrap()
         .unwrap();
     run_until(&mut [&mut host, &mut joiner], |a| {
         !a[0].world().resource::<Seen>().greetings.is_empty()
@@ -183,7 +186,7 @@ fn two_apps_share_the_room_its_entities_and_a_message_of_their_own_type() {
     // The joiner's app exits: the plugin says Leave, the host hears it at once (no timeout).
     joiner.world_mut().write_message(AppExit::Success);
     joiner.update();
-    assert!(joiner.world().non_send::<Room>().has_left());
+    assert_eq!(joiner.with_room(|r| r.has_left()), Some(true));
     let left_at = WallInstant::now();
     run_until(&mut [&mut host], |a| {
         a[0].world().resource::<Seen>().peers_left.contains(&JOINER)
@@ -193,6 +196,53 @@ fn two_apps_share_the_room_its_entities_and_a_message_of_their_own_type() {
         "{:?}",
         left_at.elapsed()
     );
+}
+
+/// A host whose frames stop for 1.5 s (a slow render, a dropped headset frame, a load) while
+/// the joiner runs on: (host seen by the joiner after, its RTT to the host then, host pumps
+/// between frames).
+fn stall_the_hosts_frames(net_thread: bool) -> (Option<PeerId>, Option<Duration>, u64) {
+    let hub = MemoryHub::new(1200);
+    let opts = Opts::host("lab");
+    let plugin = SoftsyncPlugin {
+        net_thread,
+        ..SoftsyncPlugin::default()
+    };
+    let mut host = app_with(room(&hub, HOST, &opts), plugin.clone());
+    let mut joiner = app_with(room(&hub, JOINER, &opts), plugin);
+    run_until(&mut [&mut host, &mut joiner], |a| {
+        a[1].world().resource::<Seen>().joined && entities(a[1]).len() == 3
+    });
+    // the peer timeout is 1 s: a stall of 1.5 s is a dead host unless something answers
+    let stalled = WallInstant::now();
+    while stalled.elapsed() < Duration::from_millis(1500) {
+        joiner.update();
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    for _ in 0..50 {
+        host.update();
+        joiner.update();
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let s = joiner.world().resource::<RoomStats>();
+    let rtt = s.session.links.get(&HOST).and_then(|l| l.rtt);
+    let pumps = host.with_room(|r| r.background_pumps()).unwrap();
+    (s.host, rtt, pumps)
+}
+
+#[test]
+fn a_hosts_slow_frames_do_not_slow_the_room_with_the_network_thread() {
+    // The plugin's default: the host's network thread answers while its frames stall; the
+    // joiner keeps it as host and reads a network's RTT, not the stall.
+    let (host, rtt, pumps) = stall_the_hosts_frames(true);
+    assert_eq!(host, Some(HOST), "the joiner took a stalled host for dead");
+    let rtt = rtt.unwrap();
+    assert!(rtt < Duration::from_millis(100), "rtt {rtt:?}");
+    assert!(pumps > 100, "{pumps} pumps between frames");
+    // The frame alone pumping: the same stall is a dead host to the joiner.
+    let (host, _, pumps) = stall_the_hosts_frames(false);
+    assert_eq!(host, Some(JOINER), "the joiner should have taken over");
+    assert_eq!(pumps, 0);
 }
 
 #[test]
@@ -369,13 +419,14 @@ fn a_bot_in_the_input_set_grabs_and_the_hand_entity_says_what_it_holds() {
         hovered |= q.iter(a[1].world()).any(|o| o.id.0 == block && o.hovered);
         let h = hands(a[1]);
         if std::env::var("DEBUG_HANDS").is_ok() {
-            let r = a[1].world().non_send::<Room>();
-            eprintln!(
-                "{:?} held {:?} hovered {:?}",
-                h,
-                r.peer.held(1).map(|x| x.0),
-                r.peer.hovered_ids()
-            );
+            a[1].with_room(|r| {
+                eprintln!(
+                    "{:?} held {:?} hovered {:?}",
+                    h,
+                    r.peer.held(1).map(|x| x.0),
+                    r.peer.hovered_ids()
+                )
+            });
         }
         h[1].0.holding.map(|id| id.0) == Some(block)
     });

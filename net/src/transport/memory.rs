@@ -1,9 +1,8 @@
 //! An in-memory datagram switch for tests and virtual-time runs (feature `testing`): endpoints
 //! deliver instantly into each other's inboxes; peers can be killed, links cut, the MTU changed.
 
-use std::cell::RefCell;
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
-use std::rc::Rc;
+use std::sync::{Arc, Mutex, PoisonError};
 
 use super::{PeerEvent, Transmit, Transport};
 use crate::ids::PeerId;
@@ -22,14 +21,14 @@ struct HubInner {
 /// In-memory datagram switch: endpoints deliver instantly into each other's inboxes.
 #[derive(Clone, Debug)]
 pub struct MemoryHub {
-    inner: Rc<RefCell<HubInner>>,
+    inner: Arc<Mutex<HubInner>>,
 }
 
 impl MemoryHub {
     /// A hub whose links carry datagrams up to `mtu` bytes.
     pub fn new(mtu: usize) -> Self {
         MemoryHub {
-            inner: Rc::new(RefCell::new(HubInner {
+            inner: Arc::new(Mutex::new(HubInner {
                 mtu,
                 ..HubInner::default()
             })),
@@ -38,7 +37,7 @@ impl MemoryHub {
 
     /// Attach an endpoint; every existing endpoint hears `Connected`.
     pub fn endpoint(&self, id: PeerId) -> HubEndpoint {
-        let mut h = self.inner.borrow_mut();
+        let mut h = self.inner.lock().unwrap_or_else(PoisonError::into_inner);
         let others: Vec<PeerId> = h.inboxes.keys().copied().collect();
         for o in &others {
             h.events
@@ -60,7 +59,7 @@ impl MemoryHub {
 
     /// The endpoint stops sending and receiving (a crash).
     pub fn kill(&self, id: PeerId) {
-        let mut h = self.inner.borrow_mut();
+        let mut h = self.inner.lock().unwrap_or_else(PoisonError::into_inner);
         h.dead.insert(id);
         if let Some(q) = h.inboxes.get_mut(&id) {
             q.clear();
@@ -69,7 +68,7 @@ impl MemoryHub {
 
     /// Cut (or restore) both directions between `a` and `b`.
     pub fn set_partition(&self, a: PeerId, b: PeerId, cut: bool) {
-        let mut h = self.inner.borrow_mut();
+        let mut h = self.inner.lock().unwrap_or_else(PoisonError::into_inner);
         for pair in [(a, b), (b, a)] {
             if cut {
                 h.cut.insert(pair);
@@ -81,12 +80,12 @@ impl MemoryHub {
 
     /// Change the path MTU.
     pub fn set_mtu(&self, mtu: usize) {
-        self.inner.borrow_mut().mtu = mtu;
+        self.inner.lock().unwrap_or_else(PoisonError::into_inner).mtu = mtu;
     }
 
     /// Datagrams dropped for exceeding the MTU.
     pub fn dropped_over_mtu(&self) -> u64 {
-        self.inner.borrow().dropped_mtu
+        self.inner.lock().unwrap_or_else(PoisonError::into_inner).dropped_mtu
     }
 }
 
@@ -104,7 +103,7 @@ impl Transport for HubEndpoint {
 
     fn send(&mut self, _now: Instant, transmit: &Transmit) {
         let (to, datagram) = (transmit.to, &transmit.payload);
-        let mut h = self.hub.inner.borrow_mut();
+        let mut h = self.hub.inner.lock().unwrap_or_else(PoisonError::into_inner);
         if h.dead.contains(&self.id) || h.dead.contains(&to) || h.cut.contains(&(self.id, to)) {
             return;
         }
@@ -118,7 +117,7 @@ impl Transport for HubEndpoint {
     }
 
     fn recv(&mut self, _now: Instant) -> Option<(PeerId, Vec<u8>)> {
-        let mut h = self.hub.inner.borrow_mut();
+        let mut h = self.hub.inner.lock().unwrap_or_else(PoisonError::into_inner);
         if h.dead.contains(&self.id) {
             return None;
         }
@@ -128,13 +127,13 @@ impl Transport for HubEndpoint {
     fn poll_peer_event(&mut self) -> Option<PeerEvent> {
         self.hub
             .inner
-            .borrow_mut()
+            .lock().unwrap_or_else(PoisonError::into_inner)
             .events
             .get_mut(&self.id)?
             .pop_front()
     }
 
     fn mtu(&self) -> usize {
-        self.hub.inner.borrow().mtu
+        self.hub.inner.lock().unwrap_or_else(PoisonError::into_inner).mtu
     }
 }
