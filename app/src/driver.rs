@@ -116,6 +116,7 @@ impl Driver {
     /// The stats line once a second, the dump at its rate; true when `--duration` is over.
     pub fn report(&mut self, room: &mut Room) -> bool {
         let now = room.now();
+        self.stats.frame(now);
         let t = Duration::from_micros(now.as_micros());
         if t >= self.next_stats {
             self.next_stats = t + Duration::from_secs(1);

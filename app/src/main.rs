@@ -532,7 +532,10 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     }
     let _ = home;
     let exit = app
-        .add_plugins(SoftsyncPlugin::default())
+        .add_plugins(SoftsyncPlugin {
+            net_thread: !a.no_net_thread,
+            ..SoftsyncPlugin::default()
+        })
         .add_room(room)
         .insert_resource(Time::<Fixed>::from_hz(a.sim_hz))
         .insert_non_send(driver)

@@ -172,13 +172,24 @@ pub struct Rates {
     pub down: f64,
 }
 
-/// Remembers the previous reading for rates.
+/// Remembers the previous reading for rates, and the frames since.
 #[derive(Clone, Debug, Default)]
 pub struct StatsLine {
     last: Option<(softsync_net::Instant, Traffic, Traffic)>,
+    last_frame: Option<Instant>,
+    /// Intervals between frames since the last line.
+    frames: Vec<Duration>,
 }
 
 impl StatsLine {
+    /// A frame ran at `now` (the line shows the median and longest interval).
+    pub fn frame(&mut self, now: Instant) {
+        if let Some(t) = self.last_frame {
+            self.frames.push(now.saturating_since(t));
+        }
+        self.last_frame = Some(now);
+    }
+
     /// The stats line of `peer` at `now` (and the rates it shows).
     pub fn line(&mut self, now: Instant, peer: &Peer) -> (String, Rates) {
         let session = peer.session();
@@ -204,8 +215,30 @@ impl StatsLine {
         } else {
             String::new()
         };
+        // each link's RTT (ms), and this peer's frame intervals since the last line
+        let rtts: Vec<String> = st
+            .links
+            .iter()
+            .filter_map(|(p, l)| Some(format!("{}:{:.1}", p.0, l.rtt?.as_secs_f64() * 1e3)))
+            .collect();
+        let frames = {
+            let f = &mut self.frames;
+            f.sort_unstable();
+            let ms = |d: Option<&Duration>| d.map_or(0.0, |d| d.as_secs_f64() * 1e3);
+            let line = format!(
+                " frame_ms={:.1}/{:.1}",
+                ms(f.get(f.len() / 2)),
+                ms(f.last())
+            );
+            f.clear();
+            if rtts.is_empty() {
+                line
+            } else {
+                format!("{line} rtts={}", rtts.join(","))
+            }
+        };
         let line = format!(
-            "stats t={:.1}s peer={} host={} term={} peers={} up={:.0}B/s down={:.0}B/s rtt={} owned={}/{}{heal}",
+            "stats t={:.1}s peer={} host={} term={} peers={} up={:.0}B/s down={:.0}B/s rtt={} owned={}/{}{frames}{heal}",
             now.as_secs_f64(),
             peer.me().0,
             session.host_id().map_or("-".into(), |h| h.0.to_string()),

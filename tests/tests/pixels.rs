@@ -16,7 +16,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{embedded_host, field, require_netns, scratch, Proc};
+use common::{embedded_host, field, require_netns, send_signal, scratch, Proc};
 
 /// An Xvfb server on a free display, killed when dropped.
 struct Xvfb {
@@ -290,12 +290,12 @@ fn desktop_peer_renders_the_room_and_a_squeeze_changes_the_soft_box_pixels() {
     require_netns();
     let dir = scratch("pixels");
     let x = Xvfb::start(&dir);
-    let (_host, url) = host(&dir, "pixels");
+    let (host, url) = host(&dir, "pixels");
     let mut desktop = desktop_peer(&dir, &x, &url, "pixels", "softbox");
     // Rendering works: a few frames at rest first.
     let rest_frames = first_frames(&mut desktop, "softbox", 4);
     // Now a bot squeezes the box and holds it.
-    let bot = Proc::spawn(
+    let mut bot = Proc::spawn(
         &dir,
         "bot",
         &[
@@ -403,6 +403,33 @@ fn desktop_peer_renders_the_room_and_a_squeeze_changes_the_soft_box_pixels() {
         moved > 0.05 && moved_box > 200,
         "the squeeze did not change the box's pixels enough: {:.2}%, {moved_box} on the box",
         moved * 100.0
+    );
+    // A slow frame never slows the room: the desktop peer's frames on the software renderer
+    // take tens to hundreds of ms, yet its RTT to the host (pumped by its network thread) is
+    // within a few ms of the headless bot's.
+    let host_id = host.peer_id().to_string();
+    let mut finals = Vec::new();
+    for p in [&mut desktop, &mut bot] {
+        send_signal("-TERM", p);
+        p.wait_exit(Duration::from_secs(20));
+        let l = p.wait_line("final stats", Duration::from_secs(1));
+        let rtt: f64 = field(&l, "rtts")
+            .split(',')
+            .find_map(|e| e.strip_prefix(&format!("{host_id}:")))
+            .unwrap_or_else(|| panic!("no RTT to the host in {l:?}"))
+            .parse()
+            .unwrap();
+        finals.push((rtt, field(&l, "frame_ms").to_owned()));
+    }
+    let ((d_rtt, d_frames), (b_rtt, b_frames)) = (&finals[0], &finals[1]);
+    println!(
+        "RTT to the host: desktop {d_rtt:.1} ms (frames p50/max {d_frames} ms), \
+         bot {b_rtt:.1} ms (frames {b_frames} ms)"
+    );
+    assert!(
+        *d_rtt < b_rtt + 15.0,
+        "the desktop's RTT follows its frames: {d_rtt} ms against the bot's {b_rtt} ms \
+         (desktop frames {d_frames} ms)"
     );
 }
 

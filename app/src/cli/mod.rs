@@ -209,6 +209,10 @@ struct PeerOpts {
     /// should say it; a peer whose frames stall for 250 ms or more is then taken for dead).
     #[arg(long)]
     fast_detection: bool,
+    /// Pump the network only in the frame, not on a thread of its own between frames (a slow
+    /// frame then slows the room: for comparison).
+    #[arg(long)]
+    no_net_thread: bool,
     /// No stats lines.
     #[arg(long)]
     quiet: bool,
@@ -387,6 +391,8 @@ pub struct PeerArgs {
     pub room_token: Option<softsync_net::wire::RoomToken>,
     /// The adaptive failure detector and 50 ms heartbeats.
     pub fast_detection: bool,
+    /// Pump the network in the frame only.
+    pub no_net_thread: bool,
     /// No stats lines.
     pub quiet: bool,
     /// Spawn no avatar.
@@ -625,6 +631,7 @@ fn peer_args(
         room_key_file: p.room_key_file,
         room_token: p.room_token,
         fast_detection: p.fast_detection,
+        no_net_thread: p.no_net_thread,
         quiet: p.quiet,
         no_avatar: p.no_avatar,
         front,
