@@ -19,6 +19,7 @@ use softsync_net::{
 };
 use softsync_net_matchbox::{MatchboxConfig, MatchboxTransport, Role, SignalServer};
 use softsync_peer::scene::MAX_BUNDLE_BYTES;
+use softsync_peer::messages::SignalingMoved;
 use softsync_peer::{Event, Peer, PeerConfig, PeerError, Scene};
 
 /// Milliseconds on this process's wall clock (the `method: auto` probe's timer).
@@ -66,6 +67,9 @@ pub struct RoomOptions {
     pub signal: Option<String>,
     /// Where a host's embedded signaling server listens.
     pub bind: SocketAddr,
+    /// A joiner's address for the room's signaling should it become host after the host that
+    /// served signaling died (see [`Room`]'s docs on signaling). None: it serves none.
+    pub takeover_bind: Option<SocketAddr>,
     /// STUN/TURN servers (`stun:…`, `turn:…`); none on a LAN.
     pub ice_servers: Vec<String>,
     /// TURN credentials.
@@ -109,6 +113,7 @@ impl RoomOptions {
             host: true,
             signal: None,
             bind: SocketAddr::from(([127, 0, 0, 1], 3536)),
+            takeover_bind: None,
             ice_servers: Vec::new(),
             ice_username: None,
             ice_credential: None,
@@ -260,6 +265,8 @@ pub struct Room {
     deferred: Option<OpenError>,
     /// Pumps between frames ([`Room::pump_between_frames`]).
     background_pumps: u64,
+    /// Where to serve the room's signaling if we take over from a host that served it.
+    takeover: Option<(SocketAddr, Option<RoomKey>)>,
 }
 
 /// How a joiner received the room's scene ([`Room::open_fetching_scene`]).
@@ -340,6 +347,11 @@ impl Room {
         mcfg.signal_token = opts.room_token.as_ref().map(|t| t.to_string());
         mcfg.ice_credential = opts.ice_credential.clone();
         mcfg.connect_timeout = opts.connect_timeout.min(Duration::from_secs(30));
+        // several servers: when ours is lost, register the room with the next (new peers find
+        // it there; the data channels we have live on)
+        if urls.len() > 1 {
+            mcfg.fallback_urls = urls.clone();
+        }
         let started = std::time::Instant::now();
         let mut tried = Vec::new();
         let mut connected = None;
@@ -436,6 +448,10 @@ impl Room {
             fetched,
             deferred: None,
             background_pumps: 0,
+            takeover: (!opts.host)
+                .then_some(opts.takeover_bind)
+                .flatten()
+                .map(|b| (b, opts.room_key.clone())),
         })
     }
 
@@ -460,6 +476,7 @@ impl Room {
             fetched: None,
             deferred: None,
             background_pumps: 0,
+            takeover: None,
         }
     }
 
@@ -539,9 +556,7 @@ impl Room {
             self.peer.handle_link_event(e);
         }
         let pumped = self.peer.pump(now);
-        while let Some(e) = self.peer.poll_event() {
-            self.events.push(e);
-        }
+        self.take_events(now);
         match pumped {
             Ok(()) => {
                 self.flush();
@@ -553,6 +568,79 @@ impl Room {
             ))),
             Err(e) => Err(OpenError::Peer(e.to_string())),
         }
+    }
+
+    /// The peer's events into our queue; the room's own signaling news acted on here.
+    fn take_events(&mut self, now: Instant) {
+        while let Some(e) = self.peer.poll_event() {
+            match &e {
+                Event::Room(softsync_net::Event::Message(m)) => {
+                    if let Some(moved) = self.peer.decode::<SignalingMoved>(m) {
+                        match moved {
+                            Ok(SignalingMoved { url }) if url.starts_with("ws") => {
+                                self.transport.prefer_signaling(&url);
+                                self.events.push(Event::Warning(format!(
+                                    "the room's signaling moved to {url} (peer {})",
+                                    m.from.0
+                                )));
+                            }
+                            _ => self.events.push(Event::Warning(format!(
+                                "a malformed signaling notice from peer {}",
+                                m.from.0
+                            ))),
+                        }
+                        continue;
+                    }
+                }
+                Event::Room(softsync_net::Event::HostChanged { host, .. })
+                    if *host == self.peer.me() =>
+                {
+                    self.serve_signaling_after_takeover(now);
+                }
+                _ => {}
+            }
+            self.events.push(e);
+        }
+    }
+
+    /// We are the new host: if our predecessor served the room's signaling and we have an
+    /// address for it, serve it now, register there ourselves and tell the room.
+    fn serve_signaling_after_takeover(&mut self, now: Instant) {
+        let Some((bind, key)) = self.takeover.take() else {
+            return;
+        };
+        if self.signal.is_some() {
+            return;
+        }
+        let server = match SignalServer::start_keyed(
+            bind,
+            softsync_net_matchbox::SignalLimits::default(),
+            key,
+        ) {
+            Ok(s) => s,
+            Err(e) => {
+                self.events.push(Event::Warning(format!(
+                    "cannot serve the room's signaling on {bind}: {e}"
+                )));
+                return;
+            }
+        };
+        let url = server.url();
+        self.signal = Some(server);
+        self.signal_url.clone_from(&url);
+        self.transport.prefer_signaling(&url);
+        let notice = SignalingMoved { url: url.clone() };
+        if let Err(e) = self
+            .peer
+            .send(now, MessageTarget::Everyone, Delivery::Reliable, &notice)
+        {
+            self.events.push(Event::Warning(format!(
+                "cannot tell the room our signaling URL: {e}"
+            )));
+        }
+        self.events.push(Event::Warning(format!(
+            "serving the room's signaling at {url} (the host that served it is gone)"
+        )));
     }
 
     /// [`network_in`](Self::network_in) between frames ([`crate::pump::NetPump`]): the events
@@ -608,9 +696,7 @@ impl Room {
         let now = self.now();
         self.peer.fixed_step(now);
         self.flush();
-        while let Some(e) = self.peer.poll_event() {
-            self.events.push(e);
-        }
+        self.take_events(now);
     }
 
     /// Network out: everything the peer has to send.

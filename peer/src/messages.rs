@@ -19,11 +19,25 @@ impl Message for Say {
     const NAME: &'static str = "softsync.say";
 }
 
-/// The built-in message types ([`Say`]), in their fixed order; register yours after them.
+/// A new host serves the room's signaling itself (its predecessor embedded the room's server
+/// and died): members register with `url` so that new peers find the room there.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SignalingMoved {
+    /// The signaling server's URL (`ws://…`).
+    pub url: String,
+}
+
+impl Message for SignalingMoved {
+    const NAME: &'static str = "softsync.signaling";
+}
+
+/// The built-in message types ([`Say`], [`SignalingMoved`]), in their fixed order; register
+/// yours after them.
 pub fn builtin() -> MessageTypes {
     let mut t = MessageTypes::new();
-    // A fresh table holds no name yet, so this cannot collide.
+    // A fresh table holds no name yet, so these cannot collide.
     let _ = t.register::<Say>();
+    let _ = t.register::<SignalingMoved>();
     t
 }
 
@@ -41,7 +55,8 @@ mod tests {
         }
         let mut t = builtin();
         assert_eq!(t.kind::<Say>().map(|k| k.0), Some(0));
-        assert_eq!(t.register::<Valve>().unwrap().0, 1);
+        assert_eq!(t.kind::<SignalingMoved>().map(|k| k.0), Some(1));
+        assert_eq!(t.register::<Valve>().unwrap().0, 2);
         assert!(t.register::<Say>().is_err());
     }
 }

@@ -78,6 +78,11 @@ enum Sub {
         /// are tried in order (one unreachable, or without the room, is passed over).
         #[arg(long, value_parser = ws_url)]
         signal: String,
+        /// Serve the room's signaling here should this peer become host after a host that
+        /// served it (`softsync host` without --signal) died; the room's members then register
+        /// with it (give the others this address in their --signal lists for new peers).
+        #[arg(long, value_parser = address)]
+        bind: Option<SocketAddr>,
         #[command(flatten)]
         peer: PeerOpts,
     },
@@ -353,6 +358,8 @@ pub struct PeerArgs {
     pub room: String,
     /// Embedded signaling bind address (host without --signal).
     pub bind: SocketAddr,
+    /// A joiner's signaling address should it take over from a host that served it.
+    pub takeover_bind: Option<SocketAddr>,
     /// External signaling URL.
     pub signal: Option<String>,
     /// Scene name or file (a joiner without one receives the room's).
@@ -573,9 +580,10 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
             let bind = bind.unwrap_or(SocketAddr::from(([127, 0, 0, 1], 3536)));
             Command::Peer(Box::new(peer_args(true, bind, signal, peer)?))
         }
-        Sub::Join { signal, peer } => {
-            let bind = SocketAddr::from(([127, 0, 0, 1], 3536));
-            Command::Peer(Box::new(peer_args(false, bind, Some(signal), peer)?))
+        Sub::Join { signal, bind, peer } => {
+            let mut a = peer_args(false, SocketAddr::from(([127, 0, 0, 1], 3536)), Some(signal), peer)?;
+            a.takeover_bind = bind;
+            Command::Peer(Box::new(a))
         }
     })
 }
@@ -612,6 +620,7 @@ fn peer_args(
         host,
         room: p.room,
         bind,
+        takeover_bind: None,
         signal,
         scene: p.scene,
         bot: p.bot,

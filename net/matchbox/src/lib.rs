@@ -7,20 +7,27 @@
 //! The session keeps its own acks and resends on top, so the reliable channel only saves
 //! resends.
 //!
-//! Peer ids: matchbox gives every socket a UUID; softsync's [`softsync_net::PeerId`] is its
-//! first 64 bits, the same on every peer.
+//! Peer ids: matchbox gives every socket a UUID; softsync's [`softsync_net::PeerId`] is the
+//! first 64 bits of a peer's first socket, and every new data channel begins with the
+//! sender's id ([`IDENT_MAGIC`]), so a peer registered with a second signaling server after
+//! its first was lost keeps its id.
 //!
-//! Rooms: a socket connects to `ws://ADDR/ROOM?softsync=V&role=host|join`. The server refuses
-//! a protocol version it does not speak (HTTP 426), a join to a room nobody is in (404), and a
-//! second host for a room that has peers (409). The client turns those into [`ConnectError`]s.
+//! Rooms: a socket connects to `ws://ADDR/ROOM?softsync=V&role=host|join|member`. The server
+//! refuses a protocol version it does not speak (HTTP 426), a join to a room nobody is in
+//! (404), and a second host for a room that has peers (409); a `member` (a peer of the room
+//! whose own server was lost) is let in either way. The client turns those into
+//! [`ConnectError`]s.
 
 #![allow(clippy::disallowed_methods)] // an I/O adapter: it reads the clock and waits for threads
 
 mod signal;
+mod signaller;
 mod transport;
 
 pub use signal::{RoomInfo, SignalError, SignalLimits, SignalServer};
-pub use transport::{ConnectError, MatchboxConfig, MatchboxTransport, Role, TransportStats};
+pub use transport::{
+    ConnectError, MatchboxConfig, MatchboxTransport, Role, TransportStats, IDENT_MAGIC,
+};
 
 /// Query parameter carrying the client's protocol version.
 pub const VERSION_PARAM: &str = "softsync";

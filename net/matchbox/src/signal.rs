@@ -218,11 +218,11 @@ impl SignalServer {
                             format!("room {room:?} not found: nobody is in it"),
                         ))
                     }
-                    Some("host") | Some("join") => {}
+                    Some("host") | Some("join") | Some("member") => {}
                     other => {
                         return Err(refuse(
                             StatusCode::BAD_REQUEST,
-                            format!("role must be host or join, not {other:?}"),
+                            format!("role must be host, join or member, not {other:?}"),
                         ))
                     }
                 }

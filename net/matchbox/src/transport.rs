@@ -1,7 +1,8 @@
 //! [`MatchboxTransport`]: softsync's datagram transport over WebRTC data channels.
 
 use std::collections::{HashMap, VecDeque};
-use std::sync::mpsc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc};
 use std::time::Duration;
 
 use matchbox_socket::{
@@ -9,6 +10,7 @@ use matchbox_socket::{
 };
 use softsync_net::{Instant, PeerEvent, PeerId, Transmit, Transport, PROTOCOL_VERSION};
 
+use crate::signaller::WatchedBuilder;
 use crate::{
     valid_room_name, DEFAULT_MTU, PROOF_PARAM, ROLE_PARAM, TOKEN_PARAM, VERSION_HEADER,
     VERSION_PARAM,
@@ -26,6 +28,9 @@ pub enum Role {
     Host,
     /// Enters an existing room (refused if nobody is in it).
     Join,
+    /// A member of the room registering with another server after its own was lost: enters
+    /// the room whether or not anyone is in it yet.
+    Member,
 }
 
 /// Where and how to connect.
@@ -55,6 +60,10 @@ pub struct MatchboxConfig {
     pub signal_proof: Option<String>,
     /// Or a join token of the room (its text form).
     pub signal_token: Option<String>,
+    /// Signaling servers to register the room with, in turn, when the current one is lost
+    /// (the data channels to peers live on; new peers find us through the next one). Empty:
+    /// none, and losing signaling closes it ([`MatchboxTransport::closed`]).
+    pub fallback_urls: Vec<String>,
 }
 
 impl MatchboxConfig {
@@ -72,6 +81,7 @@ impl MatchboxConfig {
             protocol_version: PROTOCOL_VERSION,
             signal_proof: None,
             signal_token: None,
+            fallback_urls: Vec::new(),
         }
     }
 
@@ -80,6 +90,7 @@ impl MatchboxConfig {
         let role = match self.role {
             Role::Host => "host",
             Role::Join => "join",
+            Role::Member => "member",
         };
         let mut url = format!(
             "{}/{}?{VERSION_PARAM}={}&{ROLE_PARAM}={role}",
@@ -177,27 +188,63 @@ pub struct TransportStats {
     pub oversize_dropped: u64,
     /// Datagrams to peers we have no channel to, dropped.
     pub unroutable_dropped: u64,
+    /// Datagrams on a channel before its peer said who it is, dropped.
+    pub unidentified_dropped: u64,
+    /// Channels whose peer claimed the id of a peer we already reach (ignored).
+    pub idents_refused: u64,
 }
 
-/// A softsync [`Transport`] over a matchbox WebRTC socket (full mesh).
+/// A softsync [`Transport`] over matchbox WebRTC sockets (full mesh).
+///
+/// One socket per signaling registration: the first, and, when its signaling server is lost
+/// and [`MatchboxConfig::fallback_urls`] names others, one more on the next server that takes
+/// us (the earlier sockets keep their data channels). Peers are known by the id they announce
+/// on each new channel ([`IDENT_MAGIC`]), so a peer reached through two servers is one peer.
 pub struct MatchboxTransport {
-    socket: WebRtcSocket,
+    socks: Vec<Option<Sock>>,
     local: PeerId,
     mb_id: MbPeerId,
-    uuid_of: HashMap<PeerId, MbPeerId>,
+    /// Identified channels: (socket, matchbox id) to the peer.
+    chan: HashMap<(usize, MbPeerId), PeerId>,
+    /// Each peer's channels, the first one used.
+    routes: HashMap<PeerId, Vec<(usize, MbPeerId)>>,
     inbox: VecDeque<(PeerId, Vec<u8>)>,
     events: VecDeque<PeerEvent>,
-    loop_done: mpsc::Receiver<Result<(), ConnectError>>,
     closed: Option<String>,
     stats: TransportStats,
     mtu: usize,
+    cfg: MatchboxConfig,
+    /// The next fallback server to try, and not before when.
+    next_fallback: usize,
+    retry_at: Option<std::time::Instant>,
 }
+
+/// One socket: a registration with one signaling server.
+struct Sock {
+    socket: WebRtcSocket,
+    url: String,
+    /// Its id on that server (none while registering).
+    mb_id: Option<MbPeerId>,
+    loop_done: mpsc::Receiver<Result<(), ConnectError>>,
+    /// Raised when its signaling connection ends (the data channels may live on).
+    lost: Arc<AtomicBool>,
+    ended: bool,
+    started: std::time::Instant,
+}
+
+/// The first datagram on every new data channel: these 4 bytes, then the sender's
+/// softsync id (8 bytes, little-endian). No session or share datagram starts so.
+pub const IDENT_MAGIC: [u8; 4] = [0xFF, b'S', b'I', b'D'];
+
+/// How long to wait before trying the next fallback signaling server after one refused us.
+const FALLBACK_RETRY: Duration = Duration::from_secs(1);
 
 impl std::fmt::Debug for MatchboxTransport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("MatchboxTransport")
             .field("local", &self.local)
-            .field("peers", &self.uuid_of.len())
+            .field("peers", &self.routes.len())
+            .field("sockets", &self.socks.iter().flatten().count())
             .field("closed", &self.closed)
             .finish()
     }
@@ -275,13 +322,257 @@ impl MatchboxTransport {
         if !valid_room_name(&cfg.room) {
             return Err(ConnectError::BadRoom(cfg.room.clone()));
         }
+        let mut sock = Sock::open(cfg)?;
+        let mb_id = loop {
+            if let Some(id) = sock.socket.id() {
+                break id;
+            }
+            if let Ok(r) = sock.loop_done.try_recv() {
+                return Err(match r {
+                    Ok(()) => ConnectError::Unreachable {
+                        url: cfg.signal_url.clone(),
+                        detail: "the signaling connection closed".into(),
+                    },
+                    Err(e) => e,
+                });
+            }
+            if sock.started.elapsed() > cfg.connect_timeout {
+                sock.socket.close();
+                return Err(ConnectError::Timeout {
+                    url: cfg.signal_url.clone(),
+                    timeout: cfg.connect_timeout,
+                });
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        };
+        sock.mb_id = Some(mb_id);
+        let next_fallback = cfg
+            .fallback_urls
+            .iter()
+            .position(|u| *u == cfg.signal_url)
+            .map_or(0, |i| i + 1);
+        Ok(MatchboxTransport {
+            socks: vec![Some(sock)],
+            local: net_id(mb_id),
+            mb_id,
+            chan: HashMap::new(),
+            routes: HashMap::new(),
+            inbox: VecDeque::new(),
+            events: VecDeque::new(),
+            closed: None,
+            stats: TransportStats::default(),
+            mtu: cfg.mtu,
+            cfg: cfg.clone(),
+            next_fallback,
+            retry_at: None,
+        })
+    }
+
+    /// matchbox's id of this socket.
+    pub fn matchbox_id(&self) -> MbPeerId {
+        self.mb_id
+    }
+
+    /// Counters.
+    pub fn stats(&self) -> TransportStats {
+        self.stats
+    }
+
+    /// Why signaling ended with no server left to register with (the data channels may live
+    /// on), once it has.
+    pub fn closed(&self) -> Option<&str> {
+        self.closed.as_deref()
+    }
+
+    /// Peers with open (identified) data channels.
+    pub fn connected_peers(&self) -> Vec<PeerId> {
+        self.routes.keys().copied().collect()
+    }
+
+    /// The signaling server we are registered with now (the latest), if any is up.
+    pub fn signaling(&self) -> Option<&str> {
+        self.socks
+            .iter()
+            .rev()
+            .flatten()
+            .find(|s| s.mb_id.is_some() && !s.lost.load(Ordering::Acquire))
+            .map(|s| s.url.as_str())
+    }
+
+    /// Add `url` to the servers to register with when ours is lost, first in line (a new host
+    /// serving signaling itself). A URL already listed moves up.
+    pub fn prefer_signaling(&mut self, url: &str) {
+        self.cfg.fallback_urls.retain(|u| u != url);
+        self.cfg.fallback_urls.insert(0, url.to_owned());
+        self.next_fallback = 0;
+        self.retry_at = None;
+    }
+
+    /// Signaling in order: register with the next fallback server once ours is lost.
+    fn keep_registered(&mut self) {
+        let latest = self.socks.iter().rev().flatten().next();
+        let registered = latest.is_some_and(|s| !s.ended && !s.lost.load(Ordering::Acquire));
+        if registered {
+            return;
+        }
+        let registering = latest.is_some_and(|s| s.mb_id.is_none() && !s.ended);
+        if registering {
+            if let Some(Some(s)) = self.socks.last_mut() {
+                if s.started.elapsed() > self.cfg.connect_timeout {
+                    // no id from that server in time: the next one
+                    s.socket.close();
+                    s.ended = true;
+                }
+            }
+            return;
+        }
+        if self.cfg.fallback_urls.is_empty() {
+            if self.closed.is_none() {
+                self.closed = Some(format!("signaling lost ({})", self.cfg.signal_url));
+            }
+            return;
+        }
+        if self.retry_at.is_some_and(|t| std::time::Instant::now() < t) {
+            return;
+        }
+        let urls = &self.cfg.fallback_urls;
+        let url = urls[self.next_fallback % urls.len()].clone();
+        self.next_fallback = (self.next_fallback + 1) % urls.len();
+        let mut cfg = self.cfg.clone();
+        cfg.signal_url = url;
+        cfg.role = Role::Member;
+        match Sock::open(&cfg) {
+            Ok(s) => self.socks.push(Some(s)),
+            Err(_) => self.retry_at = Some(std::time::Instant::now() + FALLBACK_RETRY),
+        }
+    }
+
+    /// Move what matchbox has received into our queues.
+    fn pump(&mut self) {
+        for i in 0..self.socks.len() {
+            let Some(sock) = self.socks[i].as_mut() else {
+                continue;
+            };
+            if sock.mb_id.is_none() {
+                sock.mb_id = sock.socket.id();
+            }
+            if !sock.ended {
+                if let Ok(r) = sock.loop_done.try_recv() {
+                    sock.ended = true;
+                    if i == 0 && self.cfg.fallback_urls.is_empty() {
+                        self.closed = Some(match r {
+                            Ok(()) => "signaling closed".into(),
+                            Err(e) => e.to_string(),
+                        });
+                    }
+                }
+            }
+            let changes = match sock.socket.try_update_peers() {
+                Ok(c) => c,
+                Err(_) => {
+                    sock.ended = true;
+                    Vec::new()
+                }
+            };
+            for (mb, state) in changes {
+                match state {
+                    PeerState::Connected => {
+                        // who we are, first on the ordered channel
+                        let mut ident = IDENT_MAGIC.to_vec();
+                        ident.extend_from_slice(&self.local.0.to_le_bytes());
+                        if let Ok(ch) = sock.socket.get_channel_mut(RELIABLE) {
+                            let _ = ch.try_send(ident.into(), mb);
+                        }
+                    }
+                    PeerState::Disconnected => {
+                        if let Some(id) = self.chan.remove(&(i, mb)) {
+                            let left = self.routes.get_mut(&id).map(|r| {
+                                r.retain(|c| *c != (i, mb));
+                                r.is_empty()
+                            });
+                            if left == Some(true) {
+                                self.routes.remove(&id);
+                                self.events.push_back(PeerEvent::Disconnected(id));
+                            }
+                        }
+                    }
+                }
+            }
+            for ch in [RELIABLE, UNRELIABLE] {
+                let Ok(channel) = sock.socket.get_channel_mut(ch) else {
+                    continue;
+                };
+                for (mb, packet) in channel.receive() {
+                    self.stats.bytes_down += packet.len() as u64;
+                    self.stats.datagrams_down += 1;
+                    if let Some(id) = self.chan.get(&(i, mb)) {
+                        self.inbox.push_back((*id, packet.to_vec()));
+                        continue;
+                    }
+                    let claimed = (packet.len() == 12 && packet[..4] == IDENT_MAGIC)
+                        .then(|| {
+                            let mut b = [0u8; 8];
+                            b.copy_from_slice(&packet[4..]);
+                            PeerId(u64::from_le_bytes(b))
+                        })
+                        .filter(|c| *c != self.local);
+                    let Some(id) = claimed else {
+                        // before its ident (an unreliable datagram overtook it): dropped
+                        self.stats.unidentified_dropped += 1;
+                        continue;
+                    };
+                    // The server vouches for a peer's first id (its UUID's); another id is
+                    // taken only for a peer we have no channel to (one that registered again
+                    // after its server was lost), never as a second way to a live peer: a
+                    // channel can neither speak for a member nor duplicate one.
+                    if id != net_id(mb) && self.routes.contains_key(&id) {
+                        self.stats.idents_refused += 1;
+                        continue;
+                    }
+                    self.chan.insert((i, mb), id);
+                    let r = self.routes.entry(id).or_default();
+                    r.push((i, mb));
+                    if r.len() == 1 {
+                        self.events.push_back(PeerEvent::Connected(id));
+                    }
+                }
+            }
+        }
+        // a socket whose signaling and channels are both gone is dropped (its slot stays, so
+        // the channel keys of the others do not move)
+        let n = self.socks.len();
+        for (i, slot) in self.socks.iter_mut().enumerate() {
+            let dead = slot.as_ref().is_some_and(|s| {
+                (s.ended || s.lost.load(Ordering::Acquire))
+                    && !self.chan.keys().any(|(j, _)| *j == i)
+                    && s.socket.connected_peers().next().is_none()
+            });
+            let is_latest_attempt = i + 1 == n;
+            if dead && !is_latest_attempt {
+                *slot = None;
+            } else if dead && slot.as_ref().is_some_and(|s| s.mb_id.is_none()) {
+                // the latest attempt failed: try the next server after a pause
+                *slot = None;
+                self.retry_at = Some(std::time::Instant::now() + FALLBACK_RETRY);
+            }
+        }
+        self.keep_registered();
+    }
+}
+
+impl Sock {
+    /// Start registering with `cfg.signal_url` (the id comes later, see [`Sock::mb_id`]).
+    fn open(cfg: &MatchboxConfig) -> Result<Sock, ConnectError> {
         let ice = RtcIceServerConfig {
             urls: cfg.ice_servers.clone(),
             username: cfg.ice_username.clone(),
             credential: cfg.ice_credential.clone(),
         };
-        let (mut socket, message_loop) = WebRtcSocket::builder(cfg.room_url())
+        let watch = WatchedBuilder::default();
+        let lost = watch.lost.clone();
+        let (socket, message_loop) = WebRtcSocket::builder(cfg.room_url())
             .ice_server(ice)
+            .signaller_builder(Arc::new(watch))
             .reconnect_attempts(Some(1))
             .signaling_keep_alive_interval(Some(Duration::from_secs(5)))
             .add_channel(ChannelConfig::unreliable())
@@ -296,107 +587,15 @@ impl MatchboxTransport {
                 let _ = done_tx.send(r.map_err(|e| classify(&e, &cfg2)));
             })
             .map_err(ConnectError::Thread)?;
-        let start = std::time::Instant::now();
-        let mb_id = loop {
-            if let Some(id) = socket.id() {
-                break id;
-            }
-            if let Ok(r) = loop_done.try_recv() {
-                return Err(match r {
-                    Ok(()) => ConnectError::Unreachable {
-                        url: cfg.signal_url.clone(),
-                        detail: "the signaling connection closed".into(),
-                    },
-                    Err(e) => e,
-                });
-            }
-            if start.elapsed() > cfg.connect_timeout {
-                socket.close();
-                return Err(ConnectError::Timeout {
-                    url: cfg.signal_url.clone(),
-                    timeout: cfg.connect_timeout,
-                });
-            }
-            std::thread::sleep(Duration::from_millis(5));
-        };
-        Ok(MatchboxTransport {
+        Ok(Sock {
             socket,
-            local: net_id(mb_id),
-            mb_id,
-            uuid_of: HashMap::new(),
-            inbox: VecDeque::new(),
-            events: VecDeque::new(),
+            url: cfg.signal_url.clone(),
+            mb_id: None,
             loop_done,
-            closed: None,
-            stats: TransportStats::default(),
-            mtu: cfg.mtu,
+            lost,
+            ended: false,
+            started: std::time::Instant::now(),
         })
-    }
-
-    /// matchbox's id of this socket.
-    pub fn matchbox_id(&self) -> MbPeerId {
-        self.mb_id
-    }
-
-    /// Counters.
-    pub fn stats(&self) -> TransportStats {
-        self.stats
-    }
-
-    /// Why the socket's message loop ended (signaling lost), once it has.
-    pub fn closed(&self) -> Option<&str> {
-        self.closed.as_deref()
-    }
-
-    /// Peers with open data channels.
-    pub fn connected_peers(&self) -> Vec<PeerId> {
-        self.socket.connected_peers().map(net_id).collect()
-    }
-
-    /// Move what matchbox has received into our queues.
-    fn pump(&mut self) {
-        if self.closed.is_none() {
-            if let Ok(r) = self.loop_done.try_recv() {
-                self.closed = Some(match r {
-                    Ok(()) => "signaling closed".into(),
-                    Err(e) => e.to_string(),
-                });
-            }
-        }
-        match self.socket.try_update_peers() {
-            Ok(changes) => {
-                for (mb, state) in changes {
-                    let id = net_id(mb);
-                    match state {
-                        PeerState::Connected => {
-                            self.uuid_of.insert(id, mb);
-                            self.events.push_back(PeerEvent::Connected(id));
-                        }
-                        PeerState::Disconnected => {
-                            self.uuid_of.remove(&id);
-                            self.events.push_back(PeerEvent::Disconnected(id));
-                        }
-                    }
-                }
-            }
-            Err(_) => {
-                if self.closed.is_none() {
-                    self.closed = Some("the WebRTC socket closed".into());
-                }
-            }
-        }
-        for ch in [RELIABLE, UNRELIABLE] {
-            let Ok(channel) = self.socket.get_channel_mut(ch) else {
-                continue;
-            };
-            for (mb, packet) in channel.receive() {
-                let id = net_id(mb);
-                self.uuid_of.entry(id).or_insert(mb);
-                self.stats.bytes_down += packet.len() as u64;
-                self.stats.datagrams_down += 1;
-                self.inbox.push_back((id, packet.to_vec()));
-            }
-        }
     }
 }
 
@@ -411,7 +610,11 @@ impl Transport for MatchboxTransport {
             self.stats.oversize_dropped += 1;
             return;
         }
-        let Some(mb) = self.uuid_of.get(&to).copied() else {
+        let Some(&(i, mb)) = self.routes.get(&to).and_then(|r| r.first()) else {
+            self.stats.unroutable_dropped += 1;
+            return;
+        };
+        let Some(sock) = self.socks.get_mut(i).and_then(Option::as_mut) else {
             self.stats.unroutable_dropped += 1;
             return;
         };
@@ -422,7 +625,7 @@ impl Transport for MatchboxTransport {
         } else {
             UNRELIABLE
         };
-        let Ok(channel) = self.socket.get_channel_mut(ch) else {
+        let Ok(channel) = sock.socket.get_channel_mut(ch) else {
             self.stats.unroutable_dropped += 1;
             return;
         };
@@ -452,10 +655,16 @@ impl Transport for MatchboxTransport {
     fn mtu(&self) -> usize {
         self.mtu
     }
+
+    fn prefer_signaling(&mut self, url: &str) {
+        MatchboxTransport::prefer_signaling(self, url);
+    }
 }
 
 impl Drop for MatchboxTransport {
     fn drop(&mut self) {
-        self.socket.close();
+        for s in self.socks.iter_mut().flatten() {
+            s.socket.close();
+        }
     }
 }

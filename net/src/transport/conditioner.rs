@@ -208,4 +208,8 @@ impl<T: Transport> Transport for LinkConditioner<T> {
     fn poll_timeout(&self) -> Option<Instant> {
         crate::time::min_opt(self.queue.peek().map(|d| d.at), self.inner.poll_timeout())
     }
+
+    fn prefer_signaling(&mut self, url: &str) {
+        self.inner.prefer_signaling(url);
+    }
 }

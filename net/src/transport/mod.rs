@@ -53,4 +53,7 @@ pub trait Transport {
     fn poll_timeout(&self) -> Option<Instant> {
         None
     }
+    /// A signaling server to register with first when ours is lost (a new host serving
+    /// signaling itself). Transports without signaling ignore it.
+    fn prefer_signaling(&mut self, _url: &str) {}
 }
