@@ -18,8 +18,8 @@ use softsync_net::{
     PeerEvent, RoomKey, SendPolicy, Session, SessionConfig, Transport,
 };
 use softsync_net_matchbox::{MatchboxConfig, MatchboxTransport, Role, SignalServer};
-use softsync_peer::scene::MAX_BUNDLE_BYTES;
 use softsync_peer::messages::SignalingMoved;
+use softsync_peer::scene::MAX_BUNDLE_BYTES;
 use softsync_peer::{Event, Peer, PeerConfig, PeerError, Scene};
 
 /// Milliseconds on this process's wall clock (the `method: auto` probe's timer).

@@ -16,7 +16,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{embedded_host, field, require_netns, send_signal, scratch, Proc};
+use common::{embedded_host, field, require_netns, scratch, send_signal, Proc};
 
 /// An Xvfb server on a free display, killed when dropped.
 struct Xvfb {

@@ -38,7 +38,14 @@ fn a_room_stays_joinable_through_the_next_server_when_its_signaling_dies() {
     let both = format!("{a},{b}");
     let host = peer_on(&dir, "host", "host", &both, "fo", &["--duration", "40"]);
     let host_id = host.peer_id();
-    let bot = peer_on(&dir, "bot", "join", &both, "fo", &["--duration", "40", "--bot", "wave"]);
+    let bot = peer_on(
+        &dir,
+        "bot",
+        "join",
+        &both,
+        "fo",
+        &["--duration", "40", "--bot", "wave"],
+    );
     let bot_id = bot.peer_id();
     bot.wait_line("joined", Duration::from_secs(20));
     // The room's server dies; the room carries on and registers with the next one.
@@ -49,7 +56,12 @@ fn a_room_stays_joinable_through_the_next_server_when_its_signaling_dies() {
     let late_id = late.peer_id();
     late.wait_line("joined", Duration::from_secs(20));
     host.wait_line(&format!("peer-joined {late_id}"), Duration::from_secs(10));
-    assert_eq!(late.wait_exit(Duration::from_secs(20)), 0, "{}", late.logs());
+    assert_eq!(
+        late.wait_exit(Duration::from_secs(20)),
+        0,
+        "{}",
+        late.logs()
+    );
     let mut got = reached(&late);
     got.sort_unstable();
     let mut want = vec![host_id, bot_id];
@@ -64,19 +76,49 @@ fn a_new_host_serves_the_signaling_its_dead_predecessor_embedded() {
     let (mut host, h) = embedded_host(&dir, "ts", &["--duration", "60"]);
     host.peer_id();
     let ports = [free_port(), free_port()];
-    let urls: Vec<String> = ports.iter().map(|p| format!("ws://127.0.0.1:{p}")).collect();
+    let urls: Vec<String> = ports
+        .iter()
+        .map(|p| format!("ws://127.0.0.1:{p}"))
+        .collect();
     let bots: Vec<Proc> = ports
         .iter()
         .enumerate()
         .map(|(i, p)| {
             let bind = format!("127.0.0.1:{p}");
-            let extra = ["--duration", "40", "--bot", "wave", "--bind", &bind];
-            let b = peer_on(&dir, &format!("bot{i}"), "join", &h, "ts", &extra);
+            // stats lines on (stderr): they say which peers each reaches
+            let args = [
+                "join",
+                "--room",
+                "ts",
+                "--signal",
+                &h,
+                "--duration",
+                "40",
+                "--bot",
+                "wave",
+                "--bind",
+                &bind,
+            ];
+            let b = Proc::spawn(&dir, &format!("bot{i}"), &args);
             b.wait_line("joined", Duration::from_secs(20));
             b
         })
         .collect();
     let ids: Vec<u64> = bots.iter().map(Proc::peer_id).collect();
+    // the survivors reach each other before the host dies (else each is a room of one)
+    let start = std::time::Instant::now();
+    while !std::fs::read_to_string(&bots[1].err)
+        .unwrap_or_default()
+        .lines()
+        .any(|l| l.starts_with("stats ") && l.contains(&format!("{}:", ids[0])))
+    {
+        assert!(
+            start.elapsed() < Duration::from_secs(20),
+            "bot1 never reached bot0\n{}",
+            bots[1].logs()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
     // The host dies with its signaling server; a survivor takes over and serves signaling.
     host.kill();
     let line = bots[0].wait_line("host-changed", Duration::from_secs(10));
@@ -88,7 +130,12 @@ fn a_new_host_serves_the_signaling_its_dead_predecessor_embedded() {
     let list = format!("{h},{},{}", urls[0], urls[1]);
     let mut late = peer_on(&dir, "late", "join", &list, "ts", &["--duration", "6"]);
     late.wait_line("joined", Duration::from_secs(25));
-    assert_eq!(late.wait_exit(Duration::from_secs(20)), 0, "{}", late.logs());
+    assert_eq!(
+        late.wait_exit(Duration::from_secs(20)),
+        0,
+        "{}",
+        late.logs()
+    );
     let mut got = reached(&late);
     got.sort_unstable();
     let mut want = ids.clone();

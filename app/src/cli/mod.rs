@@ -581,7 +581,12 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
             Command::Peer(Box::new(peer_args(true, bind, signal, peer)?))
         }
         Sub::Join { signal, bind, peer } => {
-            let mut a = peer_args(false, SocketAddr::from(([127, 0, 0, 1], 3536)), Some(signal), peer)?;
+            let mut a = peer_args(
+                false,
+                SocketAddr::from(([127, 0, 0, 1], 3536)),
+                Some(signal),
+                peer,
+            )?;
             a.takeover_bind = bind;
             Command::Peer(Box::new(a))
         }

@@ -80,12 +80,18 @@ impl MemoryHub {
 
     /// Change the path MTU.
     pub fn set_mtu(&self, mtu: usize) {
-        self.inner.lock().unwrap_or_else(PoisonError::into_inner).mtu = mtu;
+        self.inner
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .mtu = mtu;
     }
 
     /// Datagrams dropped for exceeding the MTU.
     pub fn dropped_over_mtu(&self) -> u64 {
-        self.inner.lock().unwrap_or_else(PoisonError::into_inner).dropped_mtu
+        self.inner
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .dropped_mtu
     }
 }
 
@@ -103,7 +109,11 @@ impl Transport for HubEndpoint {
 
     fn send(&mut self, _now: Instant, transmit: &Transmit) {
         let (to, datagram) = (transmit.to, &transmit.payload);
-        let mut h = self.hub.inner.lock().unwrap_or_else(PoisonError::into_inner);
+        let mut h = self
+            .hub
+            .inner
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner);
         if h.dead.contains(&self.id) || h.dead.contains(&to) || h.cut.contains(&(self.id, to)) {
             return;
         }
@@ -117,7 +127,11 @@ impl Transport for HubEndpoint {
     }
 
     fn recv(&mut self, _now: Instant) -> Option<(PeerId, Vec<u8>)> {
-        let mut h = self.hub.inner.lock().unwrap_or_else(PoisonError::into_inner);
+        let mut h = self
+            .hub
+            .inner
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner);
         if h.dead.contains(&self.id) {
             return None;
         }
@@ -127,13 +141,18 @@ impl Transport for HubEndpoint {
     fn poll_peer_event(&mut self) -> Option<PeerEvent> {
         self.hub
             .inner
-            .lock().unwrap_or_else(PoisonError::into_inner)
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
             .events
             .get_mut(&self.id)?
             .pop_front()
     }
 
     fn mtu(&self) -> usize {
-        self.hub.inner.lock().unwrap_or_else(PoisonError::into_inner).mtu
+        self.hub
+            .inner
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .mtu
     }
 }
