@@ -211,7 +211,7 @@ struct PeerOpts {
     room_token: Option<softsync_net::wire::RoomToken>,
     /// Notice a dead host or member in a few hundred ms instead of a second: 50 ms heartbeats
     /// and a timeout that adapts to each link's loss and jitter (every peer of the room
-    /// should say it; a peer whose frames stall for 250 ms or more is then taken for dead).
+    /// should say it; a process starved of CPU for 250 ms or more is then taken for dead).
     #[arg(long)]
     fast_detection: bool,
     /// Pump the network only in the frame, not on a thread of its own between frames (a slow

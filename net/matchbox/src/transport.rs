@@ -234,7 +234,7 @@ struct Sock {
 
 /// The first datagram on every new data channel: these 4 bytes, then the sender's
 /// softsync id (8 bytes, little-endian). No session or share datagram starts so.
-pub const IDENT_MAGIC: [u8; 4] = [0xFF, b'S', b'I', b'D'];
+pub const IDENT_MAGIC: [u8; 4] = softsync_net::wire::CHANNEL_IDENT;
 
 /// How long to wait before trying the next fallback signaling server after one refused us.
 const FALLBACK_RETRY: Duration = Duration::from_secs(1);
