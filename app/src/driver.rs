@@ -121,6 +121,7 @@ impl Driver {
         if t >= self.next_stats {
             self.next_stats = t + Duration::from_secs(1);
             let (line, rates) = self.stats.line(now, &room.peer);
+            let line = line + &relayed_links(room);
             if !self.quiet {
                 eprintln!("{line}");
             }
@@ -146,7 +147,7 @@ impl Driver {
         if !self.exiting {
             self.write_dump(room);
             let (line, _) = self.stats.line(room.now(), &room.peer);
-            println!("final {line}");
+            println!("final {line}{}", relayed_links(room));
             self.exiting = true;
         }
     }
@@ -233,6 +234,24 @@ fn hud_event(line: &str) -> String {
         })
         .collect::<Vec<_>>()
         .join(" ")
+}
+
+/// ` relayed=ID,…`: the peers we reach through a TURN relay (nothing when none is).
+fn relayed_links(room: &Room) -> String {
+    let ids: Vec<String> = room
+        .peer
+        .session()
+        .stats()
+        .links
+        .keys()
+        .filter(|p| room.is_relayed(**p) == Some(true))
+        .map(|p| p.0.to_string())
+        .collect();
+    if ids.is_empty() {
+        String::new()
+    } else {
+        format!(" relayed={}", ids.join(","))
+    }
 }
 
 #[cfg(test)]

@@ -507,6 +507,12 @@ impl Room {
         &self.signal_url
     }
 
+    /// Whether our path to `peer` goes through a TURN relay (`None` while unknown: about a
+    /// second after it connected).
+    pub fn is_relayed(&self, peer: PeerId) -> Option<bool> {
+        self.transport.relayed(peer)
+    }
+
     /// Whether this process runs the room's signaling server.
     pub fn runs_signaling(&self) -> bool {
         self.signal.is_some()

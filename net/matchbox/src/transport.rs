@@ -659,6 +659,11 @@ impl Transport for MatchboxTransport {
     fn prefer_signaling(&mut self, url: &str) {
         MatchboxTransport::prefer_signaling(self, url);
     }
+
+    fn relayed(&self, peer: PeerId) -> Option<bool> {
+        let &(i, mb) = self.routes.get(&peer)?.first()?;
+        self.socks.get(i)?.as_ref()?.socket.is_relayed(mb)
+    }
 }
 
 impl Drop for MatchboxTransport {

@@ -212,4 +212,8 @@ impl<T: Transport> Transport for LinkConditioner<T> {
     fn prefer_signaling(&mut self, url: &str) {
         self.inner.prefer_signaling(url);
     }
+
+    fn relayed(&self, peer: PeerId) -> Option<bool> {
+        self.inner.relayed(peer)
+    }
 }

@@ -56,4 +56,9 @@ pub trait Transport {
     /// A signaling server to register with first when ours is lost (a new host serving
     /// signaling itself). Transports without signaling ignore it.
     fn prefer_signaling(&mut self, _url: &str) {}
+    /// Whether the path to `peer` goes through a relay (TURN); `None` when unknown or for
+    /// transports without relays.
+    fn relayed(&self, _peer: PeerId) -> Option<bool> {
+        None
+    }
 }
