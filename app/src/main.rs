@@ -413,6 +413,7 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     opts.signal = a.signal.clone();
     opts.bind = a.bind;
     opts.takeover_bind = a.takeover_bind;
+    opts.uplink_bytes_per_s = a.uplink_bytes_per_s;
     opts.ice_servers = a.ice.clone();
     opts.ice_username = a.ice_user.clone();
     opts.ice_credential = ice_credential(&a)?;

@@ -103,6 +103,10 @@ pub struct RoomOptions {
     /// ([`SessionConfig::fast_detection`]): a dead host is replaced in a few hundred ms
     /// rather than a second. Every peer of the room should set it.
     pub fast_detection: bool,
+    /// This peer's uplink budget, bytes a second, shared by its links; objects wait their
+    /// turn by priority (held ones first, then by motion, interest and waiting time). `None`:
+    /// no cap. See `softsync_net::SessionConfig::uplink_bytes_per_s`.
+    pub uplink_bytes_per_s: Option<u32>,
 }
 
 impl RoomOptions {
@@ -132,6 +136,7 @@ impl RoomOptions {
             start_ready: true,
             scene_cache: std::env::temp_dir().join("softsync-scenes"),
             fast_detection: false,
+            uplink_bytes_per_s: None,
         }
     }
 
@@ -207,6 +212,7 @@ impl RoomOptions {
             .clone()
             .map(|k| k.for_room(&self.name).with_clock(unix_now));
         cfg.room_token = self.room_token.clone();
+        cfg.uplink_bytes_per_s = self.uplink_bytes_per_s;
         Ok(if self.fast_detection {
             cfg.fast_detection()
         } else {

@@ -49,6 +49,14 @@ pub struct SendPolicy {
     /// When an entry is sent anyway, changes above this fraction of the threshold ride along
     /// (1.0: thesis behaviour).
     pub piggyback_fraction: f32,
+    /// The class's weight when an uplink budget makes objects wait their turn
+    /// ([`SessionConfig::uplink_bytes_per_s`]; 0.01 to 100, 1 by default).
+    #[serde(default = "default_priority")]
+    pub priority: f32,
+}
+
+fn default_priority() -> f32 {
+    1.0
 }
 
 impl Default for SendPolicy {
@@ -62,6 +70,7 @@ impl Default for SendPolicy {
             keyframe_interval: None,
             stale_after_intervals: Some(4.0),
             piggyback_fraction: 0.4,
+            priority: default_priority(),
         }
     }
 }
@@ -206,6 +215,11 @@ pub struct SessionConfig {
     /// than this heals into one room; see `session::heal`). Not part of the digest.
     #[serde(default = "default_heal_window")]
     pub heal_window: Duration,
+    /// This peer's uplink budget, bytes a second (datagram payloads plus the estimated
+    /// transport overhead), shared equally by its links; state waits its turn by priority
+    /// (`session::budget`). `None` (default): no cap. A local choice, not part of the digest.
+    #[serde(default)]
+    pub uplink_bytes_per_s: Option<u32>,
 }
 
 fn default_heal_window() -> Duration {
@@ -312,6 +326,7 @@ impl Default for SessionConfig {
             room_token: None,
             detector: FailureDetector::Fixed,
             heal_window: default_heal_window(),
+            uplink_bytes_per_s: None,
         }
     }
 }

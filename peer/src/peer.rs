@@ -516,6 +516,20 @@ impl Peer {
                 self.apply_shown(*id, &d.state);
             }
         }
+        // Under an uplink budget, what is near each peer's head goes to it first.
+        if self.session.config().uplink_bytes_per_s.is_some() {
+            let heads: Vec<(PeerId, NetId)> = self
+                .mirror
+                .objects
+                .iter()
+                .filter(|(_, o)| o.kind == Kind::HEAD)
+                .filter_map(|(id, o)| Some((o.avatar_of.filter(|p| *p != me)?, *id)))
+                .collect();
+            for (p, id) in heads {
+                let at = self.session.latest_state(id).map(|s| s.pos);
+                self.session.set_interest(p, at);
+            }
+        }
         // Hands, then physics.
         let own = SessionOwnership {
             me,

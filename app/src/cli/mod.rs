@@ -214,6 +214,11 @@ struct PeerOpts {
     /// should say it; a process starved of CPU for 250 ms or more is then taken for dead).
     #[arg(long)]
     fast_detection: bool,
+    /// Cap this peer's uplink at KBPS kilobits a second (datagrams plus their estimated
+    /// transport overhead, shared by its links): held objects go first, then others by
+    /// motion, nearness to each peer's head and waiting time.
+    #[arg(long, value_name = "KBPS", value_parser = positive::<1_000_000>)]
+    uplink_kbps: Option<f64>,
     /// Pump the network only in the frame, not on a thread of its own between frames (a slow
     /// frame then slows the room: for comparison).
     #[arg(long)]
@@ -400,6 +405,8 @@ pub struct PeerArgs {
     pub fast_detection: bool,
     /// Pump the network in the frame only.
     pub no_net_thread: bool,
+    /// Uplink cap, bytes a second.
+    pub uplink_bytes_per_s: Option<u32>,
     /// No stats lines.
     pub quiet: bool,
     /// Spawn no avatar.
@@ -646,6 +653,7 @@ fn peer_args(
         room_token: p.room_token,
         fast_detection: p.fast_detection,
         no_net_thread: p.no_net_thread,
+        uplink_bytes_per_s: p.uplink_kbps.map(|k| (k * 125.0).round().max(1.0) as u32),
         quiet: p.quiet,
         no_avatar: p.no_avatar,
         front,

@@ -167,6 +167,9 @@ impl Session {
         let was_mine = o.info.owner == local;
         o.info.owner = owner;
         o.info.epoch = epoch;
+        if o.info.held && !held {
+            o.released = true;
+        }
         o.info.held = held;
         if owner != local {
             o.published = None;

@@ -363,16 +363,22 @@ pub(crate) struct Link {
     pub ping_due: bool,
     /// Unreliable application messages for the next datagram (encoded sections).
     pub unreliable: std::collections::VecDeque<Vec<u8>>,
+    /// Its share of our uplink budget, if there is one (`session::budget`).
+    pub bucket: super::budget::Bucket,
+    /// Its objects' priority accumulators under a budget.
+    pub priorities: super::budget::Priorities,
+    /// Where its peer looks (its head), for the budget's interest.
+    pub interest: Option<glam::Vec3>,
 }
 
 impl Link {
-    /// Anything to send now.
-    pub fn has_work(&self, now: Instant) -> bool {
+    /// Anything to send now (`state`: whether pending state may go, the budget allowing).
+    pub fn has_work(&self, now: Instant, state: bool) -> bool {
         self.reliable.ack_pending
             || self.pong_due.is_some()
             || self.ping_due
             || self.keyframes.any_due()
-            || !self.pending.is_empty()
+            || (state && !self.pending.is_empty())
             || self.state_acks.is_owed()
             || self.reliable.has_due(now)
             || !self.unreliable.is_empty()
@@ -384,6 +390,7 @@ impl Link {
         self.send.clear();
         self.recv.clear();
         self.pending.clear();
+        self.priorities.clear();
         self.in_flight.clear();
         self.state_acks.reset();
         self.spawn_pending.clear();

@@ -26,6 +26,7 @@
 
 mod access;
 mod authority;
+mod budget;
 mod control;
 mod delta;
 mod heal;

@@ -92,6 +92,10 @@ pub(crate) struct Object {
     pub source: Option<PeerId>,
     /// Its topology log (tears and cuts), see `topology`.
     pub topology: super::topology::TopologyLog,
+    /// Let go of since the last send tick (the budget's release boost starts at the tick).
+    pub released: bool,
+    /// Until when a released or thrown object goes before resting ones (`session::budget`).
+    pub boost_until: Option<Instant>,
 }
 
 impl Object {
@@ -115,6 +119,8 @@ impl Object {
             buffer: SnapshotBuffer::default(),
             source: None,
             topology: Default::default(),
+            released: false,
+            boost_until: None,
         }
     }
 

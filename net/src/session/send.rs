@@ -356,6 +356,12 @@ impl Session {
                 (Role::Client, true) => self.host.into_iter().collect(),
                 _ => Vec::new(),
             };
+            if let Some(o) = self.objects.get_mut(id) {
+                // let go of since the last tick: the budget's release boost starts now
+                if std::mem::take(&mut o.released) {
+                    o.boost_until = Some(now + super::budget::RELEASE_BOOST);
+                }
+            }
             if mine {
                 if let Some(o) = self.objects.get_mut(id) {
                     // rest sync: an object unchanged for `rest_after` drops its thresholds,
@@ -402,6 +408,14 @@ impl Session {
         if entries.is_empty() {
             return false;
         }
+        if self.cfg.uplink_bytes_per_s.is_some() {
+            // under a budget entries may wait: the newest plan replaces the object's older
+            // one (both bring the peer from the same acknowledged base), and the object
+            // gains priority for having something to send
+            link.pending.retain(|e| e.id != id);
+            let w = super::budget::weight(o, class, now, link.interest);
+            link.priorities.accumulate(id, w, class.send.interval());
+        }
         if owner {
             // the datagram is stamped with the time the owner's samples describe
             let sampled = o.published_at;
@@ -417,8 +431,21 @@ impl Session {
         let mtu = self.cfg.mtu;
         let term = self.term;
         let min_rto = self.cfg.min_rto;
+        // this link's share of the uplink budget, if there is one
+        let share = self
+            .cfg
+            .uplink_bytes_per_s
+            .map(|cap| f64::from(cap) / self.links.len().max(1) as f64);
+        let objects = &self.objects;
+        let held = |id: NetId| objects.get(id).is_some_and(|o| o.info.held);
         let link = self.links.get_mut(&to)?;
-        if !link.has_work(now) {
+        // under a budget, state goes once the bucket holds a datagram's worth; a held
+        // object's goes at once while anything is left
+        let batch_ok = share.is_none_or(|rate| link.bucket.refill(now, rate, mtu));
+        let held_only =
+            !batch_ok && link.bucket.has_tokens() && link.pending.iter().any(|e| held(e.id));
+        let state_ok = batch_ok || held_only;
+        if !link.has_work(now, state_ok) {
             return None;
         }
         let rto = link.rtt.rto(min_rto);
@@ -462,14 +489,35 @@ impl Session {
                 break;
             }
         }
-        if !link.pending.is_empty() {
-            link.pending.sort_by_key(|e| e.id);
-            let mut block = StateBlockWriter::new(w.state_budget_bits());
+        if state_ok && !link.pending.is_empty() {
+            let state_bits = match share {
+                None => {
+                    link.pending.sort_by_key(|e| e.id);
+                    w.state_budget_bits()
+                }
+                Some(_) => {
+                    // held objects first, then the highest accumulated priority (stable: an
+                    // object's entries stay in order), within what the bucket holds
+                    let pr = &link.priorities;
+                    link.pending.sort_by(|a, b| {
+                        held(b.id)
+                            .cmp(&held(a.id))
+                            .then(pr.of(b.id).total_cmp(&pr.of(a.id)))
+                            .then(a.id.cmp(&b.id))
+                    });
+                    w.state_budget_bits_within(link.bucket.room_for_state(w.len()))
+                }
+            };
+            let full_bits = w.state_budget_bits();
+            let mut block = StateBlockWriter::new(state_bits);
             let mut taken = 0usize;
             let mut oversize = 0u64;
             let mut carried: Vec<EntryRef> = Vec::new();
             let mut class_bits: BTreeMap<u16, usize> = BTreeMap::new();
             for (i, e) in link.pending.iter().enumerate() {
+                if held_only && !held(e.id) {
+                    break; // the rest waits for a fuller bucket
+                }
                 let layout = self.objects.get(e.id).and_then(|o| {
                     let class = self.cfg.classes.get(usize::from(o.info.class.0))?;
                     Some((
@@ -486,6 +534,8 @@ impl Session {
                     continue;
                 };
                 match block.push(e, &layout) {
+                    // too big for what the budget leaves, not for a datagram: it waits
+                    Pushed::Oversize if state_bits < full_bits => break,
                     Pushed::Oversize => {
                         oversize += 1;
                         taken = i + 1;
@@ -507,7 +557,14 @@ impl Session {
             if !carried.is_empty() {
                 link.in_flight.record(link.seq.next_out(), carried);
             }
-            link.pending.drain(..taken);
+            let sent: Vec<NetId> = link.pending.drain(..taken).map(|e| e.id).collect();
+            if share.is_some() {
+                for id in sent {
+                    if !link.pending.iter().any(|e| e.id == id) {
+                        link.priorities.sent(id);
+                    }
+                }
+            }
             if link.pending.is_empty() {
                 if let Some(ts) = link.pending_sample.take() {
                     // stamp the datagram with the time its samples describe
@@ -534,6 +591,9 @@ impl Session {
         link.seq.sent();
         link.last_sent = Some(now);
         let (payload, reliable) = w.finish();
+        if share.is_some() {
+            link.bucket.spend(payload.len());
+        }
         self.stats.on_send(to, payload.len(), mtu);
         Some(Transmit {
             to,

@@ -476,6 +476,12 @@ impl PacketWriter {
     }
 
     /// Bits a state block may take so that its section still fits (tag, and varints of up to
+    /// 3 bytes for the count and the length), within `bytes` more bytes.
+    pub fn state_budget_bits_within(&self, bytes: usize) -> usize {
+        (bytes.saturating_sub(1 + 3 + 3) * 8).min(self.state_budget_bits())
+    }
+
+    /// Bits a state block may take so that its section still fits (tag, and varints of up to
     /// 3 bytes for the count and the length).
     pub fn state_budget_bits(&self) -> usize {
         self.mtu.saturating_sub(self.out.len() + 1 + 3 + 3) * 8

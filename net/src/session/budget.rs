@@ -1,0 +1,204 @@
+//! The uplink budget (issue 18): a token bucket per link, and a priority accumulator per link
+//! and object in the style of Glenn Fiedler's state synchronization.
+//!
+//! With [`SessionConfig::uplink_bytes_per_s`](crate::SessionConfig::uplink_bytes_per_s) set,
+//! each link may send `cap / links` bytes a second (datagram payloads plus the estimated
+//! transport overhead, [`TRANSPORT_OVERHEAD_BYTES`]): a bucket holding a tenth of a second's
+//! share, refilled at nine tenths of the share, so no 1 s window carries more than the cap
+//! (acks, pings and control messages always go, a bucket in debt waits; state waits while
+//! the bucket is empty). Every send tick
+//! adds to an object's accumulator its weight toward that link:
+//!
+//! `class priority × (held 8 | just released or thrown 4 | moving 2 | at rest 1) × interest`
+//!
+//! where interest is `1 / (1 + d)` for an object `d` metres from the point the link's peer
+//! looks at ([`Session::set_interest`](crate::Session::set_interest)), 1 when unknown. Each
+//! datagram takes the pending entries of held objects first (someone's hand is on them: they
+//! never wait behind anything), then those of the highest accumulators; an object whose
+//! entries all went starts again from zero. Nothing else starves: an object that waits keeps
+//! accumulating, so it overtakes a just-sent one of `k` times its weight after `k` ticks —
+//! as long as the held objects leave room (a budget too small for what people hold sends
+//! only that).
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use glam::Vec3;
+
+use super::registry::Object;
+use crate::ids::NetId;
+use crate::policy::ClassConfig;
+use crate::stats::TRANSPORT_OVERHEAD_BYTES;
+use crate::time::Instant;
+
+/// How much of a second of budget the bucket holds.
+const BUCKET_SECONDS: f64 = 0.1;
+
+/// How long a released (or thrown) object keeps its boost.
+pub(crate) const RELEASE_BOOST: Duration = Duration::from_secs(1);
+
+/// A link's share of the uplink, as a token bucket of bytes.
+#[derive(Debug, Default)]
+pub(crate) struct Bucket {
+    tokens: f64,
+    last: Option<Instant>,
+}
+
+impl Bucket {
+    /// Refill at `rate` bytes a second up to a tenth of a second's worth (a new bucket
+    /// starts full) and say whether state may go now: once the bucket holds a full datagram
+    /// of `mtu` (or is full, when it holds less), so that state goes in few, well-filled
+    /// datagrams rather than many that are mostly headers.
+    pub fn refill(&mut self, now: Instant, rate: f64, mtu: usize) -> bool {
+        // a bucket of a tenth of a second refilled at nine tenths of the rate: no 1 s window
+        // holds more than the rate
+        let cap = (rate * BUCKET_SECONDS).max(1.0);
+        let fill = rate * (1.0 - BUCKET_SECONDS);
+        self.tokens = match self.last {
+            None => cap,
+            Some(t) => (self.tokens + now.saturating_since(t).as_secs_f64() * fill).min(cap),
+        };
+        self.last = Some(now);
+        self.tokens >= cap.min((mtu + TRANSPORT_OVERHEAD_BYTES) as f64)
+    }
+
+    /// Whether anything is left in the bucket (held objects' state goes at once while it
+    /// is).
+    pub fn has_tokens(&self) -> bool {
+        self.tokens > 0.0
+    }
+
+    /// Bytes state entries may take in a datagram that already holds `so_far` bytes.
+    pub fn room_for_state(&self, so_far: usize) -> usize {
+        (self.tokens - (so_far + TRANSPORT_OVERHEAD_BYTES) as f64).max(0.0) as usize
+    }
+
+    /// A datagram of `payload` bytes went (it may leave the bucket in debt: control always
+    /// goes).
+    pub fn spend(&mut self, payload: usize) {
+        self.tokens -= (payload + TRANSPORT_OVERHEAD_BYTES) as f64;
+    }
+}
+
+/// A link's priority accumulators.
+#[derive(Debug, Default)]
+pub(crate) struct Priorities {
+    acc: BTreeMap<NetId, f32>,
+}
+
+impl Priorities {
+    /// Object `id` had something to send at a tick of `interval`, weighing `weight`.
+    pub fn accumulate(&mut self, id: NetId, weight: f32, interval: Duration) {
+        *self.acc.entry(id).or_default() += weight * interval.as_secs_f32();
+    }
+
+    /// Its accumulated priority.
+    pub fn of(&self, id: NetId) -> f32 {
+        self.acc.get(&id).copied().unwrap_or(0.0)
+    }
+
+    /// Everything pending for `id` went: it starts again.
+    pub fn sent(&mut self, id: NetId) {
+        self.acc.remove(&id);
+    }
+
+    /// Forget everything (the replication toward the peer restarts).
+    pub fn clear(&mut self) {
+        self.acc.clear();
+    }
+}
+
+/// Object `o`'s weight toward a link whose peer looks at `interest`.
+pub(crate) fn weight(o: &Object, class: &ClassConfig, now: Instant, interest: Option<Vec3>) -> f32 {
+    let p = class.send.priority;
+    let base = if p.is_finite() {
+        p.clamp(0.01, 100.0)
+    } else {
+        1.0
+    };
+    let state = if o.info.held {
+        8.0
+    } else if o.boost_until.is_some_and(|t| now < t) {
+        4.0
+    } else if !o.rest {
+        2.0
+    } else {
+        1.0
+    };
+    let near = interest.map_or(1.0, |at| {
+        let pos = class.position_quantizer().dequantize(o.pos);
+        let d = pos.distance(at);
+        if d.is_finite() {
+            1.0 / (1.0 + d)
+        } else {
+            1.0
+        }
+    });
+    base * state * near
+}
+
+impl super::Session {
+    /// Where the peer at the other end of a link looks (its head, say), so that under an
+    /// uplink budget what is near it goes first; `None`: unknown (no preference).
+    pub fn set_interest(&mut self, peer: crate::ids::PeerId, at: Option<Vec3>) {
+        if let Some(l) = self.links.get_mut(&peer) {
+            l.interest = at.filter(|p| p.is_finite());
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_bucket_refills_at_its_rate_up_to_a_tenth_of_a_second_and_goes_into_debt() {
+        let mut b = Bucket::default();
+        let t0 = Instant::from_micros(1_000_000);
+        assert!(b.refill(t0, 10_000.0, 1200));
+        assert_eq!(b.room_for_state(0), 1000 - TRANSPORT_OVERHEAD_BYTES);
+        b.spend(1100);
+        assert!(!b.refill(t0 + Duration::from_millis(10), 10_000.0, 1200));
+        assert_eq!(b.room_for_state(0), 0);
+        // state waits for a full bucket (it holds less than a datagram of 1200)
+        assert!(!b.refill(t0 + Duration::from_millis(100), 10_000.0, 1200));
+        // 1 s later: full again, never more than the cap
+        assert!(b.refill(t0 + Duration::from_secs(1), 10_000.0, 1200));
+        assert_eq!(b.room_for_state(0), 1000 - TRANSPORT_OVERHEAD_BYTES);
+        // a big bucket lets state go once it holds a datagram
+        let mut big = Bucket::default();
+        big.refill(t0, 100_000.0, 1200);
+        big.spend(10_000);
+        assert!(!big.refill(t0 + Duration::from_millis(10), 100_000.0, 1200));
+        assert!(big.refill(t0 + Duration::from_millis(20), 100_000.0, 1200));
+    }
+
+    #[test]
+    fn accumulators_grow_with_weight_and_time_and_nothing_starves() {
+        let mut p = Priorities::default();
+        let (held, resting) = (NetId(1), NetId(2));
+        let tick = Duration::from_millis(50);
+        // room for one object a tick: the held one goes first, the resting one still goes
+        // within 8 ticks (the ratio of their weights)
+        let mut resting_sent = None;
+        for t in 0..20 {
+            p.accumulate(held, 8.0, tick);
+            p.accumulate(resting, 1.0, tick);
+            let first = if p.of(resting) > p.of(held) {
+                resting
+            } else {
+                held
+            };
+            if t == 0 {
+                assert_eq!(first, held);
+            }
+            p.sent(first);
+            if first == resting {
+                resting_sent = Some(t);
+                break;
+            }
+        }
+        let t = resting_sent.expect("the resting object starved");
+        assert!((7..=8).contains(&t), "sent at tick {t}");
+    }
+}
