@@ -3,8 +3,8 @@
 //!
 //! With [`SessionConfig::uplink_bytes_per_s`](crate::SessionConfig::uplink_bytes_per_s) set,
 //! each link may send `cap / links` bytes a second (datagram payloads plus the estimated
-//! transport overhead, [`TRANSPORT_OVERHEAD_BYTES`]): a bucket holding a tenth of a second's
-//! share, refilled at nine tenths of the share, so no 1 s window carries more than the cap
+//! transport overhead, [`TRANSPORT_OVERHEAD_BYTES`]): a bucket holding a twentieth of a second's
+//! share, refilled at 95 % of the share, so no 1 s window carries more than the cap
 //! (acks, pings and control messages always go, a bucket in debt waits; state waits while
 //! the bucket is empty). Every send tick
 //! adds to an object's accumulator its weight toward that link:
@@ -13,12 +13,11 @@
 //!
 //! where interest is `1 / (1 + d)` for an object `d` metres from the point the link's peer
 //! looks at ([`Session::set_interest`](crate::Session::set_interest)), 1 when unknown. Each
-//! datagram takes the pending entries of held objects first (someone's hand is on them: they
-//! never wait behind anything), then those of the highest accumulators; an object whose
-//! entries all went starts again from zero. Nothing else starves: an object that waits keeps
-//! accumulating, so it overtakes a just-sent one of `k` times its weight after `k` ticks —
-//! as long as the held objects leave room (a budget too small for what people hold sends
-//! only that).
+//! datagram takes the pending entries of objects that waited [`MAX_WAIT`] first (nothing
+//! starves), then those of held objects (someone's hand is on them), then the highest
+//! accumulators; an object whose entries all went starts again from zero. Among the rest, an
+//! object that waits keeps accumulating, so it overtakes a just-sent one of `k` times its
+//! weight after `k` ticks.
 
 use std::collections::BTreeMap;
 use std::time::Duration;
@@ -31,8 +30,9 @@ use crate::policy::ClassConfig;
 use crate::stats::TRANSPORT_OVERHEAD_BYTES;
 use crate::time::Instant;
 
-/// How much of a second of budget the bucket holds.
-const BUCKET_SECONDS: f64 = 0.1;
+/// How much of a second of budget the bucket holds (state waits at most this long for a
+/// datagram's worth).
+const BUCKET_SECONDS: f64 = 0.05;
 
 /// How long a released (or thrown) object keeps its boost.
 pub(crate) const RELEASE_BOOST: Duration = Duration::from_secs(1);
@@ -45,12 +45,12 @@ pub(crate) struct Bucket {
 }
 
 impl Bucket {
-    /// Refill at `rate` bytes a second up to a tenth of a second's worth (a new bucket
+    /// Refill at `rate` bytes a second up to a twentieth of a second's worth (a new bucket
     /// starts full) and say whether state may go now: once the bucket holds a full datagram
     /// of `mtu` (or is full, when it holds less), so that state goes in few, well-filled
     /// datagrams rather than many that are mostly headers.
     pub fn refill(&mut self, now: Instant, rate: f64, mtu: usize) -> bool {
-        // a bucket of a tenth of a second refilled at nine tenths of the rate: no 1 s window
+        // a bucket of a twentieth of a second refilled at 95 % of the rate: no 1 s window
         // holds more than the rate
         let cap = (rate * BUCKET_SECONDS).max(1.0);
         let fill = rate * (1.0 - BUCKET_SECONDS);
@@ -60,12 +60,6 @@ impl Bucket {
         };
         self.last = Some(now);
         self.tokens >= cap.min((mtu + TRANSPORT_OVERHEAD_BYTES) as f64)
-    }
-
-    /// Whether anything is left in the bucket (held objects' state goes at once while it
-    /// is).
-    pub fn has_tokens(&self) -> bool {
-        self.tokens > 0.0
     }
 
     /// Bytes state entries may take in a datagram that already holds `so_far` bytes.
@@ -80,16 +74,30 @@ impl Bucket {
     }
 }
 
+/// An object waiting this long goes before anything else (held objects included): the bound
+/// on starvation.
+pub(crate) const MAX_WAIT: Duration = Duration::from_secs(1);
+
 /// A link's priority accumulators.
 #[derive(Debug, Default)]
 pub(crate) struct Priorities {
     acc: BTreeMap<NetId, f32>,
+    /// Since when each object has had something waiting.
+    since: BTreeMap<NetId, Instant>,
 }
 
 impl Priorities {
     /// Object `id` had something to send at a tick of `interval`, weighing `weight`.
-    pub fn accumulate(&mut self, id: NetId, weight: f32, interval: Duration) {
+    pub fn accumulate(&mut self, id: NetId, weight: f32, interval: Duration, now: Instant) {
         *self.acc.entry(id).or_default() += weight * interval.as_secs_f32();
+        self.since.entry(id).or_insert(now);
+    }
+
+    /// Whether `id` has waited [`MAX_WAIT`] or longer.
+    pub fn overdue(&self, id: NetId, now: Instant) -> bool {
+        self.since
+            .get(&id)
+            .is_some_and(|t| now.saturating_since(*t) >= MAX_WAIT)
     }
 
     /// Its accumulated priority.
@@ -100,11 +108,13 @@ impl Priorities {
     /// Everything pending for `id` went: it starts again.
     pub fn sent(&mut self, id: NetId) {
         self.acc.remove(&id);
+        self.since.remove(&id);
     }
 
     /// Forget everything (the replication toward the peer restarts).
     pub fn clear(&mut self) {
         self.acc.clear();
+        self.since.clear();
     }
 }
 
@@ -152,23 +162,26 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_bucket_refills_at_its_rate_up_to_a_tenth_of_a_second_and_goes_into_debt() {
+    fn a_bucket_refills_at_its_rate_up_to_a_twentieth_of_a_second_and_goes_into_debt() {
         let mut b = Bucket::default();
         let t0 = Instant::from_micros(1_000_000);
-        assert!(b.refill(t0, 10_000.0, 1200));
+        // 20 kB/s: the bucket holds 1000 bytes and refills at 19 kB/s
+        assert!(b.refill(t0, 20_000.0, 1200));
         assert_eq!(b.room_for_state(0), 1000 - TRANSPORT_OVERHEAD_BYTES);
-        b.spend(1100);
-        assert!(!b.refill(t0 + Duration::from_millis(10), 10_000.0, 1200));
+        b.spend(1100 - TRANSPORT_OVERHEAD_BYTES);
+        assert!(!b.refill(t0, 20_000.0, 1200));
         assert_eq!(b.room_for_state(0), 0);
-        // state waits for a full bucket (it holds less than a datagram of 1200)
-        assert!(!b.refill(t0 + Duration::from_millis(100), 10_000.0, 1200));
-        // 1 s later: full again, never more than the cap
-        assert!(b.refill(t0 + Duration::from_secs(1), 10_000.0, 1200));
+        // state waits for a full bucket (it holds less than a datagram of 1200): 1000 bytes
+        // at 19 kB/s take 53 ms
+        assert!(!b.refill(t0 + Duration::from_millis(50), 20_000.0, 1200));
+        assert!(b.refill(t0 + Duration::from_millis(60), 20_000.0, 1200));
+        // never more than the bucket holds
+        assert!(b.refill(t0 + Duration::from_secs(1), 20_000.0, 1200));
         assert_eq!(b.room_for_state(0), 1000 - TRANSPORT_OVERHEAD_BYTES);
         // a big bucket lets state go once it holds a datagram
         let mut big = Bucket::default();
         big.refill(t0, 100_000.0, 1200);
-        big.spend(10_000);
+        big.spend(5_000);
         assert!(!big.refill(t0 + Duration::from_millis(10), 100_000.0, 1200));
         assert!(big.refill(t0 + Duration::from_millis(20), 100_000.0, 1200));
     }
@@ -182,8 +195,10 @@ mod tests {
         // within 8 ticks (the ratio of their weights)
         let mut resting_sent = None;
         for t in 0..20 {
-            p.accumulate(held, 8.0, tick);
-            p.accumulate(resting, 1.0, tick);
+            let now = Instant::from_micros(1_000_000 + t * 50_000);
+            p.accumulate(held, 8.0, tick, now);
+            p.accumulate(resting, 1.0, tick, now);
+            assert!(!p.overdue(resting, now));
             let first = if p.of(resting) > p.of(held) {
                 resting
             } else {

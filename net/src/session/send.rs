@@ -19,6 +19,12 @@ use crate::wire::{
     StateEntry,
 };
 
+/// Bytes of a datagram's header and a few acknowledgements, for the budget's estimates.
+const HEADER_ESTIMATE: usize = 16;
+/// Bytes of a typical rigid state entry (a delta of position and rotation), for the budget's
+/// estimates.
+const ENTRY_ESTIMATE: usize = 16;
+
 /// When each class next sends, and the next heartbeat.
 #[derive(Debug)]
 pub(crate) struct SendSchedule {
@@ -414,7 +420,8 @@ impl Session {
             // gains priority for having something to send
             link.pending.retain(|e| e.id != id);
             let w = super::budget::weight(o, class, now, link.interest);
-            link.priorities.accumulate(id, w, class.send.interval());
+            link.priorities
+                .accumulate(id, w, class.send.interval(), now);
         }
         if owner {
             // the datagram is stamped with the time the owner's samples describe
@@ -439,11 +446,14 @@ impl Session {
         let objects = &self.objects;
         let held = |id: NetId| objects.get(id).is_some_and(|o| o.info.held);
         let link = self.links.get_mut(&to)?;
-        // under a budget, state goes once the bucket holds a datagram's worth; a held
-        // object's goes at once while anything is left
+        // under a budget, state goes once the bucket holds a datagram's worth (or is full);
+        // held objects' entries go at once when the bucket holds them all (in one datagram,
+        // not one by one: each datagram costs its header and the transport's)
         let batch_ok = share.is_none_or(|rate| link.bucket.refill(now, rate, mtu));
-        let held_only =
-            !batch_ok && link.bucket.has_tokens() && link.pending.iter().any(|e| held(e.id));
+        let held_pending = link.pending.iter().filter(|e| held(e.id)).count();
+        let held_only = !batch_ok
+            && held_pending > 0
+            && link.bucket.room_for_state(HEADER_ESTIMATE) >= held_pending * ENTRY_ESTIMATE;
         let state_ok = batch_ok || held_only;
         if !link.has_work(now, state_ok) {
             return None;
@@ -496,12 +506,14 @@ impl Session {
                     w.state_budget_bits()
                 }
                 Some(_) => {
-                    // held objects first, then the highest accumulated priority (stable: an
-                    // object's entries stay in order), within what the bucket holds
+                    // what waited too long, then held objects, then the highest accumulated
+                    // priority (stable: an object's entries stay in order), within what the
+                    // bucket holds
                     let pr = &link.priorities;
+                    let tier = |id: NetId| (pr.overdue(id, now), held(id));
                     link.pending.sort_by(|a, b| {
-                        held(b.id)
-                            .cmp(&held(a.id))
+                        tier(b.id)
+                            .cmp(&tier(a.id))
                             .then(pr.of(b.id).total_cmp(&pr.of(a.id)))
                             .then(a.id.cmp(&b.id))
                     });
