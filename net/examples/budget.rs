@@ -57,6 +57,9 @@ fn scene_pose(i: usize, t: f32) -> Vec3 {
     }
 }
 
+/// (peers, p95 of every object against the cap, p95 of held objects against the cap).
+type Curve = (usize, Vec<(f64, f64)>, Vec<(f64, f64)>);
+
 #[derive(Clone)]
 struct Outcome {
     host_up: f64,
@@ -237,13 +240,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "avatar_p95_mm",
         "scene_p95_mm",
     ]);
-    let mut curves: Vec<(usize, Vec<(f64, f64)>, Vec<(f64, f64)>)> = Vec::new();
+    let mut curves: Vec<Curve> = Vec::new();
     for &n in sizes {
         let free = room(n, None);
         let mut all = Vec::new();
         let mut held = Vec::new();
         for &f in fractions {
-            let cap = (f < 1.0).then(|| (free.host_up * f) as u32);
+            let cap = (f < 1.0).then_some((free.host_up * f) as u32);
             let o = if cap.is_some() {
                 room(n, cap)
             } else {

@@ -129,6 +129,19 @@ pub struct MessageStats {
 }
 
 impl Stats {
+    /// State bits sent per class (by index into `classes`).
+    pub(crate) fn add_class_bits(
+        &mut self,
+        classes: &[crate::policy::ClassConfig],
+        bits: BTreeMap<u16, usize>,
+    ) {
+        for (c, b) in bits {
+            if let Some(cl) = classes.get(usize::from(c)) {
+                *self.class_up_bytes.entry(cl.name.clone()).or_default() += b as f64 / 8.0;
+            }
+        }
+    }
+
     pub(crate) fn on_send(&mut self, to: PeerId, bytes: usize, mtu: usize) {
         self.up.add(bytes);
         self.links.entry(to).or_default().up.add(bytes);

@@ -24,11 +24,15 @@ use std::time::Duration;
 
 use glam::Vec3;
 
-use super::registry::Object;
+use super::delta::EntryRef;
+use super::link::Link;
+use super::registry::{Object, Registry};
+use super::send::{plan_entries, LinkView, Refresh};
 use crate::ids::NetId;
 use crate::policy::ClassConfig;
 use crate::stats::TRANSPORT_OVERHEAD_BYTES;
 use crate::time::Instant;
+use crate::wire::{EntryLayout, PacketWriter, Pushed, StateBlockWriter, StateEntry};
 
 /// How much of a second of budget the bucket holds (state waits at most this long for a
 /// datagram's worth).
@@ -145,6 +149,161 @@ pub(crate) fn weight(o: &Object, class: &ClassConfig, now: Instant, interest: Op
         }
     });
     base * state * near
+}
+
+/// What [`fill_state`] put in a datagram.
+#[derive(Debug, Default)]
+pub(crate) struct Filled {
+    /// The state section: entry count and bytes (none if empty).
+    pub block: Option<(usize, Vec<u8>)>,
+    /// The entries it carries, for acknowledgements.
+    pub carried: Vec<EntryRef>,
+    /// Bits per class, for the stats.
+    pub class_bits: BTreeMap<u16, usize>,
+    /// Entries too big for any datagram, dropped.
+    pub oversize: u64,
+    /// The newest owner sample among them (the datagram is stamped with it).
+    pub sampled: Option<Instant>,
+}
+
+/// Bytes of a typical rigid state entry, for deciding whether a bucket holds the held
+/// objects' entries.
+pub(crate) const ENTRY_ESTIMATE: usize = 16;
+
+/// The layout of object `o`'s entries.
+fn layout_of<'a>(o: &Object, classes: &'a [ClassConfig]) -> Option<(u16, EntryLayout<'a>)> {
+    let class = classes.get(usize::from(o.info.class.0))?;
+    Some((
+        o.info.class.0,
+        EntryLayout {
+            class,
+            particles: o.info.particles,
+            generation: o.topology.generation(),
+        },
+    ))
+}
+
+/// Push `e` into `block`; false when it must wait for the next datagram. Entries too big for
+/// any datagram are counted and dropped.
+fn push_entry(
+    block: &mut StateBlockWriter,
+    e: &StateEntry,
+    objects: &Registry,
+    classes: &[ClassConfig],
+    link: &Link,
+    limited: bool,
+    out: &mut Filled,
+) -> bool {
+    let Some((class_id, layout)) = objects.get(e.id).and_then(|o| layout_of(o, classes)) else {
+        return true; // the object is gone: nothing to send
+    };
+    match block.push(e, &layout) {
+        // too big for what the budget leaves, not for a datagram: it waits
+        Pushed::Oversize if limited => false,
+        Pushed::Oversize => {
+            out.oversize += 1;
+            true
+        }
+        Pushed::Full => false,
+        Pushed::Written(bits) => {
+            *out.class_bits.entry(class_id).or_default() += bits;
+            let part = e.part();
+            if let Some(n) = link.send.number_of(&(e.id, part), e.seq) {
+                out.carried.push((e.id, part, n));
+            }
+            true
+        }
+    }
+}
+
+/// Fill the state section of a datagram to `link` under the budget: first the entries a
+/// previous datagram had no room for (they have their numbers: they must go), then objects
+/// planned now, in order — waited too long, held, then by accumulated priority — until the
+/// bucket's room is used. `held_only`: only held objects (the bucket holds them, not a full
+/// datagram). An object is planned only when a datagram takes it, so no entry number is
+/// spent on an entry that never goes.
+pub(crate) fn fill_state(
+    link: &mut Link,
+    objects: &Registry,
+    classes: &[ClassConfig],
+    now: Instant,
+    w: &PacketWriter,
+    held_only: bool,
+) -> Filled {
+    let mut out = Filled::default();
+    let full_bits = w.state_budget_bits();
+    let bits = w.state_budget_bits_within(link.bucket.room_for_state(w.len()));
+    let limited = bits < full_bits;
+    let mut block = StateBlockWriter::new(bits);
+    let mut room = true;
+    if !held_only {
+        let carry = std::mem::take(&mut link.pending);
+        let mut rest = carry.into_iter();
+        for e in rest.by_ref() {
+            if !push_entry(&mut block, &e, objects, classes, link, limited, &mut out) {
+                link.pending.push(e);
+                room = false;
+                break;
+            }
+        }
+        link.pending.extend(rest);
+    }
+    let held = |id: NetId| objects.get(id).is_some_and(|o| o.info.held);
+    let mut order: Vec<(NetId, Refresh)> = link
+        .dirty
+        .iter()
+        .filter(|(id, _)| !held_only || held(**id))
+        .map(|(id, how)| (*id, *how))
+        .collect();
+    let pr = &link.priorities;
+    let tier = |id: NetId| (pr.overdue(id, now), held(id));
+    order.sort_by(|(a, _), (b, _)| {
+        tier(*b)
+            .cmp(&tier(*a))
+            .then(pr.of(*b).total_cmp(&pr.of(*a)))
+            .then(a.cmp(b))
+    });
+    for (id, how) in order {
+        if !room {
+            break;
+        }
+        link.dirty.remove(&id);
+        let Some(o) = objects.get(id) else {
+            link.priorities.sent(id);
+            continue;
+        };
+        let Some(class) = classes.get(usize::from(o.info.class.0)) else {
+            continue;
+        };
+        let view = LinkView {
+            ack_wait: link.rtt.ack_wait(),
+            parts: &mut link.send,
+        };
+        let owner = how == Refresh::Owner;
+        let entries = plan_entries(o, class, view, now, owner, how == Refresh::Keyframe);
+        if owner && !entries.is_empty() {
+            out.sampled = Some(
+                out.sampled
+                    .map_or(o.published_at, |t| t.max(o.published_at)),
+            );
+        }
+        let mut left = entries.into_iter();
+        for e in left.by_ref() {
+            if !push_entry(&mut block, &e, objects, classes, link, limited, &mut out) {
+                link.pending.push(e);
+                room = false;
+                break;
+            }
+        }
+        link.pending.extend(left);
+        if room {
+            link.priorities.sent(id);
+        }
+    }
+    if !block.is_empty() {
+        out.block = Some(block.finish());
+    }
+    out
 }
 
 impl super::Session {

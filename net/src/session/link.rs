@@ -369,6 +369,8 @@ pub(crate) struct Link {
     pub priorities: super::budget::Priorities,
     /// Where its peer looks (its head), for the budget's interest.
     pub interest: Option<glam::Vec3>,
+    /// Under a budget: objects with something to send, planned when a datagram takes them.
+    pub dirty: BTreeMap<NetId, super::send::Refresh>,
 }
 
 impl Link {
@@ -378,7 +380,7 @@ impl Link {
             || self.pong_due.is_some()
             || self.ping_due
             || self.keyframes.any_due()
-            || (state && !self.pending.is_empty())
+            || (state && !(self.pending.is_empty() && self.dirty.is_empty()))
             || self.state_acks.is_owed()
             || self.reliable.has_due(now)
             || !self.unreliable.is_empty()
@@ -390,6 +392,7 @@ impl Link {
         self.send.clear();
         self.recv.clear();
         self.pending.clear();
+        self.dirty.clear();
         self.priorities.clear();
         self.in_flight.clear();
         self.state_acks.reset();

@@ -21,9 +21,6 @@ use crate::wire::{
 
 /// Bytes of a datagram's header and a few acknowledgements, for the budget's estimates.
 const HEADER_ESTIMATE: usize = 16;
-/// Bytes of a typical rigid state entry (a delta of position and rotation), for the budget's
-/// estimates.
-const ENTRY_ESTIMATE: usize = 16;
 
 /// When each class next sends, and the next heartbeat.
 #[derive(Debug)]
@@ -405,6 +402,20 @@ impl Session {
         if link.spawn_pending.contains_key(&id) {
             return false; // the peer does not know the object yet
         }
+        if self.cfg.uplink_bytes_per_s.is_some() {
+            // under a budget the object waits its turn: planned when a datagram takes it
+            // (so no entry number is spent on an entry that never goes), gaining priority
+            // meanwhile
+            let merged = match link.dirty.get(&id) {
+                Some(Refresh::Keyframe) => Refresh::Keyframe,
+                _ => how,
+            };
+            link.dirty.insert(id, merged);
+            let w = super::budget::weight(o, class, now, link.interest);
+            link.priorities
+                .accumulate(id, w, class.send.interval(), now);
+            return true;
+        }
         let view = LinkView {
             ack_wait: link.rtt.ack_wait(),
             parts: &mut link.send,
@@ -413,15 +424,6 @@ impl Session {
         let entries = plan_entries(o, class, view, now, owner, how == Refresh::Keyframe);
         if entries.is_empty() {
             return false;
-        }
-        if self.cfg.uplink_bytes_per_s.is_some() {
-            // under a budget entries may wait: the newest plan replaces the object's older
-            // one (both bring the peer from the same acknowledged base), and the object
-            // gains priority for having something to send
-            link.pending.retain(|e| e.id != id);
-            let w = super::budget::weight(o, class, now, link.interest);
-            link.priorities
-                .accumulate(id, w, class.send.interval(), now);
         }
         if owner {
             // the datagram is stamped with the time the owner's samples describe
@@ -450,10 +452,11 @@ impl Session {
         // held objects' entries go at once when the bucket holds them all (in one datagram,
         // not one by one: each datagram costs its header and the transport's)
         let batch_ok = share.is_none_or(|rate| link.bucket.refill(now, rate, mtu));
-        let held_pending = link.pending.iter().filter(|e| held(e.id)).count();
+        let held_dirty = link.dirty.keys().filter(|id| held(**id)).count();
         let held_only = !batch_ok
-            && held_pending > 0
-            && link.bucket.room_for_state(HEADER_ESTIMATE) >= held_pending * ENTRY_ESTIMATE;
+            && held_dirty > 0
+            && link.bucket.room_for_state(HEADER_ESTIMATE)
+                >= held_dirty * super::budget::ENTRY_ESTIMATE;
         let state_ok = batch_ok || held_only;
         if !link.has_work(now, state_ok) {
             return None;
@@ -499,37 +502,35 @@ impl Session {
                 break;
             }
         }
-        if state_ok && !link.pending.is_empty() {
-            let state_bits = match share {
-                None => {
-                    link.pending.sort_by_key(|e| e.id);
-                    w.state_budget_bits()
-                }
-                Some(_) => {
-                    // what waited too long, then held objects, then the highest accumulated
-                    // priority (stable: an object's entries stay in order), within what the
-                    // bucket holds
-                    let pr = &link.priorities;
-                    let tier = |id: NetId| (pr.overdue(id, now), held(id));
-                    link.pending.sort_by(|a, b| {
-                        tier(b.id)
-                            .cmp(&tier(a.id))
-                            .then(pr.of(b.id).total_cmp(&pr.of(a.id)))
-                            .then(a.id.cmp(&b.id))
-                    });
-                    w.state_budget_bits_within(link.bucket.room_for_state(w.len()))
-                }
-            };
-            let full_bits = w.state_budget_bits();
-            let mut block = StateBlockWriter::new(state_bits);
+        if state_ok && share.is_some() {
+            let filled = super::budget::fill_state(
+                link,
+                &self.objects,
+                &self.cfg.classes,
+                now,
+                &w,
+                held_only,
+            );
+            self.stats.oversize_dropped += filled.oversize;
+            if !filled.carried.is_empty() {
+                link.in_flight.record(link.seq.next_out(), filled.carried);
+            }
+            if let Some(ts) = filled.sampled {
+                w.restamp(ts.wire_ms());
+            }
+            if let Some((count, bytes)) = filled.block {
+                w.state(count, &bytes);
+                self.stats
+                    .add_class_bits(&self.cfg.classes, filled.class_bits);
+            }
+        } else if state_ok && !link.pending.is_empty() {
+            link.pending.sort_by_key(|e| e.id);
+            let mut block = StateBlockWriter::new(w.state_budget_bits());
             let mut taken = 0usize;
             let mut oversize = 0u64;
             let mut carried: Vec<EntryRef> = Vec::new();
             let mut class_bits: BTreeMap<u16, usize> = BTreeMap::new();
             for (i, e) in link.pending.iter().enumerate() {
-                if held_only && !held(e.id) {
-                    break; // the rest waits for a fuller bucket
-                }
                 let layout = self.objects.get(e.id).and_then(|o| {
                     let class = self.cfg.classes.get(usize::from(o.info.class.0))?;
                     Some((
@@ -546,8 +547,6 @@ impl Session {
                     continue;
                 };
                 match block.push(e, &layout) {
-                    // too big for what the budget leaves, not for a datagram: it waits
-                    Pushed::Oversize if state_bits < full_bits => break,
                     Pushed::Oversize => {
                         oversize += 1;
                         taken = i + 1;
@@ -569,14 +568,7 @@ impl Session {
             if !carried.is_empty() {
                 link.in_flight.record(link.seq.next_out(), carried);
             }
-            let sent: Vec<NetId> = link.pending.drain(..taken).map(|e| e.id).collect();
-            if share.is_some() {
-                for id in sent {
-                    if !link.pending.iter().any(|e| e.id == id) {
-                        link.priorities.sent(id);
-                    }
-                }
-            }
+            link.pending.drain(..taken);
             if link.pending.is_empty() {
                 if let Some(ts) = link.pending_sample.take() {
                     // stamp the datagram with the time its samples describe
@@ -586,15 +578,7 @@ impl Session {
             if !block.is_empty() {
                 let (count, bytes) = block.finish();
                 w.state(count, &bytes);
-                for (c, bits) in class_bits {
-                    if let Some(cl) = self.cfg.classes.get(usize::from(c)) {
-                        *self
-                            .stats
-                            .class_up_bytes
-                            .entry(cl.name.clone())
-                            .or_default() += bits as f64 / 8.0;
-                    }
-                }
+                self.stats.add_class_bits(&self.cfg.classes, class_bits);
             }
         }
         if w.is_empty() {
