@@ -189,6 +189,10 @@ pub struct ReplicationFile {
     /// Soft bodies: half-extent of particle offsets around the centre, metres (default 0.4).
     #[serde(default)]
     pub particle_extent_m: Option<f32>,
+    /// The class's weight when an uplink budget makes objects wait their turn (0.01–100,
+    /// default 1; `--uplink-kbps`).
+    #[serde(default)]
+    pub priority: Option<f32>,
 }
 
 impl ReplicationFile {
@@ -206,6 +210,9 @@ impl ReplicationFile {
         }
         if let Some(v) = self.particle_threshold_mm {
             p.particle_threshold_m = v * 1e-3;
+        }
+        if let Some(v) = self.priority {
+            p.priority = v;
         }
         p
     }
@@ -236,7 +243,8 @@ impl ReplicationFile {
             0.0,
             1000.0,
         )?;
-        range("particle_extent_m", self.particle_extent_m, 0.01, 10.0)
+        range("particle_extent_m", self.particle_extent_m, 0.01, 10.0)?;
+        range("priority", self.priority, 0.01, 100.0)
     }
 }
 
