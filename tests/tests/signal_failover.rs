@@ -10,13 +10,32 @@ use std::time::Duration;
 mod common;
 use common::{embedded_host, field, peer_on, require_netns, scratch, standalone_signal, Proc};
 
-/// The peers that `p`'s final stats line has an RTT to (it printed it at exit).
+/// The peers that `p`'s final stats line has an RTT to (it printed it at exit), sorted.
 fn reached(p: &Proc) -> Vec<u64> {
     let l = p.wait_line("final stats", Duration::from_secs(1));
-    field(&l, "rtts")
+    let mut v: Vec<u64> = field(&l, "rtts")
         .split(',')
         .map(|e| e.split(':').next().unwrap().parse().unwrap())
-        .collect()
+        .collect();
+    v.sort_unstable();
+    v
+}
+
+/// The newcomer ends its run cleanly, having reached exactly `want` (in any order).
+fn ends_reaching(late: &mut Proc, mut want: Vec<u64>, context: &str) {
+    assert_eq!(
+        late.wait_exit(Duration::from_secs(20)),
+        0,
+        "{}",
+        late.logs()
+    );
+    want.sort_unstable();
+    assert_eq!(
+        reached(late),
+        want,
+        "the newcomer's links ({context})\n{}",
+        late.logs()
+    );
 }
 
 /// A free port on loopback (bound, read and let go: a peer binds it moments later).
@@ -56,17 +75,11 @@ fn a_room_stays_joinable_through_the_next_server_when_its_signaling_dies() {
     let late_id = late.peer_id();
     late.wait_line("joined", Duration::from_secs(20));
     host.wait_line(&format!("peer-joined {late_id}"), Duration::from_secs(10));
-    assert_eq!(
-        late.wait_exit(Duration::from_secs(20)),
-        0,
-        "{}",
-        late.logs()
+    ends_reaching(
+        &mut late,
+        vec![host_id, bot_id],
+        "through the second server",
     );
-    let mut got = reached(&late);
-    got.sort_unstable();
-    let mut want = vec![host_id, bot_id];
-    want.sort_unstable();
-    assert_eq!(got, want, "the newcomer's links\n{}", late.logs());
 }
 
 #[test]
@@ -130,22 +143,6 @@ fn a_new_host_serves_the_signaling_its_dead_predecessor_embedded() {
     let list = format!("{h},{},{}", urls[0], urls[1]);
     let mut late = peer_on(&dir, "late", "join", &list, "ts", &["--duration", "6"]);
     late.wait_line("joined", Duration::from_secs(25));
-    assert_eq!(
-        late.wait_exit(Duration::from_secs(20)),
-        0,
-        "{}",
-        late.logs()
-    );
-    let mut got = reached(&late);
-    got.sort_unstable();
-    let mut want = ids.clone();
-    want.sort_unstable();
-    assert_eq!(
-        got,
-        want,
-        "the newcomer's links (new host {new_host}, serving on {})\n{}\n{}",
-        urls[k],
-        late.logs(),
-        bots[1 - k].logs()
-    );
+    let context = format!("new host {new_host}, serving on {}", urls[k]);
+    ends_reaching(&mut late, ids.clone(), &context);
 }

@@ -170,8 +170,11 @@ pub(crate) struct Filled {
 /// objects' entries.
 pub(crate) const ENTRY_ESTIMATE: usize = 16;
 
-/// The layout of object `o`'s entries.
-fn layout_of<'a>(o: &Object, classes: &'a [ClassConfig]) -> Option<(u16, EntryLayout<'a>)> {
+/// The layout of object `o`'s entries (and its class's index).
+pub(crate) fn layout_of<'a>(
+    o: &Object,
+    classes: &'a [ClassConfig],
+) -> Option<(u16, EntryLayout<'a>)> {
     let class = classes.get(usize::from(o.info.class.0))?;
     Some((
         o.info.class.0,
@@ -236,17 +239,23 @@ pub(crate) fn fill_state(
     let limited = bits < full_bits;
     let mut block = StateBlockWriter::new(bits);
     let mut room = true;
-    if !held_only {
-        let carry = std::mem::take(&mut link.pending);
-        let mut rest = carry.into_iter();
-        for e in rest.by_ref() {
-            if !push_entry(&mut block, &e, objects, classes, link, limited, &mut out) {
+    // push `entries` in order; what does not fit waits in `link.pending`; false when full
+    let mut push_all = |entries: Vec<StateEntry>, link: &mut Link, out: &mut Filled| {
+        let mut left = entries.into_iter();
+        let mut fit = true;
+        for e in left.by_ref() {
+            if !push_entry(&mut block, &e, objects, classes, link, limited, out) {
                 link.pending.push(e);
-                room = false;
+                fit = false;
                 break;
             }
         }
-        link.pending.extend(rest);
+        link.pending.extend(left);
+        fit
+    };
+    if !held_only {
+        let carry = std::mem::take(&mut link.pending);
+        room = push_all(carry, link, &mut out);
     }
     let held = |id: NetId| objects.get(id).is_some_and(|o| o.info.held);
     let mut order: Vec<(NetId, Refresh)> = link
@@ -287,19 +296,12 @@ pub(crate) fn fill_state(
                     .map_or(o.published_at, |t| t.max(o.published_at)),
             );
         }
-        let mut left = entries.into_iter();
-        for e in left.by_ref() {
-            if !push_entry(&mut block, &e, objects, classes, link, limited, &mut out) {
-                link.pending.push(e);
-                room = false;
-                break;
-            }
-        }
-        link.pending.extend(left);
+        room = push_all(entries, link, &mut out);
         if room {
             link.priorities.sent(id);
         }
     }
+    drop(push_all);
     if !block.is_empty() {
         out.block = Some(block.finish());
     }

@@ -15,8 +15,7 @@ use crate::policy::{ClassConfig, SoftBodyMode};
 use crate::quant::{angle_between, dequantize_quat, VecQuantizer};
 use crate::time::Instant;
 use crate::wire::{
-    ChunkEnc, EntryLayout, PacketHeader, PacketWriter, PartBody, PosEnc, Pushed, StateBlockWriter,
-    StateEntry,
+    ChunkEnc, PacketHeader, PacketWriter, PartBody, PosEnc, Pushed, StateBlockWriter, StateEntry,
 };
 
 /// Bytes of a datagram's header and a few acknowledgements, for the budget's estimates.
@@ -531,17 +530,10 @@ impl Session {
             let mut carried: Vec<EntryRef> = Vec::new();
             let mut class_bits: BTreeMap<u16, usize> = BTreeMap::new();
             for (i, e) in link.pending.iter().enumerate() {
-                let layout = self.objects.get(e.id).and_then(|o| {
-                    let class = self.cfg.classes.get(usize::from(o.info.class.0))?;
-                    Some((
-                        o.info.class.0,
-                        EntryLayout {
-                            class,
-                            particles: o.info.particles,
-                            generation: o.topology.generation(),
-                        },
-                    ))
-                });
+                let layout = self
+                    .objects
+                    .get(e.id)
+                    .and_then(|o| super::budget::layout_of(o, &self.cfg.classes));
                 let Some((class_id, layout)) = layout else {
                     taken = i + 1;
                     continue;
