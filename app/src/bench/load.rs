@@ -25,11 +25,14 @@ struct LoadRow {
 }
 
 fn window_rate(lines: &[DumpLine], from_wall: u64, to_wall: u64) -> Option<(f64, f64)> {
+    // the line at `w`, or the first one after (a peer that joined last may write its first
+    // line just after the window opened)
     let at = |w: u64| {
         lines
             .iter()
             .filter(|l| l.wall_ms <= w)
             .max_by_key(|l| l.wall_ms)
+            .or_else(|| lines.first())
     };
     let (a, b) = (at(from_wall)?, at(to_wall)?);
     let dt = (b.t - a.t).max(0.1);

@@ -208,6 +208,12 @@ pub struct MatchboxTransport {
     chan: HashMap<(usize, MbPeerId), PeerId>,
     /// Each peer's channels, the first one used.
     routes: HashMap<PeerId, Vec<(usize, MbPeerId)>>,
+    /// Channels whose ident exchange is not complete (ours not confirmed, or theirs not
+    /// heard): idents are repeated until it is (a channel's first datagrams can be lost).
+    idents: HashMap<(usize, MbPeerId), IdentExchange>,
+    /// Channels whose ident exchange completed (an ident still arriving on one means the
+    /// other side lacks our confirmation: it is answered).
+    identified: std::collections::HashSet<(usize, MbPeerId)>,
     inbox: VecDeque<(PeerId, Vec<u8>)>,
     events: VecDeque<PeerEvent>,
     closed: Option<String>,
@@ -217,6 +223,44 @@ pub struct MatchboxTransport {
     /// The next fallback server to try, and not before when.
     next_fallback: usize,
     retry_at: Option<std::time::Instant>,
+}
+
+/// The ident exchange on one channel.
+#[derive(Clone, Copy, Debug)]
+struct IdentExchange {
+    /// We received its ident (accepted or not).
+    heard: bool,
+    /// It said it received ours.
+    confirmed: bool,
+    /// When we last sent ours.
+    sent_at: std::time::Instant,
+    /// When the channel opened (we stop repeating after [`IDENT_GIVE_UP`]).
+    opened: std::time::Instant,
+}
+
+/// How often an unconfirmed ident is repeated.
+const IDENT_REPEAT: Duration = Duration::from_millis(200);
+/// How long an ident is repeated at most.
+const IDENT_GIVE_UP: Duration = Duration::from_secs(30);
+
+/// Send our ident on channel `mb` of `socket` (`heard`: we have theirs).
+fn send_ident(socket: &mut WebRtcSocket, mb: MbPeerId, local: PeerId, heard: bool) {
+    let mut ident = IDENT_MAGIC.to_vec();
+    ident.extend_from_slice(&local.0.to_le_bytes());
+    ident.push(u8::from(heard));
+    if let Ok(ch) = socket.get_channel_mut(RELIABLE) {
+        let _ = ch.try_send(ident.into(), mb);
+    }
+}
+
+/// An ident datagram: the sender's id, and whether it has heard ours.
+fn parse_ident(packet: &[u8]) -> Option<(PeerId, bool)> {
+    if packet.len() != IDENT_LEN || packet[..4] != IDENT_MAGIC {
+        return None;
+    }
+    let mut b = [0u8; 8];
+    b.copy_from_slice(&packet[4..12]);
+    Some((PeerId(u64::from_le_bytes(b)), packet[12] != 0))
 }
 
 /// One socket: a registration with one signaling server.
@@ -233,8 +277,14 @@ struct Sock {
 }
 
 /// The first datagram on every new data channel: these 4 bytes, then the sender's
-/// softsync id (8 bytes, little-endian). No session or share datagram starts so.
+/// softsync id (8 bytes, little-endian) and 1 if it has received the other side's ident
+/// (else 0). Repeated every 200 ms until both sides have each other's: a channel's very
+/// first datagrams can be lost (WebRTC may deliver before the other side's channel exists).
+/// No session or share datagram starts so.
 pub const IDENT_MAGIC: [u8; 4] = softsync_net::wire::CHANNEL_IDENT;
+
+/// Bytes of an ident datagram.
+const IDENT_LEN: usize = 13;
 
 /// How long to wait before trying the next fallback signaling server after one refused us.
 const FALLBACK_RETRY: Duration = Duration::from_secs(1);
@@ -357,6 +407,8 @@ impl MatchboxTransport {
             mb_id,
             chan: HashMap::new(),
             routes: HashMap::new(),
+            idents: HashMap::new(),
+            identified: Default::default(),
             inbox: VecDeque::new(),
             events: VecDeque::new(),
             closed: None,
@@ -477,14 +529,21 @@ impl MatchboxTransport {
             for (mb, state) in changes {
                 match state {
                     PeerState::Connected => {
-                        // who we are, first on the ordered channel
-                        let mut ident = IDENT_MAGIC.to_vec();
-                        ident.extend_from_slice(&self.local.0.to_le_bytes());
-                        if let Ok(ch) = sock.socket.get_channel_mut(RELIABLE) {
-                            let _ = ch.try_send(ident.into(), mb);
-                        }
+                        // who we are, first on the ordered channel (repeated until confirmed)
+                        let heard = self.idents.get(&(i, mb)).is_some_and(|x| x.heard);
+                        send_ident(&mut sock.socket, mb, self.local, heard);
+                        let now = std::time::Instant::now();
+                        let x = self.idents.entry((i, mb)).or_insert(IdentExchange {
+                            heard,
+                            confirmed: false,
+                            sent_at: now,
+                            opened: now,
+                        });
+                        x.sent_at = now;
                     }
                     PeerState::Disconnected => {
+                        self.idents.remove(&(i, mb));
+                        self.identified.remove(&(i, mb));
                         if let Some(id) = self.chan.remove(&(i, mb)) {
                             let left = self.routes.get_mut(&id).map(|r| {
                                 r.retain(|c| *c != (i, mb));
@@ -498,6 +557,7 @@ impl MatchboxTransport {
                     }
                 }
             }
+            let mut replies = Vec::new();
             for ch in [RELIABLE, UNRELIABLE] {
                 let Ok(channel) = sock.socket.get_channel_mut(ch) else {
                     continue;
@@ -505,22 +565,37 @@ impl MatchboxTransport {
                 for (mb, packet) in channel.receive() {
                     self.stats.bytes_down += packet.len() as u64;
                     self.stats.datagrams_down += 1;
-                    if let Some(id) = self.chan.get(&(i, mb)) {
-                        self.inbox.push_back((*id, packet.to_vec()));
-                        continue;
-                    }
-                    let claimed = (packet.len() == 12 && packet[..4] == IDENT_MAGIC)
-                        .then(|| {
-                            let mut b = [0u8; 8];
-                            b.copy_from_slice(&packet[4..]);
-                            PeerId(u64::from_le_bytes(b))
-                        })
-                        .filter(|c| *c != self.local);
-                    let Some(id) = claimed else {
-                        // before its ident (an unreliable datagram overtook it): dropped
-                        self.stats.unidentified_dropped += 1;
+                    let ident = parse_ident(&packet);
+                    let Some((id, has_ours)) = ident else {
+                        match self.chan.get(&(i, mb)) {
+                            Some(id) => self.inbox.push_back((*id, packet.to_vec())),
+                            // before its ident: dropped (it repeats its ident)
+                            None => self.stats.unidentified_dropped += 1,
+                        }
                         continue;
                     };
+                    // an ident (never passed on): note the exchange; answer one that lacks ours,
+                    // and any on a completed exchange (the other side is still repeating: it
+                    // lacks our confirmation)
+                    if self.identified.contains(&(i, mb)) {
+                        replies.push(mb);
+                    } else {
+                        let now = std::time::Instant::now();
+                        let x = self.idents.entry((i, mb)).or_insert(IdentExchange {
+                            heard: true,
+                            confirmed: false,
+                            sent_at: now,
+                            opened: now,
+                        });
+                        x.heard = true;
+                        x.confirmed |= has_ours;
+                        if !has_ours {
+                            replies.push(mb);
+                        }
+                    }
+                    if self.chan.contains_key(&(i, mb)) || id == self.local {
+                        continue;
+                    }
                     // The server vouches for a peer's first id (its UUID's); another id is
                     // taken only for a peer we have no channel to (one that registered again
                     // after its server was lost), never as a second way to a live peer: a
@@ -537,6 +612,29 @@ impl MatchboxTransport {
                     }
                 }
             }
+            for mb in replies {
+                send_ident(&mut sock.socket, mb, self.local, true);
+            }
+            // repeat idents the other side has not confirmed (or whose answer we lack)
+            let now = std::time::Instant::now();
+            for ((j, mb), x) in self.idents.iter_mut() {
+                if *j == i
+                    && !(x.heard && x.confirmed)
+                    && now.duration_since(x.sent_at) >= IDENT_REPEAT
+                    && now.duration_since(x.opened) < IDENT_GIVE_UP
+                {
+                    x.sent_at = now;
+                    send_ident(&mut sock.socket, *mb, self.local, x.heard);
+                }
+            }
+            let identified = &mut self.identified;
+            self.idents.retain(|key, x| {
+                if x.heard && x.confirmed {
+                    identified.insert(*key);
+                    return false;
+                }
+                now.duration_since(x.opened) < IDENT_GIVE_UP
+            });
         }
         // a socket whose signaling and channels are both gone is dropped (its slot stays, so
         // the channel keys of the others do not move)

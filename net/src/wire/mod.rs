@@ -34,8 +34,8 @@ pub const PROTOCOL_VERSION: u8 = 5;
 /// First byte of the version-independent refusal datagram.
 pub const REFUSAL_MARKER: u8 = 0;
 /// The first bytes of a transport's channel identification (a WebRTC transport's first
-/// datagram on every new data channel: these, then the sender's id as u64 LE). Never a
-/// session's or scene share's first byte.
+/// datagram on every new data channel: these, then the sender's id as u64 LE and whether it
+/// has the other side's). Never a session's or scene share's first byte.
 pub const CHANNEL_IDENT: [u8; 4] = [0xFF, b'S', b'I', b'D'];
 /// Largest reliable control message (bytes), also the bincode decode limit.
 pub const MAX_CONTROL_LEN: usize = 1024;
