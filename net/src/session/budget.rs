@@ -301,7 +301,6 @@ pub(crate) fn fill_state(
             link.priorities.sent(id);
         }
     }
-    drop(push_all);
     if !block.is_empty() {
         out.block = Some(block.finish());
     }
