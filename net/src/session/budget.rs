@@ -224,7 +224,11 @@ fn push_entry(
 /// planned now, in order — waited too long, held, then by accumulated priority — until the
 /// bucket's room is used. `held_only`: only held objects (the bucket holds them, not a full
 /// datagram). An object is planned only when a datagram takes it, so no entry number is
-/// spent on an entry that never goes.
+/// spent on an entry that never goes: a part's number advances at most once per datagram,
+/// which the receiver's lateness guard (a datagram 16 behind the newest is too late for state)
+/// needs to keep 5-bit entry sequences from aliasing. (Planning at the send tick and dropping
+/// unsent plans broke that: a datagram reordered behind 32 emissions put a stale state in a
+/// base slot, and remotes showed objects metres away.)
 pub(crate) fn fill_state(
     link: &mut Link,
     objects: &Registry,
@@ -275,6 +279,12 @@ pub(crate) fn fill_state(
     for (id, how) in order {
         if !room {
             break;
+        }
+        if link.pending.iter().any(|e| e.id == id) {
+            // its entries from the last datagram go first; planning again now would advance
+            // a part's entry number twice in one datagram, and the receiver's lateness guard
+            // (16 datagrams) relies on once per datagram to keep 5-bit sequences from aliasing
+            continue;
         }
         link.dirty.remove(&id);
         let Some(o) = objects.get(id) else {
