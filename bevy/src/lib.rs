@@ -64,6 +64,7 @@ pub mod glue;
 pub mod plugin;
 pub mod pump;
 pub mod room;
+mod scene_fetch;
 
 pub use plugin::{
     AvatarPart, Hand, NetEntities, NetObject, Received, RoomEvent, RoomFailed, RoomStats, SoftBody,
