@@ -210,6 +210,10 @@ fn event_line(e: &Event, types: &MessageTypes) -> Option<String> {
         Event::Rejoining { host, reason } => {
             format!("rejoining host={} reason={reason:?}", host.0)
         }
+        Event::ReturnedHome { id, from } => format!(
+            "returned-home object={} from={:.2},{:.2},{:.2}",
+            id.0, from.x, from.y, from.z
+        ),
     })
 }
 

@@ -137,6 +137,27 @@ fn run(args: &[String]) -> Result<ExitCode, Failure> {
             bench::room_load(&out, seconds, &peers).map_err(Failure::runtime)?;
             Ok(ExitCode::SUCCESS)
         }
+        Command::BenchSoak {
+            out,
+            seconds,
+            seed,
+            peers,
+            max_peers,
+        } => {
+            let plan = bench::SoakPlan {
+                seconds,
+                seed,
+                start_peers: peers,
+                max_peers,
+                min_running: 3.min(peers),
+            };
+            let violations = bench::soak(&out, &plan).map_err(Failure::runtime)?;
+            Ok(if violations == 0 {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::FAILURE
+            })
+        }
     }
 }
 

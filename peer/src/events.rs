@@ -50,6 +50,15 @@ pub enum Event {
         /// What it said.
         reason: String,
     },
+    /// An object we simulate left the room's bounds (the box positions are quantized in: past
+    /// it, the others would see it stuck at the edge): we put it back at its class's place in
+    /// the scene, at rest.
+    ReturnedHome {
+        /// The object.
+        id: NetId,
+        /// Where its center was.
+        from: glam::Vec3,
+    },
     /// Something went wrong that the peer carried on through (an avatar not spawned, a hand
     /// input refused, a state not published); the text says what, for the log.
     Warning(String),

@@ -322,6 +322,35 @@ impl Mirror {
         }
     }
 
+    /// Put object `id`'s body at `pos`, `rot`, at rest (a soft body in its rest shape), with no
+    /// velocity: for an object that left the room's bounds. False for a pose-only object or
+    /// one with no body.
+    pub(crate) fn return_home(&mut self, id: NetId, pos: Vec3, rot: Quat) -> bool {
+        let Some(o) = self.objects.get(&id) else {
+            return false;
+        };
+        match o.body {
+            LocalBody::Pose => false,
+            LocalBody::Rigid(h) => match self.world.bodies.get_mut(h) {
+                Some(b) => {
+                    b.set_position(Pose::from_parts(pos, rot), true);
+                    b.set_linvel(Vec3::ZERO, true);
+                    b.set_angvel(Vec3::ZERO, true);
+                    true
+                }
+                None => false,
+            },
+            LocalBody::Soft(h) => match self.soft.get_mut(h) {
+                Some(b) => {
+                    let particles: Vec<Vec3> =
+                        b.rest_offsets().iter().map(|o| pos + rot * *o).collect();
+                    b.apply_state(&mut self.world, pos, rot, &particles).is_ok()
+                }
+                None => false,
+            },
+        }
+    }
+
     /// Show state `s` on object `id`'s body. False when a soft body refused it (wrong particle
     /// count, non-finite values): the body keeps its last state.
     pub(crate) fn apply_shown(&mut self, id: NetId, s: &ObjectState) -> bool {

@@ -20,9 +20,13 @@
 
 mod auto;
 mod load;
+mod soak;
+mod soak_check;
+mod views;
 
 pub use auto::auto;
 pub use load::room_load;
+pub use soak::{soak, SoakPlan};
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -36,6 +40,7 @@ use softsync_benchkit::{
 };
 
 use crate::report::{read_dump, DumpLine};
+use views::{points, truth_at, Track};
 
 struct Proc {
     child: Child,
@@ -138,42 +143,6 @@ struct Row {
     p95_mm: f64,
     max_mm: f64,
     samples: usize,
-}
-
-/// An object's points (center, particles) over its owner's time.
-type Track = Vec<(f64, Vec<[f32; 3]>)>;
-
-/// The owner's state of one object at time `t` (its clock), interpolated between dump lines.
-fn truth_at(track: &Track, t: f64) -> Option<Vec<[f32; 3]>> {
-    let i = track.partition_point(|(ti, _)| *ti <= t);
-    if i == 0 || i >= track.len() {
-        return None;
-    }
-    let (t0, a) = &track[i - 1];
-    let (t1, b) = &track[i];
-    let f = if t1 > t0 {
-        ((t - t0) / (t1 - t0)) as f32
-    } else {
-        0.0
-    };
-    Some(
-        a.iter()
-            .zip(b)
-            .map(|(p, q)| {
-                [
-                    p[0] + (q[0] - p[0]) * f,
-                    p[1] + (q[1] - p[1]) * f,
-                    p[2] + (q[2] - p[2]) * f,
-                ]
-            })
-            .collect(),
-    )
-}
-
-fn points(o: &crate::report::DumpObject) -> Vec<[f32; 3]> {
-    let mut v = vec![o.pos];
-    v.extend(o.particles.iter().copied());
-    v
 }
 
 /// Bytes/s over the window, the largest over any 1 s inside it, and the error samples (mm).

@@ -133,6 +133,26 @@ enum BenchSub {
         #[arg(long, default_value = "2,4,8", value_parser = room_sizes)]
         peers: Sizes,
     },
+    /// A churn soak: a room of bots for a bounded time while a seeded scheduler joins,
+    /// leaves, kills and stops peers and the host; the room's invariants are checked every
+    /// second from the dumps (`RESULT soak … violations=…`; exits 1 on a violation).
+    Soak {
+        /// Output directory (timeline CSV and chart, the event log).
+        #[arg(long, default_value = "docs/results/soak")]
+        out: PathBuf,
+        /// Minutes of churn (after an 8 s warm-up).
+        #[arg(long, default_value_t = 10.0, value_parser = positive::<120>)]
+        minutes: f64,
+        /// The scheduler's seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Processes at the start, the host counted (2-16).
+        #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u16).range(2..=16))]
+        peers: u16,
+        /// Never more processes than this (the start counted; 2-16).
+        #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u16).range(2..=16))]
+        max_peers: u16,
+    },
 }
 
 /// Room sizes of `bench room-load`.
@@ -349,6 +369,19 @@ pub enum Command {
         seconds: f64,
         /// Room sizes (peers, host included).
         peers: Vec<usize>,
+    },
+    /// A churn soak.
+    BenchSoak {
+        /// Output directory.
+        out: PathBuf,
+        /// Seconds of churn.
+        seconds: f64,
+        /// The scheduler's seed.
+        seed: u64,
+        /// Processes at the start.
+        peers: usize,
+        /// At most this many processes.
+        max_peers: usize,
     },
     /// Print this (help, or the version).
     Help(String),
@@ -583,6 +616,29 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
             seconds,
             peers: peers.0,
         },
+        Sub::Bench {
+            which:
+                BenchSub::Soak {
+                    out,
+                    minutes,
+                    seed,
+                    peers,
+                    max_peers,
+                },
+        } => {
+            if max_peers < peers {
+                return Err(UsageError(format!(
+                    "--max-peers {max_peers} is less than --peers {peers}"
+                )));
+            }
+            Command::BenchSoak {
+                out,
+                seconds: minutes * 60.0,
+                seed,
+                peers: usize::from(peers),
+                max_peers: usize::from(max_peers),
+            }
+        }
         Sub::Host { bind, signal, peer } => {
             let bind = bind.unwrap_or(SocketAddr::from(([127, 0, 0, 1], 3536)));
             Command::Peer(Box::new(peer_args(true, bind, signal, peer)?))

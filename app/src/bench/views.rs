@@ -1,0 +1,241 @@
+//! Reading many peers' dumps together: what each showed at a wall-clock moment, whether their
+//! views of members and owners agree (allowing for the time news takes to travel), and how far
+//! what a peer shows of another's object is from that owner's own state.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use crate::report::{DumpLine, DumpObject};
+
+/// What a peer's view says of the room at one moment: members, and the owner of every object.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RoomView {
+    /// Members as the peer lists them.
+    pub members: BTreeSet<u64>,
+    /// Owner of every object it shows, by network id.
+    pub owners: BTreeMap<u32, u64>,
+}
+
+impl RoomView {
+    pub fn of(l: &DumpLine) -> RoomView {
+        RoomView {
+            members: l.members.iter().copied().collect(),
+            owners: l.objects.iter().map(|o| (o.id, o.owner)).collect(),
+        }
+    }
+}
+
+/// The last line written at or before `wall_ms`.
+pub fn line_at(lines: &[DumpLine], wall_ms: u64) -> Option<&DumpLine> {
+    let i = lines.partition_point(|l| l.wall_ms <= wall_ms);
+    i.checked_sub(1).map(|i| &lines[i])
+}
+
+/// Whether `view` (one peer's, at `wall_ms`) agrees with what `reference` (another peer's
+/// dump) showed within `slack_ms` of that moment: the same members as one of those lines, and
+/// for every object the same owner as one of them. Facts are compared one by one: a grant or a
+/// leave takes a link's delay to travel and dumps are taken at their own times, so a view can
+/// be a little behind on one object and up to date on another.
+pub fn agrees_within(view: &RoomView, reference: &[DumpLine], wall_ms: u64, slack_ms: u64) -> bool {
+    let lo = wall_ms.saturating_sub(slack_ms);
+    let hi = wall_ms + slack_ms;
+    // the line in force at `lo`, and every line written up to `hi`
+    let start = reference
+        .partition_point(|l| l.wall_ms <= lo)
+        .saturating_sub(1);
+    let window: Vec<RoomView> = reference[start..]
+        .iter()
+        .take_while(|l| l.wall_ms <= hi)
+        .map(RoomView::of)
+        .collect();
+    window.iter().any(|r| r.members == view.members)
+        && view
+            .owners
+            .iter()
+            .all(|(id, owner)| window.iter().any(|r| r.owners.get(id) == Some(owner)))
+        && window
+            .iter()
+            .any(|r| r.owners.keys().eq(view.owners.keys()))
+}
+
+/// An object's points (center, then particles).
+pub fn points(o: &DumpObject) -> Vec<[f32; 3]> {
+    let mut v = vec![o.pos];
+    v.extend(o.particles.iter().copied());
+    v
+}
+
+/// An object's points over its owner's clock.
+pub type Track = Vec<(f64, Vec<[f32; 3]>)>;
+
+/// Two dump lines of an owner further apart than this do not bracket its state (it let the
+/// object go and took it again, or its process was stopped), s.
+pub const MAX_TRACK_GAP_S: f64 = 0.35;
+
+/// The owner's state of one object at time `t` (its clock), interpolated between dump lines.
+pub fn truth_at(track: &Track, t: f64) -> Option<Vec<[f32; 3]>> {
+    let i = track.partition_point(|(ti, _)| *ti <= t);
+    if i == 0 || i >= track.len() {
+        return None;
+    }
+    let (t0, a) = &track[i - 1];
+    let (t1, b) = &track[i];
+    if a.len() != b.len() || t1 - t0 > MAX_TRACK_GAP_S {
+        return None; // a cut or tear in between, or the owner did not own it in between
+    }
+    let f = if t1 > t0 {
+        ((t - t0) / (t1 - t0)) as f32
+    } else {
+        0.0
+    };
+    Some(
+        a.iter()
+            .zip(b)
+            .map(|(p, q)| {
+                [
+                    p[0] + (q[0] - p[0]) * f,
+                    p[1] + (q[1] - p[1]) * f,
+                    p[2] + (q[2] - p[2]) * f,
+                ]
+            })
+            .collect(),
+    )
+}
+
+/// Every object's track as its owner dumped it, by (owner, object id).
+pub fn owner_tracks(views: &[Vec<DumpLine>]) -> BTreeMap<(u64, u32), Track> {
+    let mut tracks: BTreeMap<(u64, u32), Track> = BTreeMap::new();
+    for lines in views {
+        for l in lines {
+            for o in l.objects.iter().filter(|o| o.owner == l.peer) {
+                let track = tracks.entry((l.peer, o.id)).or_default();
+                // several dump lines can show the same step: keep the first
+                if track.last().is_none_or(|(t, _)| *t < l.state_t) {
+                    track.push((l.state_t, points(o)));
+                }
+            }
+        }
+    }
+    tracks
+}
+
+/// After a view shows an object change hands, its shown state may still be the previous
+/// owner's, whose clock the source time is on: such samples are left out this long.
+pub const OWNER_CHANGE_SKIP_MS: u64 = 1_000;
+
+/// Remote error, mm: for every line of every view written within `[from_ms, to_ms]` (wall
+/// clock) and every object it shows that another peer owns (and has owned for
+/// [`OWNER_CHANGE_SKIP_MS`] in that view), the distance between each shown point and the
+/// owner's own state at the time the shown state stands for.
+pub fn remote_errors(views: &[Vec<DumpLine>], from_ms: u64, to_ms: u64) -> Vec<f64> {
+    let tracks = owner_tracks(views);
+    let mut errors = Vec::new();
+    for lines in views {
+        // when this view last saw each object's owner change
+        let mut since: BTreeMap<u32, (u64, u64)> = BTreeMap::new();
+        for l in lines {
+            for o in &l.objects {
+                let e = since.entry(o.id).or_insert((o.owner, l.wall_ms));
+                if e.0 != o.owner {
+                    *e = (o.owner, l.wall_ms);
+                }
+            }
+            if l.wall_ms < from_ms || l.wall_ms > to_ms {
+                continue;
+            }
+            for o in l.objects.iter().filter(|o| o.owner != l.peer) {
+                if since
+                    .get(&o.id)
+                    .is_some_and(|(_, at)| l.wall_ms < at + OWNER_CHANGE_SKIP_MS)
+                {
+                    continue;
+                }
+                let Some(src) = o.src else { continue };
+                let Some(truth) = tracks.get(&(o.owner, o.id)).and_then(|t| truth_at(t, src))
+                else {
+                    continue;
+                };
+                let shown = points(o);
+                if shown.len() != truth.len() {
+                    continue;
+                }
+                errors.extend(shown.iter().zip(&truth).map(|(p, q)| {
+                    let d = ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2))
+                        .sqrt();
+                    f64::from(d) * 1e3
+                }));
+            }
+        }
+    }
+    errors
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn line(peer: u64, wall_ms: u64, members: &[u64], owners: &[(u32, u64)]) -> DumpLine {
+        DumpLine {
+            t: wall_ms as f64 / 1e3,
+            state_t: wall_ms as f64 / 1e3,
+            wall_ms,
+            peer,
+            host: Some(1),
+            term: 1,
+            members: members.to_vec(),
+            up_bytes: 0,
+            down_bytes: 0,
+            objects: owners
+                .iter()
+                .map(|&(id, owner)| DumpObject {
+                    id,
+                    kind: "ball".into(),
+                    owner,
+                    pos: [wall_ms as f32 / 1e3, 0.0, 0.0],
+                    rot: [0.0, 0.0, 0.0, 1.0],
+                    particles: Vec::new(),
+                    src: (owner != peer).then_some(wall_ms as f64 / 1e3 - 0.05),
+                    log: None,
+                    topology: None,
+                })
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn agreement_allows_the_slack_and_no_more() {
+        let host = vec![
+            line(1, 1000, &[1, 2], &[(7, 1)]),
+            line(1, 1100, &[1, 2], &[(7, 2)]),
+            line(1, 2000, &[1, 2], &[(7, 1)]),
+        ];
+        // the bot saw the grant at 1150; the host had it at 1100
+        let v = RoomView::of(&line(2, 1150, &[1, 2], &[(7, 2)]));
+        assert!(agrees_within(&v, &host, 1150, 300));
+        // the bot still shows it 1.5 s after the host took it back
+        assert!(!agrees_within(&v, &host, 3500, 300));
+        // other members never agree
+        let w = RoomView::of(&line(2, 1150, &[1, 2, 3], &[(7, 2)]));
+        assert!(!agrees_within(&w, &host, 1150, 300));
+    }
+
+    #[test]
+    fn remote_error_compares_with_the_owner_at_the_source_time() {
+        // the owner (2) moves along x at 1 m/s; the host shows it 50 ms old with the right
+        // position for that time: zero error; a wrong position shows as error
+        let owner: Vec<DumpLine> = (0..20)
+            .map(|k| line(2, 1000 + k * 100, &[1, 2], &[(7, 2)]))
+            .collect();
+        let mut host: Vec<DumpLine> = (0..20)
+            .map(|k| line(1, 1000 + k * 100, &[1, 2], &[(7, 2)]))
+            .collect();
+        for l in &mut host {
+            l.objects[0].pos[0] -= 0.05;
+        }
+        let e = remote_errors(&[owner.clone(), host.clone()], 1200, 2500);
+        assert!(!e.is_empty());
+        assert!(e.iter().all(|x| *x < 1e-3), "{e:?}");
+        host[12].objects[0].pos[1] = 0.02; // 2200 ms: owned for over a second
+        let e = remote_errors(&[owner, host], 1200, 2500);
+        assert!(e.iter().any(|x| (*x - 20.0).abs() < 1e-3), "{e:?}");
+    }
+}
