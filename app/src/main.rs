@@ -137,6 +137,26 @@ fn run(args: &[String]) -> Result<ExitCode, Failure> {
             bench::room_load(&out, seconds, &peers).map_err(Failure::runtime)?;
             Ok(ExitCode::SUCCESS)
         }
+        Command::BenchSignalLb {
+            out,
+            rooms,
+            real_rooms,
+            parallel,
+            config,
+        } => {
+            let plan = bench::LbPlan {
+                rooms,
+                real_rooms,
+                config,
+                parallel,
+            };
+            let ok = bench::signal_lb(&out, &plan).map_err(Failure::runtime)?;
+            Ok(if ok {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::FAILURE
+            })
+        }
         Command::BenchSoak {
             out,
             seconds,

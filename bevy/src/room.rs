@@ -352,11 +352,10 @@ impl Room {
         mcfg.signal_token = opts.room_token.as_ref().map(|t| t.to_string());
         mcfg.ice_credential = opts.ice_credential.clone();
         mcfg.connect_timeout = opts.connect_timeout.min(Duration::from_secs(30));
-        // several servers: when ours is lost, register the room with the next (new peers find
-        // it there; the data channels we have live on)
-        if urls.len() > 1 {
-            mcfg.fallback_urls = urls.clone();
-        }
+        // when our server is lost, register the room with the next in the list (new peers find
+        // it there; the data channels we have live on); with one URL, with that one again
+        // each second: behind a load balancer it is a live instance's
+        mcfg.fallback_urls = urls.clone();
         let started = std::time::Instant::now();
         let mut tried = Vec::new();
         let mut connected = None;

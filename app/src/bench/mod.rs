@@ -19,12 +19,14 @@
 //! this module's [`Proc`].
 
 mod auto;
+mod lb;
 mod load;
 mod soak;
 mod soak_check;
 mod views;
 
 pub use auto::auto;
+pub use lb::{signal_lb, LbPlan};
 pub use load::room_load;
 pub use soak::{soak, SoakPlan};
 

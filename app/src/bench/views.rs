@@ -57,6 +57,27 @@ pub fn agrees_within(view: &RoomView, reference: &[DumpLine], wall_ms: u64, slac
             .any(|r| r.owners.keys().eq(view.owners.keys()))
 }
 
+/// Whether objects of class `kind` are avatar parts (the avatar's reserved class names).
+pub fn is_avatar(kind: &str) -> bool {
+    kind == "head" || kind == "hand"
+}
+
+/// The views with only avatar parts (`avatar`) or only the other objects in them.
+pub fn only(views: &[Vec<DumpLine>], avatar: bool) -> Vec<Vec<DumpLine>> {
+    views
+        .iter()
+        .map(|v| {
+            v.iter()
+                .map(|l| {
+                    let mut l = l.clone();
+                    l.objects.retain(|o| is_avatar(&o.kind) == avatar);
+                    l
+                })
+                .collect()
+        })
+        .collect()
+}
+
 /// An object's points (center, then particles).
 pub fn points(o: &DumpObject) -> Vec<[f32; 3]> {
     let mut v = vec![o.pos];

@@ -133,6 +133,28 @@ enum BenchSub {
         #[arg(long, default_value = "2,4,8", value_parser = room_sizes)]
         peers: Sizes,
     },
+    /// Many rooms through signaling behind HAProxy (three instances, the room's path hashed):
+    /// rooms of light signaling clients and a few of real peers, then one instance killed;
+    /// every room must take a new joiner (`RESULT lb.*`; exits 1 if one does not). Needs
+    /// haproxy; run it in a network namespace (scripts/bench-signal-lb): it binds
+    /// 127.0.0.1:3536 and 3601-3603.
+    SignalLb {
+        /// Output directory.
+        #[arg(long, default_value = "docs/results/live")]
+        out: PathBuf,
+        /// Rooms of light clients (a host and a joiner each).
+        #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u16).range(1..=2000))]
+        rooms: u16,
+        /// Rooms of real peers (WebRTC) besides.
+        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u16).range(0..=16))]
+        real_rooms: u16,
+        /// Rooms opened at once.
+        #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u16).range(1..=256))]
+        parallel: u16,
+        /// The HAProxy configuration.
+        #[arg(long, default_value = "deploy/haproxy/signal.cfg")]
+        config: PathBuf,
+    },
     /// A churn soak: a room of bots for a bounded time while a seeded scheduler joins,
     /// leaves, kills and stops peers and the host; the room's invariants are checked every
     /// second from the dumps (`RESULT soak … violations=…`; exits 1 on a violation).
@@ -369,6 +391,19 @@ pub enum Command {
         seconds: f64,
         /// Room sizes (peers, host included).
         peers: Vec<usize>,
+    },
+    /// Signaling behind a load balancer.
+    BenchSignalLb {
+        /// Output directory.
+        out: PathBuf,
+        /// Light rooms.
+        rooms: usize,
+        /// Real rooms.
+        real_rooms: usize,
+        /// Rooms opened at once.
+        parallel: usize,
+        /// HAProxy's configuration.
+        config: PathBuf,
     },
     /// A churn soak.
     BenchSoak {
@@ -615,6 +650,22 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
             out,
             seconds,
             peers: peers.0,
+        },
+        Sub::Bench {
+            which:
+                BenchSub::SignalLb {
+                    out,
+                    rooms,
+                    real_rooms,
+                    parallel,
+                    config,
+                },
+        } => Command::BenchSignalLb {
+            out,
+            rooms: usize::from(rooms),
+            real_rooms: usize::from(real_rooms),
+            parallel: usize::from(parallel),
+            config,
         },
         Sub::Bench {
             which:

@@ -20,9 +20,12 @@
 
 #![allow(clippy::disallowed_methods)] // an I/O adapter: it reads the clock and waits for threads
 
+mod probe;
 mod signal;
 mod signaller;
 mod transport;
+
+pub use probe::{ProbeEvent, SignalProbe};
 
 pub use signal::{RoomInfo, SignalError, SignalLimits, SignalServer};
 pub use transport::{

@@ -33,6 +33,17 @@ pub enum Role {
     Member,
 }
 
+impl Role {
+    /// The `role=` value of the room's URL.
+    pub fn as_param(self) -> &'static str {
+        match self {
+            Role::Host => "host",
+            Role::Join => "join",
+            Role::Member => "member",
+        }
+    }
+}
+
 /// Where and how to connect.
 #[derive(Clone, Debug)]
 pub struct MatchboxConfig {
@@ -87,11 +98,7 @@ impl MatchboxConfig {
 
     /// The websocket URL of the room.
     pub fn room_url(&self) -> String {
-        let role = match self.role {
-            Role::Host => "host",
-            Role::Join => "join",
-            Role::Member => "member",
-        };
+        let role = self.role.as_param();
         let mut url = format!(
             "{}/{}?{VERSION_PARAM}={}&{ROLE_PARAM}={role}",
             self.signal_url.trim_end_matches('/'),
@@ -305,6 +312,42 @@ pub fn net_id(p: MbPeerId) -> PeerId {
     PeerId(p.0.as_u64_pair().0)
 }
 
+/// The error for an HTTP refusal of the websocket upgrade: `status`, the server's `body`, and
+/// the protocol version it named (`None`: no version header, not our server).
+pub(crate) fn refusal(
+    url: &str,
+    room: &str,
+    ours: u8,
+    status: u16,
+    body: String,
+    theirs: Option<String>,
+) -> ConnectError {
+    let url = url.to_owned();
+    match status {
+        404 => ConnectError::RoomNotFound {
+            room: room.to_owned(),
+            url,
+        },
+        409 if body.contains("is full") => ConnectError::Refused { url, status, body },
+        409 => ConnectError::RoomExists {
+            room: room.to_owned(),
+            url,
+        },
+        426 => ConnectError::VersionMismatch {
+            ours,
+            theirs: theirs.unwrap_or_else(|| "an unknown version".into()),
+            url,
+        },
+        // Not our signaling server at all (no version header): say so.
+        _ if theirs.is_none() => ConnectError::Refused {
+            url,
+            status,
+            body: format!("{body} (not a softsync signaling server?)"),
+        },
+        _ => ConnectError::Refused { url, status, body },
+    }
+}
+
 fn classify(err: &matchbox_socket::Error, cfg: &MatchboxConfig) -> ConnectError {
     let url = cfg.signal_url.clone();
     let sig = match err {
@@ -327,29 +370,7 @@ fn classify(err: &matchbox_socket::Error, cfg: &MatchboxConfig) -> ConnectError 
                 .get(VERSION_HEADER)
                 .and_then(|v| v.to_str().ok())
                 .map(str::to_owned);
-            return match status {
-                404 => ConnectError::RoomNotFound {
-                    room: cfg.room.clone(),
-                    url,
-                },
-                409 if body.contains("is full") => ConnectError::Refused { url, status, body },
-                409 => ConnectError::RoomExists {
-                    room: cfg.room.clone(),
-                    url,
-                },
-                426 => ConnectError::VersionMismatch {
-                    ours: cfg.protocol_version,
-                    theirs: theirs.unwrap_or_else(|| "an unknown version".into()),
-                    url,
-                },
-                // Not our signaling server at all (no version header): say so.
-                _ if theirs.is_none() => ConnectError::Refused {
-                    url,
-                    status,
-                    body: format!("{body} (not a softsync signaling server?)"),
-                },
-                _ => ConnectError::Refused { url, status, body },
-            };
+            return refusal(&url, &cfg.room, cfg.protocol_version, status, body, theirs);
         }
         return ConnectError::Unreachable {
             url,

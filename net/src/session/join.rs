@@ -52,7 +52,15 @@ impl Session {
             }
             return;
         }
-        if self.members.contains_key(&from) {
+        if let Some(&join_seq) = self.members.get(&from) {
+            // A member says Hello again: it never took our Welcome (it had turned to another
+            // contact when the Welcome came, and a joiner takes a Welcome only from the peer
+            // it asks now), and it will not stop asking. Welcome it again (the reliable
+            // layer will not resend what it acked). Found by the churn soak: a peer stopped
+            // past the timeout rejoined, asked a member, and waited for ever.
+            if protocol == PROTOCOL_VERSION && digest == self.cfg.digest() {
+                self.welcome(now, from, join_seq);
+            }
             return;
         }
         let refusal = if protocol != PROTOCOL_VERSION {
@@ -99,17 +107,7 @@ impl Session {
         self.next_join_seq = self.next_join_seq.saturating_add(1);
         self.members.insert(from, join_seq);
         self.forget_message_origin(from);
-        let members: Vec<(PeerId, u32)> = self.members.iter().map(|(p, s)| (*p, *s)).collect();
-        let welcome = Control::Welcome {
-            term: self.term,
-            host: self.local,
-            join_seq,
-            members,
-        };
-        self.send_control(now, from, &welcome);
-        self.send_snapshot(now, from);
-        self.send_retained(now, from);
-        self.send_tokens_used(now, from);
+        self.welcome(now, from, join_seq);
         self.broadcast(
             now,
             &Control::PeerJoined {
@@ -119,6 +117,22 @@ impl Session {
             Some(from),
         );
         self.events.push_back(Event::PeerJoined(from));
+    }
+
+    /// Host: `Welcome`, the snapshot, the retained messages and the used tokens to member
+    /// `to`.
+    fn welcome(&mut self, now: Instant, to: PeerId, join_seq: u32) {
+        let members: Vec<(PeerId, u32)> = self.members.iter().map(|(p, s)| (*p, *s)).collect();
+        let welcome = Control::Welcome {
+            term: self.term,
+            host: self.local,
+            join_seq,
+            members,
+        };
+        self.send_control(now, to, &welcome);
+        self.send_snapshot(now, to);
+        self.send_retained(now, to);
+        self.send_tokens_used(now, to);
     }
 
     /// The host welcomed us.
@@ -197,6 +211,32 @@ mod tests {
     #![allow(clippy::unwrap_used)]
     use super::super::testkit::{config, Wire};
     use super::*;
+
+    #[test]
+    fn a_joiner_that_turned_away_before_the_welcome_came_is_welcomed_again() {
+        let mut w = Wire::new();
+        w.add(Session::host(PeerId(1), config(), w.now));
+        w.add(Session::join(PeerId(3), PeerId(1), config(), w.now));
+        w.settle();
+        assert!(w.get(3).is_connected());
+        w.add(Session::join(PeerId(2), PeerId(1), config(), w.now));
+        let now = w.now;
+        // the joiner's Hello reaches the host, which admits it ...
+        while let Some(t) = w.get(2).poll_transmit(now) {
+            if t.to == PeerId(1) {
+                w.get(1).handle_packet(now, PeerId(2), &t.payload);
+            }
+        }
+        assert!(w.get(1).members().contains_key(&PeerId(2)));
+        // ... but before the Welcome arrives the joiner asks another member (its join
+        // retry), and drops the host's Welcome: not from the peer it asks now
+        assert!(w.get(2).join_via(now, PeerId(3)));
+        w.settle();
+        // the member redirects it to the host, whose second Welcome it takes
+        assert!(w.get(2).is_connected(), "still joining");
+        assert_eq!(w.get(2).host_id(), Some(PeerId(1)));
+        assert!(w.get(2).members().contains_key(&PeerId(3)));
+    }
 
     #[test]
     fn the_host_welcomes_a_joiner_and_a_member_redirects_the_next_one_to_the_host() {
