@@ -51,6 +51,10 @@ enum RoomNews {
         after_kill_ms: f64,
         moved: bool,
     },
+    /// After the killed instance came back: a joiner reached the host again.
+    AfterRestart {
+        ms: f64,
+    },
     Failed {
         room: usize,
         why: String,
@@ -357,7 +361,7 @@ fn run(
                 if moved { &mut moved_ms } else { &mut others_ms }.push(after_kill_ms);
             }
             Ok(RoomNews::Failed { room, why }) => failures.push(format!("room {room}: {why}")),
-            Ok(RoomNews::Opened { .. }) => continue,
+            Ok(RoomNews::Opened { .. } | RoomNews::AfterRestart { .. }) => continue,
             Err(_) => {
                 failures.push("rooms stopped answering after the kill".into());
                 break;
