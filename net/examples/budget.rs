@@ -10,6 +10,12 @@
 //! and three caps, nothing written). Writes `docs/results/net/budget.{csv,svg}` and prints
 //! `RESULT crowd.budget peers=… cap_bytes_per_s=… host_up_bytes_per_s=… p95_mm=…
 //! held_p95_mm=…` lines.
+//!
+//! `-- --route [--quick]`: the same rooms uncapped, with state relayed by the host (the
+//! thesis's way, the default) and sent directly by each owner (issue 18 point 2), at 4, 8
+//! and 16 peers: host and client uplink, how late clients' objects appear to other clients
+//! (the lag that best explains what they show) and the error. Writes
+//! `docs/results/net/route.csv`, prints `RESULT crowd.route …` lines.
 #![allow(clippy::unwrap_used, clippy::print_stdout)]
 
 use std::path::Path;
@@ -22,7 +28,7 @@ use softsync_net::harness::Harness;
 use softsync_net::stats::TRANSPORT_OVERHEAD_BYTES;
 use softsync_net::{
     ClassConfig, ClassId, ConditionerConfig, Event, Instant, NetId, ObjectState, SendPolicy,
-    SessionConfig,
+    SessionConfig, StateRoute,
 };
 
 const FRAME: Duration = Duration::from_micros(11_111);
@@ -63,10 +69,41 @@ type Curve = (usize, Vec<(f64, f64)>, Vec<(f64, f64)>);
 #[derive(Clone)]
 struct Outcome {
     host_up: f64,
+    /// Mean uplink of a client, bytes/s (transport overhead included).
+    client_up: f64,
     p95_mm: f64,
     held_p95_mm: f64,
     avatar_p95_mm: f64,
     scene_p95_mm: f64,
+    /// How late clients' objects appear to other clients: the lag that best explains what
+    /// they show (the median distance to the owner's truth that long ago is least), ms.
+    lag_ms: f64,
+    /// Clients' objects as others show them against where they really are at that moment
+    /// (lateness included), p95, mm.
+    now_p95_mm: f64,
+}
+
+/// The lag (ms, 0-400 in 1 ms steps) at which what viewers showed of clients' objects is
+/// nearest (median distance) to the owners' truth that long before: (lag, p95 at lag 0).
+fn fit_lag(shown: &[(f32, usize, usize, Vec3)]) -> (f64, f64) {
+    let dist_at = |lag: f32| -> Vec<f64> {
+        shown
+            .iter()
+            .map(|(t, c, k, p)| f64::from(p.distance(client_pose(*c, *k, t - lag))) * 1e3)
+            .collect()
+    };
+    let mut best = (0.0f64, f64::MAX);
+    for ms in 0..=400 {
+        let mut d = dist_at(ms as f32 / 1000.0);
+        d.sort_by(f64::total_cmp);
+        let m = percentile(&d, 50.0);
+        if m < best.1 {
+            best = (f64::from(ms), m);
+        }
+    }
+    let mut now = dist_at(0.0);
+    now.sort_by(f64::total_cmp);
+    (best.0, percentile(&now, 95.0))
 }
 
 fn spawned(h: &Harness, peer: usize, request: u32) -> Option<NetId> {
@@ -80,9 +117,10 @@ fn spawned(h: &Harness, peer: usize, request: u32) -> Option<NetId> {
     })
 }
 
-fn room(peers: usize, cap: Option<u32>) -> Outcome {
+fn room(peers: usize, cap: Option<u32>, route: StateRoute) -> Outcome {
     let cfg = SessionConfig {
         classes: vec![ClassConfig::rigid("rigid", SendPolicy::default())],
+        state_route: route,
         ..SessionConfig::default()
     };
     let link = ConditionerConfig::rough(7, 15, 2, 0.0);
@@ -154,11 +192,14 @@ fn room(peers: usize, cap: Option<u32>) -> Outcome {
     let mut held_errs = Vec::new();
     let mut avatar_errs = Vec::new();
     let mut scene_errs = Vec::new();
-    let mut up_start: Option<(Instant, f64)> = None;
-    let host_bytes = |h: &Harness| {
-        let s = h.peers[0].session.stats();
+    let mut shown: Vec<(f32, usize, usize, Vec3)> = Vec::new();
+    let mut up_start: Option<(Instant, f64, f64)> = None;
+    let bytes_of = |h: &Harness, i: usize| {
+        let s = h.peers[i].session.stats();
         s.up.bytes as f64 + (s.up.packets * TRANSPORT_OVERHEAD_BYTES as u64) as f64
     };
+    let host_bytes = |h: &Harness| bytes_of(h, 0);
+    let clients_bytes = |h: &Harness| (1..peers).map(|i| bytes_of(h, i)).sum::<f64>();
     while h.now < t0 + Duration::from_secs_f32(SECONDS + warm) {
         let now = h.now;
         let t = (now - t0).as_secs_f32();
@@ -176,7 +217,7 @@ fn room(peers: usize, cap: Option<u32>) -> Outcome {
             continue;
         }
         if up_start.is_none() {
-            up_start = Some((now, host_bytes(&h)));
+            up_start = Some((now, host_bytes(&h), clients_bytes(&h)));
         }
         // every 4th frame, every client measures everything it does not own
         if h.peers[0].session.stats().up.packets % 4 != 0 {
@@ -192,6 +233,7 @@ fn room(peers: usize, cap: Option<u32>) -> Outcome {
                 };
                 let at = (now.as_secs_f64() - d.delay.as_secs_f64() - t0.as_secs_f64()) as f32;
                 let e = f64::from(d.state.pos.distance(client_pose(*c, *k, at))) * 1e3;
+                shown.push(((now - t0).as_secs_f32(), *c, *k, d.state.pos));
                 errs.push(e);
                 if *k == 0 {
                     held_errs.push(e);
@@ -210,12 +252,18 @@ fn room(peers: usize, cap: Option<u32>) -> Outcome {
             }
         }
     }
-    let (ts, bs) = up_start.unwrap();
-    let host_up = (host_bytes(&h) - bs) / (h.now - ts).as_secs_f64();
+    let (ts, bs, cs) = up_start.unwrap();
+    let secs = (h.now - ts).as_secs_f64();
+    let host_up = (host_bytes(&h) - bs) / secs;
+    let client_up = (clients_bytes(&h) - cs) / secs / (peers - 1).max(1) as f64;
     errs.sort_by(f64::total_cmp);
     held_errs.sort_by(f64::total_cmp);
+    let (lag_ms, now_p95_mm) = fit_lag(&shown);
     Outcome {
         host_up,
+        client_up,
+        lag_ms,
+        now_p95_mm,
         p95_mm: percentile(&errs, 95.0),
         held_p95_mm: percentile(&held_errs, 95.0),
         avatar_p95_mm: percentile(&avatar_errs, 95.0),
@@ -223,8 +271,56 @@ fn room(peers: usize, cap: Option<u32>) -> Outcome {
     }
 }
 
+/// Relay against direct state (issue 18 point 2): rooms of 4, 8 and 16, uncapped.
+fn routes(quick: bool) -> Result<(), Box<dyn std::error::Error>> {
+    let sizes: &[usize] = if quick { &[4] } else { &[4, 8, 16] };
+    let mut csv = Csv::new(&[
+        "peers",
+        "route",
+        "host_up_bytes_per_s",
+        "client_up_bytes_per_s",
+        "lag_ms",
+        "p95_mm",
+        "now_p95_mm",
+    ]);
+    for &n in sizes {
+        for (name, route) in [("relay", StateRoute::Relay), ("direct", StateRoute::Direct)] {
+            let o = room(n, None, route);
+            println!(
+                "{}",
+                ResultLine::new("crowd.route")
+                    .field("peers", n)
+                    .field("route", name)
+                    .fixed("host_up_bytes_per_s", o.host_up, 0)
+                    .fixed("client_up_bytes_per_s", o.client_up, 0)
+                    .fixed("lag_ms", o.lag_ms, 0)
+                    .fixed("p95_mm", o.p95_mm, 1)
+                    .fixed("now_p95_mm", o.now_p95_mm, 1)
+            );
+            csv.row([
+                n.to_string(),
+                name.to_owned(),
+                format!("{:.0}", o.host_up),
+                format!("{:.0}", o.client_up),
+                format!("{:.0}", o.lag_ms),
+                format!("{:.2}", o.p95_mm),
+                format!("{:.2}", o.now_p95_mm),
+            ]);
+        }
+    }
+    if !quick {
+        let out = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/results/net");
+        std::fs::create_dir_all(&out)?;
+        csv.write(out.join("route.csv"))?;
+    }
+    Ok(())
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let quick = std::env::args().any(|a| a == "--quick");
+    if std::env::args().any(|a| a == "--route") {
+        return routes(quick);
+    }
     let sizes: &[usize] = if quick { &[8] } else { &[8, 16] };
     let fractions: &[f64] = if quick {
         &[1.0, 0.5, 0.25]
@@ -242,13 +338,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     ]);
     let mut curves: Vec<Curve> = Vec::new();
     for &n in sizes {
-        let free = room(n, None);
+        let free = room(n, None, StateRoute::Relay);
         let mut all = Vec::new();
         let mut held = Vec::new();
         for &f in fractions {
             let cap = (f < 1.0).then_some((free.host_up * f) as u32);
             let o = if cap.is_some() {
-                room(n, cap)
+                room(n, cap, StateRoute::Relay)
             } else {
                 free.clone()
             };

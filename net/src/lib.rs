@@ -38,7 +38,7 @@ pub use ids::{AuthorityEpoch, ClassId, NetId, PeerId, Term};
 pub use interp::InterpolationConfig;
 pub use policy::{
     AuthorityPolicy, ClassConfig, FailureDetector, MessageConfig, SendPolicy, SessionConfig,
-    SoftBodyMode,
+    SoftBodyMode, StateRoute,
 };
 pub use session::{DisplayedState, Event, ObjectState, RoomKey, Session};
 pub use stats::Stats;

@@ -220,6 +220,23 @@ pub struct SessionConfig {
     /// (`session::budget`). `None` (default): no cap. A local choice, not part of the digest.
     #[serde(default)]
     pub uplink_bytes_per_s: Option<u32>,
+    /// Which way object state travels: through the host (the thesis's relay, the default) or
+    /// from each owner straight to every member. Part of the digest: a room has one way.
+    #[serde(default)]
+    pub state_route: StateRoute,
+}
+
+/// Which way a client's object state travels to the other members. Membership, authority and
+/// the ordering of control stay with the host either way.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum StateRoute {
+    /// To the host, which relays it to every other member (thesis 5.2, Figure 5.2): a client
+    /// sends each update once; the host's uplink grows with the square of the room.
+    #[default]
+    Relay,
+    /// From the owner to every member over the full mesh: one hop less (no relay delay),
+    /// the host's uplink grows only with its own objects, each client's with the room.
+    Direct,
 }
 
 fn default_heal_window() -> Duration {
@@ -327,6 +344,7 @@ impl Default for SessionConfig {
             detector: FailureDetector::Fixed,
             heal_window: default_heal_window(),
             uplink_bytes_per_s: None,
+            state_route: StateRoute::Relay,
         }
     }
 }
@@ -354,10 +372,13 @@ impl SessionConfig {
     /// A digest of everything that must agree across peers (compared in the join handshake).
     pub fn digest(&self) -> u64 {
         // FNV-1a over the class table's JSON-free debug text: stable within one build.
-        let text = format!(
+        let mut text = format!(
             "{:?}|{}|{:?}",
             self.classes, self.content_digest, self.messages
         );
+        if self.state_route == StateRoute::Direct {
+            text.push_str("|direct");
+        }
         let mut h: u64 = 0xcbf2_9ce4_8422_2325;
         for b in text.bytes() {
             h ^= u64::from(b);

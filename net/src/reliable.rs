@@ -82,7 +82,17 @@ impl ReliableChannel {
     }
 
     /// Process the peer's cumulative ack.
-    pub fn on_ack(&mut self, next_expected: u16) {
+    /// Returns false, changing nothing, for an ack of messages never sent (a stale ack of an
+    /// earlier incarnation of the peer's session, or a forged one): acking everything it
+    /// names would drop messages the peer never had.
+    pub fn on_ack(&mut self, next_expected: u16) -> bool {
+        let base = self.out.front().map_or(self.next_seq, |m| m.seq);
+        if seq_before(next_expected, base) {
+            return true; // an older ack, overtaken: nothing new
+        }
+        if next_expected.wrapping_sub(base) > self.next_seq.wrapping_sub(base) {
+            return false;
+        }
         while let Some(front) = self.out.front() {
             if seq_before(front.seq, next_expected) {
                 self.out.pop_front();
@@ -90,6 +100,7 @@ impl ReliableChannel {
                 break;
             }
         }
+        true
     }
 
     /// True once message `seq` has been acknowledged.
@@ -138,5 +149,24 @@ mod tests {
         assert_eq!(got, vec![b"a".to_vec(), b"b".to_vec()]);
         assert!(rx.on_receive(0, b"a").is_empty());
         assert_eq!(rx.next_expected(), 2);
+    }
+
+    #[test]
+    fn an_ack_of_messages_never_sent_changes_nothing() {
+        let mut tx = ReliableChannel::default();
+        for b in [b"w", b"s", b"r"] {
+            tx.push(Instant::ZERO, b.to_vec());
+        }
+        // a stale ack of an earlier session that had sent 120 messages
+        assert!(!tx.on_ack(120));
+        assert_eq!(tx.in_flight(), 3);
+        // a real one, then an older one overtaken by it
+        assert!(tx.on_ack(2));
+        assert_eq!(tx.in_flight(), 1);
+        assert!(tx.on_ack(1));
+        assert_eq!(tx.in_flight(), 1);
+        assert!(tx.on_ack(3));
+        assert_eq!(tx.in_flight(), 0);
+        assert!(!tx.on_ack(4));
     }
 }

@@ -79,6 +79,9 @@ pub struct Stats {
     pub dropped_non_owner: u64,
     /// Datagrams ignored: older room term.
     pub dropped_old_term: u64,
+    /// Acks of reliable messages never sent on the link, ignored (a stale ack of an earlier
+    /// session of the peer's, arriving after it joined again).
+    pub implausible_acks: u64,
     /// Datagrams that failed to decode.
     pub decode_errors: u64,
     /// Beacons sent to peers the room lost (partition healing).

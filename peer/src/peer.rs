@@ -60,6 +60,14 @@ impl Default for PeerConfig {
     }
 }
 
+/// After a rejoin the fresh session waits this long before its first datagram: what the old
+/// session sent last (its leftovers, datagrams still in the transport from before a stall) then
+/// reaches the host first. Arriving after the fresh `Hello`, an old datagram of the same term
+/// is taken as the new member's — its acks name the old session's numbers — and the fresh
+/// session's `Welcome` could be taken as delivered when it was not (the churn soak's stopped
+/// peers that never got back in).
+pub const REJOIN_QUIET: Duration = Duration::from_millis(300);
+
 /// One peer of a room: session, rapier world, soft bodies, hands, avatar.
 pub struct Peer {
     session: Session,
@@ -83,6 +91,8 @@ pub struct Peer {
     auto: auto::AutoBodies,
     /// Datagrams an old session had still to send when we rejoined.
     leftover: VecDeque<Transmit>,
+    /// After a rejoin, the fresh session says nothing until then (see [`REJOIN_QUIET`]).
+    quiet_until: Option<Instant>,
     sim_time_s: f64,
     steps: u64,
     last_step_at: Instant,
@@ -142,6 +152,7 @@ impl Peer {
             scalpels: Default::default(),
             auto: Default::default(),
             leftover: VecDeque::new(),
+            quiet_until: None,
             sim_time_s: 0.0,
             steps: 0,
             last_step_at: Instant::ZERO,
@@ -211,10 +222,10 @@ impl Peer {
     /// loop just pumps every frame).
     pub fn poll_timeout(&self) -> Option<Instant> {
         let join = self.joining.poll_timeout(self.config.join_timeout);
-        match (self.session.poll_timeout(), join) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
-        }
+        [self.session.poll_timeout(), join, self.quiet_until]
+            .into_iter()
+            .flatten()
+            .min()
     }
 
     /// The next datagram to send. Drain after [`Peer::pump`], [`Peer::fixed_step`] and
@@ -223,6 +234,10 @@ impl Peer {
         if let Some(t) = self.leftover.pop_front() {
             return Some(t);
         }
+        if self.quiet_until.is_some_and(|q| now < q) {
+            return None;
+        }
+        self.quiet_until = None;
         self.session.poll_transmit(now)
     }
 
@@ -279,6 +294,7 @@ impl Peer {
                 }));
         }
         self.joining.restart(now, host);
+        self.quiet_until = Some(now + REJOIN_QUIET);
         self.events.push_back(Event::Rejoining { host, reason });
     }
 

@@ -58,3 +58,65 @@ fn a_client_cut_off_for_3_s_yields_to_the_original_host_and_both_agree_again() {
     // the box went back to the host when it timed the client out
     assert_eq!(host.peer.session().owner(softbox), Some(HOST));
 }
+
+/// A client stopped (SIGSTOP) for longer than the peer timeout while it holds an object, in
+/// a room of four: the host drops it and takes the object back; when the client runs again it
+/// learns it was dropped, joins again with a fresh session (asking whichever peer, redirected
+/// to the host) and is in the room within a few seconds. Seeds and stop lengths vary (the
+/// churn soak found rejoins that never completed).
+#[test]
+fn a_client_stopped_past_the_timeout_joins_again() {
+    use softsync_net::PeerId;
+    for (seed, stop_ms) in [
+        (31u64, 1400u64),
+        (32, 1100),
+        (33, 2500),
+        (34, 1700),
+        (35, 1250),
+    ] {
+        let hub = MemoryHub::new(1200);
+        let mut nodes = vec![
+            Node::new(&hub, HOST, seed),
+            Node::new(&hub, CLIENT, seed + 100),
+            Node::new(&hub, PeerId(102), seed + 200),
+            Node::new(&hub, PeerId(103), seed + 300),
+        ];
+        let mut now = Instant::ZERO;
+        let dt = Duration::from_secs_f32(common::hub::DT);
+        let mut run =
+            |nodes: &mut Vec<Node>, now: &mut Instant, d: Duration, skip: Option<usize>| {
+                let end = *now + d;
+                while *now < end {
+                    for (i, n) in nodes.iter_mut().enumerate() {
+                        if Some(i) != skip {
+                            n.frame(*now);
+                        }
+                    }
+                    *now += dt;
+                }
+            };
+        run(&mut nodes, &mut now, Duration::from_secs(3), None);
+        let softbox = nodes[1].id_of("softbox")[0];
+        nodes[1].peer.ask_authority(now, softbox);
+        run(&mut nodes, &mut now, Duration::from_millis(500), None);
+        assert_eq!(nodes[1].peer.session().owner(softbox), Some(CLIENT));
+        // the client's process stops: the others run
+        run(
+            &mut nodes,
+            &mut now,
+            Duration::from_millis(stop_ms),
+            Some(1),
+        );
+        run(&mut nodes, &mut now, Duration::from_secs(5), None);
+        let client = &nodes[1];
+        assert_eq!(client.peer.counters().rejoins, 1, "seed {seed}");
+        assert!(
+            client.peer.joined(),
+            "seed {seed}, stopped {stop_ms} ms: not in the room again"
+        );
+        for n in &nodes {
+            assert_eq!(n.peer.session().members().len(), 4, "seed {seed}");
+            assert_eq!(n.peer.session().host_id(), Some(HOST), "seed {seed}");
+        }
+    }
+}

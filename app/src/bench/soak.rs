@@ -192,7 +192,6 @@ impl Soak {
             &self.room,
             "--signal",
             &self.url,
-            "--quiet",
             "--bot",
             &script,
             "--dump-hz",

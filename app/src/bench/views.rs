@@ -92,6 +92,11 @@ pub type Track = Vec<(f64, Vec<[f32; 3]>)>;
 /// object go and took it again, or its process was stopped), s.
 pub const MAX_TRACK_GAP_S: f64 = 0.35;
 
+/// Two successive dump lines whose centers are further apart than this do not bracket a path:
+/// the object was put elsewhere (returned home after leaving the bounds), m. Nothing a hand
+/// moves goes 5 m/s.
+pub const MAX_TRACK_JUMP_M: f32 = 0.5;
+
 /// The owner's state of one object at time `t` (its clock), interpolated between dump lines.
 pub fn truth_at(track: &Track, t: f64) -> Option<Vec<[f32; 3]>> {
     let i = track.partition_point(|(ti, _)| *ti <= t);
@@ -102,6 +107,12 @@ pub fn truth_at(track: &Track, t: f64) -> Option<Vec<[f32; 3]>> {
     let (t1, b) = &track[i];
     if a.len() != b.len() || t1 - t0 > MAX_TRACK_GAP_S {
         return None; // a cut or tear in between, or the owner did not own it in between
+    }
+    let jump = |p: [f32; 3], q: [f32; 3]| {
+        ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
+    };
+    if jump(a[0], b[0]) > MAX_TRACK_JUMP_M {
+        return None; // put somewhere else in between (returned home): no path to follow
     }
     let f = if t1 > t0 {
         ((t - t0) / (t1 - t0)) as f32

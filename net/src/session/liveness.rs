@@ -12,7 +12,7 @@ use super::{Role, Session, Transmit};
 use crate::ids::{PeerId, Term};
 use crate::policy::FailureDetector;
 use crate::time::Instant;
-use crate::wire::encode_refusal;
+use crate::wire::encode_refusal_to;
 
 /// Departed or dropped peers remembered; the set is cleared when full (peers that left long
 /// ago send nothing).
@@ -236,9 +236,11 @@ impl Session {
                 self.local.0, self.term.0, old.0
             ),
         };
+        // naming ourselves as the host to join again: a drop notice, which a joining session
+        // (the dropped peer's fresh one, reached by a notice its old one provoked) ignores
         self.raw_out.push_back(Transmit {
             to,
-            payload: encode_refusal(&reason, self.term),
+            payload: encode_refusal_to(&reason, self.term, Some(self.local)),
             reliable: true,
         });
     }

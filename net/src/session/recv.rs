@@ -13,6 +13,7 @@ use super::send::Refresh;
 use super::{Event, Role, Session, Transmit, MAX_STRANGERS};
 use crate::error::NetError;
 use crate::ids::{NetId, PeerId};
+use crate::policy::StateRoute;
 use crate::time::Instant;
 use crate::wire::{
     decode_datagram, decode_state_block_sized, encode_refusal, ChunkEnc, Control, Datagram,
@@ -112,6 +113,11 @@ impl Session {
     /// A refusal: a joiner refused, or a member the host dropped (it stalled past the
     /// timeout), or the host of a newer term telling a peer that stalled.
     fn on_refusal(&mut self, now: Instant, from: PeerId, refusal: Refusal) {
+        // A drop notice (it names a host to join) is for a member; a joining session gets one
+        // when its old session, out of the room, still spoke after we asked to join again.
+        if self.role == Role::Joining && refusal.rejoin.is_some() {
+            return;
+        }
         let from_our_host =
             matches!(self.role, Role::Joining | Role::Client) && Some(from) == self.host;
         // Or the host of a newer term: the room elected it while this peer was silent
@@ -293,7 +299,10 @@ impl Session {
         let Some(l) = self.links.get_mut(&from) else {
             return;
         };
-        l.reliable.on_ack(next_expected);
+        if !l.reliable.on_ack(next_expected) {
+            self.stats.implausible_acks += 1;
+            return;
+        }
         let acked: Vec<NetId> = l
             .spawn_pending
             .iter()
@@ -340,8 +349,9 @@ impl Session {
             self.stats.dropped_non_owner += 1;
             return Applied::Dropped;
         }
-        // the host hears an object's owner; a client hears its host (which relays)
-        let sender_ok = if self.role == Role::Host {
+        // the host hears an object's owner; a client hears its host (which relays), or, with
+        // direct state, the owner itself
+        let sender_ok = if self.role == Role::Host || self.cfg.state_route == StateRoute::Direct {
             from == o.info.owner
         } else {
             Some(from) == self.host
@@ -458,7 +468,7 @@ impl Session {
         if let Some(o) = self.objects.get_mut(id) {
             o.buffer.push(snap, &interp);
         }
-        if self.role == Role::Host {
+        if self.role == Role::Host && self.cfg.state_route == StateRoute::Relay {
             let targets: Vec<PeerId> = self
                 .members
                 .keys()

@@ -11,7 +11,7 @@ use super::registry::Object;
 use super::{ObjectState, Role, Session, Transmit};
 use crate::error::NetError;
 use crate::ids::{NetId, PeerId};
-use crate::policy::{ClassConfig, SoftBodyMode};
+use crate::policy::{ClassConfig, SoftBodyMode, StateRoute};
 use crate::quant::{angle_between, dequantize_quat, VecQuantizer};
 use crate::time::Instant;
 use crate::wire::{
@@ -351,10 +351,15 @@ impl Session {
             .collect();
         for (id, owner) in of_class {
             let mine = owner == self.local;
+            let direct = self.cfg.state_route == StateRoute::Direct;
             let targets: Vec<PeerId> = match (self.role, mine) {
                 (Role::Host, true) => members.clone(),
                 // relay tick: repeat what a client's peers have not acknowledged yet
-                (Role::Host, false) => members.iter().copied().filter(|p| *p != owner).collect(),
+                (Role::Host, false) if !direct => {
+                    members.iter().copied().filter(|p| *p != owner).collect()
+                }
+                // direct: every member hears the owner itself
+                (Role::Client, true) if direct => members.clone(),
                 (Role::Client, true) => self.host.into_iter().collect(),
                 _ => Vec::new(),
             };
