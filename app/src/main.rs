@@ -133,8 +133,9 @@ fn run(args: &[String]) -> Result<ExitCode, Failure> {
             out,
             seconds,
             peers,
+            direct,
         } => {
-            bench::room_load(&out, seconds, &peers).map_err(Failure::runtime)?;
+            bench::room_load(&out, seconds, &peers, direct).map_err(Failure::runtime)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::BenchSignalLb {
@@ -455,6 +456,7 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     opts.bind = a.bind;
     opts.takeover_bind = a.takeover_bind;
     opts.uplink_bytes_per_s = a.uplink_bytes_per_s;
+    opts.state_route = a.state_route;
     opts.ice_servers = a.ice.clone();
     opts.ice_username = a.ice_user.clone();
     opts.ice_credential = ice_credential(&a)?;

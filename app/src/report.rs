@@ -26,9 +26,13 @@ pub struct DumpObject {
     /// Particles in world space (soft bodies).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub particles: Vec<[f32; 3]>,
-    /// For objects we do not own: the owner's clock time (s) the shown state stands for.
+    /// For objects we do not own: the time (s) the shown state stands for, on the clock of the
+    /// peer it came from ([`DumpObject::src_from`]: the owner, or the host relaying it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub src: Option<f64>,
+    /// The peer whose clock `src` is on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub src_from: Option<u64>,
     /// Soft bodies: entries of the object's topology log (tears, cuts) applied.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub log: Option<u32>,
@@ -84,6 +88,7 @@ pub fn snapshot(now: Instant, peer: &mut Peer) -> DumpLine {
                 None => (peer.session().latest_state(id), None),
             }
         };
+        let src_from = src.and(peer.session().state_source(id)).map(|p| p.0);
         let Some(s) = state else {
             continue;
         };
@@ -95,6 +100,7 @@ pub fn snapshot(now: Instant, peer: &mut Peer) -> DumpLine {
             rot: s.rot.to_array(),
             particles: s.particles.iter().map(|p| p.to_array()).collect(),
             src,
+            src_from,
             log: peer
                 .objects()
                 .get(&id)

@@ -106,6 +106,10 @@ pub struct RoomOptions {
     /// turn by priority (held ones first, then by motion, interest and waiting time). `None`:
     /// no cap. See `softsync_net::SessionConfig::uplink_bytes_per_s`.
     pub uplink_bytes_per_s: Option<u32>,
+    /// Which way object state travels: through the host (default) or from each owner to
+    /// every member (`softsync_net::StateRoute`). Every peer of the room must set the same
+    /// (a joiner with another is refused at the handshake).
+    pub state_route: softsync_net::StateRoute,
 }
 
 impl RoomOptions {
@@ -136,6 +140,7 @@ impl RoomOptions {
             scene_cache: std::env::temp_dir().join("softsync-scenes"),
             fast_detection: false,
             uplink_bytes_per_s: None,
+            state_route: softsync_net::StateRoute::Relay,
         }
     }
 
@@ -212,6 +217,7 @@ impl RoomOptions {
             .map(|k| k.for_room(&self.name).with_clock(unix_now));
         cfg.room_token = self.room_token.clone();
         cfg.uplink_bytes_per_s = self.uplink_bytes_per_s;
+        cfg.state_route = self.state_route;
         Ok(if self.fast_detection {
             cfg.fast_detection()
         } else {

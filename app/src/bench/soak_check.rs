@@ -209,6 +209,7 @@ mod tests {
                     rot: [0.0, 0.0, 0.0, 1.0],
                     particles: Vec::new(),
                     src: None,
+                    src_from: None,
                     log: None,
                     topology: None,
                 })

@@ -154,12 +154,33 @@ pub fn owner_tracks(views: &[Vec<DumpLine>]) -> BTreeMap<(u64, u32), Track> {
 /// owner's, whose clock the source time is on: such samples are left out this long.
 pub const OWNER_CHANGE_SKIP_MS: u64 = 1_000;
 
+/// Each peer's clock against the wall clock: the median of `wall - t` over its dump lines, s
+/// (every process of a bench runs on one machine, so wall clocks agree).
+pub fn clock_offsets(views: &[Vec<DumpLine>]) -> BTreeMap<u64, f64> {
+    let mut per: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
+    for lines in views {
+        for l in lines {
+            per.entry(l.peer)
+                .or_default()
+                .push(l.wall_ms as f64 / 1e3 - l.t);
+        }
+    }
+    per.into_iter()
+        .map(|(p, mut v)| {
+            v.sort_by(f64::total_cmp);
+            (p, v[v.len() / 2])
+        })
+        .collect()
+}
+
 /// Remote error, mm: for every line of every view written within `[from_ms, to_ms]` (wall
 /// clock) and every object it shows that another peer owns (and has owned for
 /// [`OWNER_CHANGE_SKIP_MS`] in that view), the distance between each shown point and the
-/// owner's own state at the time the shown state stands for.
+/// owner's own state at the time the shown state stands for (moved from the clock of the
+/// peer it came from — the host, for a relayed one — to the owner's).
 pub fn remote_errors(views: &[Vec<DumpLine>], from_ms: u64, to_ms: u64) -> Vec<f64> {
     let tracks = owner_tracks(views);
+    let offsets = clock_offsets(views);
     let mut errors = Vec::new();
     for lines in views {
         // when this view last saw each object's owner change
@@ -181,7 +202,13 @@ pub fn remote_errors(views: &[Vec<DumpLine>], from_ms: u64, to_ms: u64) -> Vec<f
                 {
                     continue;
                 }
-                let Some(src) = o.src else { continue };
+                let Some(mut src) = o.src else { continue };
+                if let Some(from) = o.src_from.filter(|f| *f != o.owner) {
+                    match (offsets.get(&from), offsets.get(&o.owner)) {
+                        (Some(a), Some(b)) => src += a - b,
+                        _ => continue,
+                    }
+                }
                 let Some(truth) = tracks.get(&(o.owner, o.id)).and_then(|t| truth_at(t, src))
                 else {
                     continue;
@@ -226,6 +253,7 @@ mod tests {
                     rot: [0.0, 0.0, 0.0, 1.0],
                     particles: Vec::new(),
                     src: (owner != peer).then_some(wall_ms as f64 / 1e3 - 0.05),
+                    src_from: None,
                     log: None,
                     topology: None,
                 })
@@ -269,5 +297,31 @@ mod tests {
         host[12].objects[0].pos[1] = 0.02; // 2200 ms: owned for over a second
         let e = remote_errors(&[owner, host], 1200, 2500);
         assert!(e.iter().any(|x| (*x - 20.0).abs() < 1e-3), "{e:?}");
+    }
+
+    #[test]
+    fn a_relayed_state_is_compared_on_the_owner_clock() {
+        // the owner (2) started 5 s before the relaying host (1): its clock reads 5 s more
+        let mut owner: Vec<DumpLine> = (0..30)
+            .map(|k| line(2, 1000 + k * 100, &[1, 2, 3], &[(7, 2)]))
+            .collect();
+        for l in &mut owner {
+            l.t += 5.0;
+            l.state_t += 5.0;
+        }
+        let host: Vec<DumpLine> = (0..30)
+            .map(|k| line(1, 1000 + k * 100, &[1, 2, 3], &[(7, 2)]))
+            .collect();
+        // viewer 3 shows what the host relayed: src on the host's clock (50 ms old)
+        let mut viewer: Vec<DumpLine> = (0..30)
+            .map(|k| line(3, 1000 + k * 100, &[1, 2, 3], &[(7, 2)]))
+            .collect();
+        for l in &mut viewer {
+            l.objects[0].pos[0] -= 0.05;
+            l.objects[0].src_from = Some(1);
+        }
+        let e = remote_errors(&[owner, host, viewer], 2100, 3500);
+        assert!(!e.is_empty());
+        assert!(e.iter().all(|x| *x < 1e-3), "{e:?}");
     }
 }

@@ -132,6 +132,9 @@ enum BenchSub {
         /// Room sizes (peers, host included), comma-separated, each 2-32.
         #[arg(long, default_value = "2,4,8", value_parser = room_sizes)]
         peers: Sizes,
+        /// Which way object state travels in the rooms (every peer gets the same).
+        #[arg(long, value_enum, default_value = "relay")]
+        state_route: Route,
     },
     /// Many rooms through signaling behind HAProxy (three instances, the room's path hashed):
     /// rooms of light signaling clients and a few of real peers, then one instance killed;
@@ -175,6 +178,15 @@ enum BenchSub {
         #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u16).range(2..=16))]
         max_peers: u16,
     },
+}
+
+/// `--state-route`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum Route {
+    /// Through the host.
+    Relay,
+    /// From each owner to every member.
+    Direct,
 }
 
 /// Room sizes of `bench room-load`.
@@ -261,6 +273,11 @@ struct PeerOpts {
     /// motion, nearness to each peer's head and waiting time.
     #[arg(long, value_name = "KBPS", value_parser = positive::<1_000_000>)]
     uplink_kbps: Option<f64>,
+    /// Which way object state travels: `relay` (through the host, the default) or `direct`
+    /// (each owner to every member; the host keeps membership and authority). Every peer of
+    /// the room must give the same.
+    #[arg(long, value_enum, default_value = "relay")]
+    state_route: Route,
     /// Pump the network only in the frame, not on a thread of its own between frames (a slow
     /// frame then slows the room: for comparison).
     #[arg(long)]
@@ -391,6 +408,8 @@ pub enum Command {
         seconds: f64,
         /// Room sizes (peers, host included).
         peers: Vec<usize>,
+        /// `direct` state.
+        direct: bool,
     },
     /// Signaling behind a load balancer.
     BenchSignalLb {
@@ -475,6 +494,8 @@ pub struct PeerArgs {
     pub no_net_thread: bool,
     /// Uplink cap, bytes a second.
     pub uplink_bytes_per_s: Option<u32>,
+    /// Which way object state travels.
+    pub state_route: softsync_net::StateRoute,
     /// No stats lines.
     pub quiet: bool,
     /// Spawn no avatar.
@@ -645,11 +666,13 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
                     out,
                     seconds,
                     peers,
+                    state_route,
                 },
         } => Command::BenchRoomLoad {
             out,
             seconds,
             peers: peers.0,
+            direct: state_route == Route::Direct,
         },
         Sub::Bench {
             which:
@@ -761,6 +784,10 @@ fn peer_args(
         fast_detection: p.fast_detection,
         no_net_thread: p.no_net_thread,
         uplink_bytes_per_s: p.uplink_kbps.map(|k| (k * 125.0).round().max(1.0) as u32),
+        state_route: match p.state_route {
+            Route::Relay => softsync_net::StateRoute::Relay,
+            Route::Direct => softsync_net::StateRoute::Direct,
+        },
         quiet: p.quiet,
         no_avatar: p.no_avatar,
         front,

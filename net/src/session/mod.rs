@@ -363,6 +363,12 @@ impl Session {
         &self.cfg
     }
 
+    /// The peer whose updates of `id` we show: the owner, or the host relaying for it
+    /// ([`DisplayedState::source_time`] is on that peer's clock). `None` before any update.
+    pub fn state_source(&self, id: NetId) -> Option<PeerId> {
+        self.objects.get(id)?.source
+    }
+
     /// Latest replicated state (no interpolation): what the last update said.
     pub fn latest_state(&self, id: NetId) -> Option<ObjectState> {
         let o = self.objects.get(id)?;
