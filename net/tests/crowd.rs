@@ -56,26 +56,7 @@ fn crowd(n: usize, cap: Option<u32>) {
             h.session(0).spawn(now, RIGID, st).unwrap().0
         })
         .collect();
-    let reqs: Vec<u32> = (1..n)
-        .map(|i| {
-            let st = ObjectState::rigid(pose(i, 0.0), Quat::IDENTITY);
-            h.session(i).spawn(now, RIGID, st).unwrap().1
-        })
-        .collect();
-    h.advance(ms(1000));
-    let own: Vec<(usize, NetId)> = (1..n)
-        .filter_map(|i| {
-            h.peers[i].events.iter().find_map(|e| match e {
-                Event::Spawned {
-                    id,
-                    request: Some(r),
-                    ..
-                } if *r == reqs[i - 1] => Some((i, *id)),
-                _ => None,
-            })
-        })
-        .collect();
-    assert_eq!(own.len(), n - 1, "not every peer's spawn was answered");
+    let own = client_objects(&mut h, n, |i| pose(i, 0.0));
     // a third of the clients grab one of the host's objects (several want the same)
     let now = h.now;
     for i in (1..n).step_by(3) {

@@ -12,7 +12,7 @@ use std::time::Duration;
 use common::*;
 use glam::{Quat, Vec3};
 use softsync_net::harness::Harness;
-use softsync_net::{Event, NetId, ObjectState, SessionConfig, StateRoute};
+use softsync_net::{Event, ObjectState, SessionConfig, StateRoute};
 
 const FRAME: Duration = Duration::from_micros(16_667);
 
@@ -31,27 +31,7 @@ fn room(n: usize, route: StateRoute) -> (u64, f32) {
     };
     let mut h = Harness::new(n, cfg, steady_link());
     h.advance(ms(2000));
-    let now = h.now;
-    let reqs: Vec<u32> = (1..n)
-        .map(|i| {
-            let st = ObjectState::rigid(pose(i, 0.0), Quat::IDENTITY);
-            h.session(i).spawn(now, RIGID, st).unwrap().1
-        })
-        .collect();
-    h.advance(ms(1000));
-    let own: Vec<(usize, NetId)> = (1..n)
-        .filter_map(|i| {
-            h.peers[i].events.iter().find_map(|e| match e {
-                Event::Spawned {
-                    id,
-                    request: Some(r),
-                    ..
-                } if *r == reqs[i - 1] => Some((i, *id)),
-                _ => None,
-            })
-        })
-        .collect();
-    assert_eq!(own.len(), n - 1);
+    let own = client_objects(&mut h, n, |i| pose(i, 0.0));
     let t0 = h.now;
     let mut host_bytes_at_1s = None;
     let mut worst = 0.0f32;

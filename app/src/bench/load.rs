@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 use softsync_benchkit::{Csv, Progress, ResultLine, Summary};
 
 use super::views::{agrees_within, line_at, only, remote_errors, RoomView};
-use super::Proc;
+use super::{grab_script, Proc};
 use crate::report::{read_dump, DumpLine};
 
 /// One room-load measurement.
@@ -72,69 +72,57 @@ fn window_rate(lines: &[DumpLine], from_wall: u64, to_wall: u64) -> Option<(f64,
 /// go and sways. Traffic of the host (the relay) and of the bots, grabs taken and refused,
 /// and whether every peer lists the same members and owners at one moment.
 fn load_one(dir: &Path, peers: usize, seconds: f64, route: &str) -> Result<LoadRow, String> {
-    const OBJECTS: [&str; 7] = [
-        "bunny", "softbox", "softball", "block", "can", "ball", "plate",
-    ];
-    let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>();
     let (_signal, url) = Proc::signal(dir, &format!("load{peers}-signal"))?;
     let room = format!("load{peers}");
     // every bot runs until the measured window (after the last one joined) is over: joins
     // take longer the more processes share the cores
     let total = seconds + 8.0 + 0.75 * peers as f64;
     let hd = dir.join(format!("{room}-host.jsonl"));
-    let mut host = Proc::spawn(
+    let (hds, host_total) = (hd.display().to_string(), (total + 2.0).to_string());
+    let mut host = Proc::peer(
         dir,
         &format!("{room}-host"),
-        &s(&[
-            "host",
-            "--room",
-            &room,
-            "--signal",
-            &url,
-            "--quiet",
+        "host",
+        &room,
+        &url,
+        &[
             "--bot",
             "wave",
             "--dump-hz",
             "10",
             "--dump",
-            &hd.display().to_string(),
+            &hds,
             "--duration",
-            &(total + 2.0).to_string(),
+            &host_total,
             "--state-route",
             route,
-        ]),
+        ],
     )?;
     host.line("hosting", Duration::from_secs(20))?;
     let mut bots = Vec::new();
     for k in 1..peers {
-        let obj = OBJECTS[(k - 1) % OBJECTS.len()];
-        let script = format!(
-            "wait 0.5; reach right {obj} in 0.8; grab right timeout 1.5; squeeze right 0.015 in 0.4; \
-             release right; offset right 0 0.1 0 in 0.4; wave all 0.08 2 2; loop"
-        );
+        let script = grab_script(k - 1);
         let d = dir.join(format!("{room}-b{k}.jsonl"));
+        let (ds, bot_total) = (d.display().to_string(), total.to_string());
         bots.push((
-            Proc::spawn(
+            Proc::peer(
                 dir,
                 &format!("{room}-b{k}"),
-                &s(&[
-                    "join",
-                    "--room",
-                    &room,
-                    "--signal",
-                    &url,
-                    "--quiet",
+                "join",
+                &room,
+                &url,
+                &[
                     "--bot",
                     &script,
                     "--dump-hz",
                     "10",
                     "--dump",
-                    &d.display().to_string(),
+                    &ds,
                     "--duration",
-                    &total.to_string(),
+                    &bot_total,
                     "--state-route",
                     route,
-                ]),
+                ],
             )?,
             d,
         ));

@@ -91,6 +91,24 @@ impl Proc {
             .to_owned())
     }
 
+    /// A quiet peer (`role`: `host` or `join`) of `room` on signaling server `url`, with
+    /// `extra` arguments.
+    fn peer(
+        dir: &Path,
+        name: &str,
+        role: &str,
+        room: &str,
+        url: &str,
+        extra: &[&str],
+    ) -> Result<Proc, String> {
+        let args: Vec<String> = [role, "--room", room, "--signal", url, "--quiet"]
+            .iter()
+            .chain(extra)
+            .map(|x| x.to_string())
+            .collect();
+        Proc::spawn(dir, name, &args)
+    }
+
     /// A standalone signaling server on a free port, and its URL.
     fn signal(dir: &Path, name: &str) -> Result<(Proc, String), String> {
         let args = ["signal", "--bind", "127.0.0.1:0"].map(String::from);
@@ -125,6 +143,20 @@ impl Drop for Proc {
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
+}
+
+/// A bot that reaches for the thesis room's object number `k` (of seven, in turn), grabs it
+/// (an authority request that contends with the others'), squeezes, lets go and sways, again
+/// and again: room-load's and the soak's bots.
+fn grab_script(k: usize) -> String {
+    const OBJECTS: [&str; 7] = [
+        "bunny", "softbox", "softball", "block", "can", "ball", "plate",
+    ];
+    let obj = OBJECTS[k % OBJECTS.len()];
+    format!(
+        "wait 0.5; reach right {obj} in 0.8; grab right timeout 1.5; squeeze right 0.015 in 0.4; \
+         release right; offset right 0 0.1 0 in 0.4; wave all 0.08 2 2; loop"
+    )
 }
 
 fn field(line: &str, key: &str) -> Option<String> {

@@ -18,7 +18,7 @@ use softsync_benchkit::{
 
 use super::soak_check::{failures, Life, PeerAt, Streaks};
 use super::views::{is_avatar, line_at, remote_errors};
-use super::Proc;
+use super::{grab_script, Proc};
 use crate::report::DumpLine;
 
 /// What the soak is asked to do.
@@ -46,10 +46,6 @@ const JOINER_TOLERANCE_MM: f64 = 50.0;
 const SETTLE_MS: u64 = 3_000;
 /// Dump lines older than this are dropped from memory.
 const KEEP_MS: u64 = 8_000;
-
-const OBJECTS: [&str; 7] = [
-    "bunny", "softbox", "softball", "block", "can", "ball", "plate",
-];
 
 fn wall_ms() -> u64 {
     std::time::SystemTime::now()
@@ -180,11 +176,7 @@ impl Soak {
         let k = self.spawned;
         self.spawned += 1;
         let name = format!("p{k}");
-        let obj = OBJECTS[k % OBJECTS.len()];
-        let script = format!(
-            "wait 0.5; reach right {obj} in 0.8; grab right timeout 1.5; squeeze right 0.015 in 0.4; \
-             release right; offset right 0 0.1 0 in 0.4; wave all 0.08 2 2; loop"
-        );
+        let script = grab_script(k);
         let dump = self.dir.join(format!("{name}.jsonl"));
         let args: Vec<String> = [
             if host { "host" } else { "join" },

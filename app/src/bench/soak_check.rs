@@ -186,35 +186,10 @@ impl Streaks {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::report::DumpObject;
+    use crate::bench::views::test_line;
 
     fn line(peer: u64, host: u64, term: u32, members: &[u64], owners: &[(u32, u64)]) -> DumpLine {
-        DumpLine {
-            t: 0.0,
-            state_t: 0.0,
-            wall_ms: 0,
-            peer,
-            host: Some(host),
-            term,
-            members: members.to_vec(),
-            up_bytes: 0,
-            down_bytes: 0,
-            objects: owners
-                .iter()
-                .map(|&(id, owner)| DumpObject {
-                    id,
-                    kind: "ball".into(),
-                    owner,
-                    pos: [0.0; 3],
-                    rot: [0.0, 0.0, 0.0, 1.0],
-                    particles: Vec::new(),
-                    src: None,
-                    src_from: None,
-                    log: None,
-                    topology: None,
-                })
-                .collect(),
-        }
+        test_line(peer, host, term, 0, members, owners)
     }
 
     fn at<'a>(id: u64, life: Life, l: &'a DumpLine) -> PeerAt<'a> {

@@ -228,37 +228,52 @@ pub fn remote_errors(views: &[Vec<DumpLine>], from_ms: u64, to_ms: u64) -> Vec<f
     errors
 }
 
+/// A dump line for tests: `peer` following `host` in `term`, at `wall_ms` (its clock reads the
+/// same), with `members` and objects `(id, owner)` (a ball at x = wall seconds; those of
+/// others shown 50 ms old).
+#[cfg(test)]
+pub fn test_line(
+    peer: u64,
+    host: u64,
+    term: u32,
+    wall_ms: u64,
+    members: &[u64],
+    owners: &[(u32, u64)],
+) -> DumpLine {
+    DumpLine {
+        t: wall_ms as f64 / 1e3,
+        state_t: wall_ms as f64 / 1e3,
+        wall_ms,
+        peer,
+        host: Some(host),
+        term,
+        members: members.to_vec(),
+        up_bytes: 0,
+        down_bytes: 0,
+        objects: owners
+            .iter()
+            .map(|&(id, owner)| DumpObject {
+                id,
+                kind: "ball".into(),
+                owner,
+                pos: [wall_ms as f32 / 1e3, 0.0, 0.0],
+                rot: [0.0, 0.0, 0.0, 1.0],
+                particles: Vec::new(),
+                src: (owner != peer).then_some(wall_ms as f64 / 1e3 - 0.05),
+                src_from: None,
+                log: None,
+                topology: None,
+            })
+            .collect(),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn line(peer: u64, wall_ms: u64, members: &[u64], owners: &[(u32, u64)]) -> DumpLine {
-        DumpLine {
-            t: wall_ms as f64 / 1e3,
-            state_t: wall_ms as f64 / 1e3,
-            wall_ms,
-            peer,
-            host: Some(1),
-            term: 1,
-            members: members.to_vec(),
-            up_bytes: 0,
-            down_bytes: 0,
-            objects: owners
-                .iter()
-                .map(|&(id, owner)| DumpObject {
-                    id,
-                    kind: "ball".into(),
-                    owner,
-                    pos: [wall_ms as f32 / 1e3, 0.0, 0.0],
-                    rot: [0.0, 0.0, 0.0, 1.0],
-                    particles: Vec::new(),
-                    src: (owner != peer).then_some(wall_ms as f64 / 1e3 - 0.05),
-                    src_from: None,
-                    log: None,
-                    topology: None,
-                })
-                .collect(),
-        }
+        test_line(peer, 1, 1, wall_ms, members, owners)
     }
 
     #[test]

@@ -74,23 +74,11 @@ impl SignalProbe {
         let (ws, _) = match tungstenite::connect(url.as_str()) {
             Ok(x) => x,
             Err(tungstenite::Error::Http(resp)) => {
-                let body = resp
-                    .body()
-                    .as_ref()
-                    .map(|b| String::from_utf8_lossy(b).into_owned())
-                    .unwrap_or_default();
-                let theirs = resp
-                    .headers()
-                    .get(crate::VERSION_HEADER)
-                    .and_then(|v| v.to_str().ok())
-                    .map(str::to_owned);
-                return Err(crate::transport::refusal(
+                return Err(crate::transport::http_refusal(
                     base,
                     room,
                     PROTOCOL_VERSION,
-                    resp.status().as_u16(),
-                    body,
-                    theirs,
+                    &resp,
                 ));
             }
             Err(e) => return Err(unreachable(e.to_string())),

@@ -312,9 +312,30 @@ pub fn net_id(p: MbPeerId) -> PeerId {
     PeerId(p.0.as_u64_pair().0)
 }
 
+/// The error for the server's HTTP answer `resp` to a websocket upgrade (status, body, and
+/// the protocol version it names in [`VERSION_HEADER`]).
+pub(crate) fn http_refusal(
+    url: &str,
+    room: &str,
+    ours: u8,
+    resp: &async_tungstenite::tungstenite::http::Response<Option<Vec<u8>>>,
+) -> ConnectError {
+    let body = resp
+        .body()
+        .as_ref()
+        .map(|b| String::from_utf8_lossy(b).into_owned())
+        .unwrap_or_default();
+    let theirs = resp
+        .headers()
+        .get(VERSION_HEADER)
+        .and_then(|v| v.to_str().ok())
+        .map(str::to_owned);
+    refusal(url, room, ours, resp.status().as_u16(), body, theirs)
+}
+
 /// The error for an HTTP refusal of the websocket upgrade: `status`, the server's `body`, and
 /// the protocol version it named (`None`: no version header, not our server).
-pub(crate) fn refusal(
+fn refusal(
     url: &str,
     room: &str,
     ours: u8,
@@ -359,18 +380,7 @@ fn classify(err: &matchbox_socket::Error, cfg: &MatchboxConfig) -> ConnectError 
     };
     if let SignalingError::WebSocket(ws) = sig {
         if let async_tungstenite::tungstenite::Error::Http(resp) = ws {
-            let status = resp.status().as_u16();
-            let body = resp
-                .body()
-                .as_ref()
-                .map(|b| String::from_utf8_lossy(b).into_owned())
-                .unwrap_or_default();
-            let theirs = resp
-                .headers()
-                .get(VERSION_HEADER)
-                .and_then(|v| v.to_str().ok())
-                .map(str::to_owned);
-            return refusal(&url, &cfg.room, cfg.protocol_version, status, body, theirs);
+            return http_refusal(&url, &cfg.room, cfg.protocol_version, resp);
         }
         return ConnectError::Unreachable {
             url,

@@ -103,6 +103,31 @@ pub fn spawn_soft(h: &mut Harness, i: usize, center: Vec3) -> (NetId, u32) {
     spawn(h, i, SOFT, soft_state(center, Quat::IDENTITY, 0.0))
 }
 
+/// Every client `i` of `1..n` asks for a rigid body at `pos(i)`; after a second, each one's
+/// object as the host answered it: (client, id). Panics unless every request was answered.
+pub fn client_objects(
+    h: &mut Harness,
+    n: usize,
+    pos: impl Fn(usize) -> Vec3,
+) -> Vec<(usize, NetId)> {
+    let reqs: Vec<u32> = (1..n).map(|i| spawn_rigid(h, i, pos(i)).1).collect();
+    h.advance(Duration::from_millis(1000));
+    let own: Vec<(usize, NetId)> = (1..n)
+        .filter_map(|i| {
+            h.peers[i].events.iter().find_map(|e| match e {
+                softsync_net::Event::Spawned {
+                    id,
+                    request: Some(r),
+                    ..
+                } if *r == reqs[i - 1] => Some((i, *id)),
+                _ => None,
+            })
+        })
+        .collect();
+    assert_eq!(own.len(), n - 1, "not every peer's spawn was answered");
+    own
+}
+
 /// The host spawns three rigid bodies (at 0, 1, 2 m on x) and a soft body.
 pub fn spawn_some(h: &mut Harness) -> Vec<NetId> {
     let mut ids: Vec<NetId> = (0..3)
