@@ -12,7 +12,7 @@ use std::time::Duration;
 use common::*;
 use glam::{Quat, Vec3};
 use softsync_net::harness::Harness;
-use softsync_net::{Event, NetId, ObjectState, PeerId, SessionConfig};
+use softsync_net::{NetId, ObjectState, PeerId, SessionConfig};
 
 const FRAME: Duration = Duration::from_micros(16_667);
 

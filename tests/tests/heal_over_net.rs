@@ -83,18 +83,17 @@ fn a_client_stopped_past_the_timeout_joins_again() {
         ];
         let mut now = Instant::ZERO;
         let dt = Duration::from_secs_f32(common::hub::DT);
-        let mut run =
-            |nodes: &mut Vec<Node>, now: &mut Instant, d: Duration, skip: Option<usize>| {
-                let end = *now + d;
-                while *now < end {
-                    for (i, n) in nodes.iter_mut().enumerate() {
-                        if Some(i) != skip {
-                            n.frame(*now);
-                        }
+        let run = |nodes: &mut Vec<Node>, now: &mut Instant, d: Duration, skip: Option<usize>| {
+            let end = *now + d;
+            while *now < end {
+                for (i, n) in nodes.iter_mut().enumerate() {
+                    if Some(i) != skip {
+                        n.frame(*now);
                     }
-                    *now += dt;
                 }
-            };
+                *now += dt;
+            }
+        };
         run(&mut nodes, &mut now, Duration::from_secs(3), None);
         let softbox = nodes[1].id_of("softbox")[0];
         nodes[1].peer.ask_authority(now, softbox);
