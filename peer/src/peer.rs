@@ -10,6 +10,7 @@
 //! [`Peer::poll_transmit`] gives it.
 
 mod auto;
+mod bounds;
 pub(crate) mod topology;
 
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
@@ -591,20 +592,8 @@ impl Peer {
             else {
                 continue;
             };
-            let mut s = self.mirror.body_state(body, pose);
-            let (lo, hi) = self.scene.bounds;
-            if !(s.pos.cmpge(lo).all() && s.pos.cmple(hi).all()) && body != LocalBody::Pose {
-                // Out of the room (rolled off the floor, thrown away): past the bounds the
-                // others would see it clamped at the edge. Back to its place, at rest.
-                let (home_pos, home_rot) = self.home_of(kind);
-                let from = s.pos;
-                if self.mirror.return_home(id, home_pos, home_rot) {
-                    self.events.push_back(Event::ReturnedHome { id, from });
-                    if let Some(now_s) = self.mirror.state(id) {
-                        s = now_s;
-                    }
-                }
-            }
+            let s = self.mirror.body_state(body, pose);
+            let s = self.keep_in_bounds(id, body, kind, s);
             let layout = self.session.particles_of(id).map(|n| n as usize);
             if matches!(body, LocalBody::Soft(_)) && layout != Some(s.particles.len()) {
                 // a resolution change the session has and our body gets at the next pump
@@ -615,20 +604,6 @@ impl Peer {
                 self.events.push_back(Event::Warning(msg));
             }
         }
-    }
-
-    /// Where an object of `kind` goes back to when it leaves the room's bounds: the first place
-    /// the scene spawns that class at, else the middle of the bounds.
-    fn home_of(&self, kind: Kind) -> (Vec3, Quat) {
-        self.scene
-            .objects
-            .iter()
-            .find(|p| p.kind == kind)
-            .map(|p| (p.pos, p.rot))
-            .unwrap_or((
-                (self.scene.bounds.0 + self.scene.bounds.1) * 0.5,
-                Quat::IDENTITY,
-            ))
     }
 
     fn on_hand_event(&mut self, now: Instant, e: InteractionEvent) {

@@ -21,6 +21,7 @@
 #![allow(clippy::disallowed_methods)] // an I/O adapter: it reads the clock and waits for threads
 
 mod probe;
+mod refusal;
 mod signal;
 mod signaller;
 mod transport;

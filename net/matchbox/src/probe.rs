@@ -74,7 +74,7 @@ impl SignalProbe {
         let (ws, _) = match tungstenite::connect(url.as_str()) {
             Ok(x) => x,
             Err(tungstenite::Error::Http(resp)) => {
-                return Err(crate::transport::http_refusal(
+                return Err(crate::refusal::http_refusal(
                     base,
                     room,
                     PROTOCOL_VERSION,
