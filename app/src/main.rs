@@ -471,6 +471,7 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
         (None, Err(_)) => None,
     };
     opts.fast_detection = a.fast_detection;
+    opts.max_members = a.max_members;
     opts.condition = a.condition.clone();
     opts.send = SendPolicy {
         rate_hz: a.send_rate_hz,

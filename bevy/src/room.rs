@@ -110,6 +110,11 @@ pub struct RoomOptions {
     /// every member (`softsync_net::StateRoute`). Every peer of the room must set the same
     /// (a joiner with another is refused at the handshake).
     pub state_route: softsync_net::StateRoute,
+    /// The host takes no more than this many members, itself included; a joiner beyond it is
+    /// refused with "the room is full (N members)". Every peer of the room must set the same
+    /// (it is part of the handshake's digest, so a new host after a migration keeps it).
+    /// Default 64, the session's limit.
+    pub max_members: usize,
 }
 
 impl RoomOptions {
@@ -141,6 +146,7 @@ impl RoomOptions {
             fast_detection: false,
             uplink_bytes_per_s: None,
             state_route: softsync_net::StateRoute::Relay,
+            max_members: softsync_net::SessionConfig::default().max_members,
         }
     }
 
@@ -218,6 +224,7 @@ impl RoomOptions {
         cfg.room_token = self.room_token.clone();
         cfg.uplink_bytes_per_s = self.uplink_bytes_per_s;
         cfg.state_route = self.state_route;
+        cfg.max_members = self.max_members;
         Ok(if self.fast_detection {
             cfg.fast_detection()
         } else {

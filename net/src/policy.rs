@@ -379,6 +379,10 @@ impl SessionConfig {
         if self.state_route == StateRoute::Direct {
             text.push_str("|direct");
         }
+        // a room's size cap must survive a migration: every peer has the same
+        if self.max_members != default_max_members() {
+            text.push_str(&format!("|max{}", self.max_members));
+        }
         let mut h: u64 = 0xcbf2_9ce4_8422_2325;
         for b in text.bytes() {
             h ^= u64::from(b);

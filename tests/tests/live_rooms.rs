@@ -729,3 +729,33 @@ fn j_a_stalled_member_with_no_rejoins_left_stops_clearly() {
         "{logs}"
     );
 }
+
+/// A room sized with `--max-members 2` (every peer gives the same): the second peer gets in,
+/// the third is refused with the reason and exits non-zero; a peer that gives another size is
+/// refused at the handshake (the size is part of the room's digest, so a new host keeps it).
+#[test]
+fn k_a_full_room_refuses_a_joiner_with_the_reason() {
+    require_netns();
+    let dir = scratch("full");
+    let (_signal, url) = standalone_signal(&dir);
+    let two = ["--max-members", "2", "--duration", "20"];
+    let host = peer_on(&dir, "host", "host", &url, "small", &two);
+    host.wait_line("hosting", Duration::from_secs(20));
+    let first = peer_on(&dir, "first", "join", &url, "small", &two);
+    first.wait_line("joined", Duration::from_secs(20));
+    for (name, args) in [
+        ("third", &two[..]),
+        ("other", &["--max-members", "3", "--duration", "20"][..]),
+    ] {
+        let mut p = peer_on(&dir, name, "join", &url, "small", args);
+        let code = p.wait_exit(Duration::from_secs(30));
+        let logs = p.logs();
+        assert_ne!(code, 0, "{logs}");
+        let reason = if name == "third" {
+            "the room is full (2 members)"
+        } else {
+            "room configuration differs"
+        };
+        assert!(logs.contains(reason), "{name}: {logs}");
+    }
+}

@@ -268,6 +268,11 @@ struct PeerOpts {
     /// should say it; a process starved of CPU for 250 ms or more is then taken for dead).
     #[arg(long)]
     fast_detection: bool,
+    /// The room takes at most N peers, the host included: a joiner beyond is refused with the
+    /// reason (size a room to what its machines can serve). Every peer of the room must give
+    /// the same (a new host after a migration keeps it).
+    #[arg(long, value_name = "N", default_value_t = 64, value_parser = clap::value_parser!(u16).range(2..=64))]
+    max_members: u16,
     /// Cap this peer's uplink at KBPS kilobits a second (datagrams plus their estimated
     /// transport overhead, shared by its links): held objects go first, then others by
     /// motion, nearness to each peer's head and waiting time.
@@ -490,6 +495,8 @@ pub struct PeerArgs {
     pub room_token: Option<softsync_net::wire::RoomToken>,
     /// The adaptive failure detector and 50 ms heartbeats.
     pub fast_detection: bool,
+    /// The room's size cap.
+    pub max_members: usize,
     /// Pump the network in the frame only.
     pub no_net_thread: bool,
     /// Uplink cap, bytes a second.
@@ -782,6 +789,7 @@ fn peer_args(
         room_key_file: p.room_key_file,
         room_token: p.room_token,
         fast_detection: p.fast_detection,
+        max_members: usize::from(p.max_members),
         no_net_thread: p.no_net_thread,
         uplink_bytes_per_s: p.uplink_kbps.map(|k| (k * 125.0).round().max(1.0) as u32),
         state_route: match p.state_route {
