@@ -180,19 +180,6 @@ enum BenchSub {
     },
 }
 
-/// `--state-route`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-enum Route {
-    /// Through the host.
-    Relay,
-    /// From each owner to every member.
-    Direct,
-}
-
-/// Room sizes of `bench room-load`.
-#[derive(Clone, Debug)]
-struct Sizes(Vec<usize>);
-
 /// Options of `host` and `join`.
 #[derive(Args, Debug)]
 struct PeerOpts {

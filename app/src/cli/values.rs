@@ -4,7 +4,20 @@ use std::net::SocketAddr;
 
 use softsync_net::ConditionerConfig;
 
-use super::{parse_condition, Sizes};
+use super::parse_condition;
+
+/// `--state-route`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub(super) enum Route {
+    /// Through the host.
+    Relay,
+    /// From each owner to every member.
+    Direct,
+}
+
+/// Room sizes of `bench room-load`.
+#[derive(Clone, Debug)]
+pub(super) struct Sizes(pub(super) Vec<usize>);
 
 pub(super) fn seconds(v: &str) -> Result<f64, String> {
     match v.parse::<f64>() {
