@@ -50,7 +50,7 @@ enum HandState {
     },
 }
 
-#[derive(Debug)]
+#[derive(Clone, Debug)]
 struct Hand {
     config: HandConfig,
     input: Option<HandInput>,
@@ -61,7 +61,7 @@ struct Hand {
 }
 
 /// The hands of one peer and what they do to the world.
-#[derive(Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct Interaction {
     hands: Vec<Hand>,
     events: VecDeque<InteractionEvent>,

@@ -80,6 +80,6 @@ pub use bot::Bot;
 pub use device::DeviceFrame;
 pub use events::{Counters, Event, PeerError, TopologyError};
 pub use messages::Say;
-pub use mirror::{LocalBody, MirroredObject};
+pub use mirror::{build_body, LocalBody, MirroredObject};
 pub use peer::{Peer, PeerConfig};
 pub use scene::{BodyClass, Class, FixedBox, Kind, Placed, Scene, Shape};

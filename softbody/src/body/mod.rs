@@ -40,7 +40,7 @@ use crate::mesh::{enclosed_volume, Mesh, WeldedMesh};
 use crate::SoftBodyError;
 
 /// One particle soft body: its rapier bodies, its particle map and its deformed mesh.
-#[derive(Debug)]
+#[derive(Clone, Debug)]
 pub struct SoftBody {
     config: SoftBodyConfig,
     welded: WeldedMesh,

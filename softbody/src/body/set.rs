@@ -10,7 +10,7 @@ use crate::cut::{CutError, CutPlane, TearSegment, TearStats};
 use crate::{Mesh, SoftBodyConfig, SoftBodyError};
 
 /// A set of soft bodies in the rapier style: generational handles, one pipeline step.
-#[derive(Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct SoftBodySet {
     slots: Vec<(u32, Option<SoftBody>)>,
     free: Vec<u32>,
