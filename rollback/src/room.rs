@@ -198,6 +198,7 @@ pub struct RollbackPeer {
     events: VecDeque<RollbackEvent>,
     stats: RollbackStats,
     switch_started: Option<std::time::Instant>,
+    ticks: u64,
 }
 
 impl RollbackPeer {
@@ -232,6 +233,7 @@ impl RollbackPeer {
             events: VecDeque::new(),
             stats: RollbackStats::default(),
             switch_started: None,
+            ticks: 0,
         })
     }
 
@@ -265,6 +267,13 @@ impl RollbackPeer {
         let (g, (_, start)) = (self.ggrs.as_ref()?, self.epoch.as_ref()?);
         let c = g.confirmed_frame();
         (c >= 0).then_some(start + c)
+    }
+
+    /// The checksum of this peer's saved state of world frame `frame`, if it still has it
+    /// (final once `frame` is confirmed).
+    pub fn checksum_at(&self, frame: i32) -> Option<u128> {
+        let (_, start) = self.epoch.as_ref()?;
+        self.ring.get(&(frame - start)).map(|s| RollbackWorld::checksum_of(s))
     }
 
     /// This peer's input for the next frame.
@@ -593,9 +602,9 @@ impl RollbackPeer {
             self.stats.switch_ms_max = self.stats.switch_ms_max.max(ms);
         }
         // Far ahead of the others: skip a tick now and then so they catch up.
-        if g.frames_ahead() >= 2 && self.stats.frames % 4 == 0 {
+        self.ticks += 1;
+        if g.frames_ahead() >= 2 && self.ticks % 4 == 0 {
             self.stats.waited_ticks += 1;
-            self.stats.frames += 1;
             return;
         }
         for h in g.local_player_handles() {

@@ -298,17 +298,12 @@ impl RollbackWorld {
     /// A hash of every body's position, rotation and velocities (bits) and the frame: equal on
     /// two peers exactly when their worlds agree.
     pub fn checksum(&self) -> u128 {
-        let mut h = Fnv128::new();
-        h.word(self.frame as u32);
-        for (_, b) in self.world.bodies.iter() {
-            let t = b.translation();
-            let r = *b.rotation();
-            let (v, a) = (b.linvel(), b.angvel());
-            for x in [t.x, t.y, t.z, r.x, r.y, r.z, r.w, v.x, v.y, v.z, a.x, a.y, a.z] {
-                h.word(x.to_bits());
-            }
-        }
-        h.finish()
+        checksum(self.frame, &self.world.bodies)
+    }
+
+    /// The checksum of a saved state.
+    pub fn checksum_of(state: &WorldState) -> u128 {
+        checksum(state.frame, &state.bodies)
     }
 
     /// Turn the deliberate non-determinism on (tests only show it is caught).
@@ -382,6 +377,20 @@ impl RollbackWorld {
     pub fn dt_s(&self) -> f32 {
         self.dt_s
     }
+}
+
+fn checksum(frame: i32, bodies: &RigidBodySet) -> u128 {
+    let mut h = Fnv128::new();
+    h.word(frame as u32);
+    for (_, b) in bodies.iter() {
+        let t = b.translation();
+        let r = *b.rotation();
+        let (v, a) = (b.linvel(), b.angvel());
+        for x in [t.x, t.y, t.z, r.x, r.y, r.z, r.w, v.x, v.y, v.z, a.x, a.y, a.z] {
+            h.word(x.to_bits());
+        }
+    }
+    h.finish()
 }
 
 /// Translation, rotation, velocities of every object body, as bits.
