@@ -9,6 +9,7 @@ mod desktop;
 mod driver;
 mod plugins;
 mod report;
+mod rollback;
 mod stderr_log;
 #[cfg(feature = "desktop")]
 mod view;
@@ -493,6 +494,16 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
         rejoin_limit: a.rejoin_limit,
         join_timeout: a.connect_timeout,
     };
+    if a.rollback {
+        let scene = match scene {
+            Some(s) => s,
+            // a rollback joiner builds the room's scene itself (the digest checks it is the
+            // host's); it does not fetch one
+            None => Scene::by_name(DEFAULT_SCENE, &assets_dir(a.assets.as_deref()))
+                .map_err(Failure::usage)?,
+        };
+        return rollback::run(&a, scene, opts);
+    }
     // A desktop or VR peer enters the room once its front end renders (`Room::set_ready`).
     opts.start_ready = front == FrontEnd::Headless;
     let started = std::time::Instant::now();

@@ -64,11 +64,25 @@ pub enum Event {
     Warning(String),
 }
 
+/// The name of a rollback room's epoch message type: a host whose refusal lists it runs a
+/// rollback room (`softsync-rollback` registers it).
+pub const ROLLBACK_EPOCH_TYPE: &str = "softsync.rollback.epoch";
+
+/// What a joiner refused for its room configuration should do when the room's sync mode
+/// differs from its own (the host lists its message types in such a refusal).
+fn sync_hint(reason: &str) -> &'static str {
+    if reason.contains("configuration differs") && reason.contains(ROLLBACK_EPOCH_TYPE) {
+        "\n  the room syncs by rollback (its host ran --sync rollback): join with --sync rollback"
+    } else {
+        ""
+    }
+}
+
 /// Why the peer must stop.
 #[derive(Debug, thiserror::Error)]
 pub enum PeerError {
     /// The host refused us.
-    #[error("the host refused us: {0}")]
+    #[error("the host refused us: {0}{hint}", hint = sync_hint(.0))]
     Refused(String),
     /// The room went on without us, and we may not join again.
     #[error(

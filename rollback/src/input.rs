@@ -90,7 +90,8 @@ fn unit(v: f32) -> u8 {
 impl PlayerInput {
     /// Quantize a device frame (a headset, the desktop's mouse hands, or a bot's).
     pub fn from_device(d: &DeviceFrame) -> Self {
-        let part = |p: Option<(Vec3, Quat)>| p.map(|(p, r)| PartInput::new(p, r)).unwrap_or_default();
+        let part =
+            |p: Option<(Vec3, Quat)>| p.map(|(p, r)| PartInput::new(p, r)).unwrap_or_default();
         PlayerInput {
             parts: [part(d.head), part(d.hands[0]), part(d.hands[1])],
             grip: [unit(d.grip[0]), unit(d.grip[1])],
@@ -103,7 +104,10 @@ impl PlayerInput {
         DeviceFrame {
             head: self.parts[0].pose(),
             hands: [self.parts[1].pose(), self.parts[2].pose()],
-            grip: [f32::from(self.grip[0]) / 255.0, f32::from(self.grip[1]) / 255.0],
+            grip: [
+                f32::from(self.grip[0]) / 255.0,
+                f32::from(self.grip[1]) / 255.0,
+            ],
             trigger: [
                 f32::from(self.trigger[0]) / 255.0,
                 f32::from(self.trigger[1]) / 255.0,
@@ -132,7 +136,10 @@ mod tests {
     fn non_finite_poses_and_values_become_untracked_and_zero() {
         let d = DeviceFrame {
             head: Some((Vec3::NAN, Quat::IDENTITY)),
-            hands: [Some((Vec3::ONE, Quat::from_xyzw(f32::NAN, 0.0, 0.0, 1.0))), None],
+            hands: [
+                Some((Vec3::ONE, Quat::from_xyzw(f32::NAN, 0.0, 0.0, 1.0))),
+                None,
+            ],
             grip: [f32::NAN, 2.0],
             trigger: [-1.0, f32::INFINITY],
         };

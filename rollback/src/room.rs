@@ -64,8 +64,12 @@ pub struct Epoch {
 }
 
 impl Message for Epoch {
-    const NAME: &'static str = "softsync.rollback.epoch";
+    const NAME: &'static str = EPOCH_NAME;
 }
+
+/// [`Epoch`]'s name in the room's message table (a state-sync joiner refused by a rollback
+/// room sees it in the host's refusal, and is told to join with `--sync rollback`).
+pub const EPOCH_NAME: &str = softsync_peer::events::ROLLBACK_EPOCH_TYPE;
 
 /// Add the rollback room's message type to a room's table (host and joiners alike: it is
 /// part of the room's configuration digest, so a state-sync peer cannot join by mistake).
@@ -205,8 +209,9 @@ impl RollbackPeer {
     /// A peer with its session (hosting or joining; its configuration must have
     /// [`register`]ed the epoch message).
     pub fn new(scene: Scene, cfg: RollbackConfig, session: Session) -> Result<Self, WorldError> {
-        let types = MessageTypes::from_config(session.config())
-            .ok_or_else(|| WorldError::Build("the room's message table names a type twice".into()))?;
+        let types = MessageTypes::from_config(session.config()).ok_or_else(|| {
+            WorldError::Build("the room's message table names a type twice".into())
+        })?;
         if types.kind::<Epoch>().is_none() {
             return Err(WorldError::Build(
                 "the session's message table has no rollback epoch type (rollback::room::register)"
@@ -273,7 +278,9 @@ impl RollbackPeer {
     /// (final once `frame` is confirmed).
     pub fn checksum_at(&self, frame: i32) -> Option<u128> {
         let (_, start) = self.epoch.as_ref()?;
-        self.ring.get(&(frame - start)).map(|s| RollbackWorld::checksum_of(s))
+        self.ring
+            .get(&(frame - start))
+            .map(|s| RollbackWorld::checksum_of(s))
     }
 
     /// This peer's input for the next frame.
@@ -301,7 +308,9 @@ impl RollbackPeer {
                     self.stats.dropped += 1;
                 }
             }
-            Ok(Datagram::Snapshot { epoch, share }) => self.on_snapshot_datagram(now, from, epoch, share),
+            Ok(Datagram::Snapshot { epoch, share }) => {
+                self.on_snapshot_datagram(now, from, epoch, share)
+            }
             Err(_) => self.stats.dropped += 1,
         }
     }
@@ -354,8 +363,9 @@ impl RollbackPeer {
             Delivery::Retained,
             &epoch,
         ) {
-            self.events
-                .push_back(RollbackEvent::Warning(format!("epoch {n} not announced: {e:?}")));
+            self.events.push_back(RollbackEvent::Warning(format!(
+                "epoch {n} not announced: {e:?}"
+            )));
         }
         self.announced = Some(players);
         // The host switches at once (it has the state it announced).
@@ -447,7 +457,9 @@ impl RollbackPeer {
     }
 
     fn try_switch(&mut self, now: Instant) {
-        let Some(p) = self.pending.as_mut() else { return };
+        let Some(p) = self.pending.as_mut() else {
+            return;
+        };
         if !p.epoch.players.contains(&self.me) {
             // Not ours (we joined after it was made): the host makes one with us.
             return;
@@ -483,7 +495,12 @@ impl RollbackPeer {
                     )));
                     // Ask the host the session knows now (the old one may be gone).
                     let from = self.session.host_id().unwrap_or(p.epoch.host);
-                    p.fetch = Some(BlobFetch::new(now, from, MAX_SNAPSHOT_BYTES, Duration::from_secs(10)));
+                    p.fetch = Some(BlobFetch::new(
+                        now,
+                        from,
+                        MAX_SNAPSHOT_BYTES,
+                        Duration::from_secs(10),
+                    ));
                     return;
                 }
             }
@@ -495,7 +512,9 @@ impl RollbackPeer {
             Some(_) => return, // not confirmed that far yet
             None => None,
         };
-        let Some(p) = self.pending.as_mut() else { return };
+        let Some(p) = self.pending.as_mut() else {
+            return;
+        };
         if let Some(snap) = mine {
             let blob = encode_snapshot(&snap);
             if sha256(&blob) == p.epoch.digest {
@@ -512,7 +531,12 @@ impl RollbackPeer {
         }
         // No state of that frame here (a joiner, or it left our ring), or ours differs.
         let from = p.epoch.host;
-        p.fetch = Some(BlobFetch::new(now, from, MAX_SNAPSHOT_BYTES, Duration::from_secs(10)));
+        p.fetch = Some(BlobFetch::new(
+            now,
+            from,
+            MAX_SNAPSHOT_BYTES,
+            Duration::from_secs(10),
+        ));
     }
 
     fn switch_to(&mut self, epoch: Epoch, snap: Snapshot, blob: Vec<u8>) {
@@ -567,9 +591,10 @@ impl RollbackPeer {
                 }
                 self.epoch = Some((epoch, snap.frame));
             }
-            Err(e) => self
-                .events
-                .push_back(RollbackEvent::Warning(format!("epoch {}: ggrs: {e}", epoch.n))),
+            Err(e) => self.events.push_back(RollbackEvent::Warning(format!(
+                "epoch {}: ggrs: {e}",
+                epoch.n
+            ))),
         }
     }
 
@@ -579,9 +604,9 @@ impl RollbackPeer {
         g.poll_remote_clients();
         for e in g.events() {
             match e {
-                GgrsEvent::Disconnected { addr } => {
-                    self.events.push_back(RollbackEvent::PlayerDisconnected(addr))
-                }
+                GgrsEvent::Disconnected { addr } => self
+                    .events
+                    .push_back(RollbackEvent::PlayerDisconnected(addr)),
                 GgrsEvent::DesyncDetected { frame, addr, .. } => {
                     self.stats.desyncs += 1;
                     let start = self.epoch.as_ref().map_or(0, |e| e.1);
@@ -622,7 +647,9 @@ impl RollbackPeer {
                 return;
             }
         };
-        let Some(world) = self.world.as_mut() else { return };
+        let Some(world) = self.world.as_mut() else {
+            return;
+        };
         let mut advances = 0u64;
         for r in requests {
             match r {

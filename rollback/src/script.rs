@@ -66,13 +66,19 @@ impl SqueezeThrow {
             60..120 => {
                 let at = self.grabbed_at.unwrap_or(object);
                 let s = (t - 60) as f32 / 60.0;
-                (at + Vec3::new(0.0, 0.25 * s, 0.0) + facing * Vec3::Z * (-0.03 * s), 1.0)
+                (
+                    at + Vec3::new(0.0, 0.25 * s, 0.0) + facing * Vec3::Z * (-0.03 * s),
+                    1.0,
+                )
             }
             // throw: fast sweep sideways and up, released at the end
             120..132 => {
                 let at = self.grabbed_at.unwrap_or(object) + Vec3::Y * 0.25;
                 let s = (t - 120) as f32 / 12.0;
-                (at + facing * Vec3::new(0.2 * s, 0.15 * s, 0.0), if t < 130 { 1.0 } else { 0.0 })
+                (
+                    at + facing * Vec3::new(0.2 * s, 0.15 * s, 0.0),
+                    if t < 130 { 1.0 } else { 0.0 },
+                )
             }
             // back to rest
             _ => {
@@ -83,7 +89,10 @@ impl SqueezeThrow {
         let sway = (frame as f32 * 0.05).sin() * 0.02;
         DeviceFrame {
             head: Some((head + Vec3::X * sway, facing)),
-            hands: [Some((base + facing * PART_OFFSETS[1], facing)), Some((hand, facing))],
+            hands: [
+                Some((base + facing * PART_OFFSETS[1], facing)),
+                Some((hand, facing)),
+            ],
             grip: [0.0, grip],
             trigger: [0.0, 0.0],
         }

@@ -156,7 +156,10 @@ mod tests {
     #[test]
     fn hostile_datagrams_are_errors_and_never_panic() {
         assert_eq!(decode(&[]).err(), Some(DecodeError::Short));
-        assert_eq!(decode(&[ROLLBACK_MARKER, 1, 0]).err(), Some(DecodeError::Short));
+        assert_eq!(
+            decode(&[ROLLBACK_MARKER, 1, 0]).err(),
+            Some(DecodeError::Short)
+        );
         assert_eq!(
             decode(&[ROLLBACK_MARKER, 9, 0, 0, 0, 0]).err(),
             Some(DecodeError::Kind(9))

@@ -114,7 +114,11 @@ impl RollbackWorld {
                 LocalBody::Rigid(h) => vec![h],
                 LocalBody::Soft(h) => soft
                     .get(h)
-                    .map(|b| std::iter::once(b.center()).chain(b.particles().iter().copied()).collect())
+                    .map(|b| {
+                        std::iter::once(b.center())
+                            .chain(b.particles().iter().copied())
+                            .collect()
+                    })
                     .unwrap_or_default(),
                 LocalBody::Pose => Vec::new(),
             };
@@ -167,7 +171,9 @@ impl RollbackWorld {
             if !(t.is_finite() && r.is_finite() && v.is_finite() && a.is_finite())
                 || (r.length_squared() - 1.0).abs() > 1e-3
             {
-                return Err(WorldError::Snapshot("a non-finite or non-unit body state".into()));
+                return Err(WorldError::Snapshot(
+                    "a non-finite or non-unit body state".into(),
+                ));
             }
             if let Some(body) = w.world.bodies.get_mut(*h) {
                 body.set_position(Pose::from_parts(t, r), true);
@@ -231,7 +237,9 @@ impl RollbackWorld {
                 if let Some(pose) = d.hands[h] {
                     p.last[h] = Some(pose);
                 }
-                let Some((pos, rot)) = p.last[h] else { continue };
+                let Some((pos, rot)) = p.last[h] else {
+                    continue;
+                };
                 let tracked = d.hands[h].is_some();
                 let sample = HandSample {
                     position_m: pos,
@@ -247,7 +255,8 @@ impl RollbackWorld {
                     },
                 );
             }
-            p.hands.update(&mut self.world, &mut self.soft, &AllLocal, dt);
+            p.hands
+                .update(&mut self.world, &mut self.soft, &AllLocal, dt);
             while p.hands.poll_event().is_some() {}
         }
         if let Some(n) = self.debug_noise.as_mut() {
@@ -386,7 +395,9 @@ fn checksum(frame: i32, bodies: &RigidBodySet) -> u128 {
         let t = b.translation();
         let r = *b.rotation();
         let (v, a) = (b.linvel(), b.angvel());
-        for x in [t.x, t.y, t.z, r.x, r.y, r.z, r.w, v.x, v.y, v.z, a.x, a.y, a.z] {
+        for x in [
+            t.x, t.y, t.z, r.x, r.y, r.z, r.w, v.x, v.y, v.z, a.x, a.y, a.z,
+        ] {
             h.word(x.to_bits());
         }
     }
@@ -404,7 +415,9 @@ fn body_bits(objects: &[WorldObject], bodies: &RigidBodySet) -> Vec<[u32; 13]> {
                 let t = b.translation();
                 let r = *b.rotation();
                 let (v, a) = (b.linvel(), b.angvel());
-                let vals = [t.x, t.y, t.z, r.x, r.y, r.z, r.w, v.x, v.y, v.z, a.x, a.y, a.z];
+                let vals = [
+                    t.x, t.y, t.z, r.x, r.y, r.z, r.w, v.x, v.y, v.z, a.x, a.y, a.z,
+                ];
                 for (o, x) in out.iter_mut().zip(vals) {
                     *o = x.to_bits();
                 }
@@ -430,7 +443,9 @@ impl Fnv128 {
     fn word(&mut self, w: u32) {
         for byte in w.to_le_bytes() {
             self.a = (self.a ^ u64::from(byte)).wrapping_mul(0x0000_0100_0000_01b3);
-            self.b = (self.b ^ u64::from(byte)).wrapping_mul(0x0000_0100_0000_01b3).rotate_left(7);
+            self.b = (self.b ^ u64::from(byte))
+                .wrapping_mul(0x0000_0100_0000_01b3)
+                .rotate_left(7);
         }
     }
     fn finish(&self) -> u128 {

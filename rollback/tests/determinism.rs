@@ -21,7 +21,10 @@ const PLAYERS: [PeerId; 2] = [PeerId(3), PeerId(6)];
 /// Two bots' inputs recorded from a world as it runs, and the checksum once a second.
 fn record(frames: i32) -> (Vec<[PlayerInput; 2]>, Vec<u128>, RollbackWorld) {
     let mut w = RollbackWorld::new(&scene(), DT, &PLAYERS).unwrap();
-    let mut bots = [SqueezeThrow::new(PLAYERS[0], 1), SqueezeThrow::new(PLAYERS[1], 3)];
+    let mut bots = [
+        SqueezeThrow::new(PLAYERS[0], 1),
+        SqueezeThrow::new(PLAYERS[1], 3),
+    ];
     let mut inputs = Vec::new();
     let mut sums = Vec::new();
     for f in 0..frames {
@@ -36,10 +39,14 @@ fn record(frames: i32) -> (Vec<[PlayerInput; 2]>, Vec<u128>, RollbackWorld) {
 }
 
 #[test]
-fn two_fresh_worlds_fed_the_same_inputs_for_60_s_end_bit_identical_with_bodies_squeezed_and_thrown() {
+fn two_fresh_worlds_fed_the_same_inputs_for_60_s_end_bit_identical_with_bodies_squeezed_and_thrown()
+{
     let (inputs, sums, a) = record(3600);
     // The recording did things: the soft ball was held, squeezed and thrown.
-    let grips = inputs.iter().filter(|i| i[0].grip[1] > 0 || i[1].grip[1] > 0).count();
+    let grips = inputs
+        .iter()
+        .filter(|i| i[0].grip[1] > 0 || i[1].grip[1] > 0)
+        .count();
     assert!(grips > 600, "{grips} frames with a grip");
     let mut b = RollbackWorld::new(&scene(), DT, &PLAYERS).unwrap();
     let start = b.object_pose(1).unwrap().0;
@@ -48,7 +55,12 @@ fn two_fresh_worlds_fed_the_same_inputs_for_60_s_end_bit_identical_with_bodies_s
         b.step(i);
         moved = moved.max(b.object_pose(1).unwrap().0.distance(start));
         if f % 60 == 59 {
-            assert_eq!(b.checksum(), sums[f / 60], "worlds differ after frame {}", f + 1);
+            assert_eq!(
+                b.checksum(),
+                sums[f / 60],
+                "worlds differ after frame {}",
+                f + 1
+            );
         }
     }
     assert!(moved > 0.1, "the soft ball moved at most {moved} m");
@@ -86,16 +98,21 @@ fn sync_test(world: &mut RollbackWorld, frames: i32) -> Result<(), GgrsError> {
         .add_player(ggrs::PlayerType::Local, 0)?
         .add_player(ggrs::PlayerType::Local, 1)?
         .start_synctest_session()?;
-    let mut bots = [SqueezeThrow::new(PLAYERS[0], 1), SqueezeThrow::new(PLAYERS[1], 0)];
+    let mut bots = [
+        SqueezeThrow::new(PLAYERS[0], 1),
+        SqueezeThrow::new(PLAYERS[1], 0),
+    ];
     for _ in 0..frames {
         let i = [bots[0].input(world), bots[1].input(world)];
         s.add_local_input(0, i[0])?;
         s.add_local_input(1, i[1])?;
         for r in s.advance_frame()? {
             match r {
-                GgrsRequest::SaveGameState { cell, frame } => {
-                    cell.save(frame, Some(std::rc::Rc::new(world.save())), Some(world.checksum()))
-                }
+                GgrsRequest::SaveGameState { cell, frame } => cell.save(
+                    frame,
+                    Some(std::rc::Rc::new(world.save())),
+                    Some(world.checksum()),
+                ),
                 GgrsRequest::LoadGameState { cell, .. } => world.load(&cell.load().unwrap()),
                 GgrsRequest::AdvanceFrame { inputs } => {
                     let i: Vec<PlayerInput> = inputs.iter().map(|x| x.0).collect();
@@ -108,7 +125,8 @@ fn sync_test(world: &mut RollbackWorld, frames: i32) -> Result<(), GgrsError> {
 }
 
 #[test]
-fn rolling_back_and_resimulating_gives_the_same_checksums_and_an_injected_nondeterminism_is_caught() {
+fn rolling_back_and_resimulating_gives_the_same_checksums_and_an_injected_nondeterminism_is_caught()
+{
     let mut w = RollbackWorld::new(&scene(), DT, &PLAYERS).unwrap();
     sync_test(&mut w, 150).unwrap();
     let mut bad = RollbackWorld::new(&scene(), DT, &PLAYERS).unwrap();

@@ -30,8 +30,14 @@ fn assert_agree(room: &Room) {
         );
     }
     assert!(f > 0, "no frame confirmed everywhere");
-    assert!(sums.iter().all(|s| s.is_some()), "a peer lost frame {f}: {sums:?}");
-    assert!(sums.windows(2).all(|w| w[0] == w[1]), "worlds differ at frame {f}: {sums:?}");
+    assert!(
+        sums.iter().all(|s| s.is_some()),
+        "a peer lost frame {f}: {sums:?}"
+    );
+    assert!(
+        sums.windows(2).all(|w| w[0] == w[1]),
+        "worlds differ at frame {f}: {sums:?}"
+    );
 }
 
 #[test]
@@ -42,34 +48,58 @@ fn a_two_peer_room_under_50_ms_and_5_percent_loss_runs_60_s_without_a_desync() {
     room.run(Duration::from_secs(60));
     for n in &room.nodes {
         let s = n.peer.stats();
-        assert!(s.frames > 2500, "peer {} advanced only {} frames: {s:?}", n.peer.me().0, s.frames);
+        assert!(
+            s.frames > 2500,
+            "peer {} advanced only {} frames: {s:?}",
+            n.peer.me().0,
+            s.frames
+        );
         assert_eq!(n.peer.epoch().map(|e| e.players.len()), Some(2));
     }
-    assert!(room.nodes[1].peer.stats().rollbacks > 100, "no rollbacks under 50 ms?");
+    assert!(
+        room.nodes[1].peer.stats().rollbacks > 100,
+        "no rollbacks under 50 ms?"
+    );
     assert_eq!(room.desyncs(), 0, "warnings: {:?}", room.warnings());
     assert_agree(&room);
 }
 
 #[test]
-fn a_peer_killed_mid_grab_leaves_the_others_going_from_an_agreed_state_and_a_late_joiner_plays_on() {
+fn a_peer_killed_mid_grab_leaves_the_others_going_from_an_agreed_state_and_a_late_joiner_plays_on()
+{
     let mut room = Room::new(net(20, 0.02));
     room.add(1);
     room.add(2);
     room.add(3);
     room.run(Duration::from_secs(4));
-    assert!(room.nodes.iter().all(|n| n.peer.epoch().map(|e| e.players.len()) == Some(3)));
+    assert!(room
+        .nodes
+        .iter()
+        .all(|n| n.peer.epoch().map(|e| e.players.len()) == Some(3)));
     // Kill peer 3 while its right hand grips.
     let mut waited = 0;
-    while room.nodes[2].peer.world().and_then(|w| w.held(2, 1)).is_none() && waited < 400 {
+    while room.nodes[2]
+        .peer
+        .world()
+        .and_then(|w| w.held(2, 1))
+        .is_none()
+        && waited < 400
+    {
         room.tick();
         std::thread::sleep(Duration::from_millis(16));
         waited += 1;
     }
-    assert!(room.nodes[2].peer.world().unwrap().held(2, 1).is_some(), "peer 3 never held anything");
+    assert!(
+        room.nodes[2].peer.world().unwrap().held(2, 1).is_some(),
+        "peer 3 never held anything"
+    );
     let before = room.nodes[0].peer.stats().frames;
     room.kill(2);
     room.run(Duration::from_secs(5));
-    assert!(room.nodes[0].peer.stats().frames > before + 150, "the room stopped");
+    assert!(
+        room.nodes[0].peer.stats().frames > before + 150,
+        "the room stopped"
+    );
     assert!(room.nodes[..2].iter().all(|n| n
         .events
         .iter()
@@ -83,8 +113,17 @@ fn a_peer_killed_mid_grab_leaves_the_others_going_from_an_agreed_state_and_a_lat
     room.add(4);
     room.run(Duration::from_secs(6));
     let joiner = &room.nodes[3];
-    assert_eq!(joiner.peer.epoch().map(|e| e.players.len()), Some(3), "{:?}", joiner.events);
-    assert!(joiner.peer.stats().frames > 120, "{:?}", joiner.peer.stats());
+    assert_eq!(
+        joiner.peer.epoch().map(|e| e.players.len()),
+        Some(3),
+        "{:?}",
+        joiner.events
+    );
+    assert!(
+        joiner.peer.stats().frames > 120,
+        "{:?}",
+        joiner.peer.stats()
+    );
     assert_eq!(room.desyncs(), 0, "warnings: {:?}", room.warnings());
     assert_agree(&room);
 }

@@ -270,6 +270,12 @@ struct PeerOpts {
     /// the room must give the same.
     #[arg(long, value_enum, default_value = "relay")]
     state_route: Route,
+    /// How the room keeps its peers' worlds the same: `state` (each object's owner simulates
+    /// it and sends its state, the default) or `rollback` (every peer simulates everything
+    /// from everyone's inputs, ggrs; headless bots only in this build). Every peer of the
+    /// room must give the same: a joiner with the other is refused, told which the room uses.
+    #[arg(long, value_enum, default_value = "state")]
+    sync: SyncArg,
     /// Pump the network only in the frame, not on a thread of its own between frames (a slow
     /// frame then slows the room: for comparison).
     #[arg(long)]
@@ -490,6 +496,8 @@ pub struct PeerArgs {
     pub uplink_bytes_per_s: Option<u32>,
     /// Which way object state travels.
     pub state_route: softsync_net::StateRoute,
+    /// Rollback (ggrs) rather than state sync.
+    pub rollback: bool,
     /// No stats lines.
     pub quiet: bool,
     /// Spawn no avatar.
@@ -783,6 +791,7 @@ fn peer_args(
             Route::Relay => softsync_net::StateRoute::Relay,
             Route::Direct => softsync_net::StateRoute::Direct,
         },
+        rollback: p.sync == SyncArg::Rollback,
         quiet: p.quiet,
         no_avatar: p.no_avatar,
         front,

@@ -15,6 +15,15 @@ pub(super) enum Route {
     Direct,
 }
 
+/// `--sync`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub(super) enum SyncArg {
+    /// Owners simulate and send state.
+    State,
+    /// Everyone simulates from everyone's inputs (ggrs).
+    Rollback,
+}
+
 /// Room sizes of `bench room-load`.
 #[derive(Clone, Debug)]
 pub(super) struct Sizes(pub(super) Vec<usize>);

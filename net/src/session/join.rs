@@ -68,11 +68,11 @@ impl Session {
                 "protocol version mismatch: host speaks {PROTOCOL_VERSION}, you speak {protocol}"
             ))
         } else if digest != self.cfg.digest() {
-            Some(
+            Some(format!(
                 "room configuration differs from the host's (another scene, other replication \
-                 settings, or other message types)"
-                    .to_string(),
-            )
+                 settings, or other message types; the host's message types: {})",
+                self.cfg.messages.kinds.join(", ")
+            ))
         } else if self.members.len() >= self.cfg.max_members {
             Some(format!(
                 "the room is full ({} members)",

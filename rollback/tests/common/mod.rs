@@ -5,11 +5,11 @@
 use std::path::Path;
 use std::time::{Duration, Instant as WallInstant};
 
+use softsync_net::policy::SendPolicy;
+use softsync_net::transport::HubEndpoint;
 use softsync_net::{
     ConditionerConfig, Instant, LinkConditioner, MemoryHub, PeerId, Session, Transport,
 };
-use softsync_net::transport::HubEndpoint;
-use softsync_net::policy::SendPolicy;
 use softsync_peer::Scene;
 use softsync_rollback::room::register;
 use softsync_rollback::script::SqueezeThrow;

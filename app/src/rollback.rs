@@ -1,0 +1,256 @@
+//! `softsync host|join --sync rollback`: a headless peer of a rollback room on the real path
+//! (signaling, WebRTC data channels, the optional seeded conditioner), its loop at the fixed
+//! rate, its lines for people and tests:
+//! - `epoch n=N frame=F players=A,B,…` when an epoch starts here;
+//! - `rollback.check frame=F checksum=X` for every confirmed frame that is a multiple of 60
+//!   (two processes agree when their lines for a frame are equal);
+//! - a stats line a second, and `rollback.summary …` at the end.
+
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant as WallInstant};
+
+use softsync_bevy::{connect, first_contact, scene_server, Clock, RoomOptions, LEAVE_GRACE};
+use softsync_net::messages::MessageTypes;
+use softsync_net::{Event, LinkConditioner, PeerEvent, Session, Transport};
+use softsync_peer::Scene;
+use softsync_rollback::room::register;
+use softsync_rollback::script::SqueezeThrow;
+use softsync_rollback::{PlayerInput, RollbackConfig, RollbackEvent, RollbackPeer};
+
+use crate::cli::{FrontEnd, PeerArgs};
+use crate::Failure;
+
+/// What a rollback bot does.
+enum Script {
+    Idle,
+    Squeeze(SqueezeThrow),
+}
+
+/// Run a rollback peer until `--duration`, a signal, or a refusal.
+pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Failure> {
+    if a.front != FrontEnd::Headless {
+        return Err(Failure::usage(
+            "--sync rollback: desktop and VR peers are not in rollback rooms yet; run a headless \
+             peer (with --bot squeeze or idle)",
+        ));
+    }
+    let mut cfg = opts
+        .session_config(&scene)
+        .map_err(|e| Failure::usage(e.to_string()))?;
+    let mut types = MessageTypes::from_config(&cfg)
+        .ok_or_else(|| Failure::usage("the room's message table names a type twice"))?;
+    register(&mut types);
+    types.configure(&mut cfg);
+    let rcfg = RollbackConfig {
+        dt_s: (1.0 / a.sim_hz) as f32,
+        ..RollbackConfig::default()
+    };
+    let mut conn = connect(&opts).map_err(|e| Failure::connect(e.to_string()))?;
+    let me = conn.transport.local_id();
+    let clock = Clock::start();
+    let session = if a.host {
+        Session::host(me, cfg, clock.now())
+    } else {
+        let c = first_contact(&mut conn.transport, &opts, conn.started)
+            .map_err(|e| Failure::connect(e.to_string()))?;
+        println!(
+            "connected to peer {} after {:.0} ms",
+            c.0,
+            conn.started.elapsed().as_secs_f64() * 1e3
+        );
+        Session::join(me, c, cfg, clock.now())
+    };
+    let mut transport: Box<dyn Transport + Send> = match opts.condition.clone() {
+        Some(c) => Box::new(LinkConditioner::new(conn.transport, c)),
+        None => Box::new(conn.transport),
+    };
+    let scene_copy = scene.clone();
+    let mut share: Option<softsync_net::share::BlobServer> = None;
+    let mut peer =
+        RollbackPeer::new(scene, rcfg, session).map_err(|e| Failure::runtime(e.to_string()))?;
+    if a.host {
+        peer.open(clock.now())
+            .map_err(|e| Failure::runtime(e.to_string()))?;
+    }
+    if conn.signal.is_some() {
+        println!("signaling on {}", conn.url);
+    }
+    println!(
+        "{} room={} peer={} signal={} sync=rollback",
+        if a.host { "hosting" } else { "joining" },
+        a.room,
+        me.0,
+        conn.url
+    );
+    let mut script = match a.bot.as_deref() {
+        None | Some("idle") => Script::Idle,
+        Some("squeeze") => Script::Squeeze(SqueezeThrow::new(me, (me.0 % 5) as usize)),
+        Some(other) => {
+            return Err(Failure::usage(format!(
+                "--bot {other:?}: a rollback peer runs the built-in `squeeze` or `idle` (the \
+                 script language drives a state-sync peer)"
+            )))
+        }
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = stop.clone();
+        if let Err(e) = ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst)) {
+            eprintln!("warning: no signal handler ({e})");
+        }
+    }
+    let step = Duration::from_secs_f64(1.0 / a.sim_hz);
+    let started = WallInstant::now();
+    let mut next = started;
+    let mut last_line = started;
+    let mut checked = -1i32;
+    let mut joined = a.host;
+    let mut failure = None;
+    while !stop.load(Ordering::SeqCst) && a.duration.is_none_or(|d| started.elapsed() < d) {
+        let now = clock.now();
+        while let Some((from, bytes)) = transport.recv(now) {
+            if softsync_net::share::is_share(&bytes) {
+                // a joiner without the scene asks for ours (a state-sync one is then refused
+                // at its Hello, told the room syncs by rollback)
+                let server = share
+                    .get_or_insert_with(|| scene_server(&scene_copy, peer.session().config(), me));
+                if let Some(t) = server.handle(now, from, &bytes) {
+                    transport.send(now, &t);
+                }
+                continue;
+            }
+            peer.handle_datagram(now, from, &bytes);
+        }
+        while let Some(PeerEvent::Disconnected(_) | PeerEvent::Connected(_)) =
+            transport.poll_peer_event()
+        {}
+        let input = match (&mut script, peer.world()) {
+            (Script::Squeeze(s), Some(w)) => s.input(w),
+            _ => PlayerInput::default(),
+        };
+        peer.set_input(input);
+        peer.tick(now);
+        while let Some(t) = peer.poll_transmit(now) {
+            transport.send(now, &t);
+        }
+        while let Some(e) = peer.poll_event() {
+            match e {
+                RollbackEvent::EpochStarted { n, frame, players } => {
+                    let p: Vec<String> = players.iter().map(|p| p.0.to_string()).collect();
+                    println!("epoch n={n} frame={frame} players={}", p.join(","));
+                }
+                RollbackEvent::Desync { frame, peer } => {
+                    println!("desync frame={frame} peer={}", peer.0)
+                }
+                RollbackEvent::PlayerDisconnected(p) => println!("player {} disconnected", p.0),
+                RollbackEvent::Warning(w) => eprintln!("warning: {w}"),
+                RollbackEvent::Room(Event::Joined { host, .. }) => {
+                    joined = true;
+                    println!("joined: host is peer {}", host.0)
+                }
+                RollbackEvent::Room(Event::Refused { reason }) => {
+                    failure = Some(Failure::connect(refusal(&reason)));
+                }
+                RollbackEvent::Room(Event::Dropped { reason, .. }) => {
+                    failure = Some(Failure::runtime(format!("dropped from the room: {reason}")));
+                }
+                RollbackEvent::Room(Event::PeerJoined(p)) => println!("peer {} joined", p.0),
+                RollbackEvent::Room(Event::PeerLeft(p)) => println!("peer {} left", p.0),
+                RollbackEvent::Room(Event::HostChanged { host, .. }) => {
+                    println!("host is now peer {}", host.0)
+                }
+                RollbackEvent::Room(_) => {}
+            }
+        }
+        if failure.is_some() {
+            break;
+        }
+        if !joined && started.elapsed() > a.connect_timeout {
+            failure = Some(Failure::connect("no welcome from the room's host in time"));
+            break;
+        }
+        if let Some(c) = peer.confirmed_frame() {
+            let mut f = (checked + 1).max(c - 120);
+            f = (f + 59) / 60 * 60;
+            while f <= c {
+                if let Some(sum) = peer.checksum_at(f) {
+                    println!("rollback.check frame={f} checksum={sum:032x}");
+                }
+                checked = f;
+                f += 60;
+            }
+        }
+        if !a.quiet && last_line.elapsed() >= Duration::from_secs(1) {
+            last_line = WallInstant::now();
+            let s = peer.stats();
+            println!(
+                "stats frame={} confirmed={} epoch={} players={} rollbacks={} resimulated={} stalled={} desyncs={} ggrs_bytes={}",
+                peer.world().map_or(-1, |w| w.frame()),
+                peer.confirmed_frame().unwrap_or(-1),
+                peer.epoch().map_or(0, |e| e.n),
+                peer.epoch().map_or(0, |e| e.players.len()),
+                s.rollbacks,
+                s.resimulated,
+                s.stalled_ticks,
+                s.desyncs,
+                s.ggrs_bytes
+            );
+        }
+        next += step;
+        let now = WallInstant::now();
+        if next > now {
+            std::thread::sleep(next - now);
+        } else if now - next > Duration::from_millis(250) {
+            next = now;
+        }
+    }
+    peer.leave(clock.now());
+    let end = WallInstant::now() + LEAVE_GRACE;
+    while WallInstant::now() < end {
+        let now = clock.now();
+        while let Some(t) = peer.poll_transmit(now) {
+            transport.send(now, &t);
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let s = peer.stats();
+    let mut ms = s.frame_ms.clone();
+    ms.sort_by(f32::total_cmp);
+    let p95 = ms.get(ms.len() * 95 / 100).copied().unwrap_or(0.0);
+    println!(
+        "rollback.summary frames={} resimulated={} rollbacks={} desyncs={} epochs={} switch_ms_max={:.0} frame_ms_p95={p95:.2} save_us={:.1} load_us={:.1} ggrs_bytes={}",
+        s.frames,
+        s.resimulated,
+        s.rollbacks,
+        s.desyncs,
+        s.epochs,
+        s.switch_ms_max,
+        s.save_ns as f64 / s.saves.max(1) as f64 / 1e3,
+        s.load_ns as f64 / s.rollbacks.max(1) as f64 / 1e3,
+        s.ggrs_bytes
+    );
+    match failure {
+        Some(f) => Err(f),
+        None => Ok(ExitCode::SUCCESS),
+    }
+}
+
+/// A refusal said plainly, naming the room's sync mode when that is why.
+pub fn refusal(reason: &str) -> String {
+    let host_rollback = reason.contains(softsync_rollback::room::EPOCH_NAME);
+    if reason.contains("configuration differs") {
+        if host_rollback {
+            return format!(
+                "refused: {reason}\n  the room syncs by rollback (its host ran --sync \
+                 rollback): join with --sync rollback"
+            );
+        }
+        return format!(
+            "refused: {reason}\n  if the room syncs by state (its host ran without --sync \
+             rollback), join without --sync rollback"
+        );
+    }
+    format!("refused: {reason}")
+}

@@ -1,0 +1,189 @@
+//! Rollback rooms of real processes on WebRTC (`softsync host|join --sync rollback`): every
+//! peer simulates the room from everyone's inputs (ggrs); the host keeps membership.
+//!
+//! Inside a network namespace (`scripts/netns-run`), like every live test. Agreement is read
+//! from the `rollback.check frame=F checksum=X` lines each process prints for confirmed
+//! frames: two processes agree when their lines for a frame are equal.
+#![allow(clippy::unwrap_used, clippy::disallowed_methods, missing_docs)]
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+mod common;
+use common::{embedded_host, field, peer_on, require_netns, scratch, Proc};
+
+/// frame → checksum, from a process's lines.
+fn checks(p: &Proc) -> BTreeMap<i64, String> {
+    p.stdout()
+        .lines()
+        .filter(|l| l.starts_with("rollback.check "))
+        .map(|l| {
+            (
+                field(l, "frame").parse().unwrap(),
+                field(l, "checksum").to_owned(),
+            )
+        })
+        .collect()
+}
+
+/// The frames both processes checked, and that they agree on every one (at least `min`).
+fn assert_agree(a: &Proc, b: &Proc, min: usize) -> usize {
+    let (ca, cb) = (checks(a), checks(b));
+    let common: Vec<i64> = ca.keys().filter(|f| cb.contains_key(f)).copied().collect();
+    assert!(
+        common.len() >= min,
+        "only {} common checked frames:\n{}\n{}",
+        common.len(),
+        a.logs(),
+        b.logs()
+    );
+    for f in &common {
+        assert_eq!(ca[f], cb[f], "worlds differ at frame {f}");
+    }
+    common.len()
+}
+
+fn summary(p: &Proc) -> String {
+    p.stdout()
+        .lines()
+        .find(|l| l.starts_with("rollback.summary"))
+        .unwrap_or_else(|| panic!("no summary:\n{}", p.logs()))
+        .to_owned()
+}
+
+const NET: &str = "lat=50ms,jitter=5ms,loss=5%,seed=3";
+
+#[test]
+fn a_two_process_rollback_room_under_50_ms_and_5_percent_loss_agrees_60_s_without_a_desync() {
+    require_netns();
+    let dir = scratch("rollback-two");
+    let common = [
+        "--sync",
+        "rollback",
+        "--bot",
+        "squeeze",
+        "--net-condition",
+        NET,
+    ];
+    let mut args = common.to_vec();
+    args.extend(["--duration", "66"]);
+    let (mut host, url) = embedded_host(&dir, "rb", &args);
+    let mut bot = peer_on(&dir, "bot", "join", &url, "rb", &{
+        let mut a = common.to_vec();
+        a.extend(["--duration", "62"]);
+        a
+    });
+    bot.wait_line("epoch n=2", Duration::from_secs(20));
+    assert_eq!(bot.wait_exit(Duration::from_secs(90)), 0, "{}", bot.logs());
+    assert_eq!(
+        host.wait_exit(Duration::from_secs(30)),
+        0,
+        "{}",
+        host.logs()
+    );
+    // ~58 s of frames checked every second, all equal.
+    let n = assert_agree(&host, &bot, 50);
+    for p in [&host, &bot] {
+        let s = summary(p);
+        assert_eq!(field(&s, "desyncs"), "0", "{s}");
+        assert!(field(&s, "rollbacks").parse::<u64>().unwrap() > 100, "{s}");
+        assert!(!p.stdout().contains("desync frame="), "{}", p.logs());
+    }
+    eprintln!(
+        "{n} frames agreed\nhost: {}\nbot: {}",
+        summary(&host),
+        summary(&bot)
+    );
+}
+
+#[test]
+fn a_peer_killed_mid_interaction_leaves_the_others_going_and_a_late_joiner_gets_the_state() {
+    require_netns();
+    let dir = scratch("rollback-kill");
+    let common = ["--sync", "rollback", "--bot", "squeeze", "--duration", "40"];
+    let (mut host, url) = embedded_host(&dir, "rk", &common);
+    let mut b = peer_on(&dir, "b", "join", &url, "rk", &common);
+    b.wait_line("epoch n=2", Duration::from_secs(20));
+    let mut c = peer_on(&dir, "c", "join", &url, "rk", &common);
+    c.wait_line("epoch n=3", Duration::from_secs(20));
+    let c_id = c.peer_id();
+    // Let it play, then kill it (its bot grips two thirds of every cycle).
+    std::thread::sleep(Duration::from_secs(5));
+    c.kill();
+    host.wait_line(
+        &format!("player {c_id} disconnected"),
+        Duration::from_secs(10),
+    );
+    b.wait_line(
+        &format!("player {c_id} disconnected"),
+        Duration::from_secs(10),
+    );
+    // A late joiner: the next epoch (without the dead peer), its snapshot fetched.
+    let d = peer_on(&dir, "d", "join", &url, "rk", &common);
+    let line = d.wait_line("epoch n=", Duration::from_secs(30));
+    let players = field(&line, "players").split(',').count();
+    assert_eq!(players, 3, "{line}");
+    std::thread::sleep(Duration::from_secs(8));
+    assert_eq!(
+        host.wait_exit(Duration::from_secs(60)),
+        0,
+        "{}",
+        host.logs()
+    );
+    assert_eq!(b.wait_exit(Duration::from_secs(30)), 0, "{}", b.logs());
+    assert_agree(&host, &b, 20);
+    // The late joiner checked frames after its epoch and agrees with both.
+    let mut d = d;
+    d.kill();
+    assert_agree(&host, &d, 3);
+    for p in [&host, &b] {
+        assert!(!p.stdout().contains("desync frame="), "{}", p.logs());
+    }
+}
+
+#[test]
+fn a_joiner_of_the_other_sync_mode_is_refused_and_told_which_the_room_uses() {
+    require_netns();
+    let dir = scratch("rollback-mismatch");
+    let (_host, url) = embedded_host(&dir, "rm", &["--sync", "rollback", "--duration", "40"]);
+    let mut state = peer_on(&dir, "state", "join", &url, "rm", &["--duration", "20"]);
+    assert_ne!(state.wait_exit(Duration::from_secs(30)), 0);
+    assert!(
+        state.logs().contains("the room syncs by rollback")
+            && state.logs().contains("--sync rollback"),
+        "{}",
+        state.logs()
+    );
+    let (_shost, surl) = {
+        let p = Proc::spawn(
+            &dir,
+            "shost",
+            &[
+                "host",
+                "--room",
+                "rs",
+                "--bind",
+                "127.0.0.1:0",
+                "--quiet",
+                "--duration",
+                "40",
+            ],
+        );
+        let u = common::signal_url(&p);
+        (p, u)
+    };
+    let mut rb = peer_on(
+        &dir,
+        "rb",
+        "join",
+        &surl,
+        "rs",
+        &["--sync", "rollback", "--duration", "20"],
+    );
+    assert_ne!(rb.wait_exit(Duration::from_secs(30)), 0);
+    assert!(
+        rb.logs().contains("join without --sync rollback"),
+        "{}",
+        rb.logs()
+    );
+}
