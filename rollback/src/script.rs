@@ -40,17 +40,29 @@ impl SqueezeThrow {
         PlayerInput::from_device(&self.device(world))
     }
 
-    /// The same as a device frame (for a state-sync bot to compare with).
+    /// The same as a device frame.
     pub fn device(&mut self, world: &RollbackWorld) -> DeviceFrame {
-        let frame = world.frame() + 1;
+        let n = world.objects().len();
+        self.device_at(world.frame() + 1, n, &|i| world.object_pose(i).map(|p| p.0))
+    }
+
+    /// The device frame for `frame`, in a room of `objects` scene objects whose centers
+    /// `center` gives (scene order) as this peer sees them: the same motions for a rollback
+    /// peer and a state-sync one.
+    pub fn device_at(
+        &mut self,
+        frame: i32,
+        objects: usize,
+        center: &dyn Fn(usize) -> Option<Vec3>,
+    ) -> DeviceFrame {
         let (base, facing) = home(self.me);
         let head = base;
         let rest = base + facing * PART_OFFSETS[2];
-        let n = world.objects().len().max(1);
+        let n = objects.max(1);
         let cycle = frame.div_euclid(CYCLE_FRAMES);
         let t = frame.rem_euclid(CYCLE_FRAMES);
         let target = (self.slot + cycle as usize) % n;
-        let object = world.object_pose(target).map_or(rest, |p| p.0);
+        let object = center(target).unwrap_or(rest);
         let lerp = |a: Vec3, b: Vec3, s: f32| a + (b - a) * s.clamp(0.0, 1.0);
         let (hand, grip) = match t {
             // reach over 0.8 s

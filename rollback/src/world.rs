@@ -100,8 +100,19 @@ pub struct RollbackWorld {
 
 impl RollbackWorld {
     /// The scene's objects at their places, at frame 0, with `players` (in this order: every
-    /// member must give the same), stepping by `dt_s`.
+    /// member must give the same), stepping by `dt_s`, hands as [`bot_hand`] makes them.
     pub fn new(scene: &Scene, dt_s: f32, players: &[PeerId]) -> Result<Self, WorldError> {
+        Self::with_hand(scene, dt_s, players, bot_hand())
+    }
+
+    /// The same with every player's hands configured as `hand` (every member must give the
+    /// same).
+    pub fn with_hand(
+        scene: &Scene,
+        dt_s: f32,
+        players: &[PeerId],
+        hand: HandConfig,
+    ) -> Result<Self, WorldError> {
         let mut world = PhysicsWorld::new();
         world.integration_parameters.dt = dt_s;
         scene.build_static(&mut world);
@@ -130,7 +141,7 @@ impl RollbackWorld {
         }
         let mut w = RollbackWorld {
             dt_s,
-            hand: HandConfig::default(),
+            hand,
             world,
             soft,
             objects,
@@ -402,6 +413,17 @@ fn checksum(frame: i32, bodies: &RigidBodySet) -> u128 {
         }
     }
     h.finish()
+}
+
+/// The hands of a rollback room: the ones the binary gives its bots and desktop peers (no
+/// physical controller body, which would shove what the hand reaches for; a 3 cm hover
+/// sphere), so a state-sync room and a rollback room of bots move alike.
+pub fn bot_hand() -> HandConfig {
+    HandConfig {
+        physical_controller: false,
+        hover_radius_m: 0.03,
+        ..HandConfig::default()
+    }
 }
 
 /// Translation, rotation, velocities of every object body, as bits.

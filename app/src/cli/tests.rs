@@ -106,3 +106,19 @@ fn flags_parse_and_bad_ones_are_named() {
         assert!(e.contains(says), "{bad}: {e}");
     }
 }
+
+#[test]
+fn sync_is_state_unless_rollback_is_asked_and_a_wrong_mode_is_refused() {
+    let Command::Peer(p) = parse(&args("host --room r")).unwrap() else {
+        panic!()
+    };
+    assert!(!p.rollback);
+    let Command::Peer(p) = parse(&args(
+        "join --room r --signal ws://127.0.0.1:1 --sync rollback",
+    ))
+    .unwrap() else {
+        panic!()
+    };
+    assert!(p.rollback);
+    assert!(parse(&args("host --room r --sync lockstep")).is_err());
+}
