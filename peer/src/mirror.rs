@@ -360,6 +360,41 @@ impl Mirror {
     }
 }
 
+/// Build a body of `kind` at a pose in a world: a rigid body, or a soft body built around the
+/// origin and then placed (its rest shape stays in its own frame); avatar parts have no body.
+/// The mirror builds the room's objects with it, and a rollback world (`softsync-rollback`)
+/// builds the same bodies.
+pub fn build_body(
+    scene: &Scene,
+    kind: Kind,
+    world: &mut PhysicsWorld,
+    soft: &mut SoftBodySet,
+    pos: Vec3,
+    rot: Quat,
+) -> Result<LocalBody, PeerError> {
+    if kind.is_avatar() {
+        return Ok(LocalBody::Pose);
+    }
+    let Some(config) = scene.soft_config(kind) else {
+        return scene
+            .build_rigid(kind, world, pos, rot)
+            .map(LocalBody::Rigid)
+            .ok_or_else(|| {
+                PeerError::Build(format!("class {} is not in scene {}", kind.0, scene.name))
+            });
+    };
+    let mesh = scene.soft_mesh(kind).map_err(PeerError::Build)?;
+    let h = soft
+        .insert(&mesh, config.clone(), world)
+        .map_err(|e| PeerError::Build(format!("{}: {e}", scene.name_of(kind))))?;
+    if let Some(b) = soft.get_mut(h) {
+        let particles: Vec<Vec3> = b.rest_offsets().iter().map(|o| pos + rot * *o).collect();
+        b.apply_state(world, pos, rot, &particles)
+            .map_err(|e| PeerError::Build(e.to_string()))?;
+    }
+    Ok(LocalBody::Soft(h))
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {
@@ -451,39 +486,4 @@ mod tests {
         assert!(!m.apply_shown(NetId(1), &s), "non-finite");
         assert!(m.state(NetId(1)).unwrap().particles[0].is_finite());
     }
-}
-
-/// Build a body of `kind` at a pose in a world: a rigid body, or a soft body built around the
-/// origin and then placed (its rest shape stays in its own frame); avatar parts have no body.
-/// The mirror builds the room's objects with it, and a rollback world (`softsync-rollback`)
-/// builds the same bodies.
-pub fn build_body(
-    scene: &Scene,
-    kind: Kind,
-    world: &mut PhysicsWorld,
-    soft: &mut SoftBodySet,
-    pos: Vec3,
-    rot: Quat,
-) -> Result<LocalBody, PeerError> {
-    if kind.is_avatar() {
-        return Ok(LocalBody::Pose);
-    }
-    let Some(config) = scene.soft_config(kind) else {
-        return scene
-            .build_rigid(kind, world, pos, rot)
-            .map(LocalBody::Rigid)
-            .ok_or_else(|| {
-                PeerError::Build(format!("class {} is not in scene {}", kind.0, scene.name))
-            });
-    };
-    let mesh = scene.soft_mesh(kind).map_err(PeerError::Build)?;
-    let h = soft
-        .insert(&mesh, config.clone(), world)
-        .map_err(|e| PeerError::Build(format!("{}: {e}", scene.name_of(kind))))?;
-    if let Some(b) = soft.get_mut(h) {
-        let particles: Vec<Vec3> = b.rest_offsets().iter().map(|o| pos + rot * *o).collect();
-        b.apply_state(world, pos, rot, &particles)
-            .map_err(|e| PeerError::Build(e.to_string()))?;
-    }
-    Ok(LocalBody::Soft(h))
 }

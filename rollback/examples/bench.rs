@@ -198,11 +198,12 @@ struct Outcome {
     grips: usize,
 }
 
+/// Per (holder, viewer, object): (tick, where the viewer shows it, where the holder does).
+type Held = std::collections::BTreeMap<(usize, usize, usize), Vec<(usize, Vec3, Vec3)>>;
+
 /// How late remote views are: the shift (whole frames, 0–30) of the holders' truth that best
 /// matches what the others show (least mean distance over every held stretch), in ms.
-fn lag_ms(
-    series: &std::collections::BTreeMap<(usize, usize, usize), Vec<(usize, Vec3, Vec3)>>,
-) -> f64 {
+fn lag_ms(series: &Held) -> f64 {
     let mut best = (f64::INFINITY, 0usize);
     for shift in 0..=30usize {
         let (mut sum, mut n) = (0.0f64, 0usize);
@@ -345,8 +346,7 @@ fn run(cfg: Config, seconds: f64) -> Outcome {
     let mut late = 0usize;
     let mut errors = Vec::new();
     // (tick, holder, viewer, object) → (seen, holder's truth), for the lag estimate.
-    let mut series: std::collections::BTreeMap<(usize, usize, usize), Vec<(usize, Vec3, Vec3)>> =
-        Default::default();
+    let mut series: Held = Default::default();
     let stalled0: Vec<u64> = nodes
         .iter()
         .map(|n| match &n.sim {
@@ -365,9 +365,9 @@ fn run(cfg: Config, seconds: f64) -> Outcome {
             let Some(truth) = nodes[a].center(now, k) else {
                 continue;
             };
-            for v in 0..nodes.len() {
+            for (v, node) in nodes.iter_mut().enumerate() {
                 if v != a {
-                    if let Some(seen) = nodes[v].center(now, k) {
+                    if let Some(seen) = node.center(now, k) {
                         errors.push(f64::from(seen.distance(truth)) * 1000.0);
                         series
                             .entry((a, v, k))

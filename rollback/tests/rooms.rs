@@ -1,5 +1,8 @@
 //! Rollback rooms of in-process peers on the seeded link conditioner, in real time.
 #![allow(clippy::unwrap_used)]
+// ggrs keeps its own wall clock (its timers read `Instant::now`): these rooms run in real
+// time, paced by sleeps, and cannot run on virtual time like the session's tests.
+#![allow(clippy::disallowed_methods)]
 
 mod common;
 
