@@ -11,6 +11,7 @@ use softsync_bevy::Room;
 use softsync_net::Event as RoomEvent;
 use softsync_peer::messages::MessageTypes;
 use softsync_peer::{Bot, DeviceFrame, Event, Say};
+use softsync_rollback::script::SqueezeThrow;
 
 use crate::report::{snapshot, Dump, Rates, StatsLine};
 
@@ -37,6 +38,9 @@ pub struct Driver {
     next_dump: Duration,
     /// Exiting: no more bot, reports or events.
     pub exiting: bool,
+    /// `--bot throw`: the rollback bench's squeeze-and-throw motion (the same a rollback
+    /// peer's bot makes), with its frame count, instead of a script.
+    pub throw: Option<(SqueezeThrow, i32)>,
 }
 
 impl Driver {
@@ -58,6 +62,7 @@ impl Driver {
             last_rates: Rates::default(),
             recent_events: VecDeque::new(),
             stats: StatsLine::default(),
+            throw: None,
             next_stats: Duration::from_secs(1),
             next_dump: Duration::ZERO,
             exiting: false,
@@ -109,7 +114,26 @@ impl Driver {
                 }
             }
             (None, Some(device)) => device.apply(&mut room.peer),
-            (None, None) => {}
+            (None, None) => {
+                if let Some((throw, frame)) = self.throw.as_mut() {
+                    *frame += 1;
+                    // the scene's objects in spawn order, as this peer shows them now
+                    let ids: Vec<_> = room
+                        .peer
+                        .objects()
+                        .iter()
+                        .filter(|(_, o)| !o.kind.is_avatar())
+                        .map(|(id, _)| *id)
+                        .collect();
+                    let centers: Vec<_> = ids
+                        .iter()
+                        .map(|id| room.peer.drawn_pose(now, *id).map(|p| p.0))
+                        .collect();
+                    let d =
+                        throw.device_at(*frame, ids.len(), &|i| centers.get(i).copied().flatten());
+                    d.apply(&mut room.peer);
+                }
+            }
         }
     }
 

@@ -32,6 +32,8 @@ use softsync_net_matchbox::SignalServer;
 use softsync_peer::scene::DEFAULT_SCENE;
 use softsync_peer::{bot, Bot, PeerConfig, Scene};
 
+use softsync_rollback::script::SqueezeThrow;
+
 use crate::cli::{Command, FrontEnd, PeerArgs, UsageError};
 use crate::driver::Driver;
 use crate::plugins::ReportPlugin;
@@ -434,7 +436,14 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
         std::fs::create_dir_all(d)
             .map_err(|e| Failure::usage(format!("--screenshot-dir {}: {e}", d.display())))?;
     }
-    let bot = a.bot.as_deref().map(load_bot).transpose()?;
+    // `throw`: the squeeze-and-throw motion both sync modes share (their side-by-side bench)
+    let throw = a.bot.as_deref() == Some("throw");
+    let bot = a
+        .bot
+        .as_deref()
+        .filter(|b| !throw && !(a.rollback && *b == "squeeze"))
+        .map(load_bot)
+        .transpose()?;
     if let Some(scene) = &scene {
         scene_checks(&a, bot.as_ref(), scene)?;
     }
@@ -550,7 +559,11 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
         room.peer.me().0,
         room.signal_url()
     );
-    let driver = Driver::new(bot, a.duration, dump, a.dump_hz, a.quiet);
+    let mut driver = Driver::new(bot, a.duration, dump, a.dump_hz, a.quiet);
+    if throw {
+        let me = room.peer.me();
+        driver.throw = Some((SqueezeThrow::new(me, (me.0 % 5) as usize), 0));
+    }
     // Ctrl-C, SIGTERM and SIGHUP end the peer cleanly (last dump, `Leave`). Installed here
     // with overwrite: bevy's own installer gives up when SIGINT is ignored, which it is for
     // every background job a script starts, and then SIGTERM is not handled either.

@@ -86,11 +86,11 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
     );
     let mut script = match a.bot.as_deref() {
         None | Some("idle") => Script::Idle,
-        Some("squeeze") => Script::Squeeze(SqueezeThrow::new(me, (me.0 % 5) as usize)),
+        Some("squeeze" | "throw") => Script::Squeeze(SqueezeThrow::new(me, (me.0 % 5) as usize)),
         Some(other) => {
             return Err(Failure::usage(format!(
-                "--bot {other:?}: a rollback peer runs the built-in `squeeze` or `idle` (the \
-                 script language drives a state-sync peer)"
+                "--bot {other:?}: a rollback peer runs the built-in `throw` (also `squeeze`) or \
+                 `idle` (the script language drives a state-sync peer)"
             )))
         }
     };
@@ -107,6 +107,9 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
     let mut last_line = started;
     let mut checked = -1i32;
     let mut joined = a.host;
+    // datagram payload bytes sent (session, ggrs, snapshots): the stats line's `up=` rate
+    let mut up_bytes = 0u64;
+    let mut last_up = (WallInstant::now(), 0u64);
     let mut failure = None;
     while !stop.load(Ordering::SeqCst) && a.duration.is_none_or(|d| started.elapsed() < d) {
         let now = clock.now();
@@ -133,6 +136,7 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
         peer.set_input(input);
         peer.tick(now);
         while let Some(t) = peer.poll_transmit(now) {
+            up_bytes += t.payload.len() as u64;
             transport.send(now, &t);
         }
         while let Some(e) = peer.poll_event() {
@@ -185,8 +189,10 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
         if !a.quiet && last_line.elapsed() >= Duration::from_secs(1) {
             last_line = WallInstant::now();
             let s = peer.stats();
+            let up = (up_bytes - last_up.1) as f64 / last_up.0.elapsed().as_secs_f64().max(1e-3);
+            last_up = (WallInstant::now(), up_bytes);
             println!(
-                "stats frame={} confirmed={} epoch={} players={} rollbacks={} resimulated={} stalled={} desyncs={} ggrs_bytes={}",
+                "stats up={up:.0}B/s frame={} confirmed={} epoch={} players={} rollbacks={} resimulated={} stalled={} desyncs={} ggrs_bytes={}",
                 peer.world().map_or(-1, |w| w.frame()),
                 peer.confirmed_frame().unwrap_or(-1),
                 peer.epoch().map_or(0, |e| e.n),

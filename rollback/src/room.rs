@@ -505,9 +505,12 @@ impl RollbackPeer {
                 }
             }
         }
-        // A member of the running epoch: our own confirmed state of the frame, once we have it.
+        // A member of the epoch before it: our own confirmed state of the frame, once we have
+        // it. (From an older epoch our frames are another timeline: ask the host.)
         let frame = p.epoch.frame;
+        let previous = self.epoch.as_ref().map(|e| e.0.n + 1) == Some(p.epoch.n);
         let mine = match self.confirmed_frame() {
+            _ if !previous => None,
             Some(c) if c >= frame => self.snapshot_at(frame),
             Some(_) => return, // not confirmed that far yet
             None => None,
