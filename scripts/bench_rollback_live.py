@@ -46,14 +46,15 @@ class Proc:
 def run(mode, peers, lat, seconds, logdir):
     room = f"{mode}{peers}l{lat}"
     cond = f"lat={lat}ms,jitter={lat // 10}ms,loss=5%,seed=7"
-    common = ["--room", room, "--bot", "throw", "--duration", str(seconds + 30), "--net-condition", cond]
+    common = ["--room", room, "--duration", str(seconds + 30), "--net-condition", cond]
     if mode == "rollback":
         common += ["--sync", "rollback"]
-    host = Proc(f"{room}-host", ["host", "--bind", "127.0.0.1:0"] + common, logdir)
+    # peer k starts with the scene's object 2k+1, as in the in-process bench
+    host = Proc(f"{room}-host", ["host", "--bind", "127.0.0.1:0", "--bot", "throw:1"] + common, logdir)
     url = host.wait_for(r"signaling on (\S+)", 20).group(1)
     procs = [host]
     for k in range(1, peers):
-        procs.append(Proc(f"{room}-j{k}", ["join", "--signal", url] + common, logdir))
+        procs.append(Proc(f"{room}-j{k}", ["join", "--signal", url, "--bot", f"throw:{2 * k + 1}"] + common, logdir))
     ready = rf"epoch n=\d+ frame=\d+ players=(\d+,){{{peers - 1}}}\d+" if mode == "rollback" else r"joined"
     for p in procs[1:]:
         p.wait_for(ready, 40)

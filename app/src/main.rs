@@ -339,6 +339,16 @@ fn room_key(file: Option<&Path>) -> Result<Option<softsync_net::RoomKey>, Failur
         .ok_or_else(|| Failure::runtime("no system random source for the room key's challenges"))
 }
 
+/// `--bot throw` (the squeeze-and-throw motion, starting with the object its id picks) or
+/// `--bot throw:N` (starting with the scene's object N): `Some(slot)`; any other bot: `None`.
+pub(crate) fn throw_slot(bot: &str) -> Option<Option<usize>> {
+    match bot.strip_prefix("throw") {
+        Some("") => Some(None),
+        Some(n) => n.strip_prefix(':').and_then(|n| n.parse().ok()).map(Some),
+        None => None,
+    }
+}
+
 fn load_bot(src: &str) -> Result<Bot, Failure> {
     let text = if let Some(b) = bot::builtin(src) {
         b.to_owned()
@@ -349,7 +359,7 @@ fn load_bot(src: &str) -> Result<Bot, Failure> {
         src.to_owned()
     } else {
         return Err(Failure::usage(format!(
-            "--bot {src:?}: no such file or built-in script (squeeze, idle, wave)"
+            "--bot {src:?}: no such file or built-in script (squeeze, idle, wave; throw or throw:N for the squeeze-and-throw motion)"
         )));
     };
     let cmds = bot::parse(&text).map_err(Failure::usage)?;
@@ -437,11 +447,11 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
             .map_err(|e| Failure::usage(format!("--screenshot-dir {}: {e}", d.display())))?;
     }
     // `throw`: the squeeze-and-throw motion both sync modes share (their side-by-side bench)
-    let throw = a.bot.as_deref() == Some("throw");
+    let throw = a.bot.as_deref().and_then(throw_slot);
     let bot = a
         .bot
         .as_deref()
-        .filter(|b| !throw && !(a.rollback && *b == "squeeze"))
+        .filter(|b| throw.is_none() && !(a.rollback && *b == "squeeze"))
         .map(load_bot)
         .transpose()?;
     if let Some(scene) = &scene {
@@ -560,9 +570,10 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
         room.signal_url()
     );
     let mut driver = Driver::new(bot, a.duration, dump, a.dump_hz, a.quiet);
-    if throw {
+    if let Some(slot) = throw {
         let me = room.peer.me();
-        driver.throw = Some((SqueezeThrow::new(me, (me.0 % 5) as usize), 0));
+        let slot = slot.unwrap_or((me.0 % 5) as usize);
+        driver.throw = Some((SqueezeThrow::new(me, slot), 0));
     }
     // Ctrl-C, SIGTERM and SIGHUP end the peer cleanly (last dump, `Leave`). Installed here
     // with overwrite: bevy's own installer gives up when SIGINT is ignored, which it is for

@@ -13,7 +13,7 @@ use std::time::{Duration, Instant as WallInstant};
 
 use softsync_bevy::{connect, first_contact, scene_server, Clock, RoomOptions, LEAVE_GRACE};
 use softsync_net::messages::MessageTypes;
-use softsync_net::{Event, LinkConditioner, PeerEvent, Session, Transport};
+use softsync_net::{Event, LinkConditioner, Session, Transport};
 use softsync_peer::Scene;
 use softsync_rollback::room::register;
 use softsync_rollback::script::SqueezeThrow;
@@ -50,8 +50,8 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
     let mut conn = connect(&opts).map_err(|e| Failure::connect(e.to_string()))?;
     let me = conn.transport.local_id();
     let clock = Clock::start();
-    let session = if a.host {
-        Session::host(me, cfg, clock.now())
+    let (session, contact) = if a.host {
+        (Session::host(me, cfg, clock.now()), None)
     } else {
         let c = first_contact(&mut conn.transport, &opts, conn.started)
             .map_err(|e| Failure::connect(e.to_string()))?;
@@ -60,7 +60,7 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
             c.0,
             conn.started.elapsed().as_secs_f64() * 1e3
         );
-        Session::join(me, c, cfg, clock.now())
+        (Session::join(me, c, cfg, clock.now()), Some(c))
     };
     let mut transport: Box<dyn Transport + Send> = match opts.condition.clone() {
         Some(c) => Box::new(LinkConditioner::new(conn.transport, c)),
@@ -68,8 +68,8 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
     };
     let scene_copy = scene.clone();
     let mut share: Option<softsync_net::share::BlobServer> = None;
-    let mut peer =
-        RollbackPeer::new(scene, rcfg, session).map_err(|e| Failure::runtime(e.to_string()))?;
+    let mut peer = RollbackPeer::new(clock.now(), scene, rcfg, session, contact)
+        .map_err(|e| Failure::runtime(e.to_string()))?;
     if a.host {
         peer.open(clock.now())
             .map_err(|e| Failure::runtime(e.to_string()))?;
@@ -86,7 +86,10 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
     );
     let mut script = match a.bot.as_deref() {
         None | Some("idle") => Script::Idle,
-        Some("squeeze" | "throw") => Script::Squeeze(SqueezeThrow::new(me, (me.0 % 5) as usize)),
+        Some(b) if b == "squeeze" || crate::throw_slot(b).is_some() => {
+            let slot = crate::throw_slot(b).flatten();
+            Script::Squeeze(SqueezeThrow::new(me, slot.unwrap_or((me.0 % 5) as usize)))
+        }
         Some(other) => {
             return Err(Failure::usage(format!(
                 "--bot {other:?}: a rollback peer runs the built-in `throw` (also `squeeze`) or \
@@ -126,9 +129,9 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
             }
             peer.handle_datagram(now, from, &bytes);
         }
-        while let Some(PeerEvent::Disconnected(_) | PeerEvent::Connected(_)) =
-            transport.poll_peer_event()
-        {}
+        while let Some(e) = transport.poll_peer_event() {
+            peer.handle_link_event(e);
+        }
         let input = match (&mut script, peer.world()) {
             (Script::Squeeze(s), Some(w)) => s.input(w),
             _ => PlayerInput::default(),

@@ -21,7 +21,7 @@ pub fn may_rejoin(rejoins: u64, limit: u32) -> bool {
 
 /// A peer's way into the room: in or not, the peers it can ask, the one it asked last.
 #[derive(Clone, Debug)]
-pub(crate) struct Joining {
+pub struct Joining {
     joined: bool,
     /// Peers with open data channels, in the order they connected.
     contacts: Vec<PeerId>,
@@ -33,7 +33,7 @@ pub(crate) struct Joining {
 
 impl Joining {
     /// In the room already (a host), or asking `contact` since `now`.
-    pub(crate) fn new(now: Instant, joined: bool, contact: Option<PeerId>) -> Self {
+    pub fn new(now: Instant, joined: bool, contact: Option<PeerId>) -> Self {
         Joining {
             joined,
             contacts: contact.into_iter().collect(),
@@ -43,17 +43,17 @@ impl Joining {
     }
 
     /// In the room (host, or welcomed).
-    pub(crate) fn joined(&self) -> bool {
+    pub fn joined(&self) -> bool {
         self.joined
     }
 
     /// Welcomed.
-    pub(crate) fn set_joined(&mut self) {
+    pub fn set_joined(&mut self) {
         self.joined = true;
     }
 
     /// Connectivity news: a joiner collects the peers it could ask.
-    pub(crate) fn on_link_event(&mut self, e: PeerEvent) {
+    pub fn on_link_event(&mut self, e: PeerEvent) {
         match e {
             PeerEvent::Connected(p) if !self.contacts.contains(&p) => self.contacts.push(p),
             PeerEvent::Disconnected(p) => self.contacts.retain(|q| *q != p),
@@ -63,7 +63,7 @@ impl Joining {
 
     /// The peer to say `Hello` to now, if our contact has not answered within [`JOIN_RETRY`]:
     /// the one after it among the connected peers (the first if it is gone).
-    pub(crate) fn next_contact(&mut self, now: Instant) -> Option<PeerId> {
+    pub fn next_contact(&mut self, now: Instant) -> Option<PeerId> {
         if self.joined {
             return None;
         }
@@ -82,7 +82,7 @@ impl Joining {
     }
 
     /// Out of the room: join again through `host`, counting the timeout from `now`.
-    pub(crate) fn restart(&mut self, now: Instant, host: PeerId) {
+    pub fn restart(&mut self, now: Instant, host: PeerId) {
         self.joined = false;
         if !self.contacts.contains(&host) {
             self.contacts.push(host);
@@ -92,17 +92,17 @@ impl Joining {
     }
 
     /// Count the join timeout from `now` (the driver starts pumping the network late).
-    pub(crate) fn restart_clock(&mut self, now: Instant) {
+    pub fn restart_clock(&mut self, now: Instant) {
         self.started = now;
     }
 
     /// Not in the room after waiting `timeout` since joining started.
-    pub(crate) fn overdue(&self, now: Instant, timeout: Duration) -> bool {
+    pub fn overdue(&self, now: Instant, timeout: Duration) -> bool {
         !self.joined && now.saturating_since(self.started) >= timeout
     }
 
     /// When this needs a look next (a retry or the timeout), for virtual-time drivers.
-    pub(crate) fn poll_timeout(&self, timeout: Duration) -> Option<Instant> {
+    pub fn poll_timeout(&self, timeout: Duration) -> Option<Instant> {
         if self.joined {
             return None;
         }

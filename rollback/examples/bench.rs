@@ -115,8 +115,9 @@ impl Node {
             }
         }
         while let Some(e) = self.link.poll_peer_event() {
-            if let Sim::State(p) = &mut self.sim {
-                p.handle_link_event(e);
+            match &mut self.sim {
+                Sim::State(p) => p.handle_link_event(e),
+                Sim::Rollback(p) => p.handle_link_event(e),
             }
         }
         self.frame += 1;
@@ -241,12 +242,13 @@ fn build(cfg: Config, hub: &MemoryHub, now: Instant) -> Vec<Node> {
             let mut types = softsync_net::messages::MessageTypes::from_config(&scfg).unwrap();
             register(&mut types);
             types.configure(&mut scfg);
-            let session = if k == 0 {
-                Session::host(me, scfg, now)
+            let (session, contact) = if k == 0 {
+                (Session::host(me, scfg, now), None)
             } else {
-                Session::join(me, host, scfg, now)
+                (Session::join(me, host, scfg, now), Some(host))
             };
-            let mut p = RollbackPeer::new(sc, RollbackConfig::default(), session).unwrap();
+            let mut p =
+                RollbackPeer::new(now, sc, RollbackConfig::default(), session, contact).unwrap();
             if k == 0 {
                 p.open(now).unwrap();
             }

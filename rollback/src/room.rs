@@ -37,7 +37,8 @@ use serde::{Deserialize, Serialize};
 use softsync_net::messages::{Message, MessageTypes};
 use softsync_net::share::{sha256, BlobFetch, BlobServer, FetchError};
 use softsync_net::wire::{Delivery, MessageTarget};
-use softsync_net::{Event, Instant, PeerId, Session, Transmit};
+use softsync_net::{Event, Instant, PeerEvent, PeerId, Session, Transmit};
+use softsync_peer::join::Joining;
 use softsync_peer::Scene;
 
 use crate::input::PlayerInput;
@@ -203,12 +204,21 @@ pub struct RollbackPeer {
     stats: RollbackStats,
     switch_started: Option<std::time::Instant>,
     ticks: u64,
+    /// A joiner's way in: the next connected peer is asked when a contact stays silent (it
+    /// may be another joiner), as a state-sync peer does.
+    joining: Joining,
 }
 
 impl RollbackPeer {
-    /// A peer with its session (hosting or joining; its configuration must have
-    /// [`register`]ed the epoch message).
-    pub fn new(scene: Scene, cfg: RollbackConfig, session: Session) -> Result<Self, WorldError> {
+    /// A peer with its session (hosting, or joining through `contact`; its configuration must
+    /// have [`register`]ed the epoch message), at `now`.
+    pub fn new(
+        now: Instant,
+        scene: Scene,
+        cfg: RollbackConfig,
+        session: Session,
+        contact: Option<PeerId>,
+    ) -> Result<Self, WorldError> {
         let types = MessageTypes::from_config(session.config()).ok_or_else(|| {
             WorldError::Build("the room's message table names a type twice".into())
         })?;
@@ -219,6 +229,7 @@ impl RollbackPeer {
             ));
         }
         let me = session.local_id();
+        let session_is_host = session.is_host();
         Ok(RollbackPeer {
             scene,
             cfg,
@@ -239,6 +250,7 @@ impl RollbackPeer {
             stats: RollbackStats::default(),
             switch_started: None,
             ticks: 0,
+            joining: Joining::new(now, session_is_host, contact),
         })
     }
 
@@ -291,6 +303,11 @@ impl RollbackPeer {
     /// Next event.
     pub fn poll_event(&mut self) -> Option<RollbackEvent> {
         self.events.pop_front()
+    }
+
+    /// Connectivity news from the transport (a joiner's contacts).
+    pub fn handle_link_event(&mut self, e: PeerEvent) {
+        self.joining.on_link_event(e);
     }
 
     /// A datagram from the transport (session, ggrs or snapshot).
@@ -376,6 +393,9 @@ impl RollbackPeer {
     /// back and re-simulate as it asks). Send what [`Self::poll_transmit`] gives after it.
     pub fn tick(&mut self, now: Instant) {
         self.session.handle_timeout(now);
+        if let Some(next) = self.joining.next_contact(now) {
+            self.session.join_via(now, next);
+        }
         self.drain_session(now);
         self.host_duties(now);
         self.try_switch(now);
@@ -395,7 +415,12 @@ impl RollbackPeer {
                         .push_back(RollbackEvent::Warning(format!("bad epoch message: {r:?}"))),
                     None => self.events.push_back(RollbackEvent::Room(e)),
                 },
-                other => self.events.push_back(RollbackEvent::Room(other)),
+                other => {
+                    if matches!(other, Event::Joined { .. }) {
+                        self.joining.set_joined();
+                    }
+                    self.events.push_back(RollbackEvent::Room(other))
+                }
             }
         }
     }

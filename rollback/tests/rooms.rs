@@ -130,3 +130,41 @@ fn a_peer_killed_mid_grab_leaves_the_others_going_from_an_agreed_state_and_a_lat
     assert_eq!(room.desyncs(), 0, "warnings: {:?}", room.warnings());
     assert_agree(&room);
 }
+
+#[test]
+fn joiners_that_first_reach_each_other_still_get_in() {
+    let mut room = Room::new(net(10, 0.0));
+    room.add(1);
+    // Two joiners at once, each asking the other first (neither can answer): after the retry
+    // each asks the next peer it is connected to, and the host welcomes both.
+    room.add_via(2, 0);
+    let b = room.add_via(3, 0);
+    let c = room.add_via(4, b);
+    room.nodes[b].peer = {
+        // re-made to ask peer 4 first
+        let scene = common::scene();
+        let cfg = common::session_config(&scene);
+        let now = room.now();
+        let s =
+            softsync_net::Session::join(softsync_net::PeerId(3), softsync_net::PeerId(4), cfg, now);
+        softsync_rollback::RollbackPeer::new(
+            now,
+            scene,
+            softsync_rollback::RollbackConfig::default(),
+            s,
+            Some(softsync_net::PeerId(4)),
+        )
+        .unwrap()
+    };
+    let _ = c;
+    room.run(Duration::from_secs(8));
+    for n in &room.nodes {
+        assert_eq!(
+            n.peer.epoch().map(|e| e.players.len()),
+            Some(4),
+            "{:?}",
+            n.events
+        );
+    }
+    assert_agree(&room);
+}

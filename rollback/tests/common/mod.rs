@@ -60,15 +60,24 @@ impl Room {
 
     /// Add a peer: the first hosts, the others join through the host.
     pub fn add(&mut self, id: u64) -> usize {
+        self.add_via(id, 0)
+    }
+
+    /// Add a joiner whose first contact is peer `contact` (an index; 0 is the host).
+    pub fn add_via(&mut self, id: u64, contact: usize) -> usize {
         let scene = scene();
         let cfg = session_config(&scene);
         let now = self.now();
         let me = PeerId(id);
-        let session = match self.nodes.first() {
-            None => Session::host(me, cfg, now),
-            Some(h) => Session::join(me, h.peer.me(), cfg, now),
+        let (session, contact) = match self.nodes.first() {
+            None => (Session::host(me, cfg, now), None),
+            Some(_) => {
+                let c = self.nodes[contact].peer.me();
+                (Session::join(me, c, cfg, now), Some(c))
+            }
         };
-        let mut peer = RollbackPeer::new(scene, RollbackConfig::default(), session).unwrap();
+        let mut peer =
+            RollbackPeer::new(now, scene, RollbackConfig::default(), session, contact).unwrap();
         if self.nodes.is_empty() {
             peer.open(now).unwrap();
         }
@@ -95,7 +104,9 @@ impl Room {
             while let Some((from, bytes)) = n.link.recv(now) {
                 n.peer.handle_datagram(now, from, &bytes);
             }
-            while n.link.poll_peer_event().is_some() {}
+            while let Some(e) = n.link.poll_peer_event() {
+                n.peer.handle_link_event(e);
+            }
             if let Some(w) = n.peer.world() {
                 let i = n.bot.input(w);
                 n.peer.set_input(i);
