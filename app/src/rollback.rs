@@ -2,6 +2,8 @@
 //! (signaling, WebRTC data channels, the optional seeded conditioner), its loop at the fixed
 //! rate, its lines for people and tests:
 //! - `epoch n=N frame=F players=A,B,…` when an epoch starts here;
+//! - `grab object=K` / `release object=K` when our right hand takes or lets go of the scene's
+//!   object K (in our own view);
 //! - `rollback.check frame=F checksum=X` for every confirmed frame that is a multiple of 60
 //!   (two processes agree when their lines for a frame are equal);
 //! - a stats line a second, and `rollback.summary …` at the end.
@@ -110,6 +112,7 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
     let mut last_line = started;
     let mut checked = -1i32;
     let mut joined = a.host;
+    let mut holding: Option<usize> = None;
     // datagram payload bytes sent (session, ggrs, snapshots): the stats line's `up=` rate
     let mut up_bytes = 0u64;
     let mut last_up = (WallInstant::now(), 0u64);
@@ -138,6 +141,19 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
         };
         peer.set_input(input);
         peer.tick(now);
+        // our right hand's grabs and releases, in our own (predicted) view
+        let held = peer.epoch().and_then(|e| {
+            let i = e.players.iter().position(|p| *p == me)?;
+            peer.world()?.held(i, 1)
+        });
+        if held != holding {
+            match (holding, held) {
+                (_, Some(k)) => println!("grab object={k}"),
+                (Some(k), None) => println!("release object={k}"),
+                (None, None) => {}
+            }
+            holding = held;
+        }
         while let Some(t) = peer.poll_transmit(now) {
             up_bytes += t.payload.len() as u64;
             transport.send(now, &t);

@@ -60,20 +60,19 @@
 //! bevy's renderer, or not at all (a bot, a server). `docs/GUIDE.md` walks through a room of
 //! your own from `cargo add` on; `examples/` has two programs.
 
+pub mod connect;
 pub mod glue;
 pub mod plugin;
 pub mod pump;
 pub mod room;
 mod scene_fetch;
 
+pub use connect::{connect, first_contact, scene_server, Connected};
 pub use plugin::{
     AvatarPart, Hand, NetEntities, NetObject, Received, RoomEvent, RoomFailed, RoomStats, SoftBody,
     SoftsyncApp, SoftsyncPlugin, SoftsyncSet,
 };
-pub use room::{
-    connect, first_contact, scene_server, wall_ms, Clock, Connected, FetchedScene, OpenError, Room,
-    RoomOptions, LEAVE_GRACE,
-};
+pub use room::{wall_ms, Clock, FetchedScene, OpenError, Room, RoomOptions, LEAVE_GRACE};
 /// The networking crate (sessions, wire format, policies).
 pub use softsync_net as net;
 /// The engine-agnostic peer (scenes, hands, bots, the built-in messages).

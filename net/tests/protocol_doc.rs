@@ -502,6 +502,13 @@ fn render() -> String {
         .unwrap();
     }
 
+    writeln!(
+        w,
+        "## Rollback rooms (`softsync-rollback`, `--sync rollback`)\n"
+    )
+    .unwrap();
+    writeln!(w, "Beside the session's datagrams, a rollback room's peers send datagrams that start with `0xF7` (never a protocol version, `0xF5` or `0xFF`), then a kind byte and the epoch (u32 LE) they belong to: kind `01` a ggrs message (`ggrs::Message`, bincode 2 `standard()` with a 4096-byte limit; one of another epoch is dropped), kind `02` a share datagram as above (`F5 …`) about the epoch's snapshot (the portable world state a joiner pulls; bincode, at most 8 MiB). The per-frame input inside ggrs's messages is `PlayerInput`: three parts (head, left, right) of position in millimetres (3 × i16), the dropped rotation component's index with bit 7 set when tracked (u8) and the three kept components (3 × u16, 11-bit grid), then grip and trigger per hand (u8 each, 1/255). Epochs are announced as a retained application message of type `softsync.rollback.epoch` (`Epoch {{ n, frame, players, digest, host }}`), which also makes a rollback room's configuration digest differ from a state-sync room's.\n").unwrap();
+
     writeln!(w, "## Refusal datagram (version-independent)\n").unwrap();
     let r = encode_refusal(
         "protocol version mismatch: host speaks 1, you speak 2",

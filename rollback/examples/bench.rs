@@ -199,6 +199,17 @@ struct Outcome {
     grips: usize,
 }
 
+/// The sum of a counter over the rollback peers (0 in a state-sync room).
+fn rollback_sum(nodes: &[Node], f: impl Fn(&softsync_rollback::RollbackStats) -> u64) -> u64 {
+    nodes
+        .iter()
+        .map(|n| match &n.sim {
+            Sim::Rollback(p) => f(p.stats()),
+            Sim::State(_) => 0,
+        })
+        .sum()
+}
+
 /// Per (holder, viewer, object): (tick, where the viewer shows it, where the holder does).
 type Held = std::collections::BTreeMap<(usize, usize, usize), Vec<(usize, Vec3, Vec3)>>;
 
@@ -336,26 +347,14 @@ fn run(cfg: Config, seconds: f64) -> Outcome {
         n.tick_ms.clear();
         n.responses.clear();
     }
-    let resim0: Vec<u64> = nodes
-        .iter()
-        .map(|n| match &n.sim {
-            Sim::Rollback(p) => p.stats().resimulated,
-            Sim::State(_) => 0,
-        })
-        .collect();
+    let resim0 = rollback_sum(&nodes, |s| s.resimulated);
     let t0 = Wall::now();
     let ticks = (seconds * 60.0) as usize;
     let mut late = 0usize;
     let mut errors = Vec::new();
     // (tick, holder, viewer, object) → (seen, holder's truth), for the lag estimate.
     let mut series: Held = Default::default();
-    let stalled0: Vec<u64> = nodes
-        .iter()
-        .map(|n| match &n.sim {
-            Sim::Rollback(p) => p.stats().stalled_ticks,
-            Sim::State(_) => 0,
-        })
-        .collect();
+    let stalled0 = rollback_sum(&nodes, |s| s.stalled_ticks);
     for tick in 0..ticks {
         let now = clock(start);
         for n in nodes.iter_mut() {
@@ -384,31 +383,11 @@ fn run(cfg: Config, seconds: f64) -> Outcome {
         }
     }
     let secs = t0.elapsed().as_secs_f64();
-    let stalled: u64 = nodes
-        .iter()
-        .zip(&stalled0)
-        .map(|(n, s0)| match &n.sim {
-            Sim::Rollback(p) => p.stats().stalled_ticks - s0,
-            Sim::State(_) => 0,
-        })
-        .sum();
+    let stalled = rollback_sum(&nodes, |s| s.stalled_ticks) - stalled0;
     let peers = nodes.len() as f64;
     let bytes = nodes.iter().map(|n| n.bytes).sum::<u64>() as f64;
-    let resim: u64 = nodes
-        .iter()
-        .zip(&resim0)
-        .map(|(n, r0)| match &n.sim {
-            Sim::Rollback(p) => p.stats().resimulated - r0,
-            Sim::State(_) => 0,
-        })
-        .sum();
-    let desyncs = nodes
-        .iter()
-        .map(|n| match &n.sim {
-            Sim::Rollback(p) => p.stats().desyncs,
-            Sim::State(_) => 0,
-        })
-        .sum();
+    let resim = rollback_sum(&nodes, |s| s.resimulated) - resim0;
+    let desyncs = rollback_sum(&nodes, |s| s.desyncs);
     let ms: Vec<f64> = nodes
         .iter()
         .flat_map(|n| n.tick_ms.iter().copied())

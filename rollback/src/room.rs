@@ -157,7 +157,8 @@ pub struct RollbackStats {
     pub save_ns: u64,
     /// Total load cost, ns.
     pub load_ns: u64,
-    /// Per tick: wall time of the tick's ggrs work (advance, re-simulation, saves), ms.
+    /// Per tick: wall time of the tick's ggrs work (advance, re-simulation, saves), ms (the
+    /// last 18 000 to 36 000 ticks).
     pub frame_ms: Vec<f32>,
     /// Desyncs detected.
     pub desyncs: u64,
@@ -710,6 +711,10 @@ impl RollbackPeer {
         }
         self.stats.frames += 1;
         self.stats.resimulated += advances.saturating_sub(1);
+        // the last 10 minutes of frames (a long run must not grow without bound)
+        if self.stats.frame_ms.len() >= 36_000 {
+            self.stats.frame_ms.drain(..18_000);
+        }
         self.stats
             .frame_ms
             .push(t0.elapsed().as_secs_f32() * 1000.0);

@@ -107,9 +107,20 @@ fn a_peer_killed_mid_interaction_leaves_the_others_going_and_a_late_joiner_gets_
     let mut c = peer_on(&dir, "c", "join", &url, "rk", &common);
     c.wait_line("epoch n=3", Duration::from_secs(20));
     let c_id = c.peer_id();
-    // Let it play, then kill it (its bot holds something a third of every 4 s cycle; the
-    // in-process test kills one while it holds).
-    std::thread::sleep(Duration::from_secs(5));
+    // Let it play, then kill it while its hand holds something.
+    std::thread::sleep(Duration::from_secs(3));
+    let before = c.stdout().matches("grab object=").count();
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    while c.stdout().matches("grab object=").count() == before
+        && std::time::Instant::now() < deadline
+    {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(
+        c.stdout().matches("grab object=").count() > before,
+        "{}",
+        c.logs()
+    );
     c.kill();
     host.wait_line(
         &format!("player {c_id} disconnected"),

@@ -270,10 +270,7 @@ struct PeerOpts {
     /// the room must give the same.
     #[arg(long, value_enum, default_value = "relay")]
     state_route: Route,
-    /// How the room keeps its peers' worlds the same: `state` (each object's owner simulates
-    /// it and sends its state, the default) or `rollback` (every peer simulates everything
-    /// from everyone's inputs, ggrs; headless bots only in this build). Every peer of the
-    /// room must give the same: a joiner with the other is refused, told which the room uses.
+    /// `state` (owners send state) or `rollback` (all simulate all inputs: ggrs; headless).
     #[arg(long, value_enum, default_value = "state")]
     sync: SyncArg,
     /// Pump the network only in the frame, not on a thread of its own between frames (a slow
