@@ -629,27 +629,20 @@ fn main() {
     let max = |m: &dyn Fn(&Outcome) -> f64| outcomes.iter().map(m).fold(1.0, f64::max) * 1.15;
     let bytes = |o: &Outcome| o.bytes_per_s;
     let err = |o: &Outcome| o.remote_p95_mm;
+    // one panel per metric, against latency, every mode and size a line
+    let panel = |title: &str, y_desc: &str, metric: &dyn Fn(&Outcome) -> f64| LineChart {
+        title: title.into(),
+        x_desc: "one-way latency, ms (5 % loss)".into(),
+        y_desc: y_desc.into(),
+        x_range: 0.0..160.0,
+        x_log: false,
+        y_range: 0.0..max(metric),
+        series: series(metric),
+        style: ChartStyle::PANEL,
+    };
     let charts = [
-        LineChart {
-            title: "bytes/s per peer".into(),
-            x_desc: "one-way latency, ms (5 % loss)".into(),
-            y_desc: "payload bytes/s".into(),
-            x_range: 0.0..160.0,
-            x_log: false,
-            y_range: 0.0..max(&bytes),
-            series: series(&bytes),
-            style: ChartStyle::PANEL,
-        },
-        LineChart {
-            title: "remote error against the holder's view, p95".into(),
-            x_desc: "one-way latency, ms (5 % loss)".into(),
-            y_desc: "mm".into(),
-            x_range: 0.0..160.0,
-            x_log: false,
-            y_range: 0.0..max(&err),
-            series: series(&err),
-            style: ChartStyle::PANEL,
-        },
+        panel("bytes/s per peer", "payload bytes/s", &bytes),
+        panel("remote error against the holder's view, p95", "mm", &err),
     ];
     write_svg(out.join("rooms.svg"), (1100, 420), &charts).unwrap();
     println!("wrote {}/rooms.csv and rooms.svg", out.display());
