@@ -21,8 +21,9 @@ use std::time::Instant;
 use softsync_benchkit::plotters::style::RGBColor;
 use softsync_benchkit::{write_svg, ChartStyle, Csv, LineChart, ResultLine, Series};
 use softsync_softbody::methods::reference::{
-    energy_summary, record, reference_spec, shape_change, Recording, ShapeChange, REFERENCE_CELL,
-    REFERENCE_ITERATIONS, REFERENCE_SUBSTEPS, TOLERANCE_MM,
+    energy_summary, record, reference_spec, shape_change, shape_change_profile, Recording,
+    ShapeChange, REFERENCE_CELL, REFERENCE_ITERATIONS, REFERENCE_SUBSTEPS, SAMPLE_EVERY,
+    TOLERANCE_MM,
 };
 use softsync_softbody::scenario::ScenarioKind;
 use softsync_softbody::Mesh;
@@ -133,6 +134,16 @@ fn main() {
     let mut space_series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
     let mut time_series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
     let mut summary_rows = Vec::new();
+    // Where in each scenario the reference and its finer rungs part, sample by sample.
+    let mut profile_csv = Csv::new(&[
+        "case",
+        "t_s",
+        "time_change_mm",
+        "space_change_mm",
+        "nudge_mm",
+    ]);
+    let mut time_profiles: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    let mut space_profiles: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
     for case in &cases {
         println!("{}:", case.name);
         // The reference itself is a rung of both ladders.
@@ -212,6 +223,28 @@ fn main() {
         let space_change = ladder_changes("space", &space, &mut space_series);
         let time_change = ladder_changes("time", &time, &mut time_series);
         let nudge_change = shape_change(&reference.run.samples, &nudge.run.samples);
+        // The next finer rungs of both ladders (the reference sits third of four).
+        let t_prof = shape_change_profile(&reference.run.samples, &time[3].run.samples);
+        let s_prof = shape_change_profile(&reference.run.samples, &space[3].run.samples);
+        let n_prof = shape_change_profile(&reference.run.samples, &nudge.run.samples);
+        let sample_s = |i: usize| (i + 1) as f64 * SAMPLE_EVERY as f64 * DT as f64;
+        for i in 0..t_prof.len().min(s_prof.len()).min(n_prof.len()) {
+            profile_csv.row([
+                case.name.to_string(),
+                format!("{:.3}", sample_s(i)),
+                format!("{:.3}", t_prof[i]),
+                format!("{:.3}", s_prof[i]),
+                format!("{:.3}", n_prof[i]),
+            ]);
+        }
+        let curve = |p: &[f32]| -> Vec<(f64, f64)> {
+            p.iter()
+                .enumerate()
+                .map(|(i, v)| (sample_s(i), *v as f64))
+                .collect()
+        };
+        time_profiles.push((case.name.to_string(), curve(&t_prof)));
+        space_profiles.push((case.name.to_string(), curve(&s_prof)));
         let worst_inverted = space
             .iter()
             .chain(&time)
@@ -256,6 +289,9 @@ fn main() {
         ));
     }
     csv.write(out.join("reference.csv")).unwrap();
+    profile_csv
+        .write(out.join("reference_profile.csv"))
+        .unwrap();
     let colors = [
         RGBColor(214, 39, 40),
         RGBColor(31, 119, 180),
@@ -311,6 +347,52 @@ fn main() {
         ],
     )
     .unwrap();
+    let profile = |title: &str, series: &[(String, Vec<(f64, f64)>)]| {
+        let xmax = series
+            .iter()
+            .flat_map(|s| s.1.iter().map(|p| p.0))
+            .fold(0.0f64, f64::max);
+        let ymax = series
+            .iter()
+            .flat_map(|s| s.1.iter().map(|p| p.1))
+            .fold(TOLERANCE_MM as f64, f64::max)
+            * 1.1;
+        let mut lines: Vec<Series> = series
+            .iter()
+            .zip(colors)
+            .map(|((name, pts), c)| Series::new(name.as_str(), c, pts.clone()))
+            .collect();
+        lines.push(Series::new(
+            format!("tolerance {TOLERANCE_MM} mm"),
+            RGBColor(0, 0, 0),
+            vec![(0.0, TOLERANCE_MM as f64), (xmax, TOLERANCE_MM as f64)],
+        ));
+        LineChart {
+            title: title.to_owned(),
+            x_desc: "scenario time, s".to_owned(),
+            y_desc: "shape RMS change at the sample, mm".to_owned(),
+            x_range: 0.0..xmax,
+            x_log: false,
+            y_range: 0.0..ymax,
+            series: lines,
+            style: ChartStyle::FIGURE,
+        }
+    };
+    write_svg(
+        out.join("reference_profile.svg"),
+        (1400, 560),
+        &[
+            profile(
+                &format!("reference against {} substeps, over time", substeps * 2),
+                &time_profiles,
+            ),
+            profile(
+                &format!("reference against cell {:.3}, over time", cell / root2),
+                &space_profiles,
+            ),
+        ],
+    )
+    .unwrap();
     let spec = reference_spec(cell, substeps);
     writeln!(
         md,
@@ -331,6 +413,7 @@ fn main() {
     for r in &summary_rows {
         writeln!(md, "{r}").unwrap();
     }
+    writeln!(md, "\nWhere the rungs part, sample by sample (`reference_profile.csv`, with the nudge):\n\n![profile](reference_profile.svg)\n").unwrap();
     writeln!(md, "\nEnergy: kinetic + gravitational (height above the floor's top) + stored Neo-Hookean energy of the reference at the samples; in the drops the total must never exceed the first sample's (nothing adds energy; contacts and damping remove it); in squeeze and poke the props do work on the body. Every rung of both ladders is in `reference.csv`.\n").unwrap();
     let results: Vec<String> = results.iter().map(ResultLine::to_string).collect();
     writeln!(md, "```\n{}\n```", results.join("\n")).unwrap();

@@ -130,6 +130,15 @@ pub fn shape_change(a: &[Vec<Vec3>], b: &[Vec<Vec3>]) -> ShapeChange {
     }
 }
 
+/// [`shape_change`] sample by sample: the shape RMS (mm) of each sample of `b` rigidly fitted
+/// onto `a`'s — where in the scenario two recordings part.
+pub fn shape_change_profile(a: &[Vec<Vec3>], b: &[Vec<Vec3>]) -> Vec<f32> {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| rigid_fit_error(x, y, Quat::IDENTITY).0 * 1e3)
+        .collect()
+}
+
 /// Energy bookkeeping of a recording: the total at the first sample, the largest total seen
 /// after it, the last, and the largest elastic energy, J.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]

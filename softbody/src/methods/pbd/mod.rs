@@ -117,6 +117,14 @@ pub struct PbdBody {
     x: Vec<Vec3>,
     v: Vec<Vec3>,
     prev: Vec<Vec3>,
+    /// What the f32 positions lost when the prediction moved them (the true position is
+    /// `x + carry`): compensated (Kahan–Babuška) integration. A substep's move `v·h` is
+    /// hundreds of times smaller than a coordinate, so without it the velocity read back from
+    /// the positions is quantised to `ulp(x) / h`: at 160 substeps a body at 0.6 m height
+    /// falls at a wrong rate, at 320 it cannot start falling at all.
+    carry: Vec<Vec3>,
+    /// `carry` at the start of the substep.
+    carry0: Vec<Vec3>,
     inv_mass: Vec<f32>,
     /// Distance constraint groups (edges, links, tet edges).
     pub distance: Vec<DistanceGroup>,
@@ -179,6 +187,8 @@ impl PbdBody {
             params,
             v: vec![Vec3::ZERO; n],
             prev: x.clone(),
+            carry: vec![Vec3::ZERO; n],
+            carry0: vec![Vec3::ZERO; n],
             x,
             inv_mass,
             distance: Vec::new(),
@@ -312,12 +322,20 @@ impl PbdBody {
             // Algorithm 1 lines 8–10: external forces, damping, prediction.
             for i in 0..self.x.len() {
                 self.prev[i] = self.x[i];
+                self.carry0[i] = self.carry[i];
                 if self.inv_mass[i] == 0.0 {
                     self.v[i] = Vec3::ZERO;
+                    self.carry[i] = Vec3::ZERO;
+                    self.carry0[i] = Vec3::ZERO;
                     continue;
                 }
                 self.v[i] = (self.v[i] + gravity * h) * damp;
-                self.x[i] += self.v[i] * h;
+                // Fast2Sum: `x` is far larger than the move, so `(moved − x)` is exact and
+                // `y − (moved − x)` is exactly what rounding dropped.
+                let y = self.carry[i] + self.v[i] * h;
+                let moved = self.x[i] + y;
+                self.carry[i] = y - (moved - self.x[i]);
+                self.x[i] = moved;
             }
             // Line 11: contact constraints (half-spaces) for this substep.
             let (points, contacts) = self.contact_points();
@@ -345,13 +363,14 @@ impl PbdBody {
             }
             // Lines 16–17: velocities from positions.
             for i in 0..self.x.len() {
-                if !self.x[i].is_finite() {
+                if !(self.x[i].is_finite() && self.carry[i].is_finite()) {
                     self.x[i] = self.prev[i];
                     self.v[i] = Vec3::ZERO;
+                    self.carry[i] = Vec3::ZERO;
                     self.non_finite_resets += 1;
                     continue;
                 }
-                self.v[i] = (self.x[i] - self.prev[i]) / h;
+                self.v[i] = ((self.x[i] - self.prev[i]) + (self.carry[i] - self.carry0[i])) / h;
             }
         }
         self.constraint_solves += self.solves_per_step();
