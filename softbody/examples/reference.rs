@@ -243,6 +243,22 @@ fn main() {
                 .map(|(i, v)| (sample_s(i), *v as f64))
                 .collect()
         };
+        // How long the answer stays within the tolerance sample by sample: the reference
+        // against both finer rungs, and against itself nudged (the scenario's own horizon of
+        // predictability: past it no refinement can pin the answer down).
+        let horizon = |profiles: &[&[f32]]| -> f64 {
+            let n = profiles.iter().map(|p| p.len()).min().unwrap_or(0);
+            let mut last = 0.0;
+            for i in 0..n {
+                if profiles.iter().any(|p| p[i] >= TOLERANCE_MM) {
+                    break;
+                }
+                last = sample_s(i);
+            }
+            last
+        };
+        let converged_until = horizon(&[&t_prof, &s_prof]);
+        let nudge_until = horizon(&[&n_prof]);
         time_profiles.push((case.name.to_string(), curve(&t_prof)));
         space_profiles.push((case.name.to_string(), curve(&s_prof)));
         let worst_inverted = space
@@ -264,10 +280,13 @@ fn main() {
                 .fixed("time_mm", time_change.rms_mm, 2)
                 .fixed("nudge_mm", nudge_change.rms_mm, 2)
                 .field("ladders_inverted", worst_inverted)
-                .field("converged", converged),
+                .field("converged", converged)
+                .fixed("converged_until_s", converged_until, 1)
+                .fixed("nudge_until_s", nudge_until, 1)
+                .fixed("duration_s", case.kind.duration_s() as f64, 1),
         );
         summary_rows.push(format!(
-            "| {} | {} | {} | {} ({} in material) | {:.3}–{:.3} | {:.2} / {:.2} / {:.2} / {:.2} | {:.2} ({:.1}) | {:.2} ({:.1}) | {:.2} ({:.1}) | {} |",
+            "| {} | {} | {} | {} ({} in material) | {:.3}–{:.3} | {:.2} / {:.2} / {:.2} / {:.2} | {:.2} ({:.1}) | {:.2} ({:.1}) | {:.2} ({:.1}) | {} | {:.1} / {:.1} of {:.1} |",
             case.name,
             reference.run.particles,
             reference.run.max_inverted,
@@ -286,6 +305,9 @@ fn main() {
             nudge_change.rms_mm,
             nudge_change.max_mm,
             if converged { "**yes**" } else { "no" },
+            converged_until,
+            nudge_until,
+            case.kind.duration_s(),
         ));
     }
     csv.write(out.join("reference.csv")).unwrap();
@@ -408,8 +430,8 @@ fn main() {
     )
     .unwrap();
     writeln!(md, "The reference `{}`: stable Neo-Hookean XPBD tets (Macklin & Müller 2021: per tet `C_D = ‖F‖` with compliance `1/(μV)` and `C_H = det F − (1 + μ/λ)` with compliance `1/(λV)`; `λ` raised by `μ` so small strains match the material's E = 200 kPa and K = 400 kPa, ν ≈ 0.42) on a Kuhn lattice (six congruent tets per cube, no slivers) of cell {:.3} × the object's size, each tet's mass and stiffness weighted by the fraction of it inside the surface, the surface embedded; {} substeps of {} Gauss–Seidel iterations per 60 Hz step; only the surface collides; a pinned region holds the same surface vertices at every resolution; a hard floor `det F ≥ 0.2` makes inversion impossible by construction (how often it engaged is counted).\n", spec.label(), cell, substeps, REFERENCE_ITERATIONS).unwrap();
-    writeln!(md, "Ladders around it, on every scenario of the evidence: in space (cell ×√2 coarser and finer: {}) at {substeps} substeps, and in time (substeps {}) at cell {cell:.3}. A change is the shape RMS between two rungs (each sample's surface rigidly fitted, the accuracy figures' own metric), over every sample of the scenario; `max` the largest vertex distance. `nudge`: the reference against itself with {nudged} substeps instead of {substeps} — how much the scenario itself moves under a 5 % change of the step (contact stick/slip, buckling, tumbling): no reference can be closer to *the* answer than that. Converged = both the space and the time change of the reference to its next finer rung below {TOLERANCE_MM} mm.\n", cells.iter().map(|c| format!("{c:.3}")).collect::<Vec<_>>().join(", "), steps.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(", ")).unwrap();
-    writeln!(md, "![convergence](reference.svg)\n\n| case | nodes | max inverted tets | floor engaged | volume ratio | energy J: first / max / last / max elastic | space change mm (max) | time change mm (max) | nudge mm (max) | converged |\n|---|---|---|---|---|---|---|---|---|---|").unwrap();
+    writeln!(md, "Ladders around it, on every scenario of the evidence: in space (cell ×√2 coarser and finer: {}) at {substeps} substeps, and in time (substeps {}) at cell {cell:.3}. A change is the shape RMS between two rungs (each sample's surface rigidly fitted, the accuracy figures' own metric), over every sample of the scenario; `max` the largest vertex distance. `nudge`: the reference against itself with {nudged} substeps instead of {substeps} — how much the scenario itself moves under a 5 % change of the step (contact stick/slip, buckling, tumbling): no reference can be closer to *the* answer than that. Converged = both the space and the time change of the reference to its next finer rung below {TOLERANCE_MM} mm. `within 0.5 mm until`: the last sample time up to which every sample's change to both finer rungs stays below the tolerance, and the same for the nudge — the scenario's own horizon of predictability (bounces and tumbles amplify any change of the step: past that time no refinement pins the answer down, and errors against the reference measure that sensitivity as much as a method).\n", cells.iter().map(|c| format!("{c:.3}")).collect::<Vec<_>>().join(", "), steps.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(", ")).unwrap();
+    writeln!(md, "![convergence](reference.svg)\n\n| case | nodes | max inverted tets | floor engaged | volume ratio | energy J: first / max / last / max elastic | space change mm (max) | time change mm (max) | nudge mm (max) | converged | within 0.5 mm until, s: ladders / nudge |\n|---|---|---|---|---|---|---|---|---|---|---|").unwrap();
     for r in &summary_rows {
         writeln!(md, "{r}").unwrap();
     }
