@@ -19,7 +19,7 @@ pub(super) struct NearCollider<'a> {
     /// Its inverse mass in the contacts (0: immovable).
     pub(super) inv_mass: f32,
     pose: Pose,
-    /// How far a dynamic body's collider moved in the rapier step just taken: the substeps
+    /// How far a moving (dynamic or kinematic) body's collider moved in the rapier step just taken: the substeps
     /// see it move there gradually (at the start of the step it was `lag` behind), so a body
     /// it runs into is pushed at its speed, not at its travel over one substep.
     lag: Vec3,
@@ -54,7 +54,12 @@ pub(super) fn near_colliders(
                 Some((_, b)) if sweep_dynamic && b.mass() > 0.0 => 1.0 / b.mass(),
                 _ => 0.0,
             };
-            let lag = if sweep_dynamic && dynamic_body.is_some() {
+            // A moving prop (kinematic) is swept too: seen at its end-of-step pose by every
+            // substep it would jump its whole step's travel at the first one and the body
+            // would take that jump as a velocity of travel / h — energy that grew with the
+            // square of the substep count and kept the squeeze and poke from converging.
+            let kinematic = parent.is_some_and(|(_, b)| b.is_kinematic());
+            let lag = if kinematic || (sweep_dynamic && dynamic_body.is_some()) {
                 velocity * dt_s
             } else {
                 Vec3::ZERO
