@@ -190,7 +190,7 @@ impl ModelScene {
         Ok(s)
     }
 
-    /// A throw into a corner: under gravity, the body (2 cm over a fixed floor 1 cm thick) flies at `speed_mps` diagonally into the corner of two fixed walls 1 cm thick
+    /// A throw into a corner: under gravity, the body (2 cm over a wide fixed floor 1 cm thick) flies at `speed_mps` diagonally into the corner of two fixed walls 1 cm thick
     /// (+x and +z, 2 cm beyond the body). Nothing may end beyond a wall or below the floor.
     pub fn corner_throw(
         mesh: &Mesh,
@@ -210,10 +210,12 @@ impl ModelScene {
                 Some(b),
             );
         };
+        // The floor reaches far beyond the corner: a body that bounces back must not fall off
+        // its edge within the run (that read as tunnelling under it).
         slab(
             &mut s.world,
             Vec3::new(0.0, floor_top - half_t, 0.0),
-            Vec3::new(3.0 * size, half_t, 3.0 * size),
+            Vec3::new(20.0, half_t, 20.0),
         );
         let near_x = s.frame.hi.x + 0.02;
         let near_z = s.frame.hi.z + 0.02;
