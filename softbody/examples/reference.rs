@@ -70,6 +70,30 @@ fn rung(case: &Case, cell: f32, substeps: u32) -> Rung {
     }
 }
 
+/// One line per case, coloured in turn, and the tolerance across `x`; with the largest value
+/// drawn (the tolerance at least).
+fn with_tolerance(
+    series: &[(String, Vec<(f64, f64)>)],
+    colors: &[RGBColor],
+    x: (f64, f64),
+) -> (Vec<Series>, f64) {
+    let ymax = series
+        .iter()
+        .flat_map(|s| s.1.iter().map(|p| p.1))
+        .fold(TOLERANCE_MM as f64, f64::max);
+    let mut lines: Vec<Series> = series
+        .iter()
+        .zip(colors)
+        .map(|((name, pts), c)| Series::new(name.as_str(), *c, pts.clone()))
+        .collect();
+    lines.push(Series::new(
+        format!("tolerance {TOLERANCE_MM} mm"),
+        RGBColor(0, 0, 0),
+        vec![(x.0, TOLERANCE_MM as f64), (x.1, TOLERANCE_MM as f64)],
+    ));
+    (lines, ymax)
+}
+
 fn bunny() -> Mesh {
     Mesh::load(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets/bunny.obj"))
         .unwrap()
@@ -323,24 +347,8 @@ fn main() {
     let panel = |title: &str, x_desc: &str, series: &[(String, Vec<(f64, f64)>)]| {
         let xs = series.iter().flat_map(|s| s.1.iter().map(|p| p.0));
         let (xmin, xmax) = xs.fold((f64::MAX, 0.0f64), |(a, b), x| (a.min(x), b.max(x)));
-        let ymax = series
-            .iter()
-            .flat_map(|s| s.1.iter().map(|p| p.1))
-            .fold(TOLERANCE_MM as f64, f64::max)
-            * 1.15;
-        let mut lines: Vec<Series> = series
-            .iter()
-            .zip(colors)
-            .map(|((name, pts), c)| Series::new(name.as_str(), c, pts.clone()))
-            .collect();
-        lines.push(Series::new(
-            format!("tolerance {TOLERANCE_MM} mm"),
-            RGBColor(0, 0, 0),
-            vec![
-                (xmin * 0.8, TOLERANCE_MM as f64),
-                (xmax * 1.25, TOLERANCE_MM as f64),
-            ],
-        ));
+        let (lines, ymax) = with_tolerance(series, &colors, (xmin * 0.8, xmax * 1.25));
+        let ymax = ymax * 1.15;
         LineChart {
             title: title.to_owned(),
             x_desc: x_desc.to_owned(),
@@ -374,21 +382,8 @@ fn main() {
             .iter()
             .flat_map(|s| s.1.iter().map(|p| p.0))
             .fold(0.0f64, f64::max);
-        let ymax = series
-            .iter()
-            .flat_map(|s| s.1.iter().map(|p| p.1))
-            .fold(TOLERANCE_MM as f64, f64::max)
-            * 1.1;
-        let mut lines: Vec<Series> = series
-            .iter()
-            .zip(colors)
-            .map(|((name, pts), c)| Series::new(name.as_str(), c, pts.clone()))
-            .collect();
-        lines.push(Series::new(
-            format!("tolerance {TOLERANCE_MM} mm"),
-            RGBColor(0, 0, 0),
-            vec![(0.0, TOLERANCE_MM as f64), (xmax, TOLERANCE_MM as f64)],
-        ));
+        let (lines, ymax) = with_tolerance(series, &colors, (0.0, xmax));
+        let ymax = ymax * 1.1;
         LineChart {
             title: title.to_owned(),
             x_desc: "scenario time, s".to_owned(),
