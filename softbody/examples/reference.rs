@@ -94,6 +94,28 @@ fn with_tolerance(
     (lines, ymax)
 }
 
+/// Runs every `(case, cell, substeps)` of `jobs` on as many threads as the machine has cores,
+/// in the order given; returns each rung keyed by `(case, cell bits, substeps)`.
+#[allow(clippy::type_complexity)]
+fn run_all(cases: &[Case], jobs: &[(usize, f32, u32)]) -> Vec<((usize, u32, u32), Rung)> {
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let out = std::sync::Mutex::new(Vec::new());
+    std::thread::scope(|scope| {
+        for _ in 0..threads.min(jobs.len()) {
+            scope.spawn(|| loop {
+                let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let Some(&(k, c, s)) = jobs.get(i) else {
+                    break;
+                };
+                let r = rung(&cases[k], c, s);
+                out.lock().unwrap().push(((k, c.to_bits(), s), r));
+            });
+        }
+    });
+    out.into_inner().unwrap()
+}
+
 fn bunny() -> Mesh {
     Mesh::load(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets/bunny.obj"))
         .unwrap()
@@ -168,25 +190,42 @@ fn main() {
     ]);
     let mut time_profiles: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
     let mut space_profiles: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
-    for case in &cases {
-        println!("{}:", case.name);
+    // Every rung of every case is independent: run them on every core, the costliest first
+    // (cost ~ nodes × substeps ~ substeps / cell³), and take them back in the ladders' order.
+    let mut jobs: Vec<(usize, f32, u32)> = Vec::new();
+    for k in 0..cases.len() {
+        jobs.push((k, cell, substeps));
+        jobs.extend(cells.iter().filter(|&&c| c != cell).map(|&c| (k, c, substeps)));
+        jobs.extend(steps.iter().filter(|&&s| s != substeps).map(|&s| (k, cell, s)));
+        jobs.push((k, cell, nudged));
+    }
+    jobs.sort_by(|a, b| (b.2 as f32 / b.1.powi(3)).total_cmp(&(a.2 as f32 / a.1.powi(3))));
+    let mut done = run_all(&cases, &jobs);
+    for (k, case) in cases.iter().enumerate() {
+        let mut take = |c: f32, s: u32| {
+            let at = done
+                .iter()
+                .position(|(j, _)| *j == (k, c.to_bits(), s))
+                .unwrap();
+            done.swap_remove(at).1
+        };
         // The reference itself is a rung of both ladders.
-        let reference = rung(case, cell, substeps);
+        let reference = take(cell, substeps);
         let mut space: Vec<Rung> = Vec::new();
         for &c in &cells {
             if c == cell {
                 continue;
             }
-            space.push(rung(case, c, substeps));
+            space.push(take(c, substeps));
         }
         let mut time: Vec<Rung> = Vec::new();
         for &s in &steps {
             if s == substeps {
                 continue;
             }
-            time.push(rung(case, cell, s));
+            time.push(take(cell, s));
         }
-        let nudge = rung(case, cell, nudged);
+        let nudge = take(cell, nudged);
         // Put the reference in its place on both ladders (coarse to fine).
         let place = |ladder: Vec<Rung>, at: usize, r: &Rung| {
             let mut v: Vec<Option<Rung>> = ladder.into_iter().map(Some).collect();
