@@ -306,7 +306,7 @@ fn skid_on_frictionless_floor(spec: &MethodSpec) -> f32 {
     for p in &mut mesh.positions {
         p.y += 0.02 + 0.003;
     }
-    let mut spec = spec.clone();
+    let mut spec = *spec;
     spec.params.damping_per_s = 0.0;
     let mut body = build_pbd(&spec, &mesh).unwrap();
     body.set_all_velocities(Vec3::new(3.0, -2.0, 0.0));
