@@ -195,8 +195,18 @@ fn main() {
     let mut jobs: Vec<(usize, f32, u32)> = Vec::new();
     for k in 0..cases.len() {
         jobs.push((k, cell, substeps));
-        jobs.extend(cells.iter().filter(|&&c| c != cell).map(|&c| (k, c, substeps)));
-        jobs.extend(steps.iter().filter(|&&s| s != substeps).map(|&s| (k, cell, s)));
+        jobs.extend(
+            cells
+                .iter()
+                .filter(|&&c| c != cell)
+                .map(|&c| (k, c, substeps)),
+        );
+        jobs.extend(
+            steps
+                .iter()
+                .filter(|&&s| s != substeps)
+                .map(|&s| (k, cell, s)),
+        );
         jobs.push((k, cell, nudged));
     }
     jobs.sort_by(|a, b| (b.2 as f32 / b.1.powi(3)).total_cmp(&(a.2 as f32 / a.1.powi(3))));

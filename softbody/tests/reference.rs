@@ -9,8 +9,8 @@ use glam::{Quat, Vec3};
 use softsync_softbody::methods::builders::build_pbd;
 use softsync_softbody::methods::lattice::lattice_tets;
 use softsync_softbody::methods::reference::{record, reference_spec, shape_change};
-use softsync_softbody::methods::{MethodKind, MethodSpec};
 use softsync_softbody::methods::scene::ModelScene;
+use softsync_softbody::methods::{MethodKind, MethodSpec};
 use softsync_softbody::rapier3d::prelude::{ColliderBuilder, PhysicsWorld, RigidBodyBuilder};
 use softsync_softbody::scenario::ScenarioKind;
 use softsync_softbody::Mesh;
@@ -279,7 +279,10 @@ fn coulomb_friction_holds_and_slides_as_it_should_at_any_iteration_count() {
             free * 1e3,
             coulomb(10.0, 0.0) * 1e3
         );
-        assert!(held < 0.005, "{iterations} iterations: slid {held} m at 25° (μ = 0.8)");
+        assert!(
+            held < 0.005,
+            "{iterations} iterations: slid {held} m at 25° (μ = 0.8)"
+        );
         assert!(
             (slid / coulomb(50.0, 0.8) - 1.0).abs() < 0.2,
             "{iterations} iterations: {slid} m at 50°, Coulomb {} m",
@@ -299,8 +302,12 @@ fn coulomb_friction_holds_and_slides_as_it_should_at_any_iteration_count() {
 fn skid_on_frictionless_floor(spec: &MethodSpec) -> f32 {
     let mut world = PhysicsWorld::new();
     world.integration_parameters.dt = 1.0 / 60.0;
-    let floor = world.insert_body(RigidBodyBuilder::fixed().translation(Vec3::new(0.0, -0.05, 0.0)));
-    world.insert_collider(ColliderBuilder::cuboid(4.0, 0.05, 1.0).friction(0.0), Some(floor));
+    let floor =
+        world.insert_body(RigidBodyBuilder::fixed().translation(Vec3::new(0.0, -0.05, 0.0)));
+    world.insert_collider(
+        ColliderBuilder::cuboid(4.0, 0.05, 1.0).friction(0.0),
+        Some(floor),
+    );
     world.step();
     let mut mesh = Mesh::cuboid(Vec3::new(0.08, 0.02, 0.08), 4);
     for p in &mut mesh.positions {
