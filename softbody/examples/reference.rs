@@ -116,6 +116,33 @@ fn run_all(cases: &[Case], jobs: &[(usize, f32, u32)]) -> Vec<((usize, u32, u32)
     out.into_inner().unwrap()
 }
 
+/// How fast the scenario amplifies a small change: the doubling time of the nudge's change
+/// (log-linear least squares from its first sample above 0.05 mm to its largest), or `None`
+/// if it does not grow.
+fn doubling_time_s(nudge: &[f32], at_s: impl Fn(usize) -> f64) -> Option<f64> {
+    let first = nudge.iter().position(|&v| v >= 0.05)?;
+    let peak = nudge
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .map(|(i, _)| i)?;
+    let pts: Vec<(f64, f64)> = (first..=peak)
+        .filter(|&i| nudge[i] > 0.0)
+        .map(|i| (at_s(i), (nudge[i] as f64).ln()))
+        .collect();
+    if pts.len() < 3 {
+        return None;
+    }
+    let n = pts.len() as f64;
+    let (mx, my) = pts
+        .iter()
+        .fold((0.0, 0.0), |(a, b), p| (a + p.0 / n, b + p.1 / n));
+    let sxy: f64 = pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+    let sxx: f64 = pts.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    let slope = sxy / sxx.max(1e-12);
+    (slope > 0.0).then(|| std::f64::consts::LN_2 / slope)
+}
+
 fn bunny() -> Mesh {
     Mesh::load(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets/bunny.obj"))
         .unwrap()
@@ -332,6 +359,8 @@ fn main() {
         };
         let converged_until = horizon(&[&t_prof, &s_prof]);
         let nudge_until = horizon(&[&n_prof]);
+        let doubling = doubling_time_s(&n_prof, sample_s);
+        let doubling_text = doubling.map_or("none".to_string(), |d| format!("{d:.2}"));
         time_profiles.push((case.name.to_string(), curve(&t_prof)));
         space_profiles.push((case.name.to_string(), curve(&s_prof)));
         let worst_inverted = space
@@ -356,10 +385,11 @@ fn main() {
                 .field("converged", converged)
                 .fixed("converged_until_s", converged_until, 1)
                 .fixed("nudge_until_s", nudge_until, 1)
+                .field("nudge_doubling_s", &doubling_text)
                 .fixed("duration_s", case.kind.duration_s() as f64, 1),
         );
         summary_rows.push(format!(
-            "| {} | {} | {} | {} ({} in material) | {:.3}–{:.3} | {:.2} / {:.2} / {:.2} / {:.2} | {:.2} ({:.1}) | {:.2} ({:.1}) | {:.2} ({:.1}) | {} | {:.1} / {:.1} of {:.1} |",
+            "| {} | {} | {} | {} ({} in material) | {:.3}–{:.3} | {:.2} / {:.2} / {:.2} / {:.2} | {:.2} ({:.1}) | {:.2} ({:.1}) | {:.2} ({:.1}) | {} | {:.1} / {:.1} of {:.1} | {} |",
             case.name,
             reference.run.particles,
             reference.run.max_inverted,
@@ -381,6 +411,7 @@ fn main() {
             converged_until,
             nudge_until,
             case.kind.duration_s(),
+            doubling_text,
         ));
     }
     csv.write(out.join("reference.csv")).unwrap();
@@ -474,8 +505,8 @@ fn main() {
     )
     .unwrap();
     writeln!(md, "The reference `{}`: stable Neo-Hookean XPBD tets (Macklin & Müller 2021: per tet `C_D = ‖F‖` with compliance `1/(μV)` and `C_H = det F − (1 + μ/λ)` with compliance `1/(λV)`; `λ` raised by `μ` so small strains match the material's E = 200 kPa and K = 400 kPa, ν ≈ 0.42) on a Kuhn lattice (six congruent tets per cube, no slivers) of cell {:.3} × the object's size, each tet's mass and stiffness weighted by the fraction of it inside the surface, the surface embedded; {} substeps of {} Gauss–Seidel iterations per 60 Hz step; only the surface collides; a pinned region holds the same surface vertices at every resolution; a hard floor `det F ≥ 0.2` makes inversion impossible by construction (how often it engaged is counted).\n", spec.label(), cell, substeps, REFERENCE_ITERATIONS).unwrap();
-    writeln!(md, "Ladders around it, on every scenario of the evidence: in space (cell ×√2 coarser and finer: {}) at {substeps} substeps, and in time (substeps {}) at cell {cell:.3}. A change is the shape RMS between two rungs (each sample's surface rigidly fitted, the accuracy figures' own metric), over every sample of the scenario; `max` the largest vertex distance. `nudge`: the reference against itself with {nudged} substeps instead of {substeps} — how much the scenario itself moves under a 5 % change of the step (contact stick/slip, buckling, tumbling): no reference can be closer to *the* answer than that. Converged = both the space and the time change of the reference to its next finer rung below {TOLERANCE_MM} mm. `within 0.5 mm until`: the last sample time up to which every sample's change to both finer rungs stays below the tolerance, and the same for the nudge — the scenario's own horizon of predictability (bounces and tumbles amplify any change of the step: past that time no refinement pins the answer down, and errors against the reference measure that sensitivity as much as a method).\n", cells.iter().map(|c| format!("{c:.3}")).collect::<Vec<_>>().join(", "), steps.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(", ")).unwrap();
-    writeln!(md, "![convergence](reference.svg)\n\n| case | nodes | max inverted tets | floor engaged | volume ratio | energy J: first / max / last / max elastic | space change mm (max) | time change mm (max) | nudge mm (max) | converged | within 0.5 mm until, s: ladders / nudge |\n|---|---|---|---|---|---|---|---|---|---|---|").unwrap();
+    writeln!(md, "Ladders around it, on every scenario of the evidence: in space (cell ×√2 coarser and finer: {}) at {substeps} substeps, and in time (substeps {}) at cell {cell:.3}. A change is the shape RMS between two rungs (each sample's surface rigidly fitted, the accuracy figures' own metric), over every sample of the scenario; `max` the largest vertex distance. `nudge`: the reference against itself with {nudged} substeps instead of {substeps} — how much the scenario itself moves under a 5 % change of the step (contact stick/slip, buckling, tumbling): no reference can be closer to *the* answer than that. Converged = both the space and the time change of the reference to its next finer rung below {TOLERANCE_MM} mm. `within 0.5 mm until`: the last sample time up to which every sample's change to both finer rungs stays below the tolerance, and the same for the nudge — the scenario's own horizon of predictability (bounces and tumbles amplify any change of the step: past that time no refinement pins the answer down, and errors against the reference measure that sensitivity as much as a method). `nudge doubles every`: how fast the scenario amplifies that change (log-linear fit of the nudge's profile from 0.05 mm to its peak) — a change that doubles every τ grows 2^(T/τ)-fold over T seconds, so holding the answer to the tolerance over the whole scenario would take a step that many times more exact: out of reach of any refinement when T/τ is large.\n", cells.iter().map(|c| format!("{c:.3}")).collect::<Vec<_>>().join(", "), steps.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(", ")).unwrap();
+    writeln!(md, "![convergence](reference.svg)\n\n| case | nodes | max inverted tets | floor engaged | volume ratio | energy J: first / max / last / max elastic | space change mm (max) | time change mm (max) | nudge mm (max) | converged | within 0.5 mm until, s: ladders / nudge | nudge doubles every, s |\n|---|---|---|---|---|---|---|---|---|---|---|---|").unwrap();
     for r in &summary_rows {
         writeln!(md, "{r}").unwrap();
     }
