@@ -78,7 +78,11 @@ fn main() {
         match (args[i].parse::<f32>(), args[i + 1].parse::<u32>()) {
             (Ok(c), Ok(s)) if c > 0.0 && c.is_finite() && s > 0 => (c, s),
             _ => {
-                eprintln!("bad cell or substeps {:?} {:?}; {usage}", args[i], args[i + 1]);
+                eprintln!(
+                    "bad cell or substeps {:?} {:?}; {usage}",
+                    args[i],
+                    args[i + 1]
+                );
                 std::process::exit(2);
             }
         }

@@ -296,47 +296,35 @@ fn coulomb_friction_holds_and_slides_as_it_should_at_any_iteration_count() {
     }
 }
 
-/// A slab thrown flat onto a frictionless floor at 3 m/s sideways and 2 m/s down, at the
-/// methods' default budget (4 substeps: a substep's fall of 8 mm crosses the 2 mm contact
-/// thickness): how far it travels sideways in 0.25 s.
-fn skid_on_frictionless_floor(spec: &MethodSpec) -> f32 {
-    let mut world = PhysicsWorld::new();
-    world.integration_parameters.dt = 1.0 / 60.0;
-    let floor =
-        world.insert_body(RigidBodyBuilder::fixed().translation(Vec3::new(0.0, -0.05, 0.0)));
-    world.insert_collider(
-        ColliderBuilder::cuboid(4.0, 0.05, 1.0).friction(0.0),
-        Some(floor),
-    );
-    world.step();
-    let mut mesh = Mesh::cuboid(Vec3::new(0.08, 0.02, 0.08), 4);
-    for p in &mut mesh.positions {
-        p.y += 0.02 + 0.003;
-    }
-    let mut spec = *spec;
-    spec.params.damping_per_s = 0.0;
-    let mut body = build_pbd(&spec, &mesh).unwrap();
-    body.set_all_velocities(Vec3::new(3.0, -2.0, 0.0));
-    let x0 = body.positions().iter().map(|p| p.x).sum::<f32>() / body.positions().len() as f32;
-    for _ in 0..15 {
-        body.step(&world, 1.0 / 60.0);
-    }
-    body.positions().iter().map(|p| p.x).sum::<f32>() / body.positions().len() as f32 - x0
-}
-
-/// A point whose substep carries it through a collider's surface goes back onto the tangent
-/// plane where it entered, keeping its slide: on a frictionless floor a slab thrown down and
-/// sideways skids on at its speed. Stopping such points at the entry point was infinite
-/// friction: they lost their sideways travel at every impact.
+/// A point whose substep carries it into a collider stops where it entered: thrown at 10 m/s
+/// into a corner of walls 1 cm thick at 30 Hz (a substep's travel is 17 times a wall's
+/// thickness), no position-based body ends beyond a wall or under the floor. (Letting such a
+/// point keep its slide along the wall's tangent plane, tried, let ISPC through the second
+/// wall. The tet model is left out: it inverts in this throw, as the stability maps report.)
 #[test]
-fn an_impact_on_a_frictionless_floor_keeps_the_slide() {
-    for spec in [
-        MethodSpec::new(MethodKind::Tet).budget(4, 4),
-        MethodSpec::new(MethodKind::Surface).budget(4, 4),
-        reference_spec(0.2, 4),
+fn a_fast_throw_into_a_corner_does_not_pass_through_a_wall() {
+    let small = Mesh::icosphere(0.1, 2);
+    let w = small.weld(1e-6);
+    let volume = softsync_softbody::mesh::enclosed_volume(&w.positions, &w.triangles);
+    // The stability maps' budgets.
+    for base in [
+        MethodSpec::new(MethodKind::Ispc).budget(2, 4),
+        MethodSpec::new(MethodKind::Surface).budget(2, 4),
+        MethodSpec::new(MethodKind::ShapeMatching).budget(2, 1),
     ] {
-        let skid = skid_on_frictionless_floor(&spec);
-        println!("{}: {:.0} mm of 750", spec.label(), skid * 1e3);
-        assert!(skid > 0.7, "{}: skidded {skid} m, want 0.75", spec.label());
+        for mass in [0.001, 0.1, 1.0, 10.0] {
+            let spec = base.total_mass(mass, volume);
+            let mut s = ModelScene::corner_throw(&small, &spec, 1.0 / 30.0, 10.0).unwrap();
+            for step in 0..30 {
+                s.step();
+                let sanity = s.sanity();
+                assert!(
+                    sanity.ok(),
+                    "{} {mass} kg: {} at step {step}",
+                    spec.label(),
+                    sanity.verdict()
+                );
+            }
+        }
     }
 }

@@ -348,20 +348,13 @@ fn resolve_point(
         pose.translation -= back;
         let c = NearCollider { pose, ..*c };
         let before = q;
-        // Sweep: a point that was outside and is now past the surface goes back onto the
-        // tangent plane where it entered — the crossing stops, its slide along the surface
-        // does not (stopping it at the entry point was infinite friction at every fast
-        // impact; friction is Coulomb's, below).
+        // Sweep: a point that was outside and is now past the surface stops at the entry.
         let d = q - p0;
-        let mut entry_normal = None;
         if d.length_squared() > 1e-14 && !c.shape.contains_point(&c.pose, p0) {
             let ray = Ray::new(p0, d);
-            if let Some(hit) = c.shape.cast_ray_and_get_normal(&c.pose, &ray, 1.0, true) {
-                let n = hit.normal;
-                if hit.time_of_impact < 1.0 && (n.length_squared() - 1.0).abs() < 1e-3 {
-                    let entry = p0 + d * hit.time_of_impact;
-                    q -= n * (q - entry).dot(n).min(0.0);
-                    entry_normal = Some(n);
+            if let Some(t) = c.shape.cast_ray(&c.pose, &ray, 1.0, true) {
+                if t < 1.0 {
+                    q = p0 + d * t;
                 }
             }
         }
@@ -377,9 +370,8 @@ fn resolve_point(
         } else if dist < r && dist > 1e-9 {
             off / dist
         } else if dist <= 1e-9 {
-            // Exactly on the surface: out along the normal where it entered, or else back
-            // along the travel.
-            let back = entry_normal.unwrap_or(-(p - p0).normalize_or_zero());
+            // Exactly on the surface: push along the travel, backwards.
+            let back = -(p - p0).normalize_or_zero();
             if back == Vec3::ZERO {
                 continue;
             }
@@ -393,8 +385,7 @@ fn resolve_point(
         };
         let pushed = proj.point + normal * r;
         // Coulomb friction on the tangential travel relative to the collider.
-        // The pull-back onto the entry plane is part of this push.
-        let depth = (pushed - q).length() + (q - before).dot(normal).max(0.0);
+        let depth = (pushed - q).length();
         let rel = pushed - p0 - c.velocity * h;
         let tangential = rel - normal * rel.dot(normal);
         let t_len = tangential.length();
