@@ -18,34 +18,13 @@
 
 use std::path::PathBuf;
 
-use glam::{Mat3, Quat, Vec3};
+use glam::Quat;
 use softsync_softbody::methods::reference::{record, reference_spec, shape_change, SAMPLE_EVERY};
-use softsync_softbody::metrics::extract_rotation;
+use softsync_softbody::metrics::rigid_fit_distances;
 use softsync_softbody::scenario::ScenarioKind;
 use softsync_softbody::Mesh;
 
 const DT: f32 = 1.0 / 60.0;
-
-/// Each vertex's distance after the rigid fit of `b` onto `a` (as `rigid_fit_error`).
-fn per_vertex(a: &[Vec3], b: &[Vec3]) -> Vec<f32> {
-    let n = a.len().min(b.len());
-    if n == 0 {
-        return Vec::new();
-    }
-    let ca = a[..n].iter().copied().sum::<Vec3>() / n as f32;
-    let cb = b[..n].iter().copied().sum::<Vec3>() / n as f32;
-    let mut m = Mat3::ZERO;
-    for (x, y) in a[..n].iter().zip(&b[..n]) {
-        let (dx, dy) = (*x - ca, *y - cb);
-        m += Mat3::from_cols(dx * dy.x, dx * dy.y, dx * dy.z);
-    }
-    let q = extract_rotation(m, Quat::IDENTITY);
-    a[..n]
-        .iter()
-        .zip(&b[..n])
-        .map(|(x, y)| (q * (*y - cb) + ca).distance(*x))
-        .collect()
-}
 
 fn rms_mm(d: &[f32]) -> f64 {
     let n = d.len().max(1) as f64;
@@ -112,7 +91,7 @@ fn main() {
     );
     println!("    t_s    rms  lower60%  top40%    p50    p90    max");
     for (i, (x, y)) in ra.samples.iter().zip(&rb.samples).enumerate() {
-        let d = per_vertex(x, y);
+        let d = rigid_fit_distances(x, y, Quat::IDENTITY);
         let (mut lower, mut upper) = (Vec::new(), Vec::new());
         for (k, v) in d.iter().enumerate() {
             if top.get(k).copied().unwrap_or(false) {

@@ -67,9 +67,25 @@ pub fn measure(body: &SoftBody, world: &PhysicsWorld) -> ShapeMetrics {
 /// RMS and max distance between `current` and `reference` after the rigid transform that best
 /// maps `reference` onto `current` (rotation by polar decomposition, started from `guess`).
 pub fn rigid_fit_error(current: &[Vec3], reference: &[Vec3], guess: Quat) -> (f32, f32) {
+    let d = rigid_fit_distances(current, reference, guess);
+    if d.is_empty() {
+        return (0.0, 0.0);
+    }
+    let mut sum = 0.0f64;
+    let mut max = 0.0f32;
+    for &v in &d {
+        sum += (v as f64) * (v as f64);
+        max = max.max(v);
+    }
+    (((sum / d.len() as f64).sqrt()) as f32, max)
+}
+
+/// Each vertex's distance between `current` and `reference` after the rigid fit of
+/// [`rigid_fit_error`] (over the shorter of the two; empty if either is).
+pub fn rigid_fit_distances(current: &[Vec3], reference: &[Vec3], guess: Quat) -> Vec<f32> {
     let n = current.len().min(reference.len());
     if n == 0 {
-        return (0.0, 0.0);
+        return Vec::new();
     }
     let cx = current[..n].iter().copied().sum::<Vec3>() / n as f32;
     let cy = reference[..n].iter().copied().sum::<Vec3>() / n as f32;
@@ -79,14 +95,11 @@ pub fn rigid_fit_error(current: &[Vec3], reference: &[Vec3], guess: Quat) -> (f3
         a += Mat3::from_cols(dx * dy.x, dx * dy.y, dx * dy.z);
     }
     let q = extract_rotation(a, guess);
-    let mut sum = 0.0f64;
-    let mut max = 0.0f32;
-    for (x, y) in current[..n].iter().zip(&reference[..n]) {
-        let d = (q * (*y - cy) + cx).distance(*x);
-        sum += (d as f64) * (d as f64);
-        max = max.max(d);
-    }
-    (((sum / n as f64).sqrt()) as f32, max)
+    current[..n]
+        .iter()
+        .zip(&reference[..n])
+        .map(|(x, y)| (q * (*y - cy) + cx).distance(*x))
+        .collect()
 }
 
 /// Rotational part of `a` (Müller et al. 2016, "A Robust Method to Extract the Rotational Part
