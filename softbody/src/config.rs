@@ -154,6 +154,13 @@ pub struct SoftBodyConfig {
     pub restoring: RestoringScheme,
     /// Contact friction of particles and center. Default 0.5.
     pub friction: f32,
+    /// Rolling resistance of the center (world mode), dimensionless: while the center touches
+    /// something, a torque of `rolling_resistance × normal force × center radius` opposes its
+    /// spin (never reversing it), so a body rolling on a floor slows at about
+    /// `5/7 · rolling_resistance · g` and comes to rest. Rapier has none: without it a soft
+    /// ball rolls on a flat table for ever. In flight it does nothing. Range 0–1; default
+    /// 0.05 (rubber on wood is 0.01–0.05; a soft body deforms and loses more). 0 turns it off.
+    pub rolling_resistance: f32,
     /// Distance below which vertices are welded, metres. Default 1e-6.
     pub weld_epsilon_m: f32,
     /// Width of the slit a tear cuts (tear paper §3.1, the box's width), metres, in
@@ -185,6 +192,7 @@ impl Default for SoftBodyConfig {
             particles_can_sleep: true,
             continuous_collision: ContinuousCollision::Soft { prediction_m: 0.05 },
             friction: 0.5,
+            rolling_resistance: 0.05,
             weld_epsilon_m: 1e-6,
             tear_width_m: 0.003,
         }
@@ -218,6 +226,7 @@ impl SoftBodyConfig {
             1e4,
         )?;
         check("friction", self.friction, 0.0, 100.0)?;
+        check("rolling_resistance", self.rolling_resistance, 0.0, 1.0)?;
         check("weld_epsilon_m", self.weld_epsilon_m, 0.0, 1.0)?;
         check(
             "tear_width_m",

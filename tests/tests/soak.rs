@@ -38,5 +38,18 @@ fn a_two_minute_churn_soak_has_no_violation() {
     for k in ["joins", "leaves", "kills", "stops"] {
         assert_ne!(common::field(r, k), "0", "{k}: {text}");
     }
+    // late joiners were checked against the owners, and the check did not skip its way to a
+    // pass: states left out around a return home are few beside those compared
+    let compared: usize = common::field(r, "late_joiner_states_compared")
+        .parse()
+        .unwrap();
+    let skipped: usize = common::field(r, "late_joiner_states_skipped")
+        .parse()
+        .unwrap();
+    assert!(compared > 0, "no late joiner compared: {text}");
+    assert!(
+        skipped * 4 <= compared,
+        "skipped {skipped} of {compared}: {text}"
+    );
     assert!(out.join("soak.svg").exists() && out.join("soak.csv").exists());
 }

@@ -188,10 +188,10 @@ fn load_one(dir: &Path, peers: usize, seconds: f64, route: &str) -> Result<LoadR
         agreeing += usize::from(all);
     }
     let agree_frac = agreeing as f64 / moments.max(1) as f64;
-    let errors = remote_errors(&views, from, to);
+    let errors = remote_errors(&views, from, to).mm;
     let (p50_mm, p95_mm) = Summary::of(&errors).map_or((f64::NAN, f64::NAN), |s| (s.median, s.p95));
     let p95_of = |avatar: bool| {
-        Summary::of(&remote_errors(&only(&views, avatar), from, to)).map_or(f64::NAN, |s| s.p95)
+        Summary::of(&remote_errors(&only(&views, avatar), from, to).mm).map_or(f64::NAN, |s| s.p95)
     };
     let (scene_p95_mm, avatar_p95_mm) = (p95_of(false), p95_of(true));
     Ok(LoadRow {

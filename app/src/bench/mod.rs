@@ -42,7 +42,7 @@ use softsync_benchkit::{
 };
 
 use crate::report::{read_dump, DumpLine};
-use views::{points, truth_at, Track};
+use views::{near_cut, points, truth_at, Track};
 
 struct Proc {
     child: Child,
@@ -205,7 +205,14 @@ fn measure(
             if src < from_t || src > to_t {
                 continue;
             }
-            let Some(truth) = tracks.get(&o.id).and_then(|t| truth_at(t, src)) else {
+            let Some(track) = tracks.get(&o.id) else {
+                continue;
+            };
+            // a return home in between: the shown state may be from its other side
+            if near_cut(track, src) {
+                continue;
+            }
+            let Some(truth) = truth_at(track, src) else {
                 continue;
             };
             let shown = points(o);

@@ -17,7 +17,7 @@ use softsync_benchkit::{
 };
 
 use super::soak_check::{failures, Life, PeerAt, Streaks};
-use super::views::{is_avatar, line_at, remote_errors};
+use super::views::{is_avatar, line_at, remote_errors, RemoteErrors};
 use super::{grab_script, Proc};
 use crate::report::DumpLine;
 
@@ -259,6 +259,9 @@ pub fn soak(out: &Path, plan: &SoakPlan) -> Result<usize, String> {
     let mut joiner_errors: Vec<f64> = Vec::new();
     // the same for avatar parts (reported, not checked: see the closing note of stop 26)
     let mut avatar_errors: Vec<f64> = Vec::new();
+    // late joiners' shown states compared with the owners', and those left out around a
+    // return home (views::TRACK_CUT_SKIP_S)
+    let (mut joiner_compared, mut joiner_skipped) = (0usize, 0usize);
     let mut host_changes = 0usize;
     let mut last_host: Option<u64> = None;
     let t0 = Instant::now();
@@ -362,10 +365,12 @@ pub fn soak(out: &Path, plan: &SoakPlan) -> Result<usize, String> {
                     continue; // disturbed itself meanwhile
                 }
                 let (errs, avatar) = joiner_errors_of(&views, k, from, to);
-                if let Some(a) = Summary::of(&avatar) {
+                joiner_compared += errs.compared + avatar.compared;
+                joiner_skipped += errs.skipped_at_cuts + avatar.skipped_at_cuts;
+                if let Some(a) = Summary::of(&avatar.mm) {
                     avatar_errors.push(a.p95);
                 }
-                if let Some(sum) = Summary::of(&errs) {
+                if let Some(sum) = Summary::of(&errs.mm) {
                     joiner_errors.push(sum.p95);
                     if sum.p95 > JOINER_TOLERANCE_MM {
                         let d = format!(
@@ -427,6 +432,8 @@ pub fn soak(out: &Path, plan: &SoakPlan) -> Result<usize, String> {
             .field("stops", count("stop") + count("stop-host"))
             .field("host_changes", host_changes)
             .field("late_joiners_checked", joiner_errors.len())
+            .field("late_joiner_states_compared", joiner_compared)
+            .field("late_joiner_states_skipped", joiner_skipped)
             .fixed(
                 "late_joiner_p95_mm_max",
                 joiner.map_or(f64::NAN, |j| j.max),
@@ -450,7 +457,12 @@ pub fn soak(out: &Path, plan: &SoakPlan) -> Result<usize, String> {
 
 /// One joiner's errors, mm, over its lines in `[from, to]` against the owners' own states:
 /// (scene objects, avatar parts).
-fn joiner_errors_of(views: &[Vec<DumpLine>], k: usize, from: u64, to: u64) -> (Vec<f64>, Vec<f64>) {
+fn joiner_errors_of(
+    views: &[Vec<DumpLine>],
+    k: usize,
+    from: u64,
+    to: u64,
+) -> (RemoteErrors, RemoteErrors) {
     let part = |avatar: bool| {
         // owners' tracks come from every view; errors from the joiner's lines only: the
         // others keep only the objects they own (tracks, no shown states)

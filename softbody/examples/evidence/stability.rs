@@ -40,10 +40,12 @@ struct Map {
 }
 
 /// The methods of both maps: every method at its default, the thesis's original restoring
-/// scheme and self-collisions for the particle method, plain PBD for ISPC, and the reference.
+/// scheme, self-collisions and no rolling resistance for the particle method, plain PBD for ISPC, and the reference.
 fn methods() -> Vec<MethodSpec> {
     vec![
         MethodSpec::new(MethodKind::Particle),
+        // without rolling resistance (its default is 0.05): what that setting changes
+        MethodSpec::new(MethodKind::Particle).rolling_resistance(0.0),
         MethodSpec::new(MethodKind::Particle).restoring(RestoringScheme::Thesis),
         MethodSpec::new(MethodKind::Particle).self_collisions(true),
         MethodSpec::new(MethodKind::Surface).budget(2, 4),

@@ -129,6 +129,39 @@ impl SoftBody {
         Ok(())
     }
 
+    /// Sets the whole body moving rigidly: the center at `linvel` and spinning at `angvel`,
+    /// each particle at `linvel + angvel × (particle − center)` (a throw or a push from code;
+    /// a hand's throw goes through the particle drives instead). Refuses non-finite
+    /// velocities, changing nothing. A local-mode body's fixed center does not move.
+    pub fn set_rigid_velocity(
+        &self,
+        world: &mut PhysicsWorld,
+        linvel: Vec3,
+        angvel: Vec3,
+    ) -> Result<(), SoftBodyError> {
+        if !(linvel.is_finite() && angvel.is_finite()) {
+            return Err(SoftBodyError::Config("velocity is not finite".into()));
+        }
+        let c = world
+            .bodies
+            .get_mut(self.center)
+            .map(|c| {
+                if c.is_dynamic() {
+                    c.set_linvel(linvel, true);
+                    c.set_angvel(angvel, true);
+                }
+                c.translation()
+            })
+            .unwrap_or(Vec3::ZERO);
+        for &h in &self.particles {
+            if let Some(b) = world.bodies.get_mut(h) {
+                let x = b.translation();
+                b.set_linvel(linvel + angvel.cross(x - c), true);
+            }
+        }
+        Ok(())
+    }
+
     /// Drives particle `i` to `goal` (a grab of one particle, thesis 4.1.2), or releases it.
     pub fn set_particle_drive(&mut self, i: usize, goal: Option<Vec3>) {
         if let Some(d) = self.drives.get_mut(i) {

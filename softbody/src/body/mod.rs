@@ -83,6 +83,9 @@ pub struct SoftBody {
     slot_normals: Vec<Vec3>,
     rest_volume_m3: f32,
     size_m: f32,
+    /// The center's lever for rolling resistance: the mean rest vertex distance from the
+    /// center × `center_scale` (the ball center's radius).
+    roll_radius_m: f32,
     non_finite_recoveries: u64,
     /// A resolution change's correction still shown (see `level`).
     blend: level::Blend,
@@ -172,6 +175,7 @@ pub(crate) struct BodyPlan {
     center_shape: Option<ColliderBuilder>,
     rest_volume_m3: f32,
     size_m: f32,
+    roll_radius_m: f32,
 }
 
 impl BodyPlan {
@@ -227,15 +231,15 @@ impl BodyPlan {
             .collect();
         let rest_vertices: Vec<Vec3> = welded.positions.iter().map(|p| *p - rest_center).collect();
         let neighbour_scale = neighbour_scale(&map, config.neighbour_share);
+        let roll_radius_m = (rest_vertices.iter().map(|v| v.length()).sum::<f32>()
+            / rest_vertices.len().max(1) as f32
+            * config.center_scale)
+            .max(1e-4);
         let center_shape = match config.space {
             SimulationSpace::Local => None,
             SimulationSpace::World => {
                 let builder = match config.center_collider {
-                    CenterCollider::Ball => {
-                        let r = rest_vertices.iter().map(|v| v.length()).sum::<f32>()
-                            / rest_vertices.len() as f32;
-                        Some(ColliderBuilder::ball((r * config.center_scale).max(1e-4)))
-                    }
+                    CenterCollider::Ball => Some(ColliderBuilder::ball(roll_radius_m)),
                     CenterCollider::ConvexHull => {
                         let pts: Vec<Vec3> = rest_vertices
                             .iter()
@@ -273,6 +277,7 @@ impl BodyPlan {
             center_shape,
             rest_volume_m3,
             size_m,
+            roll_radius_m,
             config,
         })
     }
@@ -292,6 +297,7 @@ impl BodyPlan {
             center_shape,
             rest_volume_m3,
             size_m,
+            roll_radius_m,
         } = self;
         let (pg, cg) = groups(bit, config.self_collisions);
         let center_at = spawn.place(rest_center);
@@ -392,6 +398,7 @@ impl BodyPlan {
             scratch: vec![Vec3::ZERO; n],
             rest_volume_m3,
             size_m,
+            roll_radius_m,
             config,
             non_finite_recoveries: 0,
             blend: level::Blend::default(),
@@ -432,6 +439,7 @@ impl SoftBody {
     /// can destabilise it. A uniform displacement (the whole body lagging its center) decays at
     /// the full rate instead of being amplified as in the thesis's form.
     fn apply_restoring_velocities(&mut self, world: &mut PhysicsWorld, dt_s: f32) {
+        self.apply_rolling_resistance(world);
         let Some(center) = world.bodies.get(self.center) else {
             return;
         };
@@ -521,6 +529,49 @@ impl SoftBody {
                 continue;
             }
             body.set_linvel(new_v, true);
+        }
+    }
+
+    /// Rolling resistance (`SoftBodyConfig::rolling_resistance`): while the center touches
+    /// something, an angular impulse of `μ_r · r · Σ normal impulse` (the contacts' normal
+    /// impulses of the last step, so the torque follows the load) against the center's spin,
+    /// capped so that it stops the spin and never reverses it. The contact's friction then
+    /// slows the rolling body: for a ball, `(m + I/r²)·a = μ_r·N`, i.e. `a = 5/7·μ_r·g` on a
+    /// level floor. A body in flight has no contact and keeps its spin.
+    fn apply_rolling_resistance(&self, world: &mut PhysicsWorld) {
+        let mu = self.config.rolling_resistance;
+        if mu <= 0.0 || self.config.space != SimulationSpace::World {
+            return;
+        }
+        let Some(collider) = self.center_collider else {
+            return;
+        };
+        let load: f32 = world
+            .contact_pairs_with(collider)
+            .map(|p| p.total_impulse_magnitude())
+            .filter(|j| j.is_finite())
+            .sum();
+        if load <= 0.0 {
+            return;
+        }
+        let Some(center) = world.bodies.get_mut(self.center) else {
+            return;
+        };
+        let w = center.angvel();
+        let spin = w.length();
+        if center.is_sleeping() || !spin.is_finite() || spin < 1e-6 {
+            return;
+        }
+        let axis = w / spin;
+        let dw = center.mass_properties().effective_world_inv_inertia
+            * (-axis * (mu * self.roll_radius_m * load));
+        // the part along the spin stops it at most; what the impulse would turn past zero
+        // is not applied
+        let along = -dw.dot(axis);
+        let scale = if along > spin { spin / along } else { 1.0 };
+        let new_w = w + dw * scale;
+        if new_w.is_finite() {
+            center.set_angvel(new_w, false);
         }
     }
 

@@ -260,6 +260,7 @@ pub fn build_model(
                 center_mass_kg: (defaults.center_mass_kg * heavier).clamp(1e-4, 1e5),
                 restoring: spec.restoring,
                 self_collisions: spec.self_collisions,
+                rolling_resistance: spec.rolling_resistance,
                 soft_region: spec.soft_region,
                 space: if anchored {
                     SimulationSpace::Local

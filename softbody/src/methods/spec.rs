@@ -121,10 +121,18 @@ pub struct MethodSpec {
     /// default off). Particle method only.
     #[serde(default)]
     pub self_collisions: bool,
+    /// The particle method's rolling resistance (`SoftBodyConfig::rolling_resistance`;
+    /// default that config's). Particle method only.
+    #[serde(default = "default_rolling_resistance")]
+    pub rolling_resistance: f32,
 }
 
 fn exact_restoring() -> RestoringScheme {
     RestoringScheme::Exact
+}
+
+fn default_rolling_resistance() -> f32 {
+    crate::SoftBodyConfig::default().rolling_resistance
 }
 
 impl MethodSpec {
@@ -141,7 +149,14 @@ impl MethodSpec {
             soft_region: None,
             restoring: RestoringScheme::Exact,
             self_collisions: false,
+            rolling_resistance: default_rolling_resistance(),
         }
+    }
+
+    /// With the particle method's rolling resistance (0 turns it off).
+    pub fn rolling_resistance(mut self, coefficient: f32) -> Self {
+        self.rolling_resistance = coefficient;
+        self
     }
 
     /// With the particle method's restoring scheme.
@@ -234,6 +249,11 @@ impl MethodSpec {
         }
         if self.self_collisions {
             region += " selfcol";
+        }
+        if self.kind == MethodKind::Particle
+            && self.rolling_resistance != default_rolling_resistance()
+        {
+            region += &format!(" roll{}", self.rolling_resistance);
         }
         match self.kind {
             MethodKind::Surface | MethodKind::Ispc => {
