@@ -245,12 +245,13 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
     ms.sort_by(f32::total_cmp);
     let p95 = ms.get(ms.len() * 95 / 100).copied().unwrap_or(0.0);
     println!(
-        "rollback.summary frames={} resimulated={} rollbacks={} desyncs={} epochs={} switch_ms_max={:.0} frame_ms_p95={p95:.2} save_us={:.1} load_us={:.1} ggrs_bytes={}",
+        "rollback.summary frames={} resimulated={} rollbacks={} desyncs={} epochs={} epochs_refused={} switch_ms_max={:.0} frame_ms_p95={p95:.2} save_us={:.1} load_us={:.1} ggrs_bytes={}",
         s.frames,
         s.resimulated,
         s.rollbacks,
         s.desyncs,
         s.epochs,
+        s.epochs_refused,
         s.switch_ms_max,
         s.save_ns as f64 / s.saves.max(1) as f64 / 1e3,
         s.load_ns as f64 / s.rollbacks.max(1) as f64 / 1e3,

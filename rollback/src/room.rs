@@ -170,6 +170,9 @@ pub struct RollbackStats {
     pub ggrs_bytes: u64,
     /// Rollback datagrams dropped (undecodable, or of another epoch).
     pub dropped: u64,
+    /// Epoch announcements refused: not from the room's host, or naming another host than
+    /// their sender, or a start frame past the frame counter's range.
+    pub epochs_refused: u64,
 }
 
 /// A pending switch to an announced epoch.
@@ -284,7 +287,10 @@ impl RollbackPeer {
     pub fn confirmed_frame(&self) -> Option<i32> {
         let (g, (_, start)) = (self.ggrs.as_ref()?, self.epoch.as_ref()?);
         let c = g.confirmed_frame();
-        (c >= 0).then_some(start + c)
+        if c < 0 {
+            return None;
+        }
+        start.checked_add(c)
     }
 
     /// The checksum of this peer's saved state of world frame `frame`, if it still has it
@@ -292,8 +298,21 @@ impl RollbackPeer {
     pub fn checksum_at(&self, frame: i32) -> Option<u128> {
         let (_, start) = self.epoch.as_ref()?;
         self.ring
-            .get(&(frame - start))
+            .get(&frame.checked_sub(*start)?)
             .map(|s| RollbackWorld::checksum_of(s))
+    }
+
+    /// Sends an application message to the room (the room's message table: `register` adds
+    /// the rollback's own type to it). Messages go through the session, beside the
+    /// simulation, as in a state-sync room.
+    pub fn send<M: Message>(
+        &mut self,
+        now: Instant,
+        to: MessageTarget,
+        delivery: Delivery,
+        msg: &M,
+    ) -> Result<u32, softsync_net::wire::MessageRefusal> {
+        self.session.send(now, &self.types, to, delivery, msg)
     }
 
     /// This peer's input for the next frame.
@@ -410,7 +429,25 @@ impl RollbackPeer {
         while let Some(e) = self.session.poll_event() {
             match e {
                 Event::Message(ref m) => match self.types.decode::<Epoch>(m) {
-                    Some(Ok(epoch)) => self.on_epoch(now, epoch),
+                    // only the room's host announces epochs, and names itself in them: a
+                    // member's forged one would freeze joins (n = u32::MAX) or make everyone
+                    // fetch its snapshot
+                    Some(Ok(epoch))
+                        if Some(m.from) == self.session.host_id()
+                            && epoch.host == m.from
+                            && epoch.frame >= 0 =>
+                    {
+                        self.on_epoch(now, epoch)
+                    }
+                    Some(Ok(epoch)) => {
+                        self.stats.epochs_refused += 1;
+                        self.events.push_back(RollbackEvent::Warning(format!(
+                            "epoch {} from {} refused: only the host ({}) announces epochs",
+                            epoch.n,
+                            m.from.0,
+                            self.session.host_id().map_or(0, |h| h.0)
+                        )))
+                    }
                     Some(Err(r)) => self
                         .events
                         .push_back(RollbackEvent::Warning(format!("bad epoch message: {r:?}"))),
@@ -477,7 +514,7 @@ impl RollbackPeer {
     /// The portable state of world frame `frame`, from the ring.
     fn snapshot_at(&self, frame: i32) -> Option<Snapshot> {
         let (_, start) = self.epoch.as_ref()?;
-        let state = self.ring.get(&(frame - start))?;
+        let state = self.ring.get(&frame.checked_sub(*start)?)?;
         let world = self.world.as_ref()?;
         Some(world.snapshot_of(state))
     }
@@ -640,7 +677,7 @@ impl RollbackPeer {
                     self.stats.desyncs += 1;
                     let start = self.epoch.as_ref().map_or(0, |e| e.1);
                     self.events.push_back(RollbackEvent::Desync {
-                        frame: start + frame,
+                        frame: start.saturating_add(frame),
                         peer: addr,
                     });
                 }

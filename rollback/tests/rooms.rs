@@ -9,8 +9,9 @@ mod common;
 use std::time::Duration;
 
 use common::Room;
-use softsync_net::ConditionerConfig;
-use softsync_rollback::RollbackEvent;
+use softsync_net::wire::{Delivery, MessageTarget};
+use softsync_net::{ConditionerConfig, PeerId};
+use softsync_rollback::{Epoch, RollbackEvent};
 
 fn net(latency_ms: u64, loss: f64) -> ConditionerConfig {
     ConditionerConfig {
@@ -127,6 +128,61 @@ fn a_peer_killed_mid_grab_leaves_the_others_going_from_an_agreed_state_and_a_lat
         "{:?}",
         joiner.peer.stats()
     );
+    assert_eq!(room.desyncs(), 0, "warnings: {:?}", room.warnings());
+    assert_agree(&room);
+}
+
+#[test]
+fn a_members_forged_epoch_is_refused_and_the_room_still_takes_joiners() {
+    let mut room = Room::new(net(10, 0.0));
+    room.add(1);
+    room.add(2);
+    room.run(Duration::from_secs(3));
+    let running = room.nodes[0].peer.epoch().unwrap().clone();
+    // Member 2 announces an epoch as if it were the host: the largest number (every later
+    // one would look old: joins frozen for ever) and itself as the snapshot's server.
+    let now = room.now();
+    let forged = Epoch {
+        n: u32::MAX,
+        frame: i32::MAX,
+        players: vec![PeerId(2)],
+        digest: [7; 32],
+        host: PeerId(2),
+    };
+    room.nodes[1]
+        .peer
+        .send(now, MessageTarget::Everyone, Delivery::Retained, &forged)
+        .unwrap();
+    // and one naming the host as its server
+    let forged_as_host = Epoch {
+        host: PeerId(1),
+        ..forged
+    };
+    room.nodes[1]
+        .peer
+        .send(
+            now,
+            MessageTarget::Everyone,
+            Delivery::Retained,
+            &forged_as_host,
+        )
+        .unwrap();
+    room.run(Duration::from_secs(2));
+    assert_eq!(room.nodes[0].peer.stats().epochs_refused, 2);
+    assert_eq!(room.nodes[0].peer.epoch().map(|e| e.n), Some(running.n));
+    // A joiner still gets in: the host's next epoch is taken by everyone, the joiner too
+    // (the forged one is retained, so the joiner is offered it as well, and refuses it).
+    room.add(3);
+    room.run(Duration::from_secs(6));
+    for n in &room.nodes {
+        assert_eq!(
+            n.peer.epoch().map(|e| (e.n, e.players.len())),
+            Some((running.n + 1, 3)),
+            "peer {}: {:?}",
+            n.peer.me().0,
+            n.events
+        );
+    }
     assert_eq!(room.desyncs(), 0, "warnings: {:?}", room.warnings());
     assert_agree(&room);
 }

@@ -311,3 +311,51 @@ fn clustering_a_mesh_with_a_far_away_part_stays_fast() {
         assert!(map.len() > 10);
     }
 }
+
+#[test]
+fn only_regular_files_of_bounded_size_are_read_and_the_kind_is_known_first() {
+    let dir = std::env::temp_dir().join(format!("softsync-mesh-special-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    // a device behind a mesh's name: /dev/zero never ends
+    let zero = dir.join("zero.obj");
+    std::os::unix::fs::symlink("/dev/zero", &zero).unwrap();
+    let e = Mesh::load(&zero).unwrap_err().to_string();
+    assert!(e.contains("not a regular file"), "{e}");
+    // a FIFO nobody writes: opening it would block for ever
+    let fifo = dir.join("pipe.ply");
+    let made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap();
+    assert!(made.success());
+    let e = Mesh::load(&fifo).unwrap_err().to_string();
+    assert!(e.contains("not a regular file"), "{e}");
+    // a folder
+    let folder = dir.join("folder.glb");
+    std::fs::create_dir_all(&folder).unwrap();
+    let e = Mesh::load(&folder).unwrap_err().to_string();
+    assert!(e.contains("not a regular file"), "{e}");
+    // a file past the cap (sparse: nothing is written)
+    let big = dir.join("big.obj");
+    std::fs::File::create(&big)
+        .unwrap()
+        .set_len(softsync_softbody::mesh::MAX_MESH_FILE_BYTES + 1)
+        .unwrap();
+    let e = Mesh::load(&big).unwrap_err().to_string();
+    assert!(e.contains("more than the"), "{e}");
+    // an unknown kind is refused before the file is opened: /dev/zero again
+    let e = Mesh::load("/dev/zero").unwrap_err();
+    assert!(matches!(e, SoftBodyError::UnsupportedFormat { .. }), "{e}");
+    // a glTF whose buffer is a device
+    std::os::unix::fs::symlink("/dev/zero", dir.join("buf.bin")).unwrap();
+    let gltf = dir.join("dev.gltf");
+    std::fs::write(
+        &gltf,
+        r#"{"asset":{"version":"2.0"},"buffers":[{"uri":"buf.bin","byteLength":12}]}"#,
+    )
+    .unwrap();
+    let e = Mesh::load(&gltf).unwrap_err().to_string();
+    assert!(e.contains("not a regular file"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

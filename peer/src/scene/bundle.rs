@@ -30,7 +30,7 @@ struct Bundle {
 }
 
 /// A path a bundle may hold: relative, `/`-separated plain names, no `..`, no root, no drive.
-fn check_path(p: &str) -> Result<(), String> {
+pub(super) fn check_path(p: &str) -> Result<(), String> {
     let ok = !p.is_empty()
         && p.len() <= MAX_PATH
         && !p.contains('\\')
@@ -148,7 +148,9 @@ impl Scene {
             }
             write_atomically(&path, bytes)?;
         }
-        Scene::load(&dir.join(&b.scene))
+        // its meshes may name only files of the bundle: a hostile scene must not make this
+        // peer read (and then serve to the next joiner) a file of its own
+        Scene::load_with(&dir.join(&b.scene), super::file::MeshPaths::Confined)
     }
 }
 
@@ -277,6 +279,45 @@ mod tests {
         assert!(e.contains("bunny.obj"), "{e}");
         // Nothing was written outside the cache.
         assert!(!c.join("../x.ron").exists());
+        let _ = std::fs::remove_dir_all(&c);
+    }
+
+    #[test]
+    fn a_shared_scene_reads_no_file_outside_its_bundle() {
+        // A valid mesh of this machine's, outside any bundle: a hostile host's scene names it,
+        // by absolute path or with `..`, so that the joiner loads it (and would then serve it
+        // to the next joiner as part of the room's scene).
+        let c = cache("outside");
+        std::fs::create_dir_all(&c).unwrap();
+        let secret = c.join("secret.obj");
+        std::fs::copy(assets().join("bunny.obj"), &secret).unwrap();
+        let text =
+            String::from_utf8(std::fs::read(assets().join("thesis-room.ron")).unwrap()).unwrap();
+        assert!(text.contains("\"bunny.obj\""));
+        // the bundle is unpacked two levels under the cache: <cache>/<digest>/room.ron
+        for evil in [
+            secret.display().to_string(),
+            "../secret.obj".to_string(),
+            "./../secret.obj".to_string(),
+        ] {
+            let scene = text.replace("\"bunny.obj\"", &format!("{evil:?}"));
+            let b = Bundle {
+                format: FORMAT,
+                scene: "room.ron".into(),
+                files: vec![("room.ron".into(), scene.clone().into_bytes())],
+            };
+            let blob = bincode::serde::encode_to_vec(&b, bincode::config::standard()).unwrap();
+            let e = Scene::from_bundle(&blob, &c).unwrap_err();
+            assert!(
+                e.contains("shape.file") && e.contains("plain relative paths"),
+                "{evil}: {e}"
+            );
+            // the same scene file of one's own may name any file (the user's choice)
+            let own = c.join("own").join("room.ron");
+            std::fs::create_dir_all(own.parent().unwrap()).unwrap();
+            std::fs::write(&own, &scene).unwrap();
+            Scene::load(&own).unwrap();
+        }
         let _ = std::fs::remove_dir_all(&c);
     }
 }

@@ -287,9 +287,19 @@ fn colour(field: &str, c: Option<[f32; 3]>, default: [f32; 3]) -> Result<[f32; 3
     }
 }
 
+/// Which files a scene's meshes may name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum MeshPaths {
+    /// Any path, relative to the scene's folder: the user's own scene file.
+    Any,
+    /// Plain relative paths inside the scene's folder (no root, no `..`): a scene that came
+    /// from another peer, whose folder is its bundle.
+    Confined,
+}
+
 /// Reads and checks a scene (`path`: where it was read from; meshes are relative to its
-/// directory).
-pub(super) fn parse(text: &str, path: &Path) -> Result<Scene, String> {
+/// directory, and confined to it as `meshes` says).
+pub(super) fn parse(text: &str, path: &Path, meshes: MeshPaths) -> Result<Scene, String> {
     if text.len() > MAX_TEXT_BYTES {
         return Err(format!(
             "{} bytes, more than the {MAX_TEXT_BYTES} a scene may have",
@@ -371,7 +381,7 @@ pub(super) fn parse(text: &str, path: &Path) -> Result<Scene, String> {
             }));
         }
         c.replication.check().map_err(at)?;
-        let class = class(c, dir).map_err(at)?;
+        let class = class(c, dir, meshes).map_err(at)?;
         classes.push(class);
     }
     if classes.len() > usize::from(u16::MAX) {
@@ -464,7 +474,7 @@ fn friction(v: f32) -> Result<f32, String> {
 }
 
 /// One class, checked, its mesh loaded, a soft class built once in a scratch world.
-fn class(c: ClassFile, dir: &Path) -> Result<Class, String> {
+fn class(c: ClassFile, dir: &Path, meshes: MeshPaths) -> Result<Class, String> {
     let mut auto = None;
     let soft = matches!(c.body, BodyFile::Soft(_) | BodyFile::Auto { .. });
     let shape = match c.shape {
@@ -555,6 +565,9 @@ fn class(c: ClassFile, dir: &Path) -> Result<Class, String> {
     };
     let mesh = match &shape {
         Shape::Mesh { file, size_m } => {
+            if meshes == MeshPaths::Confined {
+                super::bundle::check_path(file).map_err(|e| format!("shape.file: {e}"))?;
+            }
             let path = dir.join(file);
             let mut m = Mesh::load(&path)
                 .map_err(|e| format!("shape.file: cannot load {}: {e}", path.display()))?

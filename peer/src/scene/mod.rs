@@ -282,15 +282,20 @@ impl Scene {
     /// Reads, checks and prepares the scene file at `path` (meshes are loaded and every soft
     /// class is built once): an error names the file, the line or field, and what is wrong.
     pub fn load(path: &Path) -> Result<Scene, String> {
+        Scene::load_with(path, file::MeshPaths::Any)
+    }
+
+    fn load_with(path: &Path, meshes: file::MeshPaths) -> Result<Scene, String> {
         let text =
             std::fs::read_to_string(path).map_err(|e| format!("scene {}: {e}", path.display()))?;
-        Scene::parse(&text, path)
+        file::parse(&text, path, meshes).map_err(|e| format!("scene {}: {e}", path.display()))
     }
 
     /// [`load`](Self::load) of `text` as if read from `path` (meshes relative to its
     /// directory).
     pub fn parse(text: &str, path: &Path) -> Result<Scene, String> {
-        file::parse(text, path).map_err(|e| format!("scene {}: {e}", path.display()))
+        file::parse(text, path, file::MeshPaths::Any)
+            .map_err(|e| format!("scene {}: {e}", path.display()))
     }
 
     /// The kind of a class name (not the avatar's).

@@ -61,10 +61,7 @@ impl Mesh {
                             ));
                         }
                         let p = src.parent().unwrap_or(Path::new(".")).join(uri);
-                        std::fs::read(&p).map_err(|source| SoftBodyError::Io {
-                            path: p.clone(),
-                            source,
-                        })?
+                        super::read_mesh_file(&p)?
                     }
                 }
             };

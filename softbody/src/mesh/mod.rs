@@ -86,8 +86,52 @@ pub struct WeldedMesh {
     pub normal_slots: usize,
 }
 
+/// Largest mesh file (or glTF buffer) [`Mesh::load`] reads, bytes.
+pub const MAX_MESH_FILE_BYTES: u64 = 256 << 20;
+
+/// Reads a mesh file or a glTF buffer: only a regular file (after links; not a device, a FIFO
+/// or a folder, which could block or never end), of at most [`MAX_MESH_FILE_BYTES`], checked
+/// before anything is read, and read through a bound in case it grows meanwhile.
+pub(crate) fn read_mesh_file(path: &Path) -> Result<Vec<u8>, SoftBodyError> {
+    use std::io::Read as _;
+    let io = |source| SoftBodyError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let meta = std::fs::metadata(path).map_err(io)?;
+    if !meta.is_file() {
+        return Err(SoftBodyError::malformed(
+            path,
+            "not a regular file (a device, a pipe or a folder is never read)",
+        ));
+    }
+    if meta.len() > MAX_MESH_FILE_BYTES {
+        return Err(SoftBodyError::malformed(
+            path,
+            format!(
+                "{} bytes, more than the {MAX_MESH_FILE_BYTES} a mesh file may have",
+                meta.len()
+            ),
+        ));
+    }
+    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    std::fs::File::open(path)
+        .map_err(io)?
+        .take(MAX_MESH_FILE_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(io)?;
+    if bytes.len() as u64 > MAX_MESH_FILE_BYTES {
+        return Err(SoftBodyError::malformed(
+            path,
+            format!("grew past the {MAX_MESH_FILE_BYTES} bytes a mesh file may have"),
+        ));
+    }
+    Ok(bytes)
+}
+
 impl Mesh {
-    /// Loads an OBJ, glTF, GLB or PLY file, chosen by extension.
+    /// Loads an OBJ, glTF, GLB or PLY file, chosen by extension (checked before anything is
+    /// read; the file must be a regular one of at most [`MAX_MESH_FILE_BYTES`]).
     pub fn load(path: impl AsRef<Path>) -> Result<Self, SoftBodyError> {
         let path = path.as_ref();
         let ext = path
@@ -95,10 +139,12 @@ impl Mesh {
             .and_then(|e| e.to_str())
             .map(str::to_ascii_lowercase)
             .unwrap_or_default();
-        let bytes = std::fs::read(path).map_err(|source| SoftBodyError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        if !matches!(ext.as_str(), "obj" | "gltf" | "glb" | "ply") {
+            return Err(SoftBodyError::UnsupportedFormat {
+                path: path.to_path_buf(),
+            });
+        }
+        let bytes = read_mesh_file(path)?;
         match ext.as_str() {
             "obj" => {
                 let text = std::str::from_utf8(&bytes)
@@ -130,10 +176,7 @@ impl Mesh {
         if !is_gltf {
             return Ok(vec![name]);
         }
-        let bytes = std::fs::read(path).map_err(|source| SoftBodyError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let bytes = read_mesh_file(path)?;
         let mut files = vec![name];
         files.extend(gltf::external_buffers(&bytes, path)?);
         Ok(files)
