@@ -44,6 +44,12 @@ pub enum NetError {
     /// so the rest of its block is skipped.
     #[error("state of object {0:?} laid out for another resolution")]
     OtherLayout(NetId),
+    /// A message could not be encoded (too large for its limit): it is not sent.
+    #[error("cannot encode {what}")]
+    Encode {
+        /// What, and why.
+        what: String,
+    },
 }
 
 /// Shorthand for a decode error.

@@ -104,6 +104,8 @@ pub struct Stats {
     pub refused_controls: u64,
     /// Host: joiners refused for a wrong room key.
     pub refused_joins: u64,
+    /// Control messages not sent because they could not be encoded (over their size limit).
+    pub unencodable_controls: u64,
     /// Application messages.
     pub messages: MessageStats,
 }

@@ -45,6 +45,39 @@ fn class_table_mismatch_is_refused() {
         .any(|e| matches!(e, Event::Refused { reason } if reason.contains("configuration"))));
 }
 
+/// The "configuration differs" refusal lists the host's message types: a room with many
+/// (an app's own) made it longer than a `Refused` may be, the encoder gave empty bytes and the
+/// joiner timed out without a reason. Now it is shortened and says so.
+#[test]
+fn a_refusal_too_long_for_its_message_still_arrives_shortened() {
+    let mut cfg = config();
+    cfg.messages.kinds = (0..60)
+        .map(|i| format!("training.procedure.event_type_{i:02}"))
+        .collect();
+    let mut h = room_with(1, cfg, ConditionerConfig::default(), ms(300));
+    let n = h.add_peer_with(config(), 0);
+    h.advance(ms(500));
+    assert!(!h.peers[n].session.is_connected());
+    let reason = h.peers[n]
+        .events
+        .iter()
+        .find_map(|e| match e {
+            Event::Refused { reason } => Some(reason.clone()),
+            _ => None,
+        })
+        .expect("the joiner was told nothing");
+    assert!(reason.contains("configuration differs"), "{reason}");
+    assert!(
+        reason.contains("training.procedure.event_type_00"),
+        "{reason}"
+    );
+    assert!(
+        reason.ends_with(" bytes)") && reason.len() <= 512,
+        "{reason}"
+    );
+    assert_eq!(h.peers[0].session.stats().unencodable_controls, 0);
+}
+
 /// Negative or non-finite interpolation settings are made sane: display never panics and the
 /// delay is never negative.
 #[test]

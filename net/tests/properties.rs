@@ -304,7 +304,7 @@ proptest! {
 
     #[test]
     fn control_round_trip(c in arb_control()) {
-        let bytes = c.encode();
+        let bytes = c.encode().unwrap();
         prop_assert_eq!(Control::decode(&bytes).unwrap(), c);
     }
 

@@ -445,7 +445,7 @@ fn render() -> String {
     )
     .unwrap();
     for (name, c) in &examples {
-        let b = c.encode();
+        let b = c.encode().unwrap();
         writeln!(w, "| {name} | {} | `{}` |", b.len(), hex(&b)).unwrap();
     }
     writeln!(w).unwrap();

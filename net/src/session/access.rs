@@ -300,7 +300,7 @@ impl Session {
                 let reason = "this room's host joined with a token and holds no key: it \
                               cannot admit anyone until a peer with the key hosts"
                     .to_string();
-                self.send_control(now, from, &Control::Refused { reason });
+                self.send_control(now, from, &Control::refused(reason));
                 return true;
             }
             return false;
@@ -363,7 +363,7 @@ impl Session {
         if self.challenges.open.remove(&from).is_none() {
             self.stats.refused_controls += 1;
             let reason = "no open challenge for this peer (it expired): join again".to_string();
-            self.send_control(now, from, &Control::Refused { reason });
+            self.send_control(now, from, &Control::refused(reason));
             return;
         }
         let verdict = key.check_token(&token, now).and_then(|()| {
@@ -374,7 +374,7 @@ impl Session {
         });
         if let Err(why) = verdict {
             self.stats.refused_joins += 1;
-            self.send_control(now, from, &Control::Refused { reason: why.into() });
+            self.send_control(now, from, &Control::refused(why));
             return;
         }
         self.admit(now, from);
@@ -442,7 +442,7 @@ impl Session {
         let Some((nonce, _)) = self.challenges.open.remove(&from) else {
             self.stats.refused_controls += 1;
             let reason = "no open challenge for this peer (it expired): join again".to_string();
-            self.send_control(now, from, &Control::Refused { reason });
+            self.send_control(now, from, &Control::refused(reason));
             return;
         };
         if self.role == Role::Host && key.verify(&nonce, from, self.local, &mac) {
@@ -450,7 +450,7 @@ impl Session {
         } else {
             self.stats.refused_joins += 1;
             let reason = "wrong room key".to_string();
-            self.send_control(now, from, &Control::Refused { reason });
+            self.send_control(now, from, &Control::refused(reason));
         }
     }
 }

@@ -11,10 +11,18 @@ use crate::time::Instant;
 use crate::wire::Control;
 
 impl Session {
-    /// Queue `msg` to `to` on the reliable channel; returns its reliable sequence.
-    pub(super) fn send_control(&mut self, now: Instant, to: PeerId, msg: &Control) -> u16 {
-        let bytes = msg.encode();
-        self.links.entry(to).or_default().reliable.push(now, bytes)
+    /// Queue `msg` to `to` on the reliable channel; returns its reliable sequence, or `None`
+    /// when it cannot be encoded (over its size limit: counted in
+    /// `Stats::unencodable_controls`, nothing queued — an empty message would reach the peer
+    /// as a malformed one).
+    pub(super) fn send_control(&mut self, now: Instant, to: PeerId, msg: &Control) -> Option<u16> {
+        match msg.encode() {
+            Ok(bytes) => Some(self.links.entry(to).or_default().reliable.push(now, bytes)),
+            Err(_) => {
+                self.stats.unencodable_controls += 1;
+                None
+            }
+        }
     }
 
     /// Queue `msg` to every member but us and `except`. A `Spawn` is remembered per link
@@ -28,7 +36,7 @@ impl Session {
             .collect();
         for p in peers {
             let seq = self.send_control(now, p, msg);
-            if let Control::Spawn(info) = msg {
+            if let (Control::Spawn(info), Some(seq)) = (msg, seq) {
                 if let Some(l) = self.links.get_mut(&p) {
                     l.spawn_pending.insert(info.id, seq);
                 }

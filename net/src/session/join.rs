@@ -82,7 +82,7 @@ impl Session {
             None
         };
         if let Some(reason) = refusal {
-            self.send_control(now, from, &Control::Refused { reason });
+            self.send_control(now, from, &Control::refused(reason));
             return;
         }
         if self.challenge(now, from) {
@@ -100,7 +100,7 @@ impl Session {
         if self.members.len() >= self.cfg.max_members {
             // it filled up while this joiner proved its key
             let reason = format!("the room is full ({} members)", self.cfg.max_members);
-            self.send_control(now, from, &Control::Refused { reason });
+            self.send_control(now, from, &Control::refused(reason));
             return;
         }
         let join_seq = self.next_join_seq;

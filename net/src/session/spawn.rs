@@ -230,7 +230,7 @@ impl Session {
     fn send_spawn(&mut self, now: Instant, to: PeerId, info: SpawnInfo) {
         let id = info.id;
         let seq = self.send_control(now, to, &Control::Spawn(info));
-        if let Some(l) = self.links.get_mut(&to) {
+        if let (Some(l), Some(seq)) = (self.links.get_mut(&to), seq) {
             l.spawn_pending.insert(id, seq);
         }
     }

@@ -430,10 +430,25 @@ fn bincode_config() -> impl bincode::config::Config {
     bincode::config::standard().with_limit::<MAX_CONTROL_LEN>()
 }
 
+/// Longest reason a [`Control::Refused`] carries, bytes (longer ones are refused by the
+/// decoder: make refusals with [`Control::refused`]).
+pub const MAX_REFUSED_REASON: usize = 512;
+
 impl Control {
-    /// Encode with bincode 2.
-    pub fn encode(&self) -> Vec<u8> {
-        bincode::serde::encode_to_vec(self, bincode_config()).unwrap_or_default()
+    /// A refusal whose reason always arrives: one longer than [`MAX_REFUSED_REASON`] is cut
+    /// at a character boundary and says its whole length (`… (N bytes)`).
+    pub fn refused(reason: impl AsRef<str>) -> Control {
+        Control::Refused {
+            reason: super::shorten_reason(reason.as_ref(), MAX_REFUSED_REASON).into_owned(),
+        }
+    }
+
+    /// Encode with bincode 2: an error, never empty bytes, for a message over
+    /// [`MAX_CONTROL_LEN`].
+    pub fn encode(&self) -> Result<Vec<u8>, NetError> {
+        bincode::serde::encode_to_vec(self, bincode_config()).map_err(|e| NetError::Encode {
+            what: format!("control message ({e}; at most {MAX_CONTROL_LEN} bytes)"),
+        })
     }
 
     /// Decode and validate (finite floats, bounded lists).
@@ -465,7 +480,7 @@ impl Control {
             Control::Welcome { members, .. } | Control::NewHost { members, .. } => {
                 members.len() <= MAX_MEMBERS
             }
-            Control::Refused { reason } => reason.len() <= 512,
+            Control::Refused { reason } => reason.len() <= MAX_REFUSED_REASON,
             Control::TopologyRequest { event, pieces, .. } => {
                 event.valid()
                     && pieces.len() <= MAX_CUT_PIECES

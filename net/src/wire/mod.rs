@@ -535,19 +535,31 @@ pub fn encode_refusal(reason: &str, term: Term) -> Vec<u8> {
 /// [`encode_refusal`] telling the peer which host to join instead (8 bytes, little-endian,
 /// after the term).
 pub fn encode_refusal_to(reason: &str, term: Term, rejoin: Option<PeerId>) -> Vec<u8> {
-    let r = reason.as_bytes();
-    // Cut at a character boundary, so the reason stays valid UTF-8.
-    let mut n = r.len().min(200);
-    while !reason.is_char_boundary(n) {
-        n -= 1;
-    }
-    let mut out = vec![REFUSAL_MARKER, PROTOCOL_VERSION, n as u8];
-    out.extend_from_slice(r.get(..n).unwrap_or_default());
+    let r = shorten_reason(reason, MAX_REFUSAL_DATAGRAM_REASON);
+    let mut out = vec![REFUSAL_MARKER, PROTOCOL_VERSION, r.len() as u8];
+    out.extend_from_slice(r.as_bytes());
     write_varint(&mut out, u64::from(term.0));
     if let Some(h) = rejoin {
         out.extend_from_slice(&h.0.to_le_bytes());
     }
     out
+}
+
+/// Longest reason a refusal datagram carries, bytes (its length is one byte).
+pub const MAX_REFUSAL_DATAGRAM_REASON: usize = 200;
+
+/// `reason` as it fits in `max` bytes: whole if it does, else cut at a character boundary
+/// and ended with `… (N bytes)`, N its whole length, so a reader knows it lost the rest.
+pub fn shorten_reason(reason: &str, max: usize) -> std::borrow::Cow<'_, str> {
+    if reason.len() <= max {
+        return std::borrow::Cow::Borrowed(reason);
+    }
+    let tail = format!(" … ({} bytes)", reason.len());
+    let mut n = max.saturating_sub(tail.len());
+    while !reason.is_char_boundary(n) {
+        n -= 1;
+    }
+    std::borrow::Cow::Owned(format!("{}{tail}", &reason[..n]))
 }
 
 /// Parse a refusal datagram; `None` if it is not one or is cut short.
@@ -590,11 +602,16 @@ mod tests {
                 rejoin: None,
             }
         );
-        // 199 ASCII bytes then a 2-byte character: the cut falls inside it
-        let long = format!("{}é and more", "x".repeat(199));
+        // a long reason is cut at a character boundary and says how long it was
+        let long = format!("{}é and more", "x".repeat(195));
         let r = decode_refusal(&encode_refusal(&long, Term(1))).unwrap();
-        assert_eq!(r.reason, "x".repeat(199));
+        assert_eq!(r.reason, format!("{} … (206 bytes)", "x".repeat(184)));
+        assert!(r.reason.len() <= MAX_REFUSAL_DATAGRAM_REASON);
         assert_eq!(r.term, Some(Term(1)));
+        // the cut falls inside the 2-byte character: it goes whole
+        let long = format!("{}é{}", "x".repeat(183), "y".repeat(100));
+        let r = decode_refusal(&encode_refusal(&long, Term(1))).unwrap();
+        assert_eq!(r.reason, format!("{} … (285 bytes)", "x".repeat(183)));
         // the older layout without a term, and datagrams cut short
         let old = [REFUSAL_MARKER, 1, 2, b'n', b'o'];
         let r = decode_refusal(&old).unwrap();

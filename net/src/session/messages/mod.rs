@@ -378,8 +378,9 @@ impl Session {
             if t == self.local {
                 self.deliver_message(msg.clone());
             } else if msg.delivery.is_reliable() {
-                let seq = self.send_control(now, t, &Control::Message(msg.clone()));
-                waiting.push((t, seq));
+                if let Some(seq) = self.send_control(now, t, &Control::Message(msg.clone())) {
+                    waiting.push((t, seq));
+                }
                 self.stats.messages.relayed += 1;
             } else {
                 self.queue_unreliable(t, &msg);
