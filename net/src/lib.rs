@@ -37,8 +37,8 @@ pub use error::NetError;
 pub use ids::{AuthorityEpoch, ClassId, NetId, PeerId, Term};
 pub use interp::InterpolationConfig;
 pub use policy::{
-    AuthorityPolicy, ClassConfig, FailureDetector, MessageConfig, SendPolicy, SessionConfig,
-    SoftBodyMode, StateRoute,
+    AuthorityPolicy, ClassConfig, FailureDetector, MessageConfig, PeerBudget, SendPolicy,
+    SessionConfig, SoftBodyMode, StateRoute,
 };
 pub use session::{DisplayedState, Event, ObjectState, RoomKey, Session};
 pub use stats::Stats;

@@ -224,6 +224,40 @@ pub struct SessionConfig {
     /// from each owner straight to every member. Part of the digest: a room has one way.
     #[serde(default)]
     pub state_route: StateRoute,
+    /// What one peer may cost this peer (a local policy, not part of the digest).
+    #[serde(default)]
+    pub peer_budget: PeerBudget,
+}
+
+/// What one peer may cost this one: the per-peer budgets, in one place. A local policy with
+/// defaults (each peer may set its own; not part of the room's digest). Other per-peer bounds
+/// of the session: `max_members`, `max_objects_per_peer`, `max_particles_per_peer`,
+/// [`MessageConfig`]'s rate, burst and outbox, `MAX_STRANGERS` (32 senders at once without
+/// membership), the reliable receive window (`reliable::WINDOW`, 512 messages ahead).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct PeerBudget {
+    /// Host: a member with more unacknowledged control messages than this, the oldest
+    /// waiting longer than the peer timeout, is dropped, with the reason counted
+    /// (`Stats::dropped_over_quota`) and told: a member that keeps its link alive but never
+    /// acknowledges would otherwise make the host keep (and walk, at every datagram) an ever
+    /// longer queue. A burst (a snapshot, many spawns at once) is acknowledged within round
+    /// trips. The reliable channel itself keeps at most `reliable::MAX_QUEUED` (8192).
+    pub max_control_in_flight: usize,
+    /// Host: a member that says `Hello` again (it turned to another contact before our
+    /// `Welcome` came) is welcomed again, with the whole snapshot, never while a `Welcome` to
+    /// it is still unacknowledged (~80 `Hello`s fit in one datagram), three times at once and
+    /// then at most once per this.
+    pub rewelcome_every: Duration,
+}
+
+impl Default for PeerBudget {
+    fn default() -> Self {
+        PeerBudget {
+            max_control_in_flight: 2048,
+            rewelcome_every: Duration::from_secs(1),
+        }
+    }
 }
 
 /// Which way a client's object state travels to the other members. Membership, authority and
@@ -345,6 +379,7 @@ impl Default for SessionConfig {
             heal_window: default_heal_window(),
             uplink_bytes_per_s: None,
             state_route: StateRoute::Relay,
+            peer_budget: PeerBudget::default(),
         }
     }
 }

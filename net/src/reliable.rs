@@ -9,6 +9,11 @@ use crate::time::Instant;
 /// Receive window: messages further ahead than this are dropped (bounded memory).
 pub const WINDOW: u16 = 512;
 
+/// Most unacknowledged messages a channel keeps: past it, [`ReliableChannel::push`] refuses
+/// (the session drops a member long before: `PeerBudget::max_control_in_flight`). Well under
+/// half the sequence space, so ordering by wrapping sequence stays sound.
+pub const MAX_QUEUED: usize = 8192;
+
 /// `a` comes before `b` in wrapping u16 order.
 pub fn seq_before(a: u16, b: u16) -> bool {
     a != b && b.wrapping_sub(a) < 0x8000
@@ -18,6 +23,7 @@ pub fn seq_before(a: u16, b: u16) -> bool {
 struct Outgoing {
     seq: u16,
     bytes: Vec<u8>,
+    queued: Instant,
     next_send: Instant,
     sends: u32,
 }
@@ -34,17 +40,22 @@ pub struct ReliableChannel {
 }
 
 impl ReliableChannel {
-    /// Queue a message; returns its sequence number.
-    pub fn push(&mut self, now: Instant, bytes: Vec<u8>) -> u16 {
+    /// Queue a message; returns its sequence number, or `None` (nothing queued) when
+    /// [`MAX_QUEUED`] messages already wait for an acknowledgement.
+    pub fn push(&mut self, now: Instant, bytes: Vec<u8>) -> Option<u16> {
+        if self.out.len() >= MAX_QUEUED {
+            return None;
+        }
         let seq = self.next_seq;
         self.next_seq = self.next_seq.wrapping_add(1);
         self.out.push_back(Outgoing {
             seq,
             bytes,
+            queued: now,
             next_send: now,
             sends: 0,
         });
-        seq
+        Some(seq)
     }
 
     /// Messages due for (re)transmission, in order; each is marked sent with `rto` backoff.
@@ -113,6 +124,11 @@ impl ReliableChannel {
         self.out.len()
     }
 
+    /// When the oldest unacknowledged message was queued.
+    pub fn oldest_unacked(&self) -> Option<Instant> {
+        self.out.front().map(|m| m.queued)
+    }
+
     /// Accept a received message; returns the messages now deliverable in order.
     pub fn on_receive(&mut self, seq: u16, bytes: &[u8]) -> Vec<Vec<u8>> {
         self.ack_pending = true;
@@ -155,7 +171,7 @@ mod tests {
     fn an_ack_of_messages_never_sent_changes_nothing() {
         let mut tx = ReliableChannel::default();
         for b in [b"w", b"s", b"r"] {
-            tx.push(Instant::ZERO, b.to_vec());
+            tx.push(Instant::ZERO, b.to_vec()).unwrap();
         }
         // a stale ack of an earlier session that had sent 120 messages
         assert!(!tx.on_ack(120));
@@ -168,5 +184,18 @@ mod tests {
         assert!(tx.on_ack(3));
         assert_eq!(tx.in_flight(), 0);
         assert!(!tx.on_ack(4));
+    }
+
+    #[test]
+    fn a_peer_that_never_acknowledges_costs_a_bounded_queue() {
+        let mut tx = ReliableChannel::default();
+        for i in 0..MAX_QUEUED {
+            assert_eq!(tx.push(Instant::ZERO, vec![1]), Some(i as u16));
+        }
+        assert_eq!(tx.push(Instant::ZERO, vec![1]), None);
+        assert_eq!(tx.in_flight(), MAX_QUEUED);
+        // an acknowledgement makes room again, in order
+        assert!(tx.on_ack(10));
+        assert_eq!(tx.push(Instant::ZERO, vec![2]), Some(MAX_QUEUED as u16));
     }
 }

@@ -106,6 +106,14 @@ pub struct Stats {
     pub refused_joins: u64,
     /// Control messages not sent because they could not be encoded (over their size limit).
     pub unencodable_controls: u64,
+    /// Control messages not queued because the peer's reliable channel was full
+    /// (`reliable::MAX_QUEUED` unacknowledged).
+    pub controls_over_quota: u64,
+    /// Host: members dropped for acknowledging too little (`PeerBudget::max_control_in_flight`).
+    pub dropped_over_quota: u64,
+    /// Host: repeated `Hello`s of members not answered with another `Welcome` (one was in
+    /// flight, or sent less than `PeerBudget::rewelcome_every` ago).
+    pub repeated_hellos_ignored: u64,
     /// Application messages.
     pub messages: MessageStats,
 }

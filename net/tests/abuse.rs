@@ -11,7 +11,7 @@ use softsync_net::session::MAX_STRANGERS;
 use softsync_net::wire::{Control, SpawnInfo};
 use softsync_net::{
     AuthorityEpoch, AuthorityPolicy, ClassConfig, ClassId, ConditionerConfig, Event, Instant,
-    NetId, PeerId, SendPolicy, Session, SessionConfig, Term,
+    NetId, PeerBudget, PeerId, SendPolicy, Session, SessionConfig, Term,
 };
 
 /// Delivers everything queued between `a` and the sessions in `bs` until quiet.
@@ -273,4 +273,136 @@ fn hostile_new_host_is_ignored_and_the_real_heir_takes_over() {
     assert!(h.peers[1].session.is_host());
     assert_eq!(h.peers[2].session.host_id(), Some(Harness::id(1)));
     assert_eq!(h.peers[2].session.term(), Term(2));
+}
+
+/// A member that keeps its link alive (it hears heartbeats and pings) but never receives, so
+/// never acknowledges, a control message: the host used to keep, and walk at every datagram,
+/// an ever longer queue for it. Past its budget it is dropped with the reason, told so, and
+/// the honest member keeps everything.
+#[test]
+fn a_member_that_never_acknowledges_is_dropped_past_its_budget() {
+    let cfg = SessionConfig {
+        peer_budget: PeerBudget {
+            max_control_in_flight: 100,
+            ..PeerBudget::default()
+        },
+        ..SessionConfig::default()
+    };
+    let mut now = Instant::ZERO;
+    let mut host = Session::host(PeerId(1), cfg.clone(), now);
+    let mut honest = Session::join(PeerId(2), PeerId(1), cfg.clone(), now);
+    let mut deaf = Session::join(PeerId(3), PeerId(1), cfg, now);
+    let step = |now: Instant,
+                host: &mut Session,
+                honest: &mut Session,
+                deaf: &mut Session,
+                deaf_hears_control: bool| {
+        for s in [&mut *host, &mut *honest, &mut *deaf] {
+            s.handle_timeout(now);
+        }
+        for _ in 0..8 {
+            while let Some(t) = host.poll_transmit(now) {
+                if t.to == PeerId(2) {
+                    honest.handle_packet(now, PeerId(1), &t.payload);
+                } else if t.to == PeerId(3)
+                    && (deaf_hears_control
+                        || !t.reliable
+                        || softsync_net::wire::decode_refusal(&t.payload).is_some())
+                {
+                    deaf.handle_packet(now, PeerId(1), &t.payload);
+                }
+            }
+            for s in [&mut *honest, &mut *deaf] {
+                while let Some(t) = s.poll_transmit(now) {
+                    if t.to == PeerId(1) {
+                        host.handle_packet(now, s.local_id(), &t.payload);
+                    }
+                }
+            }
+        }
+    };
+    for _ in 0..25 {
+        now += Duration::from_millis(20);
+        step(now, &mut host, &mut honest, &mut deaf, true);
+    }
+    assert!(honest.is_connected() && deaf.is_connected());
+    assert_eq!(host.members().len(), 3);
+    // From now on the deaf member hears no control message; the host spawns 150 objects.
+    let state = softsync_net::ObjectState::rigid(Vec3::ZERO, glam::Quat::IDENTITY);
+    for i in 0..150 {
+        let mut s = state.clone();
+        s.pos.x = i as f32 * 0.01;
+        host.spawn(now, ClassId(0), s).unwrap();
+    }
+    let mut dropped_at = None;
+    for k in 0..150 {
+        now += Duration::from_millis(20);
+        step(now, &mut host, &mut honest, &mut deaf, false);
+        if dropped_at.is_none() && !host.members().contains_key(&PeerId(3)) {
+            dropped_at = Some(k);
+        }
+    }
+    assert!(dropped_at.is_some(), "the deaf member was never dropped");
+    assert_eq!(host.stats().dropped_over_quota, 1);
+    assert!(honest.is_connected());
+    assert_eq!(honest.object_ids().len(), 150);
+    assert_eq!(host.members().len(), 2);
+    // it is told why (it hears everything but control messages: the refusal too)
+    let told = std::iter::from_fn(|| deaf.poll_event()).find_map(|e| match e {
+        Event::Dropped { reason, .. } => Some(reason),
+        _ => None,
+    });
+    assert!(
+        told.as_deref()
+            .is_some_and(|r| r.contains("unacknowledged")),
+        "{told:?}"
+    );
+}
+
+/// ~80 `Hello`s fit in one datagram; each used to be answered with a `Welcome` and the whole
+/// snapshot. A member's repeated `Hello` gets one `Welcome` in flight, another only once that
+/// one is acknowledged, and no more than a few at once and one a second after.
+#[test]
+fn a_flood_of_hellos_from_a_member_gets_one_welcome() {
+    let cfg = SessionConfig::default();
+    let mut now = Instant::ZERO;
+    let mut host = Session::host(PeerId(1), cfg.clone(), now);
+    let mut m = Session::join(PeerId(2), PeerId(1), cfg.clone(), now);
+    for _ in 0..25 {
+        now += Duration::from_millis(20);
+        host.handle_timeout(now);
+        m.handle_timeout(now);
+        pump(now, &mut host, &mut [&mut m]);
+    }
+    assert!(m.is_connected());
+    for i in 0..30 {
+        let mut s = softsync_net::ObjectState::rigid(Vec3::ZERO, glam::Quat::IDENTITY);
+        s.pos.x = i as f32 * 0.01;
+        host.spawn(now, ClassId(0), s).unwrap();
+    }
+    pump(now, &mut host, &mut [&mut m]);
+    let hello = Control::Hello {
+        protocol: softsync_net::PROTOCOL_VERSION,
+        config_digest: cfg.digest(),
+    };
+    // 80 at once (the last Welcome is acknowledged): one Welcome in flight answers them all
+    now += Duration::from_millis(20);
+    for _ in 0..80 {
+        m.send_raw_control(now, PeerId(1), &hello);
+    }
+    pump(now, &mut host, &mut [&mut m]);
+    assert_eq!(host.stats().repeated_hellos_ignored, 79);
+    // a member that acknowledges each Welcome and says Hello again at once, every 20 ms for
+    // a second: two more of its burst of three, then one a second
+    let mut answered = 0;
+    for _ in 0..50 {
+        now += Duration::from_millis(20);
+        let before = host.stats().repeated_hellos_ignored;
+        m.send_raw_control(now, PeerId(1), &hello);
+        pump(now, &mut host, &mut [&mut m]);
+        answered += usize::from(host.stats().repeated_hellos_ignored == before);
+    }
+    assert!((2..=3).contains(&answered), "answered {answered}");
+    assert!(m.is_connected());
+    assert_eq!(host.members().len(), 2);
 }

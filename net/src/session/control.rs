@@ -12,17 +12,20 @@ use crate::wire::Control;
 
 impl Session {
     /// Queue `msg` to `to` on the reliable channel; returns its reliable sequence, or `None`
-    /// when it cannot be encoded (over its size limit: counted in
-    /// `Stats::unencodable_controls`, nothing queued — an empty message would reach the peer
-    /// as a malformed one).
+    /// when nothing was queued: it cannot be encoded (over its size limit: counted in
+    /// `Stats::unencodable_controls` — an empty message would reach the peer as a malformed
+    /// one), or the peer's channel is full (it acknowledges nothing: counted in
+    /// `Stats::controls_over_quota`; the host drops such a member at its next liveness check).
     pub(super) fn send_control(&mut self, now: Instant, to: PeerId, msg: &Control) -> Option<u16> {
-        match msg.encode() {
-            Ok(bytes) => Some(self.links.entry(to).or_default().reliable.push(now, bytes)),
-            Err(_) => {
-                self.stats.unencodable_controls += 1;
-                None
-            }
+        let Ok(bytes) = msg.encode() else {
+            self.stats.unencodable_controls += 1;
+            return None;
+        };
+        let seq = self.links.entry(to).or_default().reliable.push(now, bytes);
+        if seq.is_none() {
+            self.stats.controls_over_quota += 1;
         }
+        seq
     }
 
     /// Queue `msg` to every member but us and `except`. A `Spawn` is remembered per link

@@ -8,6 +8,9 @@ use crate::ids::{PeerId, Term};
 use crate::time::Instant;
 use crate::wire::{Control, PROTOCOL_VERSION};
 
+/// Re-welcomes a member may have at once (then one per `PeerBudget::rewelcome_every`).
+const REWELCOME_BURST: f32 = 3.0;
+
 impl Session {
     /// Say `Hello` to `contact`.
     pub(super) fn say_hello(&mut self, now: Instant, contact: PeerId) {
@@ -58,8 +61,30 @@ impl Session {
             // it asks now), and it will not stop asking. Welcome it again (the reliable
             // layer will not resend what it acked). Found by the churn soak: a peer stopped
             // past the timeout rejoined, asked a member, and waited for ever.
+            // Bounded, since each costs a snapshot: never while a Welcome to it is in flight
+            // (that one arrives by itself), and a burst of `REWELCOME_BURST` at most, then
+            // one per `rewelcome_every`.
             if protocol == PROTOCOL_VERSION && digest == self.cfg.digest() {
-                self.welcome(now, from, join_seq);
+                let every = self.cfg.peer_budget.rewelcome_every.as_secs_f32().max(1e-3);
+                let allowed = self.links.get_mut(&from).is_some_and(|l| {
+                    if l.welcomed.is_some_and(|seq| !l.reliable.is_acked(seq)) {
+                        return false;
+                    }
+                    let (debt, at) = l.rewelcome_debt;
+                    let paid = at.map_or(0.0, |t| now.saturating_since(t).as_secs_f32() / every);
+                    let debt = (debt - paid).max(0.0);
+                    if debt + 1.0 > REWELCOME_BURST {
+                        l.rewelcome_debt = (debt, Some(now));
+                        return false;
+                    }
+                    l.rewelcome_debt = (debt + 1.0, Some(now));
+                    true
+                });
+                if allowed {
+                    self.welcome(now, from, join_seq);
+                } else {
+                    self.stats.repeated_hellos_ignored += 1;
+                }
             }
             return;
         }
@@ -129,7 +154,10 @@ impl Session {
             join_seq,
             members,
         };
-        self.send_control(now, to, &welcome);
+        let seq = self.send_control(now, to, &welcome);
+        if let Some(l) = self.links.get_mut(&to) {
+            l.welcomed = seq;
+        }
         self.send_snapshot(now, to);
         self.send_retained(now, to);
         self.send_tokens_used(now, to);

@@ -369,6 +369,12 @@ pub(crate) struct Link {
     pub priorities: super::budget::Priorities,
     /// Where its peer looks (its head), for the budget's interest.
     pub interest: Option<glam::Vec3>,
+    /// Host: the reliable sequence of the last `Welcome` we sent it (a repeated `Hello` is
+    /// answered again only once that one is acknowledged).
+    pub welcomed: Option<u16>,
+    /// Host: re-welcomes it got beyond its allowance, decaying one per
+    /// `PeerBudget::rewelcome_every`, and when that was last updated.
+    pub rewelcome_debt: (f32, Option<Instant>),
     /// Under a budget: objects with something to send, planned when a datagram takes them.
     pub dirty: BTreeMap<NetId, super::send::Refresh>,
 }

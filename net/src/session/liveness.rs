@@ -25,6 +25,8 @@ pub(crate) enum DropWhy {
     TimedOut,
     /// It spoke for this older term: the room elected a host while it was silent.
     OlderTerm(Term),
+    /// It left this many control messages unacknowledged (`PeerBudget`).
+    OverQuota(usize),
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -235,6 +237,11 @@ impl Session {
                  touch (it still spoke for term {}); join again",
                 self.local.0, self.term.0, old.0
             ),
+            DropWhy::OverQuota(n) => format!(
+                "dropped from the room: {n} control messages unacknowledged (the host keeps at \
+                 most {}); join again",
+                self.cfg.peer_budget.max_control_in_flight
+            ),
         };
         // naming ourselves as the host to join again: a drop notice, which a joining session
         // (the dropped peer's fresh one, reached by a notice its old one provoked) ignores
@@ -292,6 +299,29 @@ impl Session {
                     .collect();
                 for p in gone {
                     self.dropped.insert(p, DropWhy::TimedOut);
+                    self.host_peer_left(now, p);
+                }
+                // alive, but acknowledging nothing: its queue would grow for ever (a burst
+                // queued at once — a snapshot, many spawns — is not that: the oldest message
+                // must also have waited a peer timeout, which an honest peer never lets it)
+                let quota = self.cfg.peer_budget.max_control_in_flight;
+                let timeout = self.cfg.peer_timeout;
+                let over: Vec<(PeerId, usize)> = self
+                    .members
+                    .keys()
+                    .filter(|p| **p != self.local)
+                    .filter_map(|p| {
+                        let r = &self.links.get(p)?.reliable;
+                        let n = r.in_flight();
+                        let stuck = r
+                            .oldest_unacked()
+                            .is_some_and(|t| now.saturating_since(t) > timeout);
+                        (n > quota && stuck).then_some((*p, n))
+                    })
+                    .collect();
+                for (p, n) in over {
+                    self.stats.dropped_over_quota += 1;
+                    self.dropped.insert(p, DropWhy::OverQuota(n));
                     self.host_peer_left(now, p);
                 }
             }
