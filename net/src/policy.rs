@@ -249,6 +249,14 @@ pub struct PeerBudget {
     /// it is still unacknowledged (~80 `Hello`s fit in one datagram), three times at once and
     /// then at most once per this.
     pub rewelcome_every: Duration,
+    /// A non-member's link state (a joiner's, a refused or unknown sender's) is forgotten
+    /// this long after its first datagram, talking or not (a silent one after the peer
+    /// timeout): a joiner is a member within round trips.
+    pub stranger_lifetime: Duration,
+    /// When `MAX_STRANGERS` non-members already have state, a new one takes the place of the
+    /// one heard first, if that one was first heard at least this long ago (else the newcomer
+    /// is dropped): strangers that keep talking cannot hold the door shut.
+    pub stranger_evictable_after: Duration,
 }
 
 impl Default for PeerBudget {
@@ -256,6 +264,8 @@ impl Default for PeerBudget {
         PeerBudget {
             max_control_in_flight: 2048,
             rewelcome_every: Duration::from_secs(1),
+            stranger_lifetime: Duration::from_secs(30),
+            stranger_evictable_after: Duration::from_secs(2),
         }
     }
 }

@@ -98,6 +98,8 @@ pub struct Stats {
     pub oversize_dropped: u64,
     /// Datagrams dropped because too many unknown senders already have state.
     pub dropped_strangers: u64,
+    /// Strangers forgotten to make room for a new one (`PeerBudget::stranger_evictable_after`).
+    pub strangers_evicted: u64,
     /// Control messages or claims refused: out of place (e.g. a `Resync` outside the window
     /// after a migration), implausible (an epoch or id the sender cannot know) or over a
     /// per-peer limit.

@@ -406,3 +406,98 @@ fn a_flood_of_hellos_from_a_member_gets_one_welcome() {
     assert!(m.is_connected());
     assert_eq!(host.members().len(), 2);
 }
+
+/// 32 strangers that keep talking (refused joiners replaying their `Hello`) used to fill the
+/// stranger table for ever: nobody else could even say `Hello`. Now a newcomer takes the
+/// place of the stranger heard first (once it is 2 s old), and strangers expire.
+#[test]
+fn strangers_that_keep_talking_cannot_hold_the_door_shut() {
+    let cfg = SessionConfig::default();
+    let other = SessionConfig {
+        classes: vec![ClassConfig::rigid("other", SendPolicy::default())],
+        ..SessionConfig::default()
+    };
+    let mut now = Instant::ZERO;
+    let mut host = Session::host(PeerId(1), cfg.clone(), now);
+    // their first datagrams (a Hello each), replayed every 100 ms from then on
+    let hellos: Vec<(PeerId, Vec<u8>)> = (0..MAX_STRANGERS as u64)
+        .map(|i| {
+            let id = PeerId(1000 + i);
+            let mut s = Session::join(id, PeerId(1), other.clone(), now);
+            (id, s.poll_transmit(now).unwrap().payload)
+        })
+        .collect();
+    let mut joiner = None;
+    for k in 0..100 {
+        now += Duration::from_millis(100);
+        host.handle_timeout(now);
+        for (id, d) in &hellos {
+            host.handle_packet(now, *id, d);
+        }
+        while host.poll_transmit(now).is_some() {}
+        if k == 30 {
+            // 3 s in: an honest joiner
+            joiner = Some(Session::join(PeerId(7), PeerId(1), cfg.clone(), now));
+        }
+        if let Some(j) = joiner.as_mut() {
+            j.handle_timeout(now);
+            pump(now, &mut host, &mut [j]);
+        }
+    }
+    let joiner = joiner.unwrap();
+    assert!(joiner.is_connected(), "the honest joiner never got in");
+    assert!(host.members().contains_key(&PeerId(7)));
+    assert!(host.stats().strangers_evicted > 0);
+    // the table never held more than its bound
+    assert!(host.stats().links.len() <= MAX_STRANGERS + 1);
+}
+
+/// A stranger that asks a keyed room's host for keyframes of its objects (ids are small
+/// numbers, easily guessed) used to get their state: the room's content without the key.
+#[test]
+fn a_strangers_keyframe_request_reads_nothing_of_a_keyed_room() {
+    use softsync_net::wire::{decode_packet, PacketHeader, PacketWriter, Section};
+    let cfg = SessionConfig {
+        room_key: Some(softsync_net::RoomKey::new(b"the room's secret", 7)),
+        ..SessionConfig::default()
+    };
+    let mut now = Instant::ZERO;
+    let mut host = Session::host(PeerId(1), cfg, now);
+    let (id, _) = host
+        .spawn(
+            now,
+            ClassId(0),
+            softsync_net::ObjectState::rigid(Vec3::new(0.3, 0.8, 0.1), glam::Quat::IDENTITY),
+        )
+        .unwrap();
+    let mut w = PacketWriter::new(
+        &PacketHeader {
+            term: Term(0),
+            seq: 0,
+            time_ms: 0,
+        },
+        1200,
+    );
+    assert!(w.keyframe_request(&[id, NetId(id.0 + 1), NetId(id.0 + 2)]));
+    let (request, _) = w.finish();
+    let mut state_bytes = 0;
+    for _ in 0..20 {
+        now += Duration::from_millis(50);
+        host.handle_timeout(now);
+        host.handle_packet(now, PeerId(66), &request);
+        while let Some(t) = host.poll_transmit(now) {
+            if t.to != PeerId(66) {
+                continue;
+            }
+            if let Ok((_, sections)) = decode_packet(&t.payload) {
+                for s in sections {
+                    if let Section::State { bits, .. } = s {
+                        state_bytes += bits.len();
+                    }
+                }
+            }
+        }
+    }
+    assert_eq!(state_bytes, 0, "the stranger got state");
+    assert!(host.stats().refused_controls >= 20);
+}

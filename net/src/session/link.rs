@@ -332,6 +332,8 @@ pub(crate) struct Link {
     pub last_ping: Option<Instant>,
     /// When we last heard from it (liveness).
     pub last_heard: Option<Instant>,
+    /// When we first heard from it (a stranger's age).
+    pub first_heard: Option<Instant>,
     /// The gaps between datagrams from it (the adaptive failure detector).
     pub gaps: ArrivalGaps,
     /// Datagram sequences.

@@ -164,22 +164,47 @@ impl Session {
     }
 
     /// Drops the state of non-members silent for `peer_timeout` (a joiner that gave up, a
-    /// refused or spoofed sender), with whatever was still queued for them.
+    /// refused or spoofed sender), or first heard `stranger_lifetime` ago however much they
+    /// talk, with whatever was still queued for them.
     pub(super) fn forget_silent_strangers(&mut self, now: Instant) {
         let timeout = self.cfg.peer_timeout;
+        let lifetime = self.cfg.peer_budget.stranger_lifetime;
         let gone: Vec<PeerId> = self
             .links
             .iter()
             .filter(|(p, l)| {
                 !self.members.contains_key(p)
                     && Some(**p) != self.host
-                    && l.last_heard.is_some_and(|h| now >= h + timeout)
+                    && (l.last_heard.is_some_and(|h| now >= h + timeout)
+                        || l.first_heard.is_some_and(|f| now >= f + lifetime))
             })
             .map(|(p, _)| *p)
             .collect();
         for p in gone {
             self.links.remove(&p);
             self.stats.links.remove(&p);
+        }
+    }
+
+    /// The stranger table is full: forget the stranger heard first, if it was first heard at
+    /// least `stranger_evictable_after` ago, to make room for a new one (counted in
+    /// `Stats::strangers_evicted`). False if none is that old.
+    pub(super) fn evict_oldest_stranger(&mut self, now: Instant) -> bool {
+        let after = self.cfg.peer_budget.stranger_evictable_after;
+        let oldest = self
+            .links
+            .iter()
+            .filter(|(p, _)| !self.members.contains_key(p) && Some(**p) != self.host)
+            .filter_map(|(p, l)| l.first_heard.map(|f| (f, *p)))
+            .min();
+        match oldest {
+            Some((first, p)) if now.saturating_since(first) >= after => {
+                self.links.remove(&p);
+                self.stats.links.remove(&p);
+                self.stats.strangers_evicted += 1;
+                true
+            }
+            _ => false,
         }
     }
 

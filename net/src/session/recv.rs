@@ -66,7 +66,7 @@ impl Session {
         } else {
             // Per-peer statistics start once the sender has link state (below).
             self.stats.down.add(bytes.len());
-            if self.stranger_count() >= MAX_STRANGERS {
+            if self.stranger_count() >= MAX_STRANGERS && !self.evict_oldest_stranger(now) {
                 self.stats.dropped_strangers += 1;
                 return;
             }
@@ -159,6 +159,7 @@ impl Session {
             link.gaps.record(now.saturating_since(before));
         }
         link.last_heard = Some(now);
+        link.first_heard.get_or_insert(now);
         let ls = self.stats.links.entry(from).or_default();
         if !known {
             ls.down.add(len);
@@ -197,7 +198,11 @@ impl Session {
                         }
                     }
                 }
-                Section::KeyframeRequest { ids } => {
+                // only a member (or our host) is answered: a stranger's request would read a
+                // keyed room's objects without the key
+                Section::KeyframeRequest { ids }
+                    if self.members.contains_key(&from) || Some(from) == self.host =>
+                {
                     for id in ids {
                         let sends = self
                             .objects
@@ -208,6 +213,7 @@ impl Session {
                         }
                     }
                 }
+                Section::KeyframeRequest { .. } => self.stats.refused_controls += 1,
                 Section::State { count, bits } => states.push((count, bits)),
                 Section::StateAck { latest, mask } => self.on_state_ack(from, latest, mask),
                 Section::Message(m) => unreliable.push(m),

@@ -160,6 +160,10 @@ impl Spawn {
     }
 }
 
+/// Rolling speed (spin × center radius) below which rolling resistance leaves a body alone,
+/// m/s: rapier's sleep takes over from there (its thresholds are 5 cm/s and 0.5 rad/s).
+const ROLLING_AT_REST_MPS: f32 = 0.01;
+
 /// Everything a body needs that can fail, computed before anything enters the world: a cut
 /// plans all its pieces first, so a refused piece leaves the world untouched.
 pub(crate) struct BodyPlan {
@@ -532,7 +536,8 @@ impl SoftBody {
         }
     }
 
-    /// Rolling resistance (`SoftBodyConfig::rolling_resistance`): while the center touches
+    /// Rolling resistance (`SoftBodyConfig::rolling_resistance`), above a rolling speed of
+    /// [`ROLLING_AT_REST_MPS`]: while the center touches
     /// something, an angular impulse of `μ_r · r · Σ normal impulse` (the contacts' normal
     /// impulses of the last step, so the torque follows the load) against the center's spin,
     /// capped so that it stops the spin and never reverses it. The contact's friction then
@@ -559,7 +564,14 @@ impl SoftBody {
         };
         let w = center.angvel();
         let spin = w.length();
-        if center.is_sleeping() || !spin.is_finite() || spin < 1e-6 {
+        // below a rolling speed of 1 cm/s the body is at rest as far as rolling goes (rapier
+        // puts it to sleep from there): a ball resting on a dynamic prop that the body's own
+        // particles keep jiggling (the thesis room's plate) spins a little in place, and
+        // stopping that spin would let the jiggling carry it away
+        if center.is_sleeping()
+            || !spin.is_finite()
+            || spin * self.roll_radius_m < ROLLING_AT_REST_MPS
+        {
             return;
         }
         let axis = w / spin;
