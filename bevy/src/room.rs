@@ -719,6 +719,7 @@ fn signaling_move(
 
 #[cfg(test)]
 mod tests {
+    #![allow(clippy::unwrap_used)]
     use super::*;
 
     fn notice(url: &str) -> Result<SignalingMoved, softsync_net::MessageRefusal> {

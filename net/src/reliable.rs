@@ -155,6 +155,7 @@ impl ReliableChannel {
 
 #[cfg(test)]
 mod tests {
+    #![allow(clippy::unwrap_used)]
     use super::*;
 
     #[test]
