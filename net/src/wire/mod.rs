@@ -13,7 +13,7 @@ mod message;
 mod state;
 
 pub use control::{
-    Control, DenyReason, RoomToken, SpawnInfo, TopologyEvent, MAX_CUT_PIECES,
+    Control, DenyReason, RoomToken, SpawnInfo, TopologyEvent, MAX_CUT_PIECES, MAX_REFUSED_REASON,
     MAX_RESOLUTION_LEVELS, MAX_TOKEN_ROOM, MAX_TOPOLOGY_COORD, TOPOLOGY_QUANTUM_M,
 };
 pub use message::{
