@@ -157,8 +157,9 @@ pub struct SoftBodyConfig {
     /// Rolling resistance of the center (world mode), dimensionless: while the center touches
     /// something, a torque of `rolling_resistance × normal force × center radius` opposes its
     /// spin (never reversing it), so a body rolling on a floor slows at about
-    /// `5/7 · rolling_resistance · g` and comes to rest. Rapier has none: without it a soft
-    /// ball rolls on a flat table for ever. In flight it does nothing. Range 0–1; default
+    /// `5/7 · rolling_resistance · g` and comes to rest (below a rolling speed of 1 cm/s it
+    /// leaves the body to rapier's sleep). Rapier has none: without it a soft ball rolls on a
+    /// flat table for ever. In flight it does nothing. Range 0–1; default
     /// 0.05 (rubber on wood is 0.01–0.05; a soft body deforms and loses more). 0 turns it off.
     pub rolling_resistance: f32,
     /// Distance below which vertices are welded, metres. Default 1e-6.
