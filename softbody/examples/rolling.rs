@@ -22,7 +22,7 @@ use std::time::Instant;
 use glam::Vec3;
 use softsync_benchkit::plotters::style::RGBColor;
 use softsync_benchkit::{median, write_svg, ChartStyle, Csv, LineChart, ResultLine, Series};
-use softsync_softbody::rapier3d::prelude::{ColliderBuilder, PhysicsWorld, RigidBodyBuilder};
+use softsync_softbody::rapier3d::prelude::PhysicsWorld;
 use softsync_softbody::{ClusterMethod, Mesh, SoftBodyConfig, SoftBodyHandle, SoftBodySet};
 
 const HZ: f32 = 90.0;
@@ -50,23 +50,7 @@ fn world_with(
     v: Vec3,
     w: Vec3,
 ) -> (PhysicsWorld, SoftBodySet, SoftBodyHandle) {
-    let mut world = PhysicsWorld::new();
-    let floor = world.insert_body(RigidBodyBuilder::fixed().translation(Vec3::new(0.0, -0.5, 0.0)));
-    world.insert_collider(
-        ColliderBuilder::cuboid(50.0, 0.5, 50.0).friction(0.5),
-        Some(floor),
-    );
-    let mut mesh = mesh.clone();
-    for p in &mut mesh.positions {
-        *p += at;
-    }
-    let mut set = SoftBodySet::new();
-    let h = set.insert(&mesh, cfg, &mut world).unwrap();
-    set.get(h)
-        .unwrap()
-        .set_rigid_velocity(&mut world, v, w)
-        .unwrap();
-    (world, set, h)
+    softsync_softbody::scenario::on_floor(mesh, cfg, at, v, w).unwrap()
 }
 
 fn center(world: &PhysicsWorld, set: &SoftBodySet, h: SoftBodyHandle) -> (Vec3, Vec3) {

@@ -73,6 +73,35 @@ impl ScenarioKind {
     }
 }
 
+/// A world with a fixed floor whose top is y = 0 (40 m wide, friction 0.5) and `mesh`, moved
+/// by `at`, as a world-mode body of `config` moving rigidly at `linvel` and spinning at
+/// `angvel`: a push, a roll or a throw (rolling resistance's test and bench).
+pub fn on_floor(
+    mesh: &Mesh,
+    mut config: SoftBodyConfig,
+    at: Vec3,
+    linvel: Vec3,
+    angvel: Vec3,
+) -> Result<(PhysicsWorld, SoftBodySet, SoftBodyHandle), SoftBodyError> {
+    let mut world = PhysicsWorld::new();
+    let floor = world.insert_body(RigidBodyBuilder::fixed().translation(Vec3::new(0.0, -0.5, 0.0)));
+    world.insert_collider(
+        ColliderBuilder::cuboid(20.0, 0.5, 20.0).friction(0.5),
+        Some(floor),
+    );
+    let mut mesh = mesh.clone();
+    for p in &mut mesh.positions {
+        *p += at;
+    }
+    config.space = SimulationSpace::World;
+    let mut set = SoftBodySet::new();
+    let h = set.insert(&mesh, config, &mut world)?;
+    set.get(h)
+        .ok_or(SoftBodyError::InvalidHandle(h))?
+        .set_rigid_velocity(&mut world, linvel, angvel)?;
+    Ok((world, set, h))
+}
+
 /// The drop scenario's setting: a fixed floor whose top is y = 0, and the mesh lifted so its
 /// bottom (`lowest_y`) is 0.5 m above it.
 pub(crate) fn drop_floor(world: &mut PhysicsWorld, mesh: &mut Mesh, lowest_y: f32) {

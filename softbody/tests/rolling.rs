@@ -26,31 +26,14 @@ fn ball_cfg(rolling_resistance: f32) -> SoftBodyConfig {
     }
 }
 
-/// A world with a fixed floor (top at y = 0, 40 m wide) and the ball with its center at `at`,
-/// every body of it moving at `v` and the center spinning at `w`.
+/// The ball with its center at `at` on a floor, moving at `v` and spinning at `w`.
 fn world_with_ball(
     cfg: SoftBodyConfig,
     at: Vec3,
     v: Vec3,
     w: Vec3,
 ) -> (PhysicsWorld, SoftBodySet, SoftBodyHandle) {
-    let mut world = PhysicsWorld::new();
-    let floor = world.insert_body(RigidBodyBuilder::fixed().translation(Vec3::new(0.0, -0.5, 0.0)));
-    world.insert_collider(
-        ColliderBuilder::cuboid(20.0, 0.5, 20.0).friction(0.5),
-        Some(floor),
-    );
-    let mut mesh = ball();
-    for p in &mut mesh.positions {
-        *p += at;
-    }
-    let mut set = SoftBodySet::new();
-    let h = set.insert(&mesh, cfg, &mut world).unwrap();
-    set.get(h)
-        .unwrap()
-        .set_rigid_velocity(&mut world, v, w)
-        .unwrap();
-    (world, set, h)
+    softsync_softbody::scenario::on_floor(&ball(), cfg, at, v, w).unwrap()
 }
 
 fn center(world: &PhysicsWorld, set: &SoftBodySet, h: SoftBodyHandle) -> (Vec3, Vec3) {
