@@ -551,6 +551,14 @@ impl SoftBody {
         let Some(collider) = self.center_collider else {
             return;
         };
+        // a resting body costs nothing here (no walk over its contacts)
+        if world
+            .bodies
+            .get(self.center)
+            .is_none_or(|c| c.is_sleeping())
+        {
+            return;
+        }
         let load: f32 = world
             .contact_pairs_with(collider)
             .map(|p| p.total_impulse_magnitude())
