@@ -1,3 +1,6 @@
+//! Over 800 lines: the script language (parse) and its interpreter (run) share the command
+//! type and its validation; issue 40 splits them into `bot/parse.rs` and `bot/run.rs`.
+//!
 //! Bots: a small script language for avatar motion and actions, so that tests and load runs
 //! are reproducible.
 //!
