@@ -234,6 +234,26 @@ fn event_line(e: &Event, types: &MessageTypes) -> Option<String> {
         Event::Rejoining { host, reason } => {
             format!("rejoining host={} reason={reason:?}", host.0)
         }
+        Event::Holders { id, hands } => format!(
+            "holders object={} hands={}",
+            id.0,
+            if hands.is_empty() {
+                "-".to_owned()
+            } else {
+                hands
+                    .iter()
+                    .map(|h| {
+                        format!(
+                            "{}:{}:{}",
+                            h.peer.0,
+                            hand_name(usize::from(h.hand)),
+                            h.particle
+                        )
+                    })
+                    .collect::<Vec<_>>()
+                    .join(",")
+            }
+        ),
         Event::ReturnedHome { id, from } => format!(
             "returned-home object={} from={:.2},{:.2},{:.2}",
             id.0, from.x, from.y, from.z

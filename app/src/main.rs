@@ -512,6 +512,7 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
         avatar: !a.no_avatar,
         rejoin_limit: a.rejoin_limit,
         join_timeout: a.connect_timeout,
+        agree_to_hands: true,
     };
     if a.rollback {
         let scene = match scene {

@@ -46,6 +46,17 @@ pub enum InteractionEvent {
         /// Throw velocity given to the target.
         velocity_mps: Vec3,
     },
+    /// A hand holding a body another peer simulates (a remote hand, see
+    /// [`Interaction::hold_remote`](crate::Interaction::hold_remote)) let go: nothing was
+    /// applied here; the app tells the owner, which throws with `velocity_mps`.
+    RemoteReleased {
+        /// The hand.
+        hand: HandId,
+        /// What it held.
+        target: Target,
+        /// The hand's throw velocity (mean of its last samples' velocities).
+        velocity_mps: Vec3,
+    },
     /// A released object has been at rest for `rest_time_s`: its authority may go back.
     CameToRest {
         /// The object.

@@ -128,3 +128,54 @@ pub(crate) fn release_without_throw(
 ) {
     apply_release(world, soft, target, Vec3::ZERO, Vec3::ZERO);
 }
+
+/// Drives particle `i` of soft body `body` toward `goal` exactly as a hand of this peer
+/// holding it would ([`HandConfig`]'s speed limit, one step of `dt_s`): for a hand of
+/// another peer, applied by the body's owner (a remote hand). False if there is no such
+/// particle or `goal` is not finite.
+pub fn drive_particle(
+    world: &mut PhysicsWorld,
+    soft: &mut SoftBodySet,
+    body: softsync_softbody::SoftBodyHandle,
+    i: u32,
+    goal: Vec3,
+    cfg: &HandConfig,
+    dt_s: f32,
+) -> bool {
+    let exists = soft
+        .get(body)
+        .is_some_and(|b| (i as usize) < b.num_particles());
+    if !exists || !goal.is_finite() {
+        return false;
+    }
+    let target = Target::SoftParticle(body, i);
+    velocity_hold(
+        world,
+        soft,
+        target,
+        goal,
+        Quat::IDENTITY,
+        cfg,
+        dt_s.max(1e-5),
+    );
+    true
+}
+
+/// Lets go of particle `i` of `body` as a hand would, giving it `throw` (m/s; zero: no
+/// throw). Non-finite throws are dropped.
+pub fn release_particle(
+    world: &mut PhysicsWorld,
+    soft: &mut SoftBodySet,
+    body: softsync_softbody::SoftBodyHandle,
+    i: u32,
+    throw: Vec3,
+) {
+    let throw = if throw.is_finite() { throw } else { Vec3::ZERO };
+    apply_release(
+        world,
+        soft,
+        Target::SoftParticle(body, i),
+        throw,
+        Vec3::ZERO,
+    );
+}

@@ -24,6 +24,7 @@ use softsync_softbody::{SoftBodyHandle, SoftBodySet, SoftPart};
 
 pub use config::{ConfigError, HandConfig, HoldMode, SoftGrab};
 pub use events::InteractionEvent;
+pub use hold::{drive_particle, release_particle};
 pub use input::{throw_velocity, HandInput, HandSample, InputError};
 pub use target::{AllLocal, Hovered, ObjectRef, Ownership, Target};
 
@@ -47,6 +48,11 @@ enum HandState {
     },
     Controller {
         body: RigidBodyHandle,
+    },
+    /// Holding a target another peer simulates: the hand only says where it is (the app sends
+    /// it to the owner, which drives the target as it drives its own hands' targets).
+    Remote {
+        target: Target,
     },
 }
 
@@ -155,6 +161,76 @@ impl Interaction {
         }
     }
 
+    /// What a hand holds as a remote hand (a body another peer simulates).
+    pub fn remote(&self, hand: HandId) -> Option<Target> {
+        match self.hands.get(hand)?.state {
+            HandState::Remote { target } => Some(target),
+            _ => None,
+        }
+    }
+
+    /// A hand's newest input sample (where it is), if it has one.
+    pub fn sample(&self, hand: HandId) -> Option<HandSample> {
+        self.hands.get(hand)?.input.map(|i| i.sample)
+    }
+
+    /// A hand's throw velocity now: the mean of its last samples' velocities (Figure 4.2),
+    /// limited to its `max_linear_speed_mps`.
+    pub fn throw_velocity(&self, hand: HandId) -> Vec3 {
+        let Some(h) = self.hands.get(hand) else {
+            return Vec3::ZERO;
+        };
+        let history: Vec<HandSample> = h.history.iter().copied().collect();
+        clamp_len(throw_velocity(&history).0, h.config.max_linear_speed_mps)
+    }
+
+    /// Hands waiting for authority over `object` hold it as remote hands instead: another
+    /// peer simulates it and drives the target toward the hand ([`Interaction::remote`] says
+    /// what each holds; letting go emits [`InteractionEvent::RemoteReleased`]). Each such hand
+    /// emits [`InteractionEvent::Grabbed`].
+    pub fn hold_remote(&mut self, object: ObjectRef) {
+        for (i, h) in self.hands.iter_mut().enumerate() {
+            if let HandState::Waiting { target } = h.state {
+                if target.object() == object {
+                    h.state = HandState::Remote { target };
+                    self.events
+                        .push_back(InteractionEvent::Grabbed { hand: i, target });
+                }
+            }
+        }
+    }
+
+    /// The local peer no longer simulates `object`: hands holding it go on as remote hands
+    /// (no release, no throw, no event).
+    pub fn hold_as_remote(&mut self, object: ObjectRef) {
+        for h in &mut self.hands {
+            if let HandState::Holding { target, .. } = h.state {
+                if target.object() == object {
+                    h.state = HandState::Remote { target };
+                }
+            }
+        }
+    }
+
+    /// Watch `object` until it rests ([`InteractionEvent::CameToRest`]), with the first
+    /// hand's rest settings: for an object the last remote hand let go of.
+    pub fn watch_until_rest(&mut self, object: ObjectRef) {
+        let Some(cfg) = self.hands.first().map(|h| h.config.clone()) else {
+            return;
+        };
+        self.resting.retain(|r| r.0 != object);
+        self.resting
+            .push((object, 0.0, cfg.rest_time_s, cfg.rest_speed_mps));
+    }
+
+    /// What a hand waits for authority over.
+    pub fn waiting(&self, hand: HandId) -> Option<Target> {
+        match self.hands.get(hand)?.state {
+            HandState::Waiting { target } => Some(target),
+            _ => None,
+        }
+    }
+
     /// True while the hand waits for authority.
     pub fn is_waiting(&self, hand: HandId) -> bool {
         matches!(
@@ -178,9 +254,10 @@ impl Interaction {
 
     /// Authority over `object` was granted: hands waiting for it start holding at the next
     /// [`update`](Self::update).
+    /// Remote hands on it (see [`Interaction::hold_remote`]) go on holding it here.
     pub fn grant(&mut self, object: ObjectRef) {
         for h in &mut self.hands {
-            if let HandState::Waiting { target } = h.state {
+            if let HandState::Waiting { target } | HandState::Remote { target } = h.state {
                 if target.object() == object {
                     // Offsets are taken at the next update, where the world is at hand.
                     h.state = HandState::Holding {
@@ -193,10 +270,11 @@ impl Interaction {
         }
     }
 
-    /// Authority over `object` was denied: hands waiting for it give up.
+    /// Authority over `object` was denied: hands waiting for it give up; so do remote hands
+    /// on it (its owner refused them).
     pub fn deny(&mut self, object: ObjectRef) {
         for (i, h) in self.hands.iter_mut().enumerate() {
-            if let HandState::Waiting { target } = h.state {
+            if let HandState::Waiting { target } | HandState::Remote { target } = h.state {
                 if target.object() == object {
                     h.state = HandState::Free;
                     self.events
@@ -229,6 +307,10 @@ impl Interaction {
             h.state = match h.state {
                 HandState::Waiting { target } => match map(target) {
                     Some(target) => HandState::Waiting { target },
+                    None => HandState::Free,
+                },
+                HandState::Remote { target } => match map(target) {
+                    Some(target) => HandState::Remote { target },
                     None => HandState::Free,
                 },
                 HandState::Holding { target, .. } if target.object() == ObjectRef::Soft(old) => {
@@ -266,7 +348,7 @@ impl Interaction {
         for h in &mut self.hands {
             if matches!(
                 h.state,
-                HandState::Waiting { .. } | HandState::Holding { .. }
+                HandState::Waiting { .. } | HandState::Holding { .. } | HandState::Remote { .. }
             ) {
                 h.state = HandState::Free;
             }
@@ -441,6 +523,15 @@ impl Interaction {
                     self.events.push_back(InteractionEvent::GrabCancelled {
                         hand: i,
                         object: target.object(),
+                    });
+                }
+                HandState::Remote { target } => {
+                    let history: Vec<HandSample> = self.hands[i].history.iter().copied().collect();
+                    let v = clamp_len(throw_velocity(&history).0, cfg.max_linear_speed_mps);
+                    self.events.push_back(InteractionEvent::RemoteReleased {
+                        hand: i,
+                        target,
+                        velocity_mps: v,
                     });
                 }
                 HandState::Controller { body } => {

@@ -334,10 +334,17 @@ pub struct MessageConfig {
     pub kinds: Vec<String>,
     /// Largest payload, bytes (at most [`MAX_MESSAGE_PAYLOAD`](crate::wire::MAX_MESSAGE_PAYLOAD)).
     pub max_payload: usize,
-    /// Messages per second a peer may send, sustained.
+    /// Reliable messages (every delivery but unreliable) per second a peer may send,
+    /// sustained.
     pub rate_per_s: f32,
-    /// Messages a peer may send at once above the rate.
+    /// Reliable messages a peer may send at once above the rate.
     pub burst: u32,
+    /// Unreliable messages per second a peer may send, sustained: a bucket of their own,
+    /// since they cost the host no ledger and a stream of them (the built-in remote hands:
+    /// one per hand per step, 2 × 90 Hz) must leave the reliable rate to the app.
+    pub unreliable_rate_per_s: f32,
+    /// Unreliable messages a peer may send at once above their rate.
+    pub unreliable_burst: u32,
     /// A peer's reliable messages not yet delivered to all their targets; more are refused
     /// ([`MessageRefusal::QueueFull`](crate::wire::MessageRefusal::QueueFull)).
     pub max_outbox: usize,
@@ -352,6 +359,8 @@ impl Default for MessageConfig {
             max_payload: crate::wire::MAX_MESSAGE_PAYLOAD,
             rate_per_s: 60.0,
             burst: 120,
+            unreliable_rate_per_s: 240.0,
+            unreliable_burst: 240,
             max_outbox: 256,
             max_unreliable_queue: 64,
         }

@@ -59,6 +59,14 @@ pub enum Event {
         /// Where its center was.
         from: glam::Vec3,
     },
+    /// Who holds object `id` changed (its owner's word; ours for what we simulate): every
+    /// hand on it, local and remote (see [`crate::messages::Holders`]).
+    Holders {
+        /// The object.
+        id: NetId,
+        /// The hands, sorted.
+        hands: Vec<crate::messages::Holder>,
+    },
     /// Something went wrong that the peer carried on through (an avatar not spawned, a hand
     /// input refused, a state not published); the text says what, for the log.
     Warning(String),
@@ -133,4 +141,19 @@ pub struct Counters {
     pub resolution_requests: u64,
     /// `method: auto`: our bodies' mode changes (asleep, touched, squeezed) as their owner.
     pub auto_mode_changes: u64,
+    /// Grabs our hands made as remote hands (on a body another peer simulates).
+    pub remote_grabs: u64,
+    /// Our remote hands their owner refused (`Locked`, an `OwnerMustAgree` owner that said no).
+    pub remote_hands_denied: u64,
+    /// Owner: other peers' remote hands taken on our bodies.
+    pub remote_hands_taken: u64,
+    /// Owner: remote hands refused by policy.
+    pub remote_hands_refused: u64,
+    /// Owner: remote hands let go because they went silent (their peer died or left).
+    pub remote_hands_expired: u64,
+    /// Owner: remote hand samples dropped as malformed (not finite, no such hand, a particle
+    /// past the body, an object that is not a soft body here, bytes that do not decode).
+    pub remote_hands_malformed: u64,
+    /// `Holders` messages dropped: not from the object's owner, or too long.
+    pub holders_refused: u64,
 }

@@ -7,6 +7,7 @@
 
 use serde::{Deserialize, Serialize};
 pub use softsync_net::messages::{Message, MessageTypes, RegisterError};
+use softsync_net::{NetId, PeerId};
 
 /// A line of text to the room (the `softsync` binary logs it; a bot's `say` sends one).
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -31,13 +32,90 @@ impl Message for SignalingMoved {
     const NAME: &'static str = "softsync.signaling";
 }
 
-/// The built-in message types ([`Say`], [`SignalingMoved`]), in their fixed order; register
-/// yours after them.
+/// A remote hand (co-manipulation): a hand of the sender holds particle `particle` of soft
+/// body `object`, which another peer simulates. Sent unreliably to the object's owner
+/// (relayed by the host, [`softsync_net::MessageTarget::OwnerOf`]) every step the hand holds
+/// it, latest wins; the owner drives the particle toward `pos` as it drives its own hands'
+/// particles. A release is sent three times (`release`, with the throw in `vel`); an owner that
+/// hears nothing of a hand for [`REMOTE_HAND_TIMEOUT_S`] lets it go without a throw.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RemoteHand {
+    /// The soft body.
+    pub object: NetId,
+    /// The sender's hand: 0 left, 1 right.
+    pub hand: u8,
+    /// The sender's grab number for this hand (from 1, one per grab): the owner ignores a
+    /// grab older than one it saw released.
+    pub grab: u32,
+    /// The particle held.
+    pub particle: u32,
+    /// The hand's position, room frame, metres.
+    pub pos: [f32; 3],
+    /// The hand's velocity, m/s (the throw, in a release).
+    pub vel: [f32; 3],
+    /// The hand let go.
+    pub release: bool,
+}
+
+impl Message for RemoteHand {
+    const NAME: &'static str = "softsync.hand";
+}
+
+/// A hand that goes silent this long is let go by the owner (its peer died, or the link did).
+pub const REMOTE_HAND_TIMEOUT_S: f64 = 0.5;
+
+/// The owner's answer to a new remote hand (reliable, to its sender): refused when the class
+/// is `Locked`, when an `OwnerMustAgree` owner says no, or when the hand is malformed.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct HandAnswer {
+    /// The soft body.
+    pub object: NetId,
+    /// The sender's hand.
+    pub hand: u8,
+    /// Its grab number.
+    pub grab: u32,
+    /// Taken (the owner drives the particle) or refused.
+    pub accepted: bool,
+}
+
+impl Message for HandAnswer {
+    const NAME: &'static str = "softsync.hand.answer";
+}
+
+/// One hand on a body: whose, which, on what particle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+pub struct Holder {
+    /// The peer whose hand it is.
+    pub peer: PeerId,
+    /// Its hand: 0 left, 1 right.
+    pub hand: u8,
+    /// The particle it holds (`u32::MAX`: the body's center or a rigid body).
+    pub particle: u32,
+}
+
+/// Who holds an object, as its owner applies the hands (its own and remote ones): retained
+/// per object ([`softsync_net::Delivery::ObjectState`]), so a late joiner knows too. Sent by
+/// the owner whenever the set changes; taken only from the object's owner.
+#[derive(Clone, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct Holders {
+    /// The hands, sorted.
+    pub hands: Vec<Holder>,
+}
+
+impl Message for Holders {
+    const NAME: &'static str = "softsync.holders";
+}
+
+/// The built-in message types ([`Say`], [`SignalingMoved`], [`RemoteHand`], [`HandAnswer`],
+/// [`Holders`]), in their fixed order; register yours after them.
 pub fn builtin() -> MessageTypes {
     let mut t = MessageTypes::new();
     // A fresh table holds no name yet, so these cannot collide.
     let _ = t.register::<Say>();
     let _ = t.register::<SignalingMoved>();
+    let _ = t.register::<RemoteHand>();
+    let _ = t.register::<HandAnswer>();
+    let _ = t.register::<Holders>();
     t
 }
 
@@ -56,7 +134,8 @@ mod tests {
         let mut t = builtin();
         assert_eq!(t.kind::<Say>().map(|k| k.0), Some(0));
         assert_eq!(t.kind::<SignalingMoved>().map(|k| k.0), Some(1));
-        assert_eq!(t.register::<Valve>().unwrap().0, 2);
+        assert_eq!(t.kind::<Holders>().map(|k| k.0), Some(4));
+        assert_eq!(t.register::<Valve>().unwrap().0, 5);
         assert!(t.register::<Say>().is_err());
     }
 }

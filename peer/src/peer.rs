@@ -11,9 +11,11 @@
 
 mod auto;
 mod bounds;
+mod comanip;
+mod show;
 pub(crate) mod topology;
 
-use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
+use std::collections::{BTreeSet, HashMap, VecDeque};
 use std::time::Duration;
 
 use glam::{Quat, Vec3};
@@ -22,16 +24,14 @@ use softsync_interaction::{
 };
 use softsync_net::messages::{Message, MessageTypes};
 use softsync_net::{
-    Delivery, DisplayedState, Instant, MessageKind, MessageRefusal, MessageTarget, NetId,
-    ObjectState, PeerEvent, PeerId, ReceivedMessage, Session, Transmit,
+    Delivery, Instant, MessageKind, MessageRefusal, MessageTarget, NetId, ObjectState, PeerEvent,
+    PeerId, ReceivedMessage, Session, Transmit,
 };
-use softsync_softbody::rapier3d::prelude::PhysicsWorld;
-use softsync_softbody::SoftBodySet;
 
-use crate::avatar::{self, Avatar};
+use crate::avatar::Avatar;
 use crate::events::{Counters, Event, PeerError};
 use crate::join::{may_rejoin, Joining};
-use crate::mirror::{LocalBody, Mirror, MirroredObject};
+use crate::mirror::{LocalBody, Mirror};
 use crate::scene::{Kind, Scene};
 
 /// How a peer simulates and how patient it is.
@@ -47,6 +47,10 @@ pub struct PeerConfig {
     pub rejoin_limit: u32,
     /// How long a joiner waits for a welcome before [`Peer::pump`] gives up.
     pub join_timeout: Duration,
+    /// Whether we let other peers' hands hold the bodies we own whose class is
+    /// `OwnerMustAgree` (remote hands, `peer/comanip.rs`; `Free` classes always let them,
+    /// `Locked` ones never).
+    pub agree_to_hands: bool,
 }
 
 impl Default for PeerConfig {
@@ -57,6 +61,7 @@ impl Default for PeerConfig {
             avatar: true,
             rejoin_limit: 3,
             join_timeout: Duration::from_secs(15),
+            agree_to_hands: true,
         }
     }
 }
@@ -90,6 +95,8 @@ pub struct Peer {
     scalpels: [topology::Scalpel; 2],
     /// `method: auto` bodies we own.
     auto: auto::AutoBodies,
+    /// Hands of several peers on one body (remote hands, both ways).
+    comanip: comanip::Comanip,
     /// Datagrams an old session had still to send when we rejoined.
     leftover: VecDeque<Transmit>,
     /// After a rejoin, the fresh session says nothing until then (see [`REJOIN_QUIET`]).
@@ -152,6 +159,7 @@ impl Peer {
             counters: Counters::default(),
             scalpels: Default::default(),
             auto: Default::default(),
+            comanip: Default::default(),
             leftover: VecDeque::new(),
             quiet_until: None,
             sim_time_s: 0.0,
@@ -279,6 +287,7 @@ impl Peer {
             self.leftover.push_back(t);
         }
         self.hands.release_all();
+        self.comanip.clear();
         self.mirror.clear();
         self.avatar.clear();
         self.waiting_grant.clear();
@@ -319,7 +328,8 @@ impl Peer {
                 self.rejoin(now, host, reason);
             }
             SessionEvent::PeerJoined(_) => self.events.push_back(Event::Room(e)),
-            SessionEvent::PeerLeft(_) => {
+            SessionEvent::PeerLeft(p) => {
+                self.forget_hands_of(p);
                 self.events.push_back(Event::Room(e));
                 if self.session.is_host() {
                     self.despawn_avatars_of_absent(now);
@@ -362,6 +372,7 @@ impl Peer {
                 if !self.mirror.objects.contains_key(&id) {
                     return Ok(()); // despawned meanwhile (the avatar of a peer that left)
                 }
+                self.on_owner_changed(id, owner == me);
                 if owner == me {
                     self.counters.authority_grants += 1;
                     self.events.push_back(Event::AuthorityGained(id));
@@ -369,17 +380,24 @@ impl Peer {
                     if let Some(s) = self.session.latest_state(id) {
                         self.apply_shown(id, &s);
                     }
-                    if self.waiting_grant.remove(&id) {
-                        if let Some(r) = self.mirror.object_ref(id) {
-                            self.hands.grant(r);
-                        }
+                    self.waiting_grant.remove(&id);
+                    // hands waiting for it, and remote hands on it, hold it here now
+                    if let Some(r) = self.mirror.object_ref(id) {
+                        self.hands.grant(r);
                     }
+                } else if let Some(r) = self.mirror.object_ref(id) {
+                    // hands holding what another peer simulates now go on as remote hands
+                    self.hands.hold_as_remote(r);
                 }
                 self.mirror.set_simulated(id, owner == me);
             }
-            SessionEvent::AuthorityDenied { id, .. } => {
+            SessionEvent::AuthorityDenied { id, reason } => {
+                let waited = self.waiting_grant.remove(&id);
+                if waited && self.grab_as_remote_on_denial(id, reason) {
+                    return Ok(()); // someone holds it: our hand holds it with theirs
+                }
                 self.events.push_back(Event::AuthorityDenied(id));
-                if self.waiting_grant.remove(&id) {
+                if waited {
                     if let Some(r) = self.mirror.object_ref(id) {
                         self.hands.deny(r);
                     }
@@ -389,6 +407,7 @@ impl Peer {
                 self.on_topology(now, id, seq, event);
                 self.events.push_back(Event::Room(e));
             }
+            SessionEvent::Message(ref m) if self.on_comanip_message(now, m) => {}
             SessionEvent::Message(_)
             | SessionEvent::MessageDelivered { .. }
             | SessionEvent::MessageRefused { .. } => self.events.push_back(Event::Room(e)),
@@ -529,7 +548,8 @@ impl Peer {
             .collect();
         for id in &remote {
             self.mirror.set_simulated(*id, false);
-            if let Some(d) = self.session.display_state(now, *id) {
+            if let Some(mut d) = self.session.display_state(now, *id) {
+                self.predict_shown(*id, &mut d.state);
                 self.apply_shown(*id, &d.state);
             }
         }
@@ -558,9 +578,13 @@ impl Peer {
         while let Some(e) = self.hands.poll_event() {
             self.on_hand_event(now, e);
         }
+        self.send_remote_hands(now);
+        self.apply_remote_hands(now);
         self.use_scalpels(now);
         self.mirror.soft.step(&mut self.mirror.world, dt);
         self.run_auto(now);
+        self.publish_holders(now);
+        self.age_fades();
         // Remote soft bodies: show exactly the interpolated state again after the step.
         for id in &remote {
             let soft = matches!(
@@ -568,7 +592,8 @@ impl Peer {
                 Some(LocalBody::Soft(_))
             );
             if soft {
-                if let Some(d) = self.session.display_state(now, *id) {
+                if let Some(mut d) = self.session.display_state(now, *id) {
+                    self.predict_shown(*id, &mut d.state);
                     self.apply_shown(*id, &d.state);
                 }
             }
@@ -609,6 +634,9 @@ impl Peer {
     fn on_hand_event(&mut self, now: Instant, e: InteractionEvent) {
         match e {
             InteractionEvent::AuthorityRequested { object, .. } => {
+                if self.grab_as_remote_if_held(object) {
+                    return; // someone holds it: our hand holds it with theirs
+                }
                 if let Some(id) = self.mirror.id_of(object) {
                     self.counters.authority_requests += 1;
                     self.events.push_back(Event::AuthorityAsked(id));
@@ -640,11 +668,23 @@ impl Peer {
                     self.events.push_back(Event::GrabEnded { id, hand, speed });
                 }
             }
+            InteractionEvent::RemoteReleased {
+                hand,
+                target,
+                velocity_mps,
+            } => {
+                self.remote_released(hand, velocity_mps);
+                if let Some(id) = self.mirror.id_of(target.object()) {
+                    let speed = velocity_mps.length();
+                    self.events.push_back(Event::GrabEnded { id, hand, speed });
+                }
+            }
             InteractionEvent::CameToRest { object } => {
                 if let Some(id) = self.mirror.id_of(object) {
                     if !self.session.is_host()
                         && self.session.owner(id) == Some(self.me())
                         && !self.is_held(object)
+                        && !self.remote_hands_on(id)
                         && self.session.release_authority(now, id).is_ok()
                     {
                         self.events.push_back(Event::AuthorityReleased(id));
@@ -653,140 +693,5 @@ impl Peer {
             }
             _ => {}
         }
-    }
-
-    // --- What the peer shows ---
-
-    /// This peer's id.
-    pub fn me(&self) -> PeerId {
-        self.session.local_id()
-    }
-
-    /// In the room (host, or welcomed).
-    pub fn joined(&self) -> bool {
-        self.joining.joined()
-    }
-
-    /// The session (membership, owners, states, traffic statistics).
-    pub fn session(&self) -> &Session {
-        &self.session
-    }
-
-    /// The networked objects as this peer knows them.
-    pub fn objects(&self) -> &BTreeMap<NetId, MirroredObject> {
-        &self.mirror.objects
-    }
-
-    /// The rapier world (static scene and the objects' bodies).
-    pub fn world(&self) -> &PhysicsWorld {
-        &self.mirror.world
-    }
-
-    /// The soft bodies in [`Peer::world`].
-    pub fn soft_bodies(&self) -> &SoftBodySet {
-        &self.mirror.soft
-    }
-
-    /// The scene.
-    pub fn scene(&self) -> &Scene {
-        &self.scene
-    }
-
-    /// The configuration.
-    pub fn config(&self) -> &PeerConfig {
-        &self.config
-    }
-
-    /// What this peer counted.
-    pub fn counters(&self) -> Counters {
-        self.counters
-    }
-
-    /// Simulated seconds.
-    pub fn sim_time(&self) -> f64 {
-        self.sim_time_s
-    }
-
-    /// Fixed steps run.
-    pub fn steps(&self) -> u64 {
-        self.steps
-    }
-
-    /// The time of the last fixed step: the time our published states stand for.
-    pub fn last_step_at(&self) -> Instant {
-        self.last_step_at
-    }
-
-    /// Where this peer stands: around the table, by its id.
-    pub fn home(&self) -> (Vec3, Quat) {
-        avatar::home(self.me())
-    }
-
-    /// Our avatar's parts (head, left hand, right hand), once spawned.
-    pub fn avatar_parts(&self) -> [Option<NetId>; 3] {
-        self.avatar.parts
-    }
-
-    /// The state this peer shows for an object now: simulated if we own it, interpolated
-    /// otherwise (what the dump writes).
-    pub fn shown_state(&mut self, now: Instant, id: NetId) -> Option<ObjectState> {
-        if !self.mirror.objects.contains_key(&id) {
-            return None;
-        }
-        if self.session.owner(id) == Some(self.me()) {
-            self.mirror.state(id)
-        } else {
-            self.session
-                .display_state(now, id)
-                .map(|d| d.state)
-                .or_else(|| self.session.latest_state(id))
-        }
-    }
-
-    /// The pose an object is drawn at now: a rigid body's simulated pose (ours, or the
-    /// replica moved to the owner's interpolated state), our own avatar parts where the bot or
-    /// device put them, anything else at its shown state. Soft bodies are drawn from their
-    /// particles ([`SoftBodySet`]'s render positions); this is their centre.
-    pub fn drawn_pose(&mut self, now: Instant, id: NetId) -> Option<(Vec3, Quat)> {
-        let o = self.mirror.objects.get(&id)?;
-        match o.body {
-            LocalBody::Rigid(h) => {
-                let b = self.mirror.world.bodies.get(h)?;
-                Some((b.translation(), *b.rotation()))
-            }
-            LocalBody::Pose if o.avatar_of == Some(self.me()) => Some(o.pose),
-            _ => self.shown_state(now, id).map(|s| (s.pos, s.rot)),
-        }
-    }
-
-    /// The interpolated state of an object another peer owns, with the owner's time it
-    /// stands for (see [`Session::display_state`]).
-    pub fn displayed_state(&mut self, now: Instant, id: NetId) -> Option<DisplayedState> {
-        self.session.display_state(now, id)
-    }
-
-    /// What a hand (0 left, 1 right) holds, as a networked id.
-    pub fn held(&self, hand: usize) -> Option<(NetId, Target)> {
-        let t = self.hands.held(*self.hand_ids.get(hand)?)?;
-        Some((self.mirror.id_of(t.object())?, t))
-    }
-
-    /// Objects our hands hover now (a view tints them).
-    pub fn hovered_ids(&self) -> BTreeSet<NetId> {
-        self.hand_ids
-            .iter()
-            .flat_map(|h| self.hands.hovered(*h))
-            .filter_map(|hv| self.mirror.id_of(hv.target.object()))
-            .collect()
-    }
-
-    /// How many objects we own.
-    pub fn owned_count(&self) -> usize {
-        let me = self.me();
-        self.mirror
-            .objects
-            .keys()
-            .filter(|id| self.session.owner(**id) == Some(me))
-            .count()
     }
 }

@@ -83,16 +83,18 @@ pub(crate) struct Messages {
     last_seq: u32,
     /// Our reliable messages not yet delivered everywhere, in order.
     outbox: VecDeque<AppMessage>,
-    /// Our sending rate.
+    /// Our sending rate of reliable messages.
     bucket: TokenBucket,
+    /// Our sending rate of unreliable messages.
+    unreliable_bucket: TokenBucket,
     /// Per origin: the highest reliable message number delivered to us.
     passed: BTreeMap<PeerId, u32>,
     /// The latest retained message of each kind (and object, for per-object state).
     retained: BTreeMap<(MessageKind, Option<NetId>), AppMessage>,
     /// Host: per origin, relayed reliable messages not yet acknowledged by every target.
     ledger: BTreeMap<PeerId, VecDeque<Relayed>>,
-    /// Host: per origin, its sending rate.
-    buckets: BTreeMap<PeerId, TokenBucket>,
+    /// Host: per origin and reliability (true: unreliable), its sending rate.
+    buckets: BTreeMap<(PeerId, bool), TokenBucket>,
     filter: Option<Box<FilterFn>>,
 }
 
@@ -115,7 +117,8 @@ impl Messages {
     fn forget(&mut self, p: PeerId) {
         self.passed.remove(&p);
         self.ledger.remove(&p);
-        self.buckets.remove(&p);
+        self.buckets.remove(&(p, false));
+        self.buckets.remove(&(p, true));
     }
 }
 
@@ -181,8 +184,14 @@ impl Session {
         if delivery.is_reliable() && self.messages.outbox.len() >= cfg.max_outbox {
             return Err(MessageRefusal::QueueFull);
         }
-        let (rate, cap) = (cfg.rate_per_s, cfg.burst as f32);
-        if !self.messages.bucket.take(now, rate, cap) {
+        let taken = if delivery.is_reliable() {
+            let (rate, cap) = (cfg.rate_per_s, cfg.burst as f32);
+            self.messages.bucket.take(now, rate, cap)
+        } else {
+            let (rate, cap) = (cfg.unreliable_rate_per_s, cfg.unreliable_burst as f32);
+            self.messages.unreliable_bucket.take(now, rate, cap)
+        };
+        if !taken {
             return Err(MessageRefusal::RateLimited);
         }
         let seq = if delivery.is_reliable() {
@@ -292,12 +301,16 @@ impl Session {
         if from != self.local {
             // room above the burst for a whole outbox: what a joiner queued before its
             // welcome, or a member resends to a new host, arrives at once
-            let cap = cfg.burst as f32 + cfg.max_outbox as f32;
-            let rate = cfg.rate_per_s;
+            let unreliable = !msg.delivery.is_reliable();
+            let (rate, cap) = if unreliable {
+                (cfg.unreliable_rate_per_s, cfg.unreliable_burst as f32)
+            } else {
+                (cfg.rate_per_s, cfg.burst as f32 + cfg.max_outbox as f32)
+            };
             if !self
                 .messages
                 .buckets
-                .entry(from)
+                .entry((from, unreliable))
                 .or_default()
                 .take(now, rate, cap)
             {
