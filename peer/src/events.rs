@@ -154,6 +154,9 @@ pub struct Counters {
     /// Owner: remote hand samples dropped as malformed (not finite, no such hand, a particle
     /// past the body, an object that is not a soft body here, bytes that do not decode).
     pub remote_hands_malformed: u64,
+    /// Owner: remote hands dropped because one hand of one peer started grabs faster than
+    /// one per 100 ms.
+    pub remote_hands_too_fast: u64,
     /// `Holders` messages dropped: not from the object's owner, or too long.
     pub holders_refused: u64,
 }

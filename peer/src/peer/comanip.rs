@@ -58,6 +58,9 @@ pub const MAX_EXTRAPOLATE_S: f32 = 0.05;
 const RELEASE_REPEATS: u8 = 3;
 /// Hands a peer has (what a remote hand's index may be).
 const HANDS: u8 = 2;
+/// One hand of one peer starts a new grab at most this often (a person cannot grab faster; a
+/// flood of new grab numbers is dropped, counted).
+const MIN_GRAB_INTERVAL_S: f64 = 0.1;
 
 /// A remote hand the owner applies.
 #[derive(Clone, Debug)]
@@ -98,6 +101,8 @@ pub(crate) struct Comanip {
     applied: BTreeMap<(PeerId, u8), Applied>,
     /// Owner: per (sender, hand), the newest grab number that ended; older samples are late.
     ended: BTreeMap<(PeerId, u8), u32>,
+    /// Owner: per (sender, hand), when its last new grab was taken or refused.
+    last_grab_at: BTreeMap<(PeerId, u8), Instant>,
     /// Per hand of ours: what it holds remotely.
     sending: [Option<Sending>; 2],
     /// Per hand of ours: its last grab number.
@@ -362,6 +367,13 @@ impl Peer {
             return;
         }
         if new_grab {
+            let interval = std::time::Duration::from_secs_f64(MIN_GRAB_INTERVAL_S);
+            let last = self.comanip.last_grab_at.get(&key).copied();
+            if last.is_some_and(|at| now.saturating_since(at) < interval) {
+                self.counters.remote_hands_too_fast += 1;
+                return;
+            }
+            self.comanip.last_grab_at.insert(key, now);
             if let Some(old) = self.comanip.applied.get(&key).map(|a| a.grab) {
                 // that hand's previous grab ended without a release we heard
                 self.end_remote_hand(key, Vec3::ZERO);
@@ -372,16 +384,21 @@ impl Peer {
                     Some(AuthorityPolicy::OwnerMustAgree) => self.config.agree_to_hands,
                     _ => true,
                 };
-            let answer = HandAnswer {
-                object: m.object,
-                hand: m.hand,
-                grab: m.grab,
-                accepted: agreed,
-            };
-            let to = MessageTarget::Peer(from);
-            let _ = self
-                .session
-                .send(now, &self.message_types, to, Delivery::Reliable, &answer);
+            // a refusal is answered, and an agreement the sender waits for; a plain take is not
+            // (each answer is a reliable message: a flood of grabs must not become one of them)
+            let asked = self.class_policy(m.object) == Some(AuthorityPolicy::OwnerMustAgree);
+            if !agreed || asked {
+                let answer = HandAnswer {
+                    object: m.object,
+                    hand: m.hand,
+                    grab: m.grab,
+                    accepted: agreed,
+                };
+                let to = MessageTarget::Peer(from);
+                let _ =
+                    self.session
+                        .send(now, &self.message_types, to, Delivery::Reliable, &answer);
+            }
             if !agreed {
                 self.counters.remote_hands_refused += 1;
                 self.comanip.ended.insert(key, m.grab);
@@ -507,6 +524,7 @@ impl Peer {
             self.end_remote_hand(k, Vec3::ZERO);
         }
         self.comanip.ended.retain(|k, _| k.0 != p);
+        self.comanip.last_grab_at.retain(|k, _| k.0 != p);
     }
 
     /// Owner, after the step: who holds each of our objects; published when it changed.

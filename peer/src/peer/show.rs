@@ -102,6 +102,13 @@ impl Peer {
         }
     }
 
+    /// The object's body in this peer's world as the last step left it: for a body another
+    /// peer simulates, the replicated state plus our remote hands' corrections (what is drawn;
+    /// [`Peer::shown_state`] is the replicated state alone).
+    pub fn local_state(&self, id: NetId) -> Option<ObjectState> {
+        self.mirror.state(id)
+    }
+
     /// The pose an object is drawn at now: a rigid body's simulated pose (ours, or the
     /// replica moved to the owner's interpolated state), our own avatar parts where the bot or
     /// device put them, anything else at its shown state. Soft bodies are drawn from their

@@ -25,6 +25,8 @@ pub struct Node {
     pub warnings: Vec<String>,
     /// Every other event the peer said, with the time.
     pub events: Vec<(Instant, Event)>,
+    /// The node's process is gone (a test stops stepping it).
+    pub link_dead: bool,
 }
 
 impl Node {
@@ -55,6 +57,18 @@ impl Node {
         scene: Scene,
         config: PeerConfig,
     ) -> Self {
+        Self::with_loss(hub, me, seed, scene, config, 0.02)
+    }
+
+    /// As [`Node::with_config`], with `loss` on the link (20 ms, 5 ms jitter).
+    pub fn with_loss(
+        hub: &MemoryHub,
+        me: PeerId,
+        seed: u64,
+        scene: Scene,
+        config: PeerConfig,
+        loss: f64,
+    ) -> Self {
         let policy = SendPolicy::default();
         let cfg = scene.session_config(policy.clone(), policy.clone(), policy);
         let (session, contact) = if me == HOST {
@@ -70,7 +84,7 @@ impl Node {
             seed,
             latency: Duration::from_millis(20),
             jitter: Duration::from_millis(5),
-            loss: 0.02,
+            loss,
             ..ConditionerConfig::default()
         };
         Node {
@@ -78,6 +92,7 @@ impl Node {
             link: LinkConditioner::new(hub.endpoint(me), link),
             warnings: Vec::new(),
             events: Vec::new(),
+            link_dead: false,
         }
     }
 
