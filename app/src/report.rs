@@ -41,6 +41,10 @@ pub struct DumpObject {
     /// identical torn or cut mesh.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub topology: Option<String>,
+    /// Who holds it (its owner's word): `[peer, hand, particle]` per hand, sorted
+    /// (`particle` `u32::MAX`: the center or a rigid body).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub holders: Vec<[u64; 3]>,
 }
 
 /// One dump line.
@@ -107,6 +111,11 @@ pub fn snapshot(now: Instant, peer: &mut Peer) -> DumpLine {
                 .filter(|o| matches!(o.body, softsync_peer::LocalBody::Soft(_)))
                 .map(|o| o.topology),
             topology: peer.topology_hash(id).map(|h| format!("{h:016x}")),
+            holders: peer
+                .holders(id)
+                .iter()
+                .map(|h| [h.peer.0, u64::from(h.hand), u64::from(h.particle)])
+                .collect(),
         });
     }
     let session = peer.session();

@@ -11,13 +11,18 @@
 //! wait S                        do nothing for S
 //! move HAND X Y Z [in S]        go to a point (straight line over S, default 0.5)
 //! offset HAND DX DY DZ [in S]   go by an offset
-//! reach HAND TARGET [in S]      go to an object: a class of the scene (the thesis room's:
+//! reach HAND TARGET [at DX DY DZ] [in S]
+//!                               go to an object: a class of the scene (the thesis room's:
 //!                               bunny, softball, softbox, plate, block, can, ball) or
 //!                               `nearest`; soft bodies are reached at their particle nearest
-//!                               to the hand
+//!                               to the hand, or with `at` nearest to the object's center +
+//!                               (DX DY DZ) (room axes: two bots take opposite sides)
 //! grab HAND [timeout S]         close the grip; waits until held (through the authority
 //!                               request if another peer owns it), or gives up (default 3 s)
 //! squeeze HAND DEPTH [in S]     push the held point DEPTH metres toward the body's center
+//! pull HAND DX DY DZ [in S]     move the held point by an offset (as `offset`, but says so
+//!                               when the hand holds nothing); on a body another peer
+//!                               simulates the hand is a remote hand (co-manipulation)
 //! release HAND                  open the grip
 //! wave HAND AMPLITUDE PERIOD S  move sinusoidally (load runs); HAND may be `all` (head
 //!                               and both hands at once, out of phase)
@@ -64,8 +69,11 @@ pub enum Cmd {
     Move(usize, Vec3, f64),
     /// Relative move.
     Offset(usize, Vec3, f64),
-    /// Move to an object (None: nearest).
-    Reach(usize, Option<String>, f64),
+    /// Move to an object (None: nearest), at its particle nearest to its center + the offset
+    /// if one is given (else nearest to the hand).
+    Reach(usize, Option<String>, Option<Vec3>, f64),
+    /// Move the held point by an offset.
+    Pull(usize, Vec3, f64),
     /// Close the grip.
     Grab(usize, f64),
     /// Push toward the held body's center.
@@ -206,7 +214,19 @@ pub fn parse(text: &str) -> Result<Vec<Cmd>, ScriptError> {
                 "wait" => Cmd::Wait(num(arg(1)?)?.max(0.0)),
                 "move" => Cmd::Move(hand(arg(1)?)?, vec3(&w, 2)?, dur(&w, 5, 0.5)?),
                 "offset" => Cmd::Offset(hand(arg(1)?)?, vec3(&w, 2)?, dur(&w, 5, 0.5)?),
-                "reach" => Cmd::Reach(hand(arg(1)?)?, target_kind(arg(2)?)?, dur(&w, 3, 0.5)?),
+                "reach" if w.get(3) == Some(&"at") => Cmd::Reach(
+                    hand(arg(1)?)?,
+                    target_kind(arg(2)?)?,
+                    Some(vec3(&w, 4)?),
+                    dur(&w, 7, 0.5)?,
+                ),
+                "reach" => Cmd::Reach(
+                    hand(arg(1)?)?,
+                    target_kind(arg(2)?)?,
+                    None,
+                    dur(&w, 3, 0.5)?,
+                ),
+                "pull" => Cmd::Pull(hand(arg(1)?)?, vec3(&w, 2)?, dur(&w, 5, 0.5)?),
                 "own" => Cmd::Own(target_kind(arg(1)?)?, dur(&w, 2, 3.0)?),
                 "tear" => {
                     let (pts, step) = path(&w, 3)?;
@@ -246,7 +266,11 @@ pub fn parse(text: &str) -> Result<Vec<Cmd>, ScriptError> {
         })?;
         if matches!(
             cmd,
-            Cmd::Grab(0, _) | Cmd::Squeeze(0, ..) | Cmd::Release(0) | Cmd::Tear(0, ..)
+            Cmd::Grab(0, _)
+                | Cmd::Squeeze(0, ..)
+                | Cmd::Release(0)
+                | Cmd::Tear(0, ..)
+                | Cmd::Pull(0, ..)
         ) {
             return Err(ScriptError {
                 index: i + 1,
@@ -357,9 +381,10 @@ impl Bot {
             .cmds
             .iter()
             .filter_map(|c| match c {
-                Cmd::Reach(_, k, _) | Cmd::Own(k, _) | Cmd::Tear(_, k, _, _) | Cmd::Cut(k, _) => {
-                    k.as_deref()
-                }
+                Cmd::Reach(_, k, _, _)
+                | Cmd::Own(k, _)
+                | Cmd::Tear(_, k, _, _)
+                | Cmd::Cut(k, _) => k.as_deref(),
                 _ => None,
             })
             .filter(|k| scene.kind(k).is_none())
@@ -485,25 +510,39 @@ impl Bot {
                 t0: t,
                 dur,
             }),
-            Cmd::Reach(part, kind, dur) => match self.target(now, peer, part, kind.as_deref()) {
-                Some((to, name)) => {
-                    self.say(format!("reach {name}"));
-                    Some(Active::Motion {
-                        part,
-                        from: self.pos[part],
-                        to: self.to_script(part, to),
-                        t0: t,
-                        dur,
-                    })
+            Cmd::Pull(hand, d, dur) => {
+                if peer.held(hand - 1).is_none() {
+                    self.say("pull: the hand holds nothing".into());
                 }
-                None => {
-                    self.say(format!(
-                        "reach: no {} in the room",
-                        kind.as_deref().unwrap_or("object")
-                    ));
-                    None
+                Some(Active::Motion {
+                    part: hand,
+                    from: self.pos[hand],
+                    to: self.pos[hand] + d,
+                    t0: t,
+                    dur,
+                })
+            }
+            Cmd::Reach(part, kind, at, dur) => {
+                match self.target(now, peer, part, kind.as_deref(), at) {
+                    Some((to, name)) => {
+                        self.say(format!("reach {name}"));
+                        Some(Active::Motion {
+                            part,
+                            from: self.pos[part],
+                            to: self.to_script(part, to),
+                            t0: t,
+                            dur,
+                        })
+                    }
+                    None => {
+                        self.say(format!(
+                            "reach: no {} in the room",
+                            kind.as_deref().unwrap_or("object")
+                        ));
+                        None
+                    }
                 }
-            },
+            }
             Cmd::Grab(hand, timeout) => {
                 self.grip[hand] = 1.0;
                 Some(Active::Grab {
@@ -776,8 +815,9 @@ impl Bot {
         peer: &mut Peer,
         part: usize,
         kind: Option<&str>,
+        at: Option<Vec3>,
     ) -> Option<(Vec3, String)> {
-        let from = self.at(part);
+        let hand = self.at(part);
         let ids: Vec<_> = peer
             .objects()
             .iter()
@@ -791,6 +831,7 @@ impl Bot {
             let Some(s) = peer.shown_state(now, id) else {
                 continue;
             };
+            let from = at.map_or(hand, |d| s.pos + d);
             let p = if s.particles.is_empty() {
                 s.pos
             } else {
@@ -800,7 +841,12 @@ impl Bot {
                     .min_by(|a, b| a.distance(from).total_cmp(&b.distance(from)))
                     .unwrap_or(s.pos)
             };
-            let d = p.distance(from);
+            // which object: the one nearest the hand
+            let d = if at.is_some() {
+                s.pos.distance(hand)
+            } else {
+                p.distance(from)
+            };
             if best.as_ref().is_none_or(|b| d < b.0) {
                 best = Some((d, p, format!("{k} (object {})", id.0)));
             }
@@ -818,8 +864,23 @@ mod tests {
     fn scripts_parse_and_errors_name_the_command() {
         let c = parse("wait 1; reach right softball in 1\n# comment\ngrab right; squeeze right 0.03 in 0.6; release right; loop").unwrap();
         assert_eq!(c.len(), 6);
-        assert_eq!(c[1], Cmd::Reach(2, Some("softball".into()), 1.0));
+        assert_eq!(c[1], Cmd::Reach(2, Some("softball".into()), None, 1.0));
         assert_eq!(c[2], Cmd::Grab(2, 3.0));
+        let c = parse("reach left bunny at -0.1 0 0 in 0.8; pull left -0.05 0 0.01 in 1").unwrap();
+        assert_eq!(
+            c,
+            [
+                Cmd::Reach(
+                    1,
+                    Some("bunny".into()),
+                    Some(Vec3::new(-0.1, 0.0, 0.0)),
+                    0.8
+                ),
+                Cmd::Pull(1, Vec3::new(-0.05, 0.0, 0.01), 1.0)
+            ]
+        );
+        assert!(parse("reach left bunny at 1 2").is_err());
+        assert!(parse("pull head 0 0 1").is_err());
         for name in ["squeeze", "idle", "wave"] {
             parse(builtin(name).unwrap()).unwrap();
         }

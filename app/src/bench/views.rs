@@ -313,6 +313,7 @@ pub fn test_line(
                 src_from: None,
                 log: None,
                 topology: None,
+                holders: Vec::new(),
             })
             .collect(),
     }
