@@ -132,6 +132,10 @@ fn run(args: &[String]) -> Result<ExitCode, Failure> {
             bench::auto(&out, seconds, &assets_dir(assets.as_deref())).map_err(Failure::runtime)?;
             Ok(ExitCode::SUCCESS)
         }
+        Command::BenchComanip { out, quick } => {
+            bench::comanip(&out, quick).map_err(Failure::runtime)?;
+            Ok(ExitCode::SUCCESS)
+        }
         Command::BenchRoomLoad {
             out,
             seconds,

@@ -47,6 +47,24 @@ pub struct DumpObject {
     pub holders: Vec<[u64; 3]>,
 }
 
+/// One of this peer's hands holding a particle of a soft body, in a dump line.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct DumpHand {
+    /// 0 left, 1 right.
+    pub hand: u8,
+    /// The object it holds.
+    pub object: u32,
+    /// The particle it holds.
+    pub particle: u32,
+    /// A remote hand (the body is simulated by another peer).
+    pub remote: bool,
+    /// Where the hand is.
+    pub pos: [f32; 3],
+    /// Where this peer draws the held particle (for a remote hand: the replicated body plus
+    /// the local correction).
+    pub drawn: [f32; 3],
+}
+
 /// One dump line.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct DumpLine {
@@ -71,6 +89,9 @@ pub struct DumpLine {
     pub down_bytes: u64,
     /// Objects.
     pub objects: Vec<DumpObject>,
+    /// Our hands holding particles of soft bodies.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub hands: Vec<DumpHand>,
 }
 
 /// Take a dump line of what `peer` shows at `now`.
@@ -118,6 +139,28 @@ pub fn snapshot(now: Instant, peer: &mut Peer) -> DumpLine {
                 .collect(),
         });
     }
+    let mut hands = Vec::new();
+    for h in 0..2 {
+        let (Some((id, softsync_interaction::Target::SoftParticle(_, particle))), Some(pos)) =
+            (peer.held(h), peer.hand_position(h))
+        else {
+            continue;
+        };
+        let Some(drawn) = peer
+            .local_state(id)
+            .and_then(|s| s.particles.get(particle as usize).copied())
+        else {
+            continue;
+        };
+        hands.push(DumpHand {
+            hand: h as u8,
+            object: id.0,
+            particle,
+            remote: peer.holds_remotely(h),
+            pos: pos.to_array(),
+            drawn: drawn.to_array(),
+        });
+    }
     let session = peer.session();
     DumpLine {
         t: now.as_secs_f64(),
@@ -132,6 +175,7 @@ pub fn snapshot(now: Instant, peer: &mut Peer) -> DumpLine {
         up_bytes: session.stats().up.bytes,
         down_bytes: session.stats().down.bytes,
         objects,
+        hands,
     }
 }
 

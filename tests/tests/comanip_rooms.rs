@@ -139,15 +139,26 @@ fn three_bots_hold_the_bunny_at_once_and_survive_its_owners_death() {
     // a late joiner
     let ld = dir.join("late.jsonl");
     let mut late = peer_on(&dir, "late", "join", &url, "co", &strs(&dumped(&ld, "5")));
-    assert_eq!(late.wait_exit(Duration::from_secs(40)), 0, "{}", late.logs());
+    assert_eq!(
+        late.wait_exit(Duration::from_secs(40)),
+        0,
+        "{}",
+        late.logs()
+    );
 
     for (p, what) in [(&b2, "bot2"), (&b3, "bot3")] {
         let out = p.stdout();
-        assert!(!out.contains("authority-denied"), "{what} was refused\n{out}");
+        assert!(
+            !out.contains("authority-denied"),
+            "{what} was refused\n{out}"
+        );
         assert!(!out.contains("grab: nothing taken"), "{what}\n{out}");
         // its hand held on through the owner's death: one grab, ended by its own release
         assert_eq!(out.matches("grab-ended").count(), 1, "{what}\n{out}");
-        assert!(!out.contains("authority-gained"), "{what} took authority\n{out}");
+        assert!(
+            !out.contains("authority-gained"),
+            "{what} took authority\n{out}"
+        );
     }
     let l = read_dump(&ld);
     let last = l.last().unwrap();

@@ -19,6 +19,7 @@
 //! this module's [`Proc`].
 
 mod auto;
+mod comanip;
 mod lb;
 mod load;
 mod soak;
@@ -26,6 +27,7 @@ mod soak_check;
 mod views;
 
 pub use auto::auto;
+pub use comanip::comanip;
 pub use lb::{signal_lb, LbPlan};
 pub use load::room_load;
 pub use soak::{soak, SoakPlan};

@@ -316,6 +316,7 @@ pub fn test_line(
                 holders: Vec::new(),
             })
             .collect(),
+        hands: Vec::new(),
     }
 }
 

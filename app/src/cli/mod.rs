@@ -121,6 +121,17 @@ enum BenchSub {
         #[arg(long)]
         assets: Option<PathBuf>,
     },
+    /// Several hands from several processes on the thesis room's bunny (remote hands): own
+    /// response, remote-hand lag, gap, agreement (`RESULT comanip.live`). Run it in a network
+    /// namespace (scripts/bench-comanip).
+    Comanip {
+        /// Output directory.
+        #[arg(long, default_value = "docs/results/comanip")]
+        out: PathBuf,
+        /// Two rooms instead of four.
+        #[arg(long)]
+        quick: bool,
+    },
     /// Rooms of growing size.
     RoomLoad {
         /// Output directory.
@@ -395,6 +406,13 @@ pub enum Command {
         /// Seconds valid.
         valid: f64,
     },
+    /// Several hands on one body, live.
+    BenchComanip {
+        /// Output directory.
+        out: PathBuf,
+        /// Fewer rooms.
+        quick: bool,
+    },
     /// Rooms of growing size.
     BenchRoomLoad {
         /// Output directory.
@@ -659,6 +677,9 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
             seconds,
             assets,
         },
+        Sub::Bench {
+            which: BenchSub::Comanip { out, quick },
+        } => Command::BenchComanip { out, quick },
         Sub::Bench {
             which:
                 BenchSub::RoomLoad {

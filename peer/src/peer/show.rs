@@ -102,6 +102,19 @@ impl Peer {
         }
     }
 
+    /// Where hand `hand` (0 left, 1 right) is: its newest input sample's position.
+    pub fn hand_position(&self, hand: usize) -> Option<Vec3> {
+        let h = *self.hand_ids.get(hand)?;
+        self.hands.sample(h).map(|s| s.position_m)
+    }
+
+    /// True if hand `hand` holds a body another peer simulates (a remote hand).
+    pub fn holds_remotely(&self, hand: usize) -> bool {
+        self.hand_ids
+            .get(hand)
+            .is_some_and(|h| self.hands.remote(*h).is_some())
+    }
+
     /// The object's body in this peer's world as the last step left it: for a body another
     /// peer simulates, the replicated state plus our remote hands' corrections (what is drawn;
     /// [`Peer::shown_state`] is the replicated state alone).
