@@ -77,6 +77,10 @@ fn side(k: usize) -> (Vec3, Vec3) {
     }
 }
 
+/// A trace sample: (s since the pull started, the hand, drawn by its peer, replicated, on the
+/// owner), metres along the pull.
+type TracePoint = (f64, f64, f64, f64, f64);
+
 /// What one cell measured.
 #[derive(Debug, Default)]
 struct Measured {
@@ -89,7 +93,7 @@ struct Measured {
     agree: bool,
     worst_mm: f64,
     /// The first remote hand's trace: (s, hand, drawn, replicated, owner's) along its pull.
-    trace: Vec<(f64, f64, f64, f64, f64)>,
+    trace: Vec<TracePoint>,
 }
 
 /// Runs the bench, writing `comanip.{csv,md,svg}` and `results.txt` to `out`.
@@ -208,8 +212,8 @@ pub fn comanip(out: &Path, quick: bool) -> Result<(), String> {
     Ok(())
 }
 
-fn chart(path: &Path, trace: &[(f64, f64, f64, f64, f64)]) -> Result<(), String> {
-    let pick = |f: &dyn Fn(&(f64, f64, f64, f64, f64)) -> f64| -> Vec<(f64, f64)> {
+fn chart(path: &Path, trace: &[TracePoint]) -> Result<(), String> {
+    let pick = |f: &dyn Fn(&TracePoint) -> f64| -> Vec<(f64, f64)> {
         trace.iter().map(|p| (p.0, f(p) * 1e3)).collect()
     };
     let ymax = trace
