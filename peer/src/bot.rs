@@ -31,10 +31,12 @@
 //! tear HAND TARGET DX DY DZ [DX DY DZ]… [in S]
 //!                               a scalpel in HAND goes through the points (offsets from
 //!                               TARGET's center when the stroke starts, room axes), S per
-//!                               step (default 0.15); each step tears TARGET (ours) from the
+//!                               step (default 0.15); each step tears TARGET from the
 //!                               last point to this one, the blade upright 4 cm above the
-//!                               tip; the stroke ends with a lift
-//! cut TARGET NX NY NZ           cut TARGET (ours) through its center, plane normal N (room)
+//!                               tip; the stroke ends with a lift (TARGET ours, or another
+//!                               peer's: its owner applies the stroke as its own)
+//! cut TARGET NX NY NZ           cut TARGET through its center, plane normal N (room; ours, or
+//!                               another peer's through its owner)
 //! say TEXT                      send TEXT to everyone in the room (a reliable
 //!                               [`Say`](crate::messages::Say) message; at most 200 bytes)
 //! loop                          start again from the top (last line)

@@ -157,6 +157,13 @@ pub struct Counters {
     /// Owner: remote hands dropped because one hand of one peer started grabs faster than
     /// one per 100 ms.
     pub remote_hands_too_fast: u64,
+    /// Blade requests (cuts and tears of bodies other peers own) we sent.
+    pub blade_requests_sent: u64,
+    /// Owner: other peers' blade requests applied on our bodies.
+    pub blade_requests_applied: u64,
+    /// Owner: blade requests refused (not ours, a `Locked` class, not finite, too many
+    /// actions, bytes that do not decode).
+    pub blade_requests_refused: u64,
     /// `Holders` messages dropped: not from the object's owner, or too long.
     pub holders_refused: u64,
 }

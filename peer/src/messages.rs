@@ -106,8 +106,52 @@ impl Message for Holders {
     const NAME: &'static str = "softsync.holders";
 }
 
+/// What a blade does to a soft body, in the room frame (metres): a tear segment (the tip
+/// moved `from` → `to`; `blade` runs from the tip to the blade's back end), the end of a
+/// stroke, or a plane cut.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Blade {
+    /// One segment of a stroke.
+    Tear {
+        /// Where the tip was.
+        from: [f32; 3],
+        /// Where it is.
+        to: [f32; 3],
+        /// From the tip to the blade's back end.
+        blade: [f32; 3],
+    },
+    /// The scalpel lifted: the stroke ends.
+    Lift,
+    /// A plane cut through `point` with normal `normal`.
+    Cut {
+        /// A point of the plane.
+        point: [f32; 3],
+        /// Its normal.
+        normal: [f32; 3],
+    },
+}
+
+/// A peer that does not own a soft body cuts or tears it: its blade's actions, in order,
+/// reliably to the body's owner (relayed by the host, [`softsync_net::MessageTarget::OwnerOf`]),
+/// which turns them into the room's topology events as if its own scalpel made them (its
+/// rest frame, its stroke). At most [`MAX_BLADE_ACTIONS`] per message.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BladeRequest {
+    /// The soft body.
+    pub object: NetId,
+    /// What the blade did, oldest first.
+    pub actions: Vec<Blade>,
+}
+
+impl Message for BladeRequest {
+    const NAME: &'static str = "softsync.blade";
+}
+
+/// The most blade actions one [`BladeRequest`] carries.
+pub const MAX_BLADE_ACTIONS: usize = 32;
+
 /// The built-in message types ([`Say`], [`SignalingMoved`], [`RemoteHand`], [`HandAnswer`],
-/// [`Holders`]), in their fixed order; register yours after them.
+/// [`Holders`], [`BladeRequest`]), in their fixed order; register yours after them.
 pub fn builtin() -> MessageTypes {
     let mut t = MessageTypes::new();
     // A fresh table holds no name yet, so these cannot collide.
@@ -116,6 +160,7 @@ pub fn builtin() -> MessageTypes {
     let _ = t.register::<RemoteHand>();
     let _ = t.register::<HandAnswer>();
     let _ = t.register::<Holders>();
+    let _ = t.register::<BladeRequest>();
     t
 }
 
@@ -135,7 +180,8 @@ mod tests {
         assert_eq!(t.kind::<Say>().map(|k| k.0), Some(0));
         assert_eq!(t.kind::<SignalingMoved>().map(|k| k.0), Some(1));
         assert_eq!(t.kind::<Holders>().map(|k| k.0), Some(4));
-        assert_eq!(t.register::<Valve>().unwrap().0, 5);
+        assert_eq!(t.kind::<BladeRequest>().map(|k| k.0), Some(5));
+        assert_eq!(t.register::<Valve>().unwrap().0, 6);
         assert!(t.register::<Say>().is_err());
     }
 }

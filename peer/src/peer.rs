@@ -10,6 +10,7 @@
 //! [`Peer::poll_transmit`] gives it.
 
 mod auto;
+mod blade;
 mod bounds;
 mod comanip;
 mod show;
@@ -97,6 +98,8 @@ pub struct Peer {
     auto: auto::AutoBodies,
     /// Hands of several peers on one body (remote hands, both ways).
     comanip: comanip::Comanip,
+    /// Cuts and tears of bodies others own (requests, both ways).
+    blades: blade::Blades,
     /// Datagrams an old session had still to send when we rejoined.
     leftover: VecDeque<Transmit>,
     /// After a rejoin, the fresh session says nothing until then (see [`REJOIN_QUIET`]).
@@ -160,6 +163,7 @@ impl Peer {
             scalpels: Default::default(),
             auto: Default::default(),
             comanip: Default::default(),
+            blades: Default::default(),
             leftover: VecDeque::new(),
             quiet_until: None,
             sim_time_s: 0.0,
@@ -288,6 +292,7 @@ impl Peer {
         }
         self.hands.release_all();
         self.comanip.clear();
+        self.blades.clear();
         self.mirror.clear();
         self.avatar.clear();
         self.waiting_grant.clear();
@@ -581,6 +586,7 @@ impl Peer {
         self.send_remote_hands(now);
         self.apply_remote_hands(now);
         self.use_scalpels(now);
+        self.flush_blades(now);
         self.mirror.soft.step(&mut self.mirror.world, dt);
         self.run_auto(now);
         self.publish_holders(now);

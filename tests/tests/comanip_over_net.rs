@@ -634,3 +634,85 @@ fn rate_limited(n: &Node) -> u64 {
         .copied()
         .unwrap_or(0)
 }
+
+#[test]
+fn a_peer_that_owns_nothing_tears_the_body_between_two_holding_hands() {
+    let (mut room, _hub) = Room::new(AuthorityPolicy::Free, 0.02, true);
+    let rest = room.particles(0);
+    let [left, right, _] = three(&rest);
+    let ball = room.ball;
+    let untouched = room.nodes[0].peer.topology_hash(ball).unwrap();
+    let t0 = room.t;
+    // the host holds the left side, A the right; both pull a little
+    let plans = [
+        Plan {
+            particle: left,
+            start: rest[left],
+            grab_s: t0 + 0.2,
+            pull: Vec3::new(-0.02, 0.0, 0.0),
+            pull_at_s: t0 + 0.6,
+            pull_s: 0.5,
+            release_s: t0 + 4.0,
+        },
+        Plan {
+            particle: right,
+            start: room.particles(1)[right],
+            grab_s: t0 + 0.4,
+            pull: Vec3::new(0.02, 0.0, 0.0),
+            pull_at_s: t0 + 0.6,
+            pull_s: 0.5,
+            release_s: t0 + 4.0,
+        },
+    ];
+    let hands = |i: usize, now: Instant, t: f32| plans.get(i).and_then(|p| p.hand(now, t));
+    room.run(1.3, &mut |i, now, t| hands(i, now, t));
+    assert_eq!(room.holders(2).len(), 2, "{:?}", room.holders(2));
+    // B, which owns and holds nothing, strokes across the top of the ball, front to back
+    let c = room.nodes[2].peer.shown_state(room.now, ball).unwrap().pos;
+    let path: Vec<Vec3> = (0..5)
+        .map(|k| c + Vec3::new(0.0, 0.02, -0.05 + 0.025 * k as f32))
+        .collect();
+    for w in path.windows(2) {
+        let now = room.now;
+        room.nodes[2]
+            .peer
+            .tear(now, ball, w[0], w[1], Vec3::Y * 0.04)
+            .unwrap();
+        room.run(0.1, &mut |i, now, t| hands(i, now, t));
+    }
+    let now = room.now;
+    room.nodes[2].peer.lift(now, ball).unwrap();
+    room.run(1.0, &mut |i, now, t| hands(i, now, t));
+    // the owner applied it as its own; every peer holds the same torn mesh
+    let torn = room.nodes[0].peer.topology_hash(ball).unwrap();
+    assert_ne!(torn, untouched, "the ball was not torn");
+    for n in &room.nodes {
+        assert_eq!(n.peer.topology_hash(ball), Some(torn), "{:?}", n.peer.me());
+        assert_eq!(n.peer.session().owner(ball), Some(HOST));
+        assert!(n.first(|e| matches!(e, Event::AuthorityAsked(_))).is_none());
+    }
+    let host = room.nodes[0].peer.counters();
+    assert!(host.blade_requests_applied >= 1, "{host:?}");
+    assert_eq!(host.blade_requests_refused, 0);
+    assert_eq!(room.nodes[0].peer.objects()[&ball].topology, 5);
+    // the two hands held on through the tear
+    assert_eq!(room.holders(2).len(), 2, "{:?}", room.holders(2));
+    // a Locked class: a non-owner's blade is refused where it starts
+    let (mut locked, _hub) = Room::new(AuthorityPolicy::Locked, 0.0, true);
+    let c = locked.nodes[2]
+        .peer
+        .shown_state(locked.now, locked.ball)
+        .unwrap()
+        .pos;
+    let (now, ball) = (locked.now, locked.ball);
+    let r = locked.nodes[2]
+        .peer
+        .tear(now, ball, c, c + Vec3::X * 0.02, Vec3::Y * 0.04);
+    assert!(r.is_err());
+    locked.run(0.5, &mut |_, _, _| None);
+    assert_eq!(
+        locked.nodes[0].peer.topology_hash(ball),
+        locked.nodes[2].peer.topology_hash(ball)
+    );
+    assert_eq!(locked.nodes[0].peer.objects()[&ball].topology, 0);
+}

@@ -1,10 +1,11 @@
 //! Several hands from several processes on one soft body, on real WebRTC (issue 31): a host,
 //! and three bots that hold the thesis room's bunny at once and pull it apart. The first bot
 //! to grab gets authority (nobody held it); the other two hold it as remote hands (no grab is
-//! refused). The owner is SIGKILLed mid-pull: the host takes the bunny back and applies the
-//! two remaining hands, which never let go. After they let go and the bunny rests, the
-//! survivors and a late joiner agree on the owner, the holders (none), the topology and the
-//! shape.
+//! refused). A fourth bot, which owns and holds nothing, tears the bunny between their hands
+//! (its strokes go to the owner as requests). The owner is SIGKILLed mid-pull: the host takes
+//! the bunny back and applies the two remaining hands, which never let go. After they let go
+//! and the bunny rests, the survivors and a late joiner agree on the owner, the holders
+//! (none), the torn topology and the shape.
 //!
 //! Opens WebRTC: runs inside a network namespace (`scripts/netns-run`), as `live_rooms` does.
 #![allow(clippy::unwrap_used, clippy::disallowed_methods, missing_docs)]
@@ -123,8 +124,20 @@ fn three_bots_hold_the_bunny_at_once_and_survive_its_owners_death() {
         let l = holders_line(p, 3, 0, Duration::from_secs(5));
         assert!(l.contains(&format!("object={bunny}")), "{l}");
     }
-    // mid-pull, the owner dies
-    std::thread::sleep(Duration::from_millis(600));
+    // a fourth bot, owning and holding nothing, tears across the bunny's back between them
+    let cut = "wait 0.5; tear right bunny 0 0.03 -0.05 0 0.03 -0.025 0 0.03 0 0 0.03 0.025                0 0.03 0.05 in 0.12; wait 30";
+    let cd = dir.join("cutter.jsonl");
+    let cutter = peer_on(
+        &dir,
+        "cutter",
+        "join",
+        &url,
+        "co",
+        &strs(&with(dumped(&cd, "30"), &["--bot", cut])),
+    );
+    cutter.wait_line("tore object", Duration::from_secs(25));
+    // the owner applied it (the next log entries reach everyone), then, mid-pull, dies
+    std::thread::sleep(Duration::from_millis(500));
     let said = host.stdout().lines().count();
     b1.kill();
     let killed = Instant::now();
@@ -146,6 +159,11 @@ fn three_bots_hold_the_bunny_at_once_and_survive_its_owners_death() {
         late.logs()
     );
 
+    assert!(
+        !cutter.stdout().contains("tear object"),
+        "the cutter's tear was refused\n{}",
+        cutter.logs()
+    );
     for (p, what) in [(&b2, "bot2"), (&b3, "bot3")] {
         let out = p.stdout();
         assert!(
@@ -167,7 +185,14 @@ fn three_bots_hold_the_bunny_at_once_and_survive_its_owners_death() {
         ("host", nearest(&read_dump(&hd), at).clone()),
         ("bot2", nearest(&read_dump(&b2d), at).clone()),
         ("bot3", nearest(&read_dump(&b3d), at).clone()),
+        ("cutter", nearest(&read_dump(&cd), at).clone()),
     ];
+    // torn: five segments and a lift, on every peer
+    let log = objects(last)[&bunny]["log"].as_u64().unwrap();
+    assert!(
+        log >= 5,
+        "the late joiner's bunny has {log} topology entries"
+    );
     for (who, v) in &views {
         assert_agree(v, last, &format!("{who} and the late joiner"));
         let o = objects(v)[&bunny];

@@ -165,7 +165,7 @@ impl Peer {
             .map(|s| s.correction)
     }
 
-    fn may_share(&self, id: NetId) -> bool {
+    pub(super) fn may_share(&self, id: NetId) -> bool {
         let Some(o) = self.mirror.objects.get(&id) else {
             return false;
         };
@@ -226,11 +226,18 @@ impl Peer {
         self.comanip.releasing.retain(|(_, left)| *left > 0);
         for h in 0..self.hand_ids.len() {
             let hid = self.hand_ids[h];
-            let holding = self.hands.remote(hid).and_then(|t| match t {
-                Target::SoftParticle(_, p) => Some((self.mirror.id_of(t.object())?, p)),
+            let Some(target) = self.hands.remote(hid) else {
+                self.comanip.sending[h] = None;
+                continue;
+            };
+            let holding = match target {
+                Target::SoftParticle(_, p) => self.mirror.id_of(target.object()).map(|id| (id, p)),
                 _ => None,
-            });
+            };
             let Some((id, particle)) = holding else {
+                // the body is gone (despawned, or replaced by a cut's pieces): the hand lets
+                // go; its owner lets go of it when it goes silent
+                self.hands.deny(target.object());
                 self.comanip.sending[h] = None;
                 continue;
             };
@@ -299,6 +306,16 @@ impl Peer {
             match r {
                 Ok(hand) => self.on_remote_hand(now, m.from, hand),
                 Err(_) => self.counters.remote_hands_malformed += 1,
+            }
+            return true;
+        }
+        if let Some(r) = self
+            .message_types
+            .decode::<crate::messages::BladeRequest>(m)
+        {
+            match r {
+                Ok(req) => self.on_blade_request(now, m.from, req),
+                Err(_) => self.counters.blade_requests_refused += 1,
             }
             return true;
         }

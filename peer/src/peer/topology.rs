@@ -8,11 +8,12 @@
 
 use glam::Vec3;
 use softsync_net::wire::TopologyEvent;
-use softsync_net::{Instant, NetId};
+use softsync_net::{Instant, NetId, PeerId};
 use softsync_softbody::cut::{CutPlane, TearSegment};
 
 use super::Peer;
 use crate::events::{Event, TopologyError};
+use crate::messages::Blade;
 use crate::mirror::LocalBody;
 
 /// Distance the hand moves between two samples of a scalpel's path (the paper samples "by time
@@ -67,7 +68,9 @@ impl Peer {
                     None => continue,
                 },
             };
-            if self.session.owner(target) != Some(self.me()) {
+            // a body another peer owns: its owner takes our blade as a request, if the class
+            // lets others act on it (else we ask for it, and start once it is ours)
+            if self.session.owner(target) != Some(self.me()) && !self.may_share(target) {
                 if !self.scalpels[h].asked {
                     self.scalpels[h].asked = true;
                     self.ask_authority(now, target);
@@ -140,8 +143,10 @@ impl Peer {
         Some(softsync_softbody::cut::topology_hash(&mesh, 1e-5))
     }
 
-    /// Asks to tear our soft object `id` along one segment of a scalpel (room frame): the
-    /// blade's tip moved from `from` to `to`; `blade` runs from the tip to its back end.
+    /// Asks to tear soft object `id` along one segment of a scalpel (room frame): the
+    /// blade's tip moved from `from` to `to`; `blade` runs from the tip to its back end. Ours:
+    /// asked of the host; another peer's: sent to its owner, which applies it as its own
+    /// (`peer/blade.rs`; not for a `Locked` class).
     pub fn tear(
         &mut self,
         now: Instant,
@@ -149,6 +154,24 @@ impl Peer {
         from: Vec3,
         to: Vec3,
         blade: Vec3,
+    ) -> Result<(), TopologyError> {
+        if self.session.owner(id) != Some(self.me()) {
+            let (from, to, blade) = (from.to_array(), to.to_array(), blade.to_array());
+            return self.request_blade(now, id, Blade::Tear { from, to, blade });
+        }
+        let me = self.me();
+        self.tear_by(now, id, from, to, blade, me)
+    }
+
+    /// Owner: a tear segment of `author`'s stroke (ours, or a request's).
+    pub(super) fn tear_by(
+        &mut self,
+        now: Instant,
+        id: NetId,
+        from: Vec3,
+        to: Vec3,
+        blade: Vec3,
+        author: PeerId,
     ) -> Result<(), TopologyError> {
         let (pos, rot) = self.rest_frame(id)?;
         let inv = rot.inverse();
@@ -161,17 +184,29 @@ impl Peer {
             to: q(inv * (to - pos))?,
             blade: q(inv * blade)?,
         };
+        self.stroke_of(now, id, author);
         self.ask_topology(now, id, event, Vec::new())
     }
 
-    /// Ends a stroke on `id`: the next tear starts a new one.
+    /// Ends a stroke on `id`: the next tear starts a new one (another peer's body: sent to its
+    /// owner, as [`Peer::tear`]).
     pub fn lift(&mut self, now: Instant, id: NetId) -> Result<(), TopologyError> {
+        if self.session.owner(id) != Some(self.me()) {
+            return self.request_blade(now, id, Blade::Lift);
+        }
+        let me = self.me();
+        self.lift_by(now, id, me)
+    }
+
+    /// Owner: asks the host to end `id`'s stroke.
+    pub(super) fn ask_lift(&mut self, now: Instant, id: NetId) -> Result<(), TopologyError> {
         self.rest_frame(id)?;
         self.ask_topology(now, id, TopologyEvent::Lift, Vec::new())
     }
 
-    /// Asks to cut our soft object `id` by the plane through `point` with normal `normal`
-    /// (room frame). The pieces become objects of their own, ours.
+    /// Asks to cut soft object `id` by the plane through `point` with normal `normal` (room
+    /// frame). Ours: the pieces become objects of their own, ours. Another peer's: sent to its
+    /// owner, which cuts it as its own (the pieces are the owner's).
     pub fn cut(
         &mut self,
         now: Instant,
@@ -179,6 +214,10 @@ impl Peer {
         point: Vec3,
         normal: Vec3,
     ) -> Result<(), TopologyError> {
+        if self.session.owner(id) != Some(self.me()) {
+            let (point, normal) = (point.to_array(), normal.to_array());
+            return self.request_blade(now, id, Blade::Cut { point, normal });
+        }
         let (pos, rot) = self.rest_frame(id)?;
         let inv = rot.inverse();
         let event = TopologyEvent::Cut {
