@@ -520,3 +520,42 @@ fn hostile_tears_and_cuts_are_refused_and_change_nothing() {
     assert!(state(&set, &world) == after);
     assert_eq!(pieces.len(), 2);
 }
+
+#[test]
+fn rest_point_takes_a_point_of_the_squeezed_surface_back_to_where_it_was_at_rest() {
+    let mesh = Mesh::cuboid(Vec3::splat(0.05), 4);
+    let cfg = SoftBodyConfig {
+        cluster: ClusterMethod::PoissonDisk {
+            radius_m: 0.018,
+            seed: 1,
+        },
+        ..Default::default()
+    };
+    let mut sc = Scenario::new(ScenarioKind::Squeeze, &mesh, cfg, 1.0 / 90.0).unwrap();
+    sc.run_until(1.2);
+    let b = sc.soft_body();
+    let (c, r) = b.center_pose(&sc.world);
+    let (mut worst, mut rigid_worst) = (0.0f32, 0.0f32);
+    for (v, rest) in b.vertices().iter().zip(b.rest_vertices()) {
+        worst = worst.max(b.rest_point(&sc.world, *v).distance(*rest));
+        rigid_worst = rigid_worst.max((r.inverse() * (*v - c)).distance(*rest));
+    }
+    // every surface point of the squeezed box goes back to its rest place; the centre pose
+    // alone leaves it where the squeeze put it
+    assert!(worst < 1e-4, "{worst} m off");
+    assert!(
+        rigid_worst > 0.02,
+        "the box was barely squeezed ({rigid_worst} m)"
+    );
+    // a point off the surface keeps its offset from the closest surface point
+    let top = b
+        .vertices()
+        .iter()
+        .zip(b.rest_vertices())
+        .max_by(|a, b| a.0.y.total_cmp(&b.0.y))
+        .unwrap();
+    let above = b.rest_point(&sc.world, *top.0 + Vec3::Y * 0.01);
+    assert!(above.distance(*top.1 + Vec3::Y * 0.01) < 1e-3, "{above}");
+    // non-finite input: the centre-pose mapping, no panic
+    assert!(!b.rest_point(&sc.world, Vec3::NAN).is_finite());
+}

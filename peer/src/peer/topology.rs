@@ -173,16 +173,28 @@ impl Peer {
         blade: Vec3,
         author: PeerId,
     ) -> Result<(), TopologyError> {
-        let (pos, rot) = self.rest_frame(id)?;
-        let inv = rot.inverse();
+        self.rest_frame(id)?;
+        // through the body's deformation as it is now: the slit opens where the blade passes
+        // through the squeezed tissue, not where that tissue was at rest
+        let Some(LocalBody::Soft(h)) = self.mirror.objects.get(&id).map(|o| o.body) else {
+            return Err(TopologyError(format!("no soft object {}", id.0)));
+        };
+        let b = self
+            .mirror
+            .soft
+            .get(h)
+            .ok_or_else(|| TopologyError(format!("object {} has no body", id.0)))?;
+        let map = |x: Vec3| b.rest_point(&self.mirror.world, x);
+        let (from_r, to_r) = (map(from), map(to));
+        let blade_r = map(to + blade) - to_r;
         let q = |v: Vec3| {
             TopologyEvent::quantise(v.to_array())
                 .ok_or_else(|| TopologyError(format!("tear point {v} out of range")))
         };
         let event = TopologyEvent::Tear {
-            from: q(inv * (from - pos))?,
-            to: q(inv * (to - pos))?,
-            blade: q(inv * blade)?,
+            from: q(from_r)?,
+            to: q(to_r)?,
+            blade: q(blade_r)?,
         };
         self.stroke_of(now, id, author);
         self.ask_topology(now, id, event, Vec::new())

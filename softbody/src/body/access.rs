@@ -12,6 +12,48 @@ use crate::cut::TearBoxPlanes;
 use crate::mesh::{Mesh, WeldedMesh};
 use crate::SoftBodyError;
 
+/// The point of triangle `a b c` closest to `p`, and its barycentric coordinates (Ericson,
+/// Real-Time Collision Detection, 5.1.5). A degenerate triangle gives its nearest corner or
+/// edge point.
+fn closest_on_triangle(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> (Vec3, [f32; 3]) {
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return (a, [1.0, 0.0, 0.0]);
+    }
+    let bp = p - b;
+    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return (b, [0.0, 1.0, 0.0]);
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return (a + ab * v, [1.0 - v, v, 0.0]);
+    }
+    let cp = p - c;
+    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return (c, [0.0, 0.0, 1.0]);
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return (a + ac * w, [1.0 - w, 0.0, w]);
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return (b + (c - b) * w, [0.0, 1.0 - w, w]);
+    }
+    let denom = va + vb + vc;
+    if denom.abs() < f32::MIN_POSITIVE {
+        return (a, [1.0, 0.0, 0.0]);
+    }
+    let (v, w) = (vb / denom, vc / denom);
+    (a + ab * v + ac * w, [1.0 - v - w, v, w])
+}
+
 impl SoftBody {
     /// The configuration it was built with.
     pub fn config(&self) -> &SoftBodyConfig {
@@ -160,6 +202,46 @@ impl SoftBody {
             }
         }
         Ok(())
+    }
+
+    /// The rest-frame point (relative to the rest center, in the center body's frame: the
+    /// frame of [`SoftBody::rest_vertices`] and of tear and cut events) that corresponds to
+    /// world point `x` in the body's current deformed shape: the closest point of the
+    /// deformed surface (after the last step or [`apply_state`](Self::apply_state)), taken to
+    /// the same face and barycentric coordinates of the rest surface, plus `x`'s offset from
+    /// it turned into the rest frame. Exact on the surface, where a tear clips faces; the
+    /// centre pose alone, `R⁻¹(x − c)`, puts a blade's path through a squeezed body where the
+    /// tissue was at rest, not where it is (`examples/tear_deformed.rs` measures both).
+    /// Non-finite `x`, or a body with no faces, gets the centre-pose mapping.
+    pub fn rest_point(&self, world: &PhysicsWorld, x: Vec3) -> Vec3 {
+        let (c, r) = self.center_pose(world);
+        let inv = r.inverse();
+        let rigid = inv * (x - c);
+        if !x.is_finite() || self.vertices.len() != self.rest_vertices.len() {
+            return rigid;
+        }
+        let mut best: Option<(f32, Vec3, usize, [f32; 3])> = None;
+        for (k, t) in self.welded.triangles.iter().enumerate() {
+            let [a, b, cc] = t.map(|i| self.vertices[i as usize]);
+            let (p, bary) = closest_on_triangle(x, a, b, cc);
+            let d = p.distance_squared(x);
+            if best.is_none_or(|(bd, ..)| d < bd) {
+                best = Some((d, p, k, bary));
+            }
+        }
+        let Some((_, p, k, bary)) = best else {
+            return rigid;
+        };
+        let t = self.welded.triangles[k];
+        let rest: Vec3 = (0..3)
+            .map(|i| self.rest_vertices[t[i] as usize] * bary[i])
+            .sum();
+        let out = rest + inv * (x - p);
+        if out.is_finite() {
+            out
+        } else {
+            rigid
+        }
     }
 
     /// Drives particle `i` to `goal` (a grab of one particle, thesis 4.1.2), or releases it.
