@@ -26,6 +26,32 @@ pub const SCALPEL_TRIGGER: f32 = 0.5;
 /// Length of the scalpel's blade above its tip, along the hand's local +y, metres.
 pub const SCALPEL_BLADE_M: f32 = 0.04;
 
+/// A turn of the scalpel's path sharper than this (degrees) is sampled where it turns, before
+/// the next [`SCALPEL_SAMPLE_M`] (tear paper §3.1: extra samples on abrupt motion), so a
+/// corner of the stroke is not cut off.
+pub const SCALPEL_TURN_DEG: f32 = 30.0;
+
+/// Where a scalpel's stroke is sampled this frame: the stroke's last sample is `last`, the
+/// tip was at `prev` a frame ago and is at `tip` now. A sample every [`SCALPEL_SAMPLE_M`] of
+/// the way from `last` (the tip itself when it has gone that far), and the previous tip when
+/// the path turned there by more than [`SCALPEL_TURN_DEG`] (at least 1 mm from `last`).
+pub(crate) fn scalpel_samples(last: Vec3, prev: Vec3, tip: Vec3) -> Vec<Vec3> {
+    let mut out = Vec::new();
+    let mut from = last;
+    let (before, after) = (prev - last, tip - prev);
+    let turned = before.length() > 1e-3
+        && after.length() > 1e-4
+        && before.angle_between(after).to_degrees() > SCALPEL_TURN_DEG;
+    if turned {
+        out.push(prev);
+        from = prev;
+    }
+    if from.distance(tip) >= SCALPEL_SAMPLE_M {
+        out.push(tip);
+    }
+    out
+}
+
 /// A hand's scalpel: while its trigger is held, the hand's path through a soft body tears it
 /// (VR controllers and the desktop's mouse hand alike: both give a trigger).
 #[derive(Clone, Debug, Default)]
@@ -37,12 +63,15 @@ pub(crate) struct Scalpel {
     asked: bool,
     /// The tip where the last segment ended.
     last: Option<Vec3>,
+    /// The tip a frame ago.
+    prev: Option<Vec3>,
 }
 
 impl Peer {
     /// Each hand with its trigger held over a soft body tears it along the hand's path, one
-    /// segment per [`SCALPEL_SAMPLE_M`] moved; letting go lifts the scalpel. A body we do not
-    /// own is asked for first (the tear starts once it is ours).
+    /// segment per [`SCALPEL_SAMPLE_M`] moved and one more where the path turns sharply
+    /// ([`scalpel_samples`]); letting go lifts the scalpel. A body another peer owns is torn
+    /// through its owner (`peer/blade.rs`), or, for a `Locked` class, asked for first.
     pub(super) fn use_scalpels(&mut self, now: Instant) {
         for h in 0..self.scalpels.len() {
             let Some((tip, rot, trigger)) = self.scalpels[h].input else {
@@ -51,6 +80,7 @@ impl Peer {
             if trigger < SCALPEL_TRIGGER {
                 let s = &mut self.scalpels[h];
                 let stroke = (s.target.take(), s.last.take());
+                s.prev = None;
                 s.asked = false;
                 if let (Some(id), Some(_)) = stroke {
                     let _ = self.lift(now, id);
@@ -63,6 +93,7 @@ impl Peer {
                     Some(id) => {
                         self.scalpels[h].target = Some(id);
                         self.scalpels[h].last = None;
+                        self.scalpels[h].prev = None;
                         id
                     }
                     None => continue,
@@ -77,18 +108,20 @@ impl Peer {
                 }
                 continue;
             }
-            match self.scalpels[h].last {
-                None => self.scalpels[h].last = Some(tip),
-                Some(last) if last.distance(tip) >= SCALPEL_SAMPLE_M => {
-                    let blade = rot * Vec3::Y * SCALPEL_BLADE_M;
-                    if let Err(e) = self.tear(now, target, last, tip, blade) {
-                        self.events
-                            .push_back(Event::Warning(format!("scalpel: {e}")));
-                    }
-                    self.scalpels[h].last = Some(tip);
+            let prev = self.scalpels[h].prev.replace(tip);
+            let Some(mut last) = self.scalpels[h].last else {
+                self.scalpels[h].last = Some(tip);
+                continue;
+            };
+            let blade = rot * Vec3::Y * SCALPEL_BLADE_M;
+            for p in scalpel_samples(last, prev.unwrap_or(last), tip) {
+                if let Err(e) = self.tear(now, target, last, p, blade) {
+                    self.events
+                        .push_back(Event::Warning(format!("scalpel: {e}")));
                 }
-                Some(_) => {}
+                last = p;
             }
+            self.scalpels[h].last = Some(last);
         }
     }
 
@@ -358,4 +391,34 @@ pub(crate) fn segment_of(event: &TopologyEvent) -> Option<TearSegment> {
         to: m(to),
         blade: m(blade),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_scalpel_samples_every_5_mm_and_where_its_path_turns() {
+        let o = Vec3::ZERO;
+        // straight on: nothing until 5 mm, then the tip
+        assert!(scalpel_samples(o, Vec3::X * 0.002, Vec3::X * 0.004).is_empty());
+        assert_eq!(
+            scalpel_samples(o, Vec3::X * 0.004, Vec3::X * 0.006),
+            [Vec3::X * 0.006]
+        );
+        // a right angle at 3 mm: the corner is sampled, then the tip once 5 mm past it
+        let corner = Vec3::X * 0.003;
+        assert_eq!(
+            scalpel_samples(o, corner, corner + Vec3::Z * 0.002),
+            [corner]
+        );
+        let far = corner + Vec3::Z * 0.006;
+        assert_eq!(scalpel_samples(o, corner, far), [corner, far]);
+        // a gentle bend is not a corner
+        let bend = Vec3::new(0.0045, 0.0, 0.0005);
+        assert!(scalpel_samples(o, Vec3::X * 0.003, bend).is_empty());
+        // a turn within 1 mm of the last sample is noise
+        let tiny = Vec3::X * 0.0005;
+        assert!(scalpel_samples(o, tiny, tiny + Vec3::Z * 0.002).is_empty());
+    }
 }
