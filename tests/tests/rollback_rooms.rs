@@ -130,9 +130,16 @@ fn a_peer_killed_mid_interaction_leaves_the_others_going_and_a_late_joiner_gets_
         &format!("player {c_id} disconnected"),
         Duration::from_secs(10),
     );
-    // A late joiner: the next epoch (without the dead peer), its snapshot fetched.
-    let d = peer_on(&dir, "d", "join", &url, "rk", &common);
-    let line = d.wait_line("epoch n=", Duration::from_secs(30));
+    // A late joiner: the next epoch (without the dead peer), its snapshot fetched. (On a
+    // loaded 2-core machine — the pixel tests rendering beside three rollback peers — its
+    // first data channel once took more than the default 15 s: it gets 30.)
+    let late: Vec<&str> = common
+        .iter()
+        .copied()
+        .chain(["--connect-timeout", "30"])
+        .collect();
+    let d = peer_on(&dir, "d", "join", &url, "rk", &late);
+    let line = d.wait_line("epoch n=", Duration::from_secs(45));
     let players = field(&line, "players").split(',').count();
     assert_eq!(players, 3, "{line}");
     std::thread::sleep(Duration::from_secs(8));
