@@ -375,18 +375,17 @@ pub fn build_body(
     if kind.is_avatar() {
         return Ok(LocalBody::Pose);
     }
-    let Some(config) = scene.soft_config(kind) else {
+    if scene.soft_config(kind).is_none() {
         return scene
             .build_rigid(kind, world, pos, rot)
             .map(LocalBody::Rigid)
             .ok_or_else(|| {
                 PeerError::Build(format!("class {} is not in scene {}", kind.0, scene.name))
             });
-    };
-    let mesh = scene.soft_mesh(kind).map_err(PeerError::Build)?;
-    let h = soft
-        .insert(&mesh, config.clone(), world)
-        .map_err(|e| PeerError::Build(format!("{}: {e}", scene.name_of(kind))))?;
+    }
+    // planned once per class (the clustering), copied into the world each time
+    let plan = scene.soft_plan(kind).map_err(PeerError::Build)?;
+    let h = soft.insert_plan(&plan, world);
     if let Some(b) = soft.get_mut(h) {
         let particles: Vec<Vec3> = b.rest_offsets().iter().map(|o| pos + rot * *o).collect();
         b.apply_state(world, pos, rot, &particles)

@@ -553,3 +553,35 @@ fn apply_state_moves_the_body_and_refuses_bad_states() {
         "a refused state changed the body"
     );
 }
+
+#[test]
+fn a_body_from_a_plan_is_the_body_insert_builds() {
+    let mesh = Mesh::icosphere(0.1, 2);
+    let cfg = SoftBodyConfig::default();
+    let plan = SoftBodyPlan::new(&mesh, cfg.clone()).unwrap();
+    let mut world = softsync_softbody::rapier3d::prelude::PhysicsWorld::new();
+    let mut set = SoftBodySet::new();
+    let a = set.insert(&mesh, cfg.clone(), &mut world).unwrap();
+    let b = set.insert_plan(&plan, &mut world);
+    let c = set.insert_plan(&plan, &mut world);
+    let (a, b, c) = (
+        set.get(a).unwrap(),
+        set.get(b).unwrap(),
+        set.get(c).unwrap(),
+    );
+    assert_eq!(plan.num_particles(), a.num_particles());
+    for other in [b, c] {
+        assert_eq!(a.rest_offsets(), other.rest_offsets());
+        assert_eq!(a.rest_vertices(), other.rest_vertices());
+        assert_eq!(
+            a.particle_positions(&world),
+            other.particle_positions(&world)
+        );
+    }
+    // what insert refuses, a plan refuses
+    let bad = SoftBodyConfig {
+        tear_width_m: -1.0,
+        ..cfg
+    };
+    assert!(SoftBodyPlan::new(&mesh, bad).is_err());
+}

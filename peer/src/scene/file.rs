@@ -433,6 +433,7 @@ pub(super) fn parse(text: &str, path: &Path, meshes: MeshPaths) -> Result<Scene,
         bounds,
         messages,
         content_digest: 0,
+        soft_plans: Default::default(),
     };
     scene.content_digest = digest(&scene);
     Ok(scene)

@@ -11,6 +11,7 @@ mod bundle;
 mod file;
 
 use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
 
 pub use bundle::MAX_BUNDLE_BYTES;
 
@@ -20,7 +21,7 @@ use softsync_net::{
 };
 use softsync_softbody::methods::auto::{AutoMode, AutoSettings, Ladder};
 use softsync_softbody::rapier3d::prelude::*;
-use softsync_softbody::{Mesh, SoftBodyConfig, StageClock};
+use softsync_softbody::{Mesh, SoftBodyConfig, SoftBodyPlan, StageClock};
 
 pub use file::{ReplicationFile, SCENE_EXTENSION};
 
@@ -235,6 +236,20 @@ pub struct Scene {
     /// they know the types (the `softsync` binary relays and logs a bell it cannot decode).
     pub messages: Vec<String>,
     content_digest: u64,
+    /// Soft classes planned once (see [`Scene::soft_plan`]), shared by the scene's clones.
+    soft_plans: SoftPlans,
+}
+
+/// The soft bodies a scene has planned: per class, the mesh and config it was planned with
+/// (a class changed since is planned again) and the plan.
+#[derive(Clone, Default)]
+struct SoftPlans(Arc<Mutex<Vec<(Kind, Mesh, SoftBodyConfig, SoftBodyPlan)>>>);
+
+impl std::fmt::Debug for SoftPlans {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let n = self.0.lock().map_or(0, |p| p.len());
+        write!(f, "SoftPlans({n} planned)")
+    }
 }
 
 /// Height of the thesis room's table top, metres (where the desktop camera looks at first).
@@ -487,6 +502,30 @@ impl Scene {
         }
     }
 
+    /// Class `kind`'s soft body planned (welded, clustered): planned the first time, then
+    /// copied — a body of the bunny is ~8 ms to plan and a fraction of a millisecond to put in
+    /// a world from its plan, and a room builds many (spawns, a snapshot, a cut's pieces,
+    /// rebuilds). Planned again if the class's mesh or config changed since.
+    pub fn soft_plan(&self, kind: Kind) -> Result<SoftBodyPlan, String> {
+        let config = self
+            .soft_config(kind)
+            .ok_or_else(|| format!("class {} is not a soft body", kind.0))?
+            .clone();
+        let mesh = self.soft_mesh(kind)?;
+        let mut plans = self.soft_plans.0.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((.., plan)) = plans
+            .iter()
+            .find(|(k, m, c, _)| *k == kind && *c == config && *m == mesh)
+        {
+            return Ok(plan.clone());
+        }
+        let plan = SoftBodyPlan::new(&mesh, config.clone())
+            .map_err(|e| format!("{}: {e}", self.name_of(kind)))?;
+        plans.retain(|(k, ..)| *k != kind);
+        plans.push((kind, mesh, config, plan.clone()));
+        Ok(plan)
+    }
+
     /// A soft class's settings (for `method: auto`, its spawn level's).
     pub fn soft_config(&self, kind: Kind) -> Option<&SoftBodyConfig> {
         match &self.class(kind)?.body {
@@ -530,6 +569,26 @@ mod tests {
 
     fn assets() -> PathBuf {
         PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../assets"))
+    }
+
+    #[test]
+    fn a_soft_class_is_planned_once_and_again_when_it_changes() {
+        let mut scene = Scene::by_name("bench-ball", &assets()).unwrap();
+        let k = scene.kind("softball").unwrap();
+        let a = scene.soft_plan(k).unwrap();
+        assert_eq!(a.num_particles(), 60);
+        let copy = scene.clone();
+        assert_eq!(copy.soft_plan(k).unwrap().num_particles(), 60);
+        assert_eq!(format!("{:?}", copy.soft_plans), "SoftPlans(1 planned)");
+        // a changed class is planned anew
+        if let BodyClass::Soft(c) = &mut scene.classes[usize::from(k.0)].body {
+            c.cluster = softsync_softbody::ClusterMethod::PoissonDisk {
+                radius_m: 0.012,
+                seed: 1,
+            };
+        }
+        assert!(scene.soft_plan(k).unwrap().num_particles() > 60);
+        assert!(scene.soft_plan(scene.kind("block").unwrap()).is_err());
     }
 
     #[test]

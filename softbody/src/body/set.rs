@@ -50,11 +50,24 @@ impl SoftBodySet {
         config: SoftBodyConfig,
         world: &mut PhysicsWorld,
     ) -> Result<SoftBodyHandle, SoftBodyError> {
-        config.validate()?;
-        mesh.validate("<soft body mesh>")?;
+        let plan = super::SoftBodyPlan::new(mesh, config)?;
+        Ok(self.insert_plan(&plan, world))
+    }
+
+    /// Inserts a body of `plan` into `world`, at rest where its mesh was baked: the body
+    /// [`insert`](Self::insert) builds from the same mesh and config, without clustering
+    /// again.
+    pub fn insert_plan(
+        &mut self,
+        plan: &super::SoftBodyPlan,
+        world: &mut PhysicsWorld,
+    ) -> SoftBodyHandle {
         let bit = self.next_group_bit();
-        let body = SoftBody::build(mesh, config, world, bit)?;
-        Ok(self.insert_built(body))
+        let body = plan
+            .0
+            .clone()
+            .instantiate(world, bit, &super::Spawn::AT_REST);
+        self.insert_built(body)
     }
 
     /// The collision-group bit pair of the next body.
