@@ -243,7 +243,10 @@ pub struct Scene {
 /// The soft bodies a scene has planned: per class, the mesh and config it was planned with
 /// (a class changed since is planned again) and the plan.
 #[derive(Clone, Default)]
-struct SoftPlans(Arc<Mutex<Vec<(Kind, Mesh, SoftBodyConfig, SoftBodyPlan)>>>);
+struct SoftPlans(Arc<Mutex<Vec<Planned>>>);
+
+/// A class's plan and what it was planned from.
+type Planned = (Kind, Mesh, SoftBodyConfig, SoftBodyPlan);
 
 impl std::fmt::Debug for SoftPlans {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
