@@ -68,6 +68,27 @@ struct Plan {
     release_s: f32,
 }
 
+/// A hand's plan (see [`Plan`]), its fields in order.
+fn plan(
+    particle: usize,
+    start: Vec3,
+    grab_s: f32,
+    pull: Vec3,
+    pull_at_s: f32,
+    pull_s: f32,
+    release_s: f32,
+) -> Plan {
+    Plan {
+        particle,
+        start,
+        grab_s,
+        pull,
+        pull_at_s,
+        pull_s,
+        release_s,
+    }
+}
+
 impl Plan {
     fn hand(&self, now: Instant, t: f32) -> Option<HandInput> {
         if t < self.grab_s - 0.1 {
@@ -188,33 +209,33 @@ fn two_remote_hands_and_the_owners_own_hand_pull_one_body_apart_and_every_peer_a
     let t0 = room.t;
     // the host (owner) holds the left side; A the right, B the top, a moment later
     let plans = [
-        Plan {
-            particle: left,
-            start: rest[left],
-            grab_s: t0 + 0.2,
-            pull: Vec3::new(-0.06, 0.0, 0.0),
-            pull_at_s: t0 + 0.8,
-            pull_s: 0.5,
-            release_s: t0 + 3.0,
-        },
-        Plan {
-            particle: right,
-            start: room.particles(1)[right],
-            grab_s: t0 + 0.4,
-            pull: Vec3::new(0.06, 0.0, 0.0),
-            pull_at_s: t0 + 0.8,
-            pull_s: 0.5,
-            release_s: t0 + 3.0,
-        },
-        Plan {
-            particle: top,
-            start: room.particles(2)[top],
-            grab_s: t0 + 0.42,
-            pull: Vec3::new(0.0, 0.04, 0.0),
-            pull_at_s: t0 + 0.8,
-            pull_s: 0.5,
-            release_s: t0 + 3.0,
-        },
+        plan(
+            left,
+            rest[left],
+            t0 + 0.2,
+            Vec3::new(-0.06, 0.0, 0.0),
+            t0 + 0.8,
+            0.5,
+            t0 + 3.0,
+        ),
+        plan(
+            right,
+            room.particles(1)[right],
+            t0 + 0.4,
+            Vec3::new(0.06, 0.0, 0.0),
+            t0 + 0.8,
+            0.5,
+            t0 + 3.0,
+        ),
+        plan(
+            top,
+            room.particles(2)[top],
+            t0 + 0.42,
+            Vec3::new(0.0, 0.04, 0.0),
+            t0 + 0.8,
+            0.5,
+            t0 + 3.0,
+        ),
     ];
     let mut gaps: Vec<f32> = Vec::new();
     let mut uncorrected: Vec<f32> = Vec::new();
@@ -334,24 +355,16 @@ fn a_remote_hand_at_5_percent_loss_pulls_the_owners_body_and_lets_go_with_a_thro
     let rest = room.particles(0);
     let [left, right, _] = three(&rest);
     let t0 = room.t;
-    let hold = Plan {
-        particle: left,
-        start: rest[left],
-        grab_s: t0 + 0.2,
-        pull: Vec3::ZERO,
-        pull_at_s: t0,
-        pull_s: 1.0,
-        release_s: t0 + 5.0,
-    };
-    let pull = Plan {
-        particle: right,
-        start: room.particles(1)[right],
-        grab_s: t0 + 0.5,
-        pull: Vec3::new(0.05, 0.02, 0.0),
-        pull_at_s: t0 + 0.8,
-        pull_s: 0.8,
-        release_s: t0 + 2.2,
-    };
+    let hold = plan(left, rest[left], t0 + 0.2, Vec3::ZERO, t0, 1.0, t0 + 5.0);
+    let pull = plan(
+        right,
+        room.particles(1)[right],
+        t0 + 0.5,
+        Vec3::new(0.05, 0.02, 0.0),
+        t0 + 0.8,
+        0.8,
+        t0 + 2.2,
+    );
     let mut seen = 0.0f32;
     let mut t = room.t;
     while t < t0 + 2.2 {
@@ -393,33 +406,33 @@ fn a_holders_peer_dies_its_hand_lets_go_and_the_other_hands_hold_on() {
     let [left, right, top] = three(&rest);
     let t0 = room.t;
     let plans = [
-        Plan {
-            particle: left,
-            start: rest[left],
-            grab_s: t0 + 0.2,
-            pull: Vec3::new(-0.03, 0.0, 0.0),
-            pull_at_s: t0 + 0.6,
-            pull_s: 0.5,
-            release_s: t0 + 10.0,
-        },
-        Plan {
-            particle: right,
-            start: room.particles(1)[right],
-            grab_s: t0 + 0.4,
-            pull: Vec3::new(0.03, 0.0, 0.0),
-            pull_at_s: t0 + 0.6,
-            pull_s: 0.5,
-            release_s: t0 + 10.0,
-        },
-        Plan {
-            particle: top,
-            start: room.particles(2)[top],
-            grab_s: t0 + 0.4,
-            pull: Vec3::new(0.0, 0.03, 0.0),
-            pull_at_s: t0 + 0.6,
-            pull_s: 0.5,
-            release_s: t0 + 10.0,
-        },
+        plan(
+            left,
+            rest[left],
+            t0 + 0.2,
+            Vec3::new(-0.03, 0.0, 0.0),
+            t0 + 0.6,
+            0.5,
+            t0 + 10.0,
+        ),
+        plan(
+            right,
+            room.particles(1)[right],
+            t0 + 0.4,
+            Vec3::new(0.03, 0.0, 0.0),
+            t0 + 0.6,
+            0.5,
+            t0 + 10.0,
+        ),
+        plan(
+            top,
+            room.particles(2)[top],
+            t0 + 0.4,
+            Vec3::new(0.0, 0.03, 0.0),
+            t0 + 0.6,
+            0.5,
+            t0 + 10.0,
+        ),
     ];
     room.run(1.5, &mut |i, now, t| plans[i].hand(now, t));
     assert_eq!(room.holders(0).len(), 3, "{:?}", room.holders(0));
@@ -455,24 +468,16 @@ fn locked_refuses_remote_hands_and_owner_must_agree_asks_the_owner() {
         let [left, right, _] = three(&rest);
         let t0 = room.t;
         let plans = [
-            Plan {
-                particle: left,
-                start: rest[left],
-                grab_s: t0 + 0.2,
-                pull: Vec3::ZERO,
-                pull_at_s: t0,
-                pull_s: 1.0,
-                release_s: t0 + 3.0,
-            },
-            Plan {
-                particle: right,
-                start: room.particles(1)[right],
-                grab_s: t0 + 0.5,
-                pull: Vec3::new(0.04, 0.0, 0.0),
-                pull_at_s: t0 + 0.7,
-                pull_s: 0.5,
-                release_s: t0 + 3.0,
-            },
+            plan(left, rest[left], t0 + 0.2, Vec3::ZERO, t0, 1.0, t0 + 3.0),
+            plan(
+                right,
+                room.particles(1)[right],
+                t0 + 0.5,
+                Vec3::new(0.04, 0.0, 0.0),
+                t0 + 0.7,
+                0.5,
+                t0 + 3.0,
+            ),
         ];
         room.run(2.0, &mut |i, now, t| {
             plans.get(i).and_then(|p| p.hand(now, t))
@@ -645,24 +650,24 @@ fn a_peer_that_owns_nothing_tears_the_body_between_two_holding_hands() {
     let t0 = room.t;
     // the host holds the left side, A the right; both pull a little
     let plans = [
-        Plan {
-            particle: left,
-            start: rest[left],
-            grab_s: t0 + 0.2,
-            pull: Vec3::new(-0.02, 0.0, 0.0),
-            pull_at_s: t0 + 0.6,
-            pull_s: 0.5,
-            release_s: t0 + 4.0,
-        },
-        Plan {
-            particle: right,
-            start: room.particles(1)[right],
-            grab_s: t0 + 0.4,
-            pull: Vec3::new(0.02, 0.0, 0.0),
-            pull_at_s: t0 + 0.6,
-            pull_s: 0.5,
-            release_s: t0 + 4.0,
-        },
+        plan(
+            left,
+            rest[left],
+            t0 + 0.2,
+            Vec3::new(-0.02, 0.0, 0.0),
+            t0 + 0.6,
+            0.5,
+            t0 + 4.0,
+        ),
+        plan(
+            right,
+            room.particles(1)[right],
+            t0 + 0.4,
+            Vec3::new(0.02, 0.0, 0.0),
+            t0 + 0.6,
+            0.5,
+            t0 + 4.0,
+        ),
     ];
     let hands = |i: usize, now: Instant, t: f32| plans.get(i).and_then(|p| p.hand(now, t));
     room.run(1.3, &mut |i, now, t| hands(i, now, t));
