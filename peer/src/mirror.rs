@@ -190,17 +190,11 @@ impl Mirror {
             }
             TopologyEvent::Cut { keep, .. } => {
                 let plane = plane_of(event)?;
-                let pieces = self.soft.cut(h, &mut self.world, &plane).map_err(err)?;
-                let mut kept = None;
-                for (k, p) in pieces.into_iter().enumerate() {
-                    if k == usize::from(*keep) {
-                        kept = Some(p);
-                    } else {
-                        self.soft.remove(p, &mut self.world);
-                    }
-                }
-                let kept =
-                    kept.ok_or_else(|| TopologyError(format!("the cut made no piece {keep}")))?;
+                // only the piece this object is (each piece is an object of its own)
+                let kept = self
+                    .soft
+                    .cut_keep(h, &mut self.world, &plane, usize::from(*keep))
+                    .map_err(err)?;
                 self.replace_soft(id, h, kept);
             }
             TopologyEvent::Resolution { level, particles } => {

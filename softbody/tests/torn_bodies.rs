@@ -559,3 +559,30 @@ fn rest_point_takes_a_point_of_the_squeezed_surface_back_to_where_it_was_at_rest
     // non-finite input: the centre-pose mapping, no panic
     assert!(!b.rest_point(&sc.world, Vec3::NAN).is_finite());
 }
+
+#[test]
+fn cutting_and_keeping_one_piece_makes_that_piece_of_the_whole_cut() {
+    let plane = CutPlane::new(Vec3::new(0.01, 0.0, 0.0), Vec3::new(1.0, 0.3, 0.0)).unwrap();
+    let (mut world, mut set, h) = box_over_floor(0.1);
+    for _ in 0..20 {
+        set.step(&mut world, 1.0 / 144.0);
+    }
+    let whole = set.cut(h, &mut world, &plane).unwrap();
+    assert_eq!(whole.len(), 2);
+    for keep in 0..2 {
+        let (mut w, mut s, hk) = box_over_floor(0.1);
+        for _ in 0..20 {
+            s.step(&mut w, 1.0 / 144.0);
+        }
+        let piece = s.cut_keep(hk, &mut w, &plane, keep).unwrap();
+        assert_eq!(s.len(), 1, "only the kept piece is in the world");
+        let (a, b) = (set.get(whole[keep]).unwrap(), s.get(piece).unwrap());
+        assert_eq!(a.rest_vertices(), b.rest_vertices(), "piece {keep}");
+        assert_eq!(a.rest_offsets(), b.rest_offsets(), "piece {keep}");
+        assert_eq!(a.particle_positions(&world), b.particle_positions(&w));
+    }
+    // a piece the cut does not make: refused, nothing changes
+    let (mut w, mut s, hk) = box_over_floor(0.1);
+    assert!(s.cut_keep(hk, &mut w, &plane, 2).is_err());
+    assert!(s.get(hk).is_some());
+}

@@ -170,6 +170,32 @@ impl SoftBodySet {
         Ok(out)
     }
 
+    /// Cuts body `handle` by `plane` (rest frame, as for [`cut`](Self::cut)) keeping only
+    /// piece `keep` (in `cut`'s order): the same body `cut` makes for that piece, without
+    /// planning the others (a room makes each piece an object of its own, and every peer
+    /// builds each from the log: planning only the piece it keeps, a peer does one cut's
+    /// work per cut, not one per piece). The old body is removed. Refused like `cut`, and for
+    /// a `keep` past the pieces, changing nothing.
+    pub fn cut_keep(
+        &mut self,
+        handle: SoftBodyHandle,
+        world: &mut PhysicsWorld,
+        plane: &CutPlane,
+        keep: usize,
+    ) -> Result<SoftBodyHandle, CutError> {
+        let mut plans = self
+            .get(handle)
+            .ok_or_else(|| unknown(handle))?
+            .plan_cut_pieces(world, plane, Some(keep))?;
+        let Some((plan, spawn)) = plans.pop() else {
+            return Err(CutError::Mesh(format!("the cut made no piece {keep}")));
+        };
+        self.remove(handle, world);
+        let bit = self.next_group_bit();
+        let body = plan.instantiate(world, bit, &spawn);
+        Ok(self.insert_built(body))
+    }
+
     /// The particle count of every piece [`cut`](Self::cut) would make of body `handle` with
     /// `plane` (rest frame), in the same order, changing nothing: what a peer names when it
     /// asks the room for a cut, since every peer makes the same pieces.

@@ -209,6 +209,19 @@ impl SoftBody {
         world: &PhysicsWorld,
         plane: &CutPlane,
     ) -> Result<Vec<(BodyPlan, Spawn)>, CutError> {
+        self.plan_cut_pieces(world, plane, None)
+    }
+
+    /// As [`plan_cut`](Self::plan_cut), planning only piece `only` if given (each piece's
+    /// plan depends on its own part of the mesh alone, so it is the same either way): the
+    /// one piece a peer keeps for one of the cut's objects. `only` past the pieces is an
+    /// error.
+    pub(crate) fn plan_cut_pieces(
+        &self,
+        world: &PhysicsWorld,
+        plane: &CutPlane,
+        only: Option<usize>,
+    ) -> Result<Vec<(BodyPlan, Spawn)>, CutError> {
         // The body's welded rest mesh is the rest mesh's welded form (built or torn so).
         let cut = cut_welded(
             &self.rest_mesh,
@@ -242,8 +255,18 @@ impl SoftBody {
                 Vec3::ZERO
             }
         };
+        if only.is_some_and(|k| k >= cut.pieces.len()) {
+            return Err(CutError::Mesh(format!(
+                "the cut makes {} pieces, not {}",
+                cut.pieces.len(),
+                only.map_or(0, |k| k + 1)
+            )));
+        }
         let mut out = Vec::with_capacity(cut.pieces.len());
         for (k, piece) in cut.pieces.iter().enumerate() {
+            if only.is_some_and(|o| o != k) {
+                continue;
+            }
             // Back into the frame the body was built in, so its soft region still applies;
             // the piece's rest frame is this body's moved to the piece's own rest center.
             let baked = Mesh {
