@@ -212,6 +212,25 @@ impl Interaction {
         }
     }
 
+    /// Hand `hand`, holding (here or as a remote hand), holds `target` instead — the body it
+    /// held was replaced (a cut's piece took its place): offsets are taken anew at the next
+    /// update, a remote hand stays remote. False if the hand holds nothing.
+    pub fn retarget(&mut self, hand: HandId, target: Target) -> bool {
+        let Some(h) = self.hands.get_mut(hand) else {
+            return false;
+        };
+        h.state = match h.state {
+            HandState::Holding { .. } => HandState::Holding {
+                target,
+                offset_m: Vec3::NAN,
+                offset_rot: Quat::IDENTITY,
+            },
+            HandState::Remote { .. } => HandState::Remote { target },
+            _ => return false,
+        };
+        true
+    }
+
     /// Watch `object` until it rests ([`InteractionEvent::CameToRest`]), with the first
     /// hand's rest settings: for an object the last remote hand let go of.
     pub fn watch_until_rest(&mut self, object: ObjectRef) {

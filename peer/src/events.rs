@@ -164,6 +164,8 @@ pub struct Counters {
     /// Owner: blade requests refused (not ours, a `Locked` class, not finite, too many
     /// actions, bytes that do not decode).
     pub blade_requests_refused: u64,
+    /// Our hands moved onto a piece of a body a cut replaced (the nearest particle).
+    pub holds_kept_through_cuts: u64,
     /// `Holders` messages dropped: not from the object's owner, or too long.
     pub holders_refused: u64,
 }

@@ -13,6 +13,7 @@ mod auto;
 mod blade;
 mod bounds;
 mod comanip;
+mod orphans;
 mod show;
 pub(crate) mod topology;
 
@@ -223,6 +224,7 @@ impl Peer {
         while let Some(e) = self.session.poll_event() {
             self.on_session_event(now, e)?;
         }
+        self.adopt_orphans(now);
         if self.joining.overdue(now, self.config.join_timeout) {
             return Err(PeerError::NotWelcomed {
                 secs: self.config.join_timeout.as_secs(),
@@ -372,7 +374,10 @@ impl Peer {
                         .on_spawned(request, id, (s.pos, s.rot), &mut self.mirror);
                 }
             }
-            SessionEvent::Despawned(id) => self.mirror.remove(id),
+            SessionEvent::Despawned(id) => {
+                self.orphan_hands_of(now, id);
+                self.mirror.remove(id);
+            }
             SessionEvent::AuthorityChanged { id, owner, .. } => {
                 if !self.mirror.objects.contains_key(&id) {
                     return Ok(()); // despawned meanwhile (the avatar of a peer that left)

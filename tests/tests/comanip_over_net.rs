@@ -721,3 +721,80 @@ fn a_peer_that_owns_nothing_tears_the_body_between_two_holding_hands() {
     );
     assert_eq!(locked.nodes[0].peer.objects()[&ball].topology, 0);
 }
+
+#[test]
+fn a_cut_between_two_holding_hands_leaves_each_hand_on_its_piece() {
+    let (mut room, _hub) = Room::new(AuthorityPolicy::Free, 0.02, true);
+    let rest = room.particles(0);
+    let [left, right, _] = three(&rest);
+    let ball = room.ball;
+    let t0 = room.t;
+    // the host holds the left side, A the right; after the cut both pull outward
+    let plans = [
+        plan(
+            left,
+            rest[left],
+            t0 + 0.2,
+            Vec3::new(-0.04, 0.0, 0.0),
+            t0 + 1.5,
+            0.5,
+            t0 + 4.0,
+        ),
+        plan(
+            right,
+            room.particles(1)[right],
+            t0 + 0.4,
+            Vec3::new(0.04, 0.0, 0.0),
+            t0 + 1.5,
+            0.5,
+            t0 + 4.0,
+        ),
+    ];
+    let hands = |i: usize, now: Instant, t: f32| plans.get(i).and_then(|p| p.hand(now, t));
+    room.run(1.0, &mut |i, now, t| hands(i, now, t));
+    assert_eq!(room.holders(2).len(), 2, "{:?}", room.holders(2));
+    // B, which owns and holds nothing, cuts the ball in two between the hands
+    let c = room.nodes[2].peer.shown_state(room.now, ball).unwrap().pos;
+    let now = room.now;
+    room.nodes[2].peer.cut(now, ball, c, Vec3::X).unwrap();
+    room.run(1.2, &mut |i, now, t| hands(i, now, t));
+    let pieces = room.nodes[0].id_of("softball");
+    assert_eq!(pieces.len(), 2, "{pieces:?}");
+    assert!(!pieces.contains(&ball));
+    // each hand holds a piece (the host's here, A's as a remote hand), never let go
+    let host_holds = room.nodes[0].peer.held(1).map(|h| h.0);
+    let a_holds = room.nodes[1].peer.held(1).map(|h| h.0);
+    assert!(
+        host_holds.is_some_and(|p| pieces.contains(&p)),
+        "{host_holds:?}"
+    );
+    assert!(a_holds.is_some_and(|p| pieces.contains(&p)), "{a_holds:?}");
+    assert_ne!(host_holds, a_holds, "both hands on one piece");
+    assert!(room.nodes[1].peer.holds_remotely(1));
+    for i in 0..2 {
+        let n = &room.nodes[i];
+        assert_eq!(n.peer.counters().holds_kept_through_cuts, 1, "node {i}");
+        assert!(n.first(|e| matches!(e, Event::GrabEnded { .. })).is_none());
+    }
+    // A's pull moves its piece on the owner's world
+    let a_piece = a_holds.unwrap();
+    let hand = plans[1].goal(room.t);
+    let on_owner = room.nodes[0]
+        .peer
+        .local_state(a_piece)
+        .unwrap()
+        .particles
+        .iter()
+        .map(|p| p.distance(hand))
+        .fold(f32::INFINITY, f32::min);
+    assert!(on_owner < 0.012, "A's piece is {on_owner} m from A's hand");
+    for id in &pieces {
+        let who: Vec<PeerId> = room.nodes[2]
+            .peer
+            .holders(*id)
+            .iter()
+            .map(|h| h.peer)
+            .collect();
+        assert_eq!(who.len(), 1, "piece {id:?}: {who:?}");
+    }
+}

@@ -114,6 +114,8 @@ pub(crate) struct Comanip {
     holders: BTreeMap<NetId, Holders>,
     /// Owner: what we published last per object.
     published: BTreeMap<NetId, Holders>,
+    /// Hands on a body that went (a cut replaced it by pieces), waiting for the pieces.
+    pub(super) orphans: Vec<super::orphans::Orphan>,
 }
 
 impl Comanip {
@@ -234,6 +236,14 @@ impl Peer {
                 Target::SoftParticle(_, p) => self.mirror.id_of(target.object()).map(|id| (id, p)),
                 _ => None,
             };
+            let waiting = self
+                .comanip
+                .orphans
+                .iter()
+                .any(|o| o.hands.iter().any(|x| x.0 == h));
+            if holding.is_none() && waiting {
+                continue; // its body was cut: it waits for the pieces
+            }
             let Some((id, particle)) = holding else {
                 // the body is gone (despawned, or replaced by a cut's pieces): the hand lets
                 // go; its owner lets go of it when it goes silent
