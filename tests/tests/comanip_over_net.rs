@@ -640,35 +640,43 @@ fn rate_limited(n: &Node) -> u64 {
         .unwrap_or(0)
 }
 
-#[test]
-fn a_peer_that_owns_nothing_tears_the_body_between_two_holding_hands() {
-    let (mut room, _hub) = Room::new(AuthorityPolicy::Free, 0.02, true);
+/// The host's hand on the ball's leftmost particle (from `t0 + 0.2`), A's on its rightmost
+/// (from `t0 + 0.4`), each pulling `pull_m` outward from `t0 + pull_at` over 0.5 s, both
+/// letting go at `t0 + release`.
+fn both_sides(room: &mut Room, t0: f32, pull_m: f32, pull_at: f32, release: f32) -> [Plan; 2] {
     let rest = room.particles(0);
     let [left, right, _] = three(&rest);
-    let ball = room.ball;
-    let untouched = room.nodes[0].peer.topology_hash(ball).unwrap();
-    let t0 = room.t;
-    // the host holds the left side, A the right; both pull a little
-    let plans = [
+    let out = |s: f32| Vec3::new(s * pull_m, 0.0, 0.0);
+    [
         plan(
             left,
             rest[left],
             t0 + 0.2,
-            Vec3::new(-0.02, 0.0, 0.0),
-            t0 + 0.6,
+            out(-1.0),
+            t0 + pull_at,
             0.5,
-            t0 + 4.0,
+            t0 + release,
         ),
         plan(
             right,
             room.particles(1)[right],
             t0 + 0.4,
-            Vec3::new(0.02, 0.0, 0.0),
-            t0 + 0.6,
+            out(1.0),
+            t0 + pull_at,
             0.5,
-            t0 + 4.0,
+            t0 + release,
         ),
-    ];
+    ]
+}
+
+#[test]
+fn a_peer_that_owns_nothing_tears_the_body_between_two_holding_hands() {
+    let (mut room, _hub) = Room::new(AuthorityPolicy::Free, 0.02, true);
+    let ball = room.ball;
+    let untouched = room.nodes[0].peer.topology_hash(ball).unwrap();
+    let t0 = room.t;
+    // the host holds the left side, A the right; both pull a little
+    let plans = both_sides(&mut room, t0, 0.02, 0.6, 4.0);
     let hands = |i: usize, now: Instant, t: f32| plans.get(i).and_then(|p| p.hand(now, t));
     room.run(1.3, &mut |i, now, t| hands(i, now, t));
     assert_eq!(room.holders(2).len(), 2, "{:?}", room.holders(2));
@@ -725,31 +733,10 @@ fn a_peer_that_owns_nothing_tears_the_body_between_two_holding_hands() {
 #[test]
 fn a_cut_between_two_holding_hands_leaves_each_hand_on_its_piece() {
     let (mut room, _hub) = Room::new(AuthorityPolicy::Free, 0.02, true);
-    let rest = room.particles(0);
-    let [left, right, _] = three(&rest);
     let ball = room.ball;
     let t0 = room.t;
     // the host holds the left side, A the right; after the cut both pull outward
-    let plans = [
-        plan(
-            left,
-            rest[left],
-            t0 + 0.2,
-            Vec3::new(-0.04, 0.0, 0.0),
-            t0 + 1.5,
-            0.5,
-            t0 + 4.0,
-        ),
-        plan(
-            right,
-            room.particles(1)[right],
-            t0 + 0.4,
-            Vec3::new(0.04, 0.0, 0.0),
-            t0 + 1.5,
-            0.5,
-            t0 + 4.0,
-        ),
-    ];
+    let plans = both_sides(&mut room, t0, 0.04, 1.5, 4.0);
     let hands = |i: usize, now: Instant, t: f32| plans.get(i).and_then(|p| p.hand(now, t));
     room.run(1.0, &mut |i, now, t| hands(i, now, t));
     assert_eq!(room.holders(2).len(), 2, "{:?}", room.holders(2));
