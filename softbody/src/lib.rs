@@ -14,6 +14,7 @@ pub mod methods;
 pub mod metrics;
 pub mod scenario;
 
+pub use body::build::{BodyBuild, BuildStep};
 pub use body::handle::SoftBodyHandle;
 pub use body::set::{SoftBodySet, SoftPart};
 pub use body::{Activity, SoftBody, SoftBodyPlan, StageClock, TearTimings};

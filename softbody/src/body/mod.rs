@@ -15,6 +15,7 @@
 //! (a resolution change while running, and the blend that hides it).
 
 mod access;
+pub(crate) mod build;
 pub(crate) mod handle;
 mod level;
 pub(crate) mod set;

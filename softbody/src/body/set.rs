@@ -70,6 +70,34 @@ impl SoftBodySet {
         self.insert_built(body)
     }
 
+    /// Inserts a body of `plan` at rest with its center at `pos`, turned by `rot` (its rest
+    /// shape placed there, no velocity). Refused, removing it again, if the pose is not
+    /// finite.
+    pub fn insert_plan_at(
+        &mut self,
+        plan: &super::SoftBodyPlan,
+        world: &mut PhysicsWorld,
+        pos: glam::Vec3,
+        rot: glam::Quat,
+    ) -> Result<SoftBodyHandle, SoftBodyError> {
+        let h = self.insert_plan(plan, world);
+        let placed = match self.get_mut(h) {
+            Some(b) => {
+                let particles: Vec<glam::Vec3> =
+                    b.rest_offsets().iter().map(|o| pos + rot * *o).collect();
+                b.apply_state(world, pos, rot, &particles)
+            }
+            None => Err(SoftBodyError::InvalidHandle(h)),
+        };
+        match placed {
+            Ok(()) => Ok(h),
+            Err(e) => {
+                self.remove(h, world);
+                Err(e)
+            }
+        }
+    }
+
     /// The collision-group bit pair of the next body.
     fn next_group_bit(&mut self) -> u32 {
         let bit = 1 + 2 * (self.groups_used % 15);
@@ -284,6 +312,47 @@ impl SoftBodySet {
             world.remove_body(h);
         }
         Some(body)
+    }
+
+    /// Moves body `handle` out of this set and `world` into `to` and `to_world`, as it is:
+    /// its rapier bodies and colliders are copied over (state, velocities, sleep) and removed
+    /// here, with the collision bits of its new set. What a body built in a private world —
+    /// on a worker thread, off the frame — becomes when it joins the room's world. `None`
+    /// (nothing moved) for an unknown handle.
+    pub fn move_body(
+        &mut self,
+        handle: SoftBodyHandle,
+        world: &mut PhysicsWorld,
+        to: &mut SoftBodySet,
+        to_world: &mut PhysicsWorld,
+    ) -> Option<SoftBodyHandle> {
+        let mut body = self.take(handle)?;
+        let bit = to.next_group_bit();
+        let (pg, cg) = super::groups(bit, body.config.self_collisions);
+        let mut copy = |h: RigidBodyHandle,
+                        collider: Option<rapier3d::prelude::ColliderHandle>,
+                        groups: rapier3d::prelude::InteractionGroups| {
+            let rb = world.bodies.get(h).cloned();
+            let co = collider.and_then(|c| world.colliders.get(c).cloned());
+            world.remove_body(h);
+            let nh = to_world.insert_body(
+                rb.unwrap_or_else(|| rapier3d::prelude::RigidBodyBuilder::dynamic().build()),
+            );
+            let nc = co.map(|mut c| {
+                c.set_collision_groups(groups);
+                to_world.insert_collider(c, Some(nh))
+            });
+            (nh, nc)
+        };
+        let (c, cc) = copy(body.center, body.center_collider, cg);
+        body.center = c;
+        body.center_collider = cc;
+        for i in 0..body.particles.len() {
+            let (p, pc) = copy(body.particles[i], body.particle_colliders[i], pg);
+            body.particles[i] = p;
+            body.particle_colliders[i] = pc;
+        }
+        Some(to.insert_built(body))
     }
 
     /// Takes a body out of the set, leaving its rapier bodies in the world.
