@@ -517,6 +517,7 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
         rejoin_limit: a.rejoin_limit,
         join_timeout: a.connect_timeout,
         agree_to_hands: true,
+        build_off_frame: true,
     };
     if a.rollback {
         let scene = match scene {

@@ -287,6 +287,8 @@ fn sync_objects(
                 }
                 None => continue,
             },
+            // being built off the frame: its mesh once it lands
+            LocalBody::Building => continue,
             _ => (meshes.add(rigid_mesh(peer.scene(), o.kind)), None),
         };
         commands.entity(e).insert((

@@ -166,6 +166,11 @@ pub struct Counters {
     pub blade_requests_refused: u64,
     /// Our hands moved onto a piece of a body a cut replaced (the nearest particle).
     pub holds_kept_through_cuts: u64,
+    /// Bodies with a topology history (a cut's pieces, torn bodies at a join) built off the
+    /// frame and landed in the world.
+    pub bodies_built_off_frame: u64,
+    /// Builds restarted because the log they replayed was rewritten meanwhile (a migration).
+    pub builds_restarted: u64,
     /// `Holders` messages dropped: not from the object's owner, or too long.
     pub holders_refused: u64,
 }

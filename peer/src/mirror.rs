@@ -15,7 +15,7 @@ use softsync_interaction::ObjectRef;
 use softsync_net::wire::TopologyEvent;
 use softsync_net::{NetId, ObjectState, PeerId};
 use softsync_softbody::rapier3d::prelude::*;
-use softsync_softbody::{SoftBodyHandle, SoftBodySet};
+use softsync_softbody::{BuildStep, SoftBodyHandle, SoftBodySet};
 
 use crate::events::{PeerError, TopologyError};
 use crate::peer::topology::{plane_of, segment_of};
@@ -30,6 +30,10 @@ pub enum LocalBody {
     Rigid(RigidBodyHandle),
     /// A soft body.
     Soft(SoftBodyHandle),
+    /// A soft body being built off the frame: an object that came with a topology history
+    /// (a cut's piece, a torn body at a late join), replayed on a worker thread. Nothing is
+    /// in the world until it lands (then it is `Soft`).
+    Building,
 }
 
 /// A networked object as this peer knows it.
@@ -60,6 +64,19 @@ pub(crate) struct Mirror {
     pub(crate) objects: BTreeMap<NetId, MirroredObject>,
     /// Networked ids by body (what the hands touch).
     pub(crate) by_ref: HashMap<ObjectRef, NetId>,
+    /// Objects being built off the frame (`LocalBody::Building`): the build, and the log
+    /// entries it replays.
+    pub(crate) builds: HashMap<NetId, Build>,
+    /// Soft objects the room despawned while builds were running (the body a cut replaced,
+    /// shown until its pieces land, so it does not blink out), and since when.
+    pub(crate) leaving: Vec<(NetId, softsync_net::Instant)>,
+}
+
+/// An object's body being built off the frame.
+pub(crate) struct Build {
+    pub(crate) job: softsync_softbody::BodyBuild,
+    /// The log entries it replays (the object's log when it started).
+    pub(crate) entries: Vec<TopologyEvent>,
 }
 
 impl Mirror {
@@ -73,6 +90,8 @@ impl Mirror {
             soft: SoftBodySet::new(),
             objects: BTreeMap::new(),
             by_ref: HashMap::new(),
+            builds: HashMap::new(),
+            leaving: Vec::new(),
         }
     }
 
@@ -81,7 +100,7 @@ impl Mirror {
         match self.objects.get(&id)?.body {
             LocalBody::Rigid(h) => Some(ObjectRef::Rigid(h)),
             LocalBody::Soft(h) => Some(ObjectRef::Soft(h)),
-            LocalBody::Pose => None,
+            LocalBody::Pose | LocalBody::Building => None,
         }
     }
 
@@ -116,7 +135,7 @@ impl Mirror {
             LocalBody::Soft(h) => {
                 self.by_ref.insert(ObjectRef::Soft(h), id);
             }
-            LocalBody::Pose => {}
+            LocalBody::Pose | LocalBody::Building => {}
         }
         self.objects.insert(
             id,
@@ -145,8 +164,12 @@ impl Mirror {
                 self.by_ref.remove(&ObjectRef::Soft(h));
                 self.soft.remove(h, &mut self.world);
             }
+            LocalBody::Building => {
+                self.builds.remove(&id);
+            }
             LocalBody::Pose => {}
         }
+        self.leaving.retain(|(l, _)| *l != id);
     }
 
     /// Drop every networked object (the static scene stays).
@@ -157,14 +180,21 @@ impl Mirror {
         }
     }
 
+    /// Object `id` is no longer leaving (the room spawned it again): dropped now.
+    pub(crate) fn forget_leaving(&mut self, id: NetId) {
+        if self.leaving.iter().any(|(l, _)| *l == id) {
+            self.remove(id);
+        }
+    }
+
     /// Entries of `id`'s topology log applied so far.
     pub(crate) fn topology_applied(&self, id: NetId) -> u32 {
         self.objects.get(&id).map_or(0, |o| o.topology)
     }
 
-    /// Applies one topology log entry to `id`'s soft body: a tear segment, a lift, or the cut
+    /// Applies one topology log entry to `id`'s soft body: a tear segment, a lift, the cut
     /// that made this piece (the body becomes piece `keep`; the other pieces are dropped, they
-    /// are objects of their own).
+    /// are objects of their own), a resolution change.
     pub(crate) fn apply_topology(
         &mut self,
         scene: &Scene,
@@ -177,51 +207,25 @@ impl Mirror {
         let LocalBody::Soft(h) = o.body else {
             return Err(TopologyError(format!("object {} is not a soft body", id.0)));
         };
-        let err = |e: softsync_softbody::cut::CutError| TopologyError(e.to_string());
-        match event {
-            TopologyEvent::Tear { .. } => {
-                let seg = segment_of(event).ok_or_else(|| TopologyError("not a tear".into()))?;
-                self.soft.tear(h, &mut self.world, &seg).map_err(err)?;
+        // the resolution's particle count is checked here, once the body is replaced
+        let kind = o.kind;
+        let step = build_step(scene, kind, event, false)?;
+        let new = step
+            .apply(&mut self.soft, &mut self.world, h)
+            .map_err(TopologyError)?;
+        if new != h {
+            self.replace_soft(id, h, new);
+        }
+        if let TopologyEvent::Resolution { level, particles } = event {
+            if let Some(o) = self.objects.get_mut(&id) {
+                o.level = Some(*level);
             }
-            TopologyEvent::Lift => {
-                if !self.soft.end_tear_stroke(h) {
-                    return Err(TopologyError(format!("object {} has no body", id.0)));
-                }
-            }
-            TopologyEvent::Cut { keep, .. } => {
-                let plane = plane_of(event)?;
-                // only the piece this object is (each piece is an object of its own)
-                let kept = self
-                    .soft
-                    .cut_keep(h, &mut self.world, &plane, usize::from(*keep))
-                    .map_err(err)?;
-                self.replace_soft(id, h, kept);
-            }
-            TopologyEvent::Resolution { level, particles } => {
-                let kind = o.kind;
-                let config = scene
-                    .level_config(kind, usize::from(*level))
-                    .ok_or_else(|| {
-                        TopologyError(format!(
-                            "{} has no resolution level {level}",
-                            scene.name_of(kind)
-                        ))
-                    })?;
-                let new = self
-                    .soft
-                    .reconfigure(h, &mut self.world, config.clone())
-                    .map_err(|e| TopologyError(e.to_string()))?;
-                self.replace_soft(id, h, new);
-                if let Some(o) = self.objects.get_mut(&id) {
-                    o.level = Some(*level);
-                }
-                let n = self.soft.get(new).map_or(0, |b| b.num_particles());
-                if n != *particles as usize {
-                    return Err(TopologyError(format!(
-                        "level {level} of {} has {n} particles here, {particles} at its owner",
-                        scene.name_of(kind)
-                    )));
-                }
+            let n = self.soft.get(new).map_or(0, |b| b.num_particles());
+            if n != *particles as usize {
+                return Err(TopologyError(format!(
+                    "level {level} of {} has {n} particles here, {particles} at its owner",
+                    scene.name_of(kind)
+                )));
             }
         }
         if let Some(o) = self.objects.get_mut(&id) {
@@ -252,7 +256,7 @@ impl Mirror {
     pub(crate) fn body_state(&self, body: LocalBody, pose: (Vec3, Quat)) -> ObjectState {
         let (pos, rot) = pose;
         match body {
-            LocalBody::Pose => ObjectState::rigid(pos, rot),
+            LocalBody::Pose | LocalBody::Building => ObjectState::rigid(pos, rot),
             LocalBody::Rigid(h) => match self.world.bodies.get(h) {
                 Some(b) => ObjectState::rigid(b.translation(), *b.rotation()),
                 None => ObjectState::rigid(pos, rot),
@@ -302,7 +306,7 @@ impl Mirror {
             return false;
         };
         match o.body {
-            LocalBody::Pose => false,
+            LocalBody::Pose | LocalBody::Building => false,
             LocalBody::Rigid(h) => match self.world.bodies.get_mut(h) {
                 Some(b) => {
                     b.set_position(Pose::from_parts(pos, rot), true);
@@ -330,7 +334,7 @@ impl Mirror {
             return true;
         };
         match o.body {
-            LocalBody::Pose => true,
+            LocalBody::Pose | LocalBody::Building => true,
             LocalBody::Rigid(h) => {
                 if let Some(b) = self.world.bodies.get_mut(h) {
                     let pose = Pose::from_parts(s.pos, s.rot);
@@ -352,6 +356,38 @@ impl Mirror {
             },
         }
     }
+}
+
+/// The body step a topology log entry of a `kind` object is (a resolution: its level's
+/// settings, and its particle count if `check_particles`).
+pub(crate) fn build_step(
+    scene: &Scene,
+    kind: Kind,
+    event: &TopologyEvent,
+    check_particles: bool,
+) -> Result<BuildStep, TopologyError> {
+    Ok(match event {
+        TopologyEvent::Tear { .. } => {
+            BuildStep::Tear(segment_of(event).ok_or_else(|| TopologyError("not a tear".into()))?)
+        }
+        TopologyEvent::Lift => BuildStep::Lift,
+        TopologyEvent::Cut { keep, .. } => BuildStep::Cut {
+            plane: plane_of(event)?,
+            keep: usize::from(*keep),
+        },
+        TopologyEvent::Resolution { level, particles } => BuildStep::Reconfigure {
+            config: scene
+                .level_config(kind, usize::from(*level))
+                .ok_or_else(|| {
+                    TopologyError(format!(
+                        "{} has no resolution level {level}",
+                        scene.name_of(kind)
+                    ))
+                })?
+                .clone(),
+            particles: check_particles.then_some(*particles as usize),
+        },
+    })
 }
 
 /// Build a body of `kind` at a pose in a world: a rigid body, or a soft body built around the
@@ -379,12 +415,9 @@ pub fn build_body(
     }
     // planned once per class (the clustering), copied into the world each time
     let plan = scene.soft_plan(kind).map_err(PeerError::Build)?;
-    let h = soft.insert_plan(&plan, world);
-    if let Some(b) = soft.get_mut(h) {
-        let particles: Vec<Vec3> = b.rest_offsets().iter().map(|o| pos + rot * *o).collect();
-        b.apply_state(world, pos, rot, &particles)
-            .map_err(|e| PeerError::Build(e.to_string()))?;
-    }
+    let h = soft
+        .insert_plan_at(&plan, world, pos, rot)
+        .map_err(|e| PeerError::Build(e.to_string()))?;
     Ok(LocalBody::Soft(h))
 }
 

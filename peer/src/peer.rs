@@ -12,6 +12,7 @@
 mod auto;
 mod blade;
 mod bounds;
+mod builds;
 mod comanip;
 mod orphans;
 mod show;
@@ -53,6 +54,10 @@ pub struct PeerConfig {
     /// `OwnerMustAgree` (remote hands, `peer/comanip.rs`; `Free` classes always let them,
     /// `Locked` ones never).
     pub agree_to_hands: bool,
+    /// Whether objects that come with a topology history (a cut's pieces, a late joiner's
+    /// torn bodies) are built on a worker thread while the frame goes on (`peer/builds.rs`),
+    /// or in the frame that receives them. The body is the same either way.
+    pub build_off_frame: bool,
 }
 
 impl Default for PeerConfig {
@@ -64,6 +69,7 @@ impl Default for PeerConfig {
             rejoin_limit: 3,
             join_timeout: Duration::from_secs(15),
             agree_to_hands: true,
+            build_off_frame: true,
         }
     }
 }
@@ -224,6 +230,7 @@ impl Peer {
         while let Some(e) = self.session.poll_event() {
             self.on_session_event(now, e)?;
         }
+        self.land_builds(now);
         self.adopt_orphans(now);
         if self.joining.overdue(now, self.config.join_timeout) {
             return Err(PeerError::NotWelcomed {
@@ -355,6 +362,7 @@ impl Peer {
                 owner,
                 request,
             } => {
+                self.mirror.forget_leaving(id);
                 if self.mirror.objects.contains_key(&id) {
                     return Ok(());
                 }
@@ -366,9 +374,11 @@ impl Peer {
                     .session
                     .latest_state(id)
                     .unwrap_or_else(|| ObjectState::rigid(Vec3::ZERO, Quat::IDENTITY));
-                let body = self.mirror.build(&self.scene, kind, s.pos, s.rot)?;
                 let avatar_of = kind.is_avatar().then_some(owner);
-                self.mirror.insert(id, kind, body, avatar_of);
+                if !self.build_off_frame(id, kind, avatar_of, &s)? {
+                    let body = self.mirror.build(&self.scene, kind, s.pos, s.rot)?;
+                    self.mirror.insert(id, kind, body, avatar_of);
+                }
                 if let (true, Some(request)) = (owner == me, request) {
                     self.avatar
                         .on_spawned(request, id, (s.pos, s.rot), &mut self.mirror);
@@ -376,7 +386,7 @@ impl Peer {
             }
             SessionEvent::Despawned(id) => {
                 self.orphan_hands_of(now, id);
-                self.mirror.remove(id);
+                self.despawn_shown(now, id);
             }
             SessionEvent::AuthorityChanged { id, owner, .. } => {
                 if !self.mirror.objects.contains_key(&id) {
@@ -630,6 +640,9 @@ impl Peer {
             };
             let s = self.mirror.body_state(body, pose);
             let s = self.keep_in_bounds(id, body, kind, s);
+            if body == LocalBody::Building {
+                continue; // nothing to publish until it lands
+            }
             let layout = self.session.particles_of(id).map(|n| n as usize);
             if matches!(body, LocalBody::Soft(_)) && layout != Some(s.particles.len()) {
                 // a resolution change the session has and our body gets at the next pump

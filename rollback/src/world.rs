@@ -131,7 +131,7 @@ impl RollbackWorld {
                             .collect()
                     })
                     .unwrap_or_default(),
-                LocalBody::Pose => Vec::new(),
+                LocalBody::Pose | LocalBody::Building => Vec::new(),
             };
             objects.push(WorldObject {
                 kind: p.kind,
@@ -353,7 +353,7 @@ impl RollbackWorld {
         self.objects.iter().position(|o| match o.body {
             LocalBody::Rigid(h) => r == softsync_interaction::ObjectRef::Rigid(h),
             LocalBody::Soft(h) => r == softsync_interaction::ObjectRef::Soft(h),
-            LocalBody::Pose => false,
+            LocalBody::Pose | LocalBody::Building => false,
         })
     }
 
@@ -371,7 +371,7 @@ impl RollbackWorld {
                 .get(h)
                 .map(|b| (b.translation(), *b.rotation())),
             LocalBody::Soft(h) => self.soft.get(h).map(|b| b.center_pose(&self.world)),
-            LocalBody::Pose => None,
+            LocalBody::Pose | LocalBody::Building => None,
         }
     }
 

@@ -138,3 +138,113 @@ fn a_hand_with_its_trigger_held_tears_along_its_path_and_both_peers_agree() {
     assert_ne!(torn, untouched);
     assert_eq!(host.peer.topology_hash(bunny), Some(torn));
 }
+
+/// A cut's pieces are built off the frame (`peer/builds.rs`) on the client, in the frame on
+/// the host: both end with the same pieces; on the client the box never blinks (every frame
+/// shows the box or all its pieces) and never overlaps (never the box and a piece at once).
+#[test]
+fn a_cuts_pieces_built_off_the_frame_are_the_frames_and_the_box_never_blinks() {
+    use softsync_peer::{LocalBody, PeerConfig, Scene};
+    let hub = MemoryHub::new(1200);
+    let assets = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets");
+    let in_frame = PeerConfig {
+        dt_s: DT,
+        avatar: false,
+        build_off_frame: false,
+        ..PeerConfig::default()
+    };
+    let scene = Scene::by_name("thesis-room", &assets).unwrap();
+    let mut room = Room {
+        nodes: [
+            Node::with_config(&hub, HOST, 1, scene, in_frame),
+            Node::new(&hub, CLIENT, 2),
+        ],
+        now: Instant::ZERO,
+    };
+    room.run(Duration::from_secs(3));
+    let soft_box = room.nodes[1].id_of("softbox")[0];
+    let now = room.now;
+    room.nodes[1].peer.ask_authority(now, soft_box);
+    room.run(Duration::from_millis(500));
+    // a tear first, so the pieces' history has more than the cut
+    let c = room.nodes[1]
+        .peer
+        .shown_state(room.now, soft_box)
+        .unwrap()
+        .pos;
+    for k in 0..3 {
+        let now = room.now;
+        let from = c + Vec3::new(-0.03 + 0.02 * k as f32, 0.02, 0.0);
+        room.nodes[1]
+            .peer
+            .tear(now, soft_box, from, from + Vec3::X * 0.02, Vec3::Y * 0.04)
+            .unwrap();
+        room.run(Duration::from_millis(100));
+    }
+    let now = room.now;
+    room.nodes[1].peer.lift(now, soft_box).unwrap();
+    room.run(Duration::from_millis(200));
+    let now = room.now;
+    let c = room.nodes[1].peer.shown_state(now, soft_box).unwrap().pos;
+    room.nodes[1]
+        .peer
+        .cut(now, soft_box, c, Vec3::new(1.0, 0.3, 0.0))
+        .unwrap();
+    // frame by frame (with a little wall time each, for the workers), watching the client
+    let soft_of = |n: &Node, id| {
+        matches!(
+            n.peer.objects().get(&id).map(|o| o.body),
+            Some(LocalBody::Soft(_))
+        )
+    };
+    let mut landed_at = None;
+    for frame in 0..400 {
+        let now = room.now;
+        for n in room.nodes.iter_mut() {
+            n.frame(now);
+        }
+        room.now += Duration::from_secs_f32(DT);
+        std::thread::sleep(Duration::from_micros(500));
+        let client = &room.nodes[1];
+        let pieces: Vec<_> = client
+            .id_of("softbox")
+            .into_iter()
+            .filter(|id| *id != soft_box)
+            .collect();
+        let parent = soft_of(client, soft_box);
+        let shown = pieces.iter().filter(|id| soft_of(client, **id)).count();
+        assert!(
+            !(parent && shown > 0),
+            "frame {frame}: the box and {shown} pieces at once"
+        );
+        assert!(
+            parent || (shown == 2 && pieces.len() == 2),
+            "frame {frame}: neither the box nor its pieces ({shown} of {})",
+            pieces.len()
+        );
+        if landed_at.is_none() && shown == 2 {
+            landed_at = Some(frame);
+        }
+    }
+    assert!(landed_at.is_some(), "the pieces never landed");
+    room.run(Duration::from_secs(3));
+    let now = room.now;
+    let [host, client] = &mut room.nodes;
+    assert!(client.warnings.is_empty(), "{:?}", client.warnings);
+    assert!(host.warnings.is_empty(), "{:?}", host.warnings);
+    assert_eq!(client.peer.counters().bodies_built_off_frame, 2);
+    assert_eq!(host.peer.counters().bodies_built_off_frame, 0);
+    let pieces = client.id_of("softbox");
+    assert_eq!(host.id_of("softbox"), pieces);
+    assert_eq!(pieces.len(), 2);
+    for id in &pieces {
+        let h = client.peer.topology_hash(*id).unwrap();
+        assert_eq!(host.peer.topology_hash(*id), Some(h), "piece {}", id.0);
+        let (a, b) = (
+            client.peer.shown_state(now, *id).unwrap(),
+            host.peer.shown_state(now, *id).unwrap(),
+        );
+        assert_eq!(a.particles.len(), b.particles.len());
+        assert!(a.pos.distance(b.pos) < 0.002, "piece {}", id.0);
+    }
+}

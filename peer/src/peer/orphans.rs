@@ -57,7 +57,8 @@ impl Peer {
     }
 
     /// Hands waiting on a cut body take the nearest particle of its pieces once they are
-    /// built (objects spawned after it whose log ends with the cut, fully applied): each
+    /// built (objects spawned after it whose log ends with the cut, fully applied; none still
+    /// building off the frame): each
     /// hand keeps holding the right piece, as a remote hand if the piece is another peer's.
     /// Past [`ORPHAN_WAIT_S`] they let go.
     pub(super) fn adopt_orphans(&mut self, now: Instant) {
@@ -84,16 +85,17 @@ impl Peer {
                     (cut && m.topology as usize == log.len()).then_some((*id, h))
                 })
                 .collect();
+            // all the pieces first: some may still be building off the frame
+            let waited = now.saturating_since(o.since).as_secs_f64();
+            if (pieces.is_empty() || !self.mirror.builds.is_empty()) && waited < ORPHAN_WAIT_S {
+                self.comanip.orphans.push(o);
+                continue;
+            }
             if pieces.is_empty() {
-                let waited = now.saturating_since(o.since).as_secs_f64();
-                if waited < ORPHAN_WAIT_S {
-                    self.comanip.orphans.push(o);
-                } else {
-                    // no pieces came: the hands let go (a remote one is told it was refused)
-                    for (hand, _) in &o.hands {
-                        if let Some(t) = self.hands.remote(self.hand_ids[*hand]) {
-                            self.hands.deny(t.object());
-                        }
+                // no pieces came: the hands let go (a remote one is told it was refused)
+                for (hand, _) in &o.hands {
+                    if let Some(t) = self.hands.remote(self.hand_ids[*hand]) {
+                        self.hands.deny(t.object());
                     }
                 }
                 continue;
