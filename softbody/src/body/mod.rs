@@ -117,8 +117,9 @@ fn groups(bit: u32, self_collisions: bool) -> (InteractionGroups, InteractionGro
 /// [`SoftBodySet::insert_plan`](crate::SoftBodySet::insert_plan) puts a copy in a world, the
 /// same body `insert` would build, in a fraction of that: a room builds every object of a
 /// class (its spawns, a late joiner's snapshot, a cut's pieces, a rebuild) from one plan.
+/// Cloning a plan shares it (it is immutable): handing one to a worker thread costs nothing.
 #[derive(Clone)]
-pub struct SoftBodyPlan(pub(crate) BodyPlan);
+pub struct SoftBodyPlan(pub(crate) std::sync::Arc<BodyPlan>);
 
 impl SoftBodyPlan {
     /// Plans a body of `mesh` (baked into world space, as for `insert`) with `config`;
@@ -126,7 +127,9 @@ impl SoftBodyPlan {
     pub fn new(mesh: &Mesh, config: SoftBodyConfig) -> Result<Self, SoftBodyError> {
         config.validate()?;
         mesh.validate("<soft body mesh>")?;
-        Ok(SoftBodyPlan(BodyPlan::new(mesh, config)?))
+        Ok(SoftBodyPlan(std::sync::Arc::new(BodyPlan::new(
+            mesh, config,
+        )?)))
     }
 
     /// Its number of particles.

@@ -63,10 +63,7 @@ impl SoftBodySet {
         world: &mut PhysicsWorld,
     ) -> SoftBodyHandle {
         let bit = self.next_group_bit();
-        let body = plan
-            .0
-            .clone()
-            .instantiate(world, bit, &super::Spawn::AT_REST);
+        let body = super::BodyPlan::clone(&plan.0).instantiate(world, bit, &super::Spawn::AT_REST);
         self.insert_built(body)
     }
 
