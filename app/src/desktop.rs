@@ -5,7 +5,9 @@
 //! - mouse: the right hand follows the cursor, at the reach distance along the cursor's ray;
 //! - wheel: reach nearer or farther (0.15–2 m); Shift+wheel: zoom the camera;
 //! - left button: grip (hold to keep holding); Ctrl+left: grip with the left hand instead;
-//! - E (held): trigger;
+//! - E (held): trigger (the scalpel: the hand's path tears a soft body);
+//! - X (held): the cutter's trigger: sweep the cursor across a soft body to cut it in two by
+//!   the plane of the sweep (the line drawn on screen, along the view);
 //! - right button drag: orbit; middle drag or W/A/S/D/Q/Z: move the camera's target;
 //! - P: particles and neighbour links; H: the HUD; R: reset the camera.
 //!
@@ -17,7 +19,7 @@ use bevy::prelude::*;
 use bevy::window::PrimaryWindow;
 
 use softsync_peer::scene::TABLE_TOP_Y;
-use softsync_peer::{DeviceFrame, Kind};
+use softsync_peer::{DeviceFrame, HandTool, Kind};
 
 use softsync_bevy::Room;
 
@@ -218,13 +220,25 @@ fn desktop_input(
         grip[active] = 1.0;
     }
     let mut trigger = [0.0; 2];
+    let mut tool = [HandTool::Scalpel; 2];
     if keys.pressed(KeyCode::KeyE) {
         trigger[active] = 1.0;
+    }
+    if keys.pressed(KeyCode::KeyX) {
+        // the cutter: its blade points into the screen, so the plane of the sweep holds the
+        // view ray: the line the cursor draws across the body
+        trigger[active] = 1.0;
+        tool[active] = HandTool::Cutter;
+        if let Some((_, rot)) = hands[active].as_mut() {
+            *rot =
+                from_bevy_quat(tf.rotation * Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2));
+        }
     }
     driver.device = Some(DeviceFrame {
         head: Some(head),
         hands,
         grip,
         trigger,
+        tool,
     });
 }

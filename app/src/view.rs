@@ -454,8 +454,36 @@ pub fn hud_text(room: &Room, driver: &Driver) -> String {
     );
     for (h, name) in [(0, "left"), (1, "right")] {
         if let Some((id, _)) = peer.held(h) {
-            s.push_str(&format!("{name} hand holds {}\n", object_name(peer, id)));
+            // co-manipulation: every hand on it, ours or not; a remote hand (the body is
+            // another peer's) says so
+            let hands = peer.holders(id).len().max(1);
+            s.push_str(&format!(
+                "{name} hand holds {}{} | {hands} hand{} on it\n",
+                object_name(peer, id),
+                if peer.holds_remotely(h) {
+                    " (remote)"
+                } else {
+                    ""
+                },
+                if hands == 1 { "" } else { "s" },
+            ));
         }
+        if peer.hand_tool(h) == softsync_peer::HandTool::Cutter {
+            let state = if peer.is_sweeping(h) {
+                "sweeping"
+            } else {
+                "ready"
+            };
+            s.push_str(&format!("{name} hand: cutter {state}\n"));
+        }
+    }
+    let building = peer
+        .objects()
+        .values()
+        .filter(|o| o.body == LocalBody::Building)
+        .count();
+    if building > 0 {
+        s.push_str(&format!("building {building} pieces off the frame\n"));
     }
     // Torn and cut soft bodies: how many log entries each has, and the pieces of a cut.
     let torn: Vec<String> = peer

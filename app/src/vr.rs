@@ -5,7 +5,10 @@
 //!
 //! Bindings are suggested for the common controllers (Khronos simple, Oculus Touch, Valve
 //! Index, HTC Vive, Windows Mixed Reality); the simple controller has no squeeze, so its
-//! select button grips.
+//! select button grips. A hand's tool button (X/A on Touch, A on Index, the trackpad on Vive,
+//! the thumbstick on WMR, menu on the simple controller) switches its trigger between the
+//! scalpel (the hand's path tears) and the cutter (a sweep through a body cuts it by the
+//! sweep's plane, `peer/cutter.rs`).
 //!
 //! There is no desktop mirror window: the headset shows the room and the terminal the stats
 //! lines. Without a runtime or a headset, [`probe`] says why and the caller opens the desktop
@@ -31,7 +34,7 @@ use bevy_mod_xr::camera::XrCamera;
 use bevy_mod_xr::session::{session_available, XrSessionCreated, XrState, XrTrackingRoot};
 use bevy_mod_xr::spaces::{XrSpace, XrSpaceSyncSet};
 
-use softsync_peer::DeviceFrame;
+use softsync_peer::{DeviceFrame, HandTool};
 
 use softsync_bevy::Room;
 
@@ -159,6 +162,8 @@ struct Actions {
     pose: [openxr::Action<openxr::Posef>; 2],
     squeeze: [openxr::Action<f32>; 2],
     trigger: [openxr::Action<f32>; 2],
+    /// A press switches the hand's tool between the scalpel and the cutter.
+    tool: [openxr::Action<bool>; 2],
 }
 
 /// The grip space of a hand (0 left, 1 right).
@@ -199,6 +204,10 @@ fn create_actions(instance: Res<OxrInstance>, mut commands: Commands) {
                 mk_f("left_trigger", "Left trigger")?,
                 mk_f("right_trigger", "Right trigger")?,
             ],
+            tool: [
+                set.create_action::<bool>("left_tool", "Left tool (scalpel or cutter)", &[])?,
+                set.create_action::<bool>("right_tool", "Right tool (scalpel or cutter)", &[])?,
+            ],
             set,
         })
     })();
@@ -208,32 +217,44 @@ fn create_actions(instance: Res<OxrInstance>, mut commands: Commands) {
     }
 }
 
-/// Suggested bindings per interaction profile: (profile, squeeze path, trigger path).
-const PROFILES: [(&str, &str, Option<&str>); 5] = [
+/// Suggested bindings per interaction profile: (profile, squeeze path, trigger path, the
+/// tool button's path on the left and on the right hand).
+type Profile = (
+    &'static str,
+    &'static str,
+    Option<&'static str>,
+    [&'static str; 2],
+);
+const PROFILES: [Profile; 5] = [
     (
         "/interaction_profiles/khr/simple_controller",
         "input/select/click",
         None,
+        ["input/menu/click", "input/menu/click"],
     ),
     (
         "/interaction_profiles/oculus/touch_controller",
         "input/squeeze/value",
         Some("input/trigger/value"),
+        ["input/x/click", "input/a/click"],
     ),
     (
         "/interaction_profiles/valve/index_controller",
         "input/squeeze/value",
         Some("input/trigger/value"),
+        ["input/a/click", "input/a/click"],
     ),
     (
         "/interaction_profiles/htc/vive_controller",
         "input/squeeze/click",
         Some("input/trigger/value"),
+        ["input/trackpad/click", "input/trackpad/click"],
     ),
     (
         "/interaction_profiles/microsoft/motion_controller",
         "input/squeeze/click",
         Some("input/trigger/value"),
+        ["input/thumbstick/click", "input/thumbstick/click"],
     ),
 ];
 
@@ -242,7 +263,7 @@ fn suggest_bindings(
     mut out: MessageWriter<OxrSuggestActionBinding>,
 ) {
     let Some(a) = actions else { return };
-    for (profile, squeeze, trigger) in PROFILES {
+    for (profile, squeeze, trigger, tool) in PROFILES {
         for (h, side) in [(0, "left"), (1, "right")] {
             let hand = |p: &str| format!("/user/hand/{side}/{p}");
             out.write(OxrSuggestActionBinding {
@@ -262,6 +283,11 @@ fn suggest_bindings(
                     bindings: vec![hand(t).into()],
                 });
             }
+            out.write(OxrSuggestActionBinding {
+                action: a.tool[h].as_raw(),
+                interaction_profile: profile.into(),
+                bindings: vec![hand(tool[h]).into()],
+            });
         }
     }
 }
@@ -306,6 +332,9 @@ struct Seen {
     announced: bool,
     /// [squeeze, trigger] held, per hand.
     pressed: [[bool; 2]; 2],
+    /// The tool button held, and each hand's tool (a press switches it).
+    tool_pressed: [bool; 2],
+    tools: [HandTool; 2],
 }
 
 /// Headset and controllers → the device frame, in room coordinates.
@@ -343,6 +372,22 @@ fn read_device(
         for h in 0..2 {
             frame.grip[h] = float_state(&session, &a.squeeze[h]);
             frame.trigger[h] = float_state(&session, &a.trigger[h]);
+            let tool = a.tool[h]
+                .state(&session, openxr::Path::NULL)
+                .is_ok_and(|s| s.is_active && s.current_state);
+            if tool && !seen.tool_pressed[h] {
+                seen.tools[h] = match seen.tools[h] {
+                    HandTool::Scalpel => HandTool::Cutter,
+                    HandTool::Cutter => HandTool::Scalpel,
+                };
+                println!(
+                    "xr tool hand={} tool={:?}",
+                    ["left", "right"][h],
+                    seen.tools[h]
+                );
+            }
+            seen.tool_pressed[h] = tool;
+            frame.tool[h] = seen.tools[h];
             // Button edges, for people checking their bindings (and the tests).
             let now = [frame.grip[h] > 0.5, frame.trigger[h] > 0.5];
             if now != seen.pressed[h] {

@@ -37,6 +37,13 @@
 //!                               peer's: its owner applies the stroke as its own)
 //! cut TARGET NX NY NZ           cut TARGET through its center, plane normal N (room; ours, or
 //!                               another peer's through its owner)
+//! slice HAND TARGET DX DY DZ DX DY DZ [in S]
+//!                               the cut gesture: HAND's tool becomes the cutter and sweeps,
+//!                               trigger held, from TARGET's center + the first offset to
+//!                               its center + the second over S (default 0.5), the blade
+//!                               upright; the body is cut by the plane of the sweep (tear
+//!                               paper §3.2, `peer/cutter.rs`); then the tool is the
+//!                               scalpel again
 //! say TEXT                      send TEXT to everyone in the room (a reliable
 //!                               [`Say`](crate::messages::Say) message; at most 200 bytes)
 //! loop                          start again from the top (last line)
@@ -90,6 +97,8 @@ pub enum Cmd {
     Tear(usize, Option<String>, Vec<Vec3>, f64),
     /// Cut through the center with a normal (room frame).
     Cut(Option<String>, Vec3),
+    /// Sweep a hand's cutter from one offset of the target's center to another (seconds).
+    Slice(usize, Option<String>, Vec3, Vec3, f64),
     /// Send a line of text to the room.
     Say(String),
     /// Restart.
@@ -241,6 +250,13 @@ pub fn parse(text: &str) -> Result<Vec<Cmd>, ScriptError> {
                     }
                     Cmd::Cut(target_kind(arg(1)?)?, n)
                 }
+                "slice" => Cmd::Slice(
+                    hand(arg(1)?)?,
+                    target_kind(arg(2)?)?,
+                    vec3(&w, 3)?,
+                    vec3(&w, 6)?,
+                    dur(&w, 9, 0.5)?,
+                ),
                 "say" => {
                     let text = piece["say".len()..].trim();
                     if text.is_empty() || text.len() > 200 {
@@ -272,6 +288,7 @@ pub fn parse(text: &str) -> Result<Vec<Cmd>, ScriptError> {
                 | Cmd::Squeeze(0, ..)
                 | Cmd::Release(0)
                 | Cmd::Tear(0, ..)
+                | Cmd::Slice(0, ..)
                 | Cmd::Pull(0, ..)
         ) {
             return Err(ScriptError {
@@ -321,6 +338,16 @@ enum Active {
         t0: f64,
         step: f64,
     },
+    Slice {
+        hand: usize,
+        name: String,
+        from: Vec3,
+        to: Vec3,
+        t0: f64,
+        dur: f64,
+        /// The peer's cut gestures before the sweep.
+        cuts: u64,
+    },
 }
 
 /// A running bot: drives the avatar (head and hands) and the grips.
@@ -343,6 +370,9 @@ pub struct Bot {
     device_grip: [f32; 3],
     rot: Quat,
     grip: [f32; 3],
+    /// The script's trigger per part (a slice holds it); the hand's is the larger of it and
+    /// the device's.
+    trigger: [f32; 3],
     started: bool,
     /// Finished the script.
     pub done: bool,
@@ -368,6 +398,7 @@ impl Bot {
             device_grip: [0.0; 3],
             rot: Quat::IDENTITY,
             grip: [0.0; 3],
+            trigger: [0.0; 3],
             started: false,
             done: false,
             grabs: Vec::new(),
@@ -386,6 +417,7 @@ impl Bot {
                 Cmd::Reach(_, k, _, _)
                 | Cmd::Own(k, _)
                 | Cmd::Tear(_, k, _, _)
+                | Cmd::Slice(_, k, ..)
                 | Cmd::Cut(k, _) => k.as_deref(),
                 _ => None,
             })
@@ -480,7 +512,7 @@ impl Bot {
                     time_s: t,
                 },
                 grip: self.grip[h + 1].max(self.device_grip[h + 1]),
-                trigger: device.map_or(0.0, |d| clamp01(d.trigger[h])),
+                trigger: self.trigger[h + 1].max(device.map_or(0.0, |d| clamp01(d.trigger[h]))),
             };
             peer.set_hand_input(h, input);
         }
@@ -628,6 +660,30 @@ impl Bot {
                     }
                 }
             }
+            Cmd::Slice(hand, kind, a, b, dur) => {
+                match self.object(now, peer, hand, kind.as_deref()) {
+                    Some((id, name)) => {
+                        let c = peer.shown_state(now, id).map_or(Vec3::ZERO, |s| s.pos);
+                        self.say(format!("slice {name}"));
+                        self.pos[hand] = self.to_script(hand, c + a);
+                        self.trigger[hand] = 1.0;
+                        peer.set_hand_tool(hand - 1, crate::HandTool::Cutter);
+                        Some(Active::Slice {
+                            hand,
+                            name,
+                            from: self.to_script(hand, c + a),
+                            to: self.to_script(hand, c + b),
+                            t0: t,
+                            dur,
+                            cuts: peer.counters().cut_gestures,
+                        })
+                    }
+                    None => {
+                        self.say("slice: no such object in the room".into());
+                        None
+                    }
+                }
+            }
             Cmd::Cut(kind, normal) => {
                 let center = self.at(2);
                 match self.object(now, peer, 2, kind.as_deref()) {
@@ -703,6 +759,33 @@ impl Bot {
                     self.pos[p] = center[p] + f(ph + shift) - f(shift);
                 }
                 t - t0 >= dur
+            }
+            Active::Slice {
+                hand,
+                name,
+                from,
+                to,
+                t0,
+                dur,
+                cuts,
+            } => {
+                let f = if dur <= 0.0 {
+                    1.0
+                } else {
+                    ((t - t0) / dur).clamp(0.0, 1.0) as f32
+                };
+                self.pos[hand] = from.lerp(to, f);
+                let cut = peer.counters().cut_gestures > cuts;
+                if f >= 1.0 || cut {
+                    if cut {
+                        self.say(format!("sliced {name}"));
+                    } else {
+                        self.say(format!("slice {name}: the sweep made no cut"));
+                    }
+                    self.trigger[hand] = 0.0;
+                    peer.set_hand_tool(hand - 1, crate::HandTool::Scalpel);
+                }
+                f >= 1.0 || cut
             }
             Active::Grab { hand, t0, until } => {
                 if let Some((id, _)) = peer.held(hand - 1) {

@@ -5,6 +5,7 @@
 use glam::{Quat, Vec3};
 use softsync_interaction::{HandInput, HandSample};
 
+use crate::peer::cutter::HandTool;
 use crate::peer::Peer;
 
 /// One frame of device input, in room coordinates (metres, y up).
@@ -18,6 +19,8 @@ pub struct DeviceFrame {
     pub grip: [f32; 2],
     /// Trigger per hand, 0..1.
     pub trigger: [f32; 2],
+    /// What each hand's trigger does (the scalpel tears, the cutter cuts).
+    pub tool: [HandTool; 2],
 }
 
 impl DeviceFrame {
@@ -41,6 +44,7 @@ impl DeviceFrame {
             }
         }
         for h in 0..2 {
+            peer.set_hand_tool(h, self.tool[h]);
             if let Some((p, r)) = self.part(h + 1) {
                 peer.set_hand_input(
                     h,

@@ -169,6 +169,8 @@ pub struct Counters {
     /// Bodies with a topology history (a cut's pieces, torn bodies at a join) built off the
     /// frame and landed in the world.
     pub bodies_built_off_frame: u64,
+    /// Cuts made by sweeping a hand's cutter through a body (`HandTool::Cutter`).
+    pub cut_gestures: u64,
     /// Builds restarted because the log they replayed was rewritten meanwhile (a migration).
     pub builds_restarted: u64,
     /// `Holders` messages dropped: not from the object's owner, or too long.

@@ -14,6 +14,7 @@ mod blade;
 mod bounds;
 mod builds;
 mod comanip;
+pub(crate) mod cutter;
 mod orphans;
 mod show;
 pub(crate) mod topology;
@@ -101,6 +102,9 @@ pub struct Peer {
     counters: Counters,
     /// Per hand: the scalpel its trigger holds (see `topology`).
     scalpels: [topology::Scalpel; 2],
+    /// What each hand's trigger does, and its cutter's sweep.
+    tools: [cutter::HandTool; 2],
+    sweeps: [cutter::Sweep; 2],
     /// `method: auto` bodies we own.
     auto: auto::AutoBodies,
     /// Hands of several peers on one body (remote hands, both ways).
@@ -168,6 +172,8 @@ impl Peer {
             events: VecDeque::new(),
             counters: Counters::default(),
             scalpels: Default::default(),
+            tools: Default::default(),
+            sweeps: Default::default(),
             auto: Default::default(),
             comanip: Default::default(),
             blades: Default::default(),

@@ -107,6 +107,7 @@ impl SqueezeThrow {
             ],
             grip: [0.0, grip],
             trigger: [0.0, 0.0],
+            tool: Default::default(),
         }
     }
 }

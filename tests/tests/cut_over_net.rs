@@ -204,6 +204,8 @@ fn a_cuts_pieces_built_off_the_frame_are_the_frames_and_the_box_never_blinks() {
             n.frame(now);
         }
         room.now += Duration::from_secs_f32(DT);
+        // the builds run on worker threads, in wall time: each virtual frame leaves them some
+        #[allow(clippy::disallowed_methods)]
         std::thread::sleep(Duration::from_micros(500));
         let client = &room.nodes[1];
         let pieces: Vec<_> = client
@@ -246,5 +248,66 @@ fn a_cuts_pieces_built_off_the_frame_are_the_frames_and_the_box_never_blinks() {
         );
         assert_eq!(a.particles.len(), b.particles.len());
         assert!(a.pos.distance(b.pos) < 0.002, "piece {}", id.0);
+    }
+}
+
+/// The cut gesture (`HandTool::Cutter`, tear paper §3.2): the client's right hand sweeps its
+/// cutter through the host's soft box along z, the blade upright, trigger held; the box is cut
+/// by the plane through where the blade met it and the blade's ends — x = the box's center —
+/// through its owner (the client owns nothing), one cut for the press, pieces on either side.
+#[test]
+fn a_hand_sweeping_its_cutter_through_the_box_cuts_it_by_the_sweeps_plane() {
+    use softsync_peer::HandTool;
+    let hub = MemoryHub::new(1200);
+    let mut room = Room {
+        nodes: [Node::new(&hub, HOST, 1), Node::new(&hub, CLIENT, 2)],
+        now: Instant::ZERO,
+    };
+    room.run(Duration::from_secs(3));
+    let soft_box = room.nodes[1].id_of("softbox")[0];
+    assert_eq!(room.nodes[1].peer.session().owner(soft_box), Some(HOST));
+    let c = room.nodes[1]
+        .peer
+        .shown_state(room.now, soft_box)
+        .unwrap()
+        .pos;
+    room.nodes[1].peer.set_hand_tool(1, HandTool::Cutter);
+    assert_eq!(room.nodes[1].peer.hand_tool(1), HandTool::Cutter);
+    // from 6 cm in front of the center to 6 cm behind it, in 0.5 s, trigger held; then let go
+    let (from, to) = (c - Vec3::Z * 0.06, c + Vec3::Z * 0.06);
+    let mut swept = false;
+    for k in 0..90 {
+        let f = (k as f32 / 45.0).min(1.0);
+        let now = room.now;
+        let trigger = if k < 60 { 1.0 } else { 0.0 };
+        let [host, client] = &mut room.nodes;
+        host.frame(now);
+        client.frame_with(now, Some((from.lerp(to, f), trigger)));
+        swept |= client.peer.is_sweeping(1);
+        room.now += Duration::from_secs_f32(DT);
+    }
+    assert!(swept, "the cutter never met the box");
+    room.run(Duration::from_secs(3));
+    let [host, client] = &mut room.nodes;
+    assert!(client.warnings.is_empty(), "{:?}", client.warnings);
+    assert_eq!(client.peer.counters().cut_gestures, 1, "one cut per press");
+    assert!(client.peer.counters().blade_requests_sent >= 1);
+    let pieces = host.id_of("softbox");
+    assert_eq!(pieces.len(), 2, "{pieces:?}");
+    assert_eq!(client.id_of("softbox"), pieces);
+    let now = room.now;
+    let mut sides: Vec<f32> = pieces
+        .iter()
+        .map(|id| host.peer.shown_state(now, *id).unwrap().pos.x - c.x)
+        .collect();
+    sides.sort_by(f32::total_cmp);
+    assert!(
+        sides[0] < -0.005 && sides[1] > 0.005,
+        "the pieces are not on either side of x = {}: {sides:?}",
+        c.x
+    );
+    for id in &pieces {
+        let h = host.peer.topology_hash(*id).unwrap();
+        assert_eq!(client.peer.topology_hash(*id), Some(h));
     }
 }

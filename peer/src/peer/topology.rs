@@ -53,7 +53,8 @@ pub(crate) fn scalpel_samples(last: Vec3, prev: Vec3, tip: Vec3) -> Vec<Vec3> {
 }
 
 /// A hand's scalpel: while its trigger is held, the hand's path through a soft body tears it
-/// (VR controllers and the desktop's mouse hand alike: both give a trigger).
+/// (VR controllers and the desktop's mouse hand alike: both give a trigger). A hand whose
+/// tool is the cutter cuts instead (`peer/cutter.rs`).
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Scalpel {
     /// The hand's last input: position, rotation, trigger.
@@ -77,6 +78,17 @@ impl Peer {
             let Some((tip, rot, trigger)) = self.scalpels[h].input else {
                 continue;
             };
+            // a hand whose tool is the cutter sweeps a plane (`peer/cutter.rs`); its
+            // scalpel sees the trigger released (a stroke in progress is lifted)
+            let cutter = self.hand_tool(h) == super::cutter::HandTool::Cutter;
+            self.use_cutter(
+                now,
+                h,
+                tip,
+                Self::blade_of(rot),
+                if cutter { trigger } else { 0.0 },
+            );
+            let trigger = if cutter { 0.0 } else { trigger };
             if trigger < SCALPEL_TRIGGER {
                 let s = &mut self.scalpels[h];
                 let stroke = (s.target.take(), s.last.take());
@@ -113,7 +125,7 @@ impl Peer {
                 self.scalpels[h].last = Some(tip);
                 continue;
             };
-            let blade = rot * Vec3::Y * SCALPEL_BLADE_M;
+            let blade = Self::blade_of(rot);
             for p in scalpel_samples(last, prev.unwrap_or(last), tip) {
                 if let Err(e) = self.tear(now, target, last, p, blade) {
                     self.events
@@ -126,7 +138,7 @@ impl Peer {
     }
 
     /// The soft body whose shown surface's bounds (1 cm wider) hold `p`, nearest center first.
-    fn soft_body_at(&self, p: Vec3) -> Option<NetId> {
+    pub(super) fn soft_body_at(&self, p: Vec3) -> Option<NetId> {
         self.mirror
             .objects
             .iter()
