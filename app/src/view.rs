@@ -612,9 +612,16 @@ fn take_screenshots(
         peer.session().members().len()
     );
     let cam = cams.iter().find(|(c, _)| c.is_active);
+    // per class: how many soft bodies (a cut makes pieces of one class) and all their points
+    let mut classes: std::collections::BTreeMap<String, (usize, Vec<Vec3>)> = Default::default();
     for (id, o) in peer.objects() {
         let LocalBody::Soft(h) = o.body else { continue };
         let name = peer.scene().name_of(o.kind);
+        if let Some(b) = peer.soft_bodies().get(h) {
+            let c = classes.entry(name.to_string()).or_default();
+            c.0 += 1;
+            c.1.extend(b.render_positions().iter().map(|p| to_bevy(*p)));
+        }
         if let Some(d) = deformation_m(peer, h) {
             fields.push_str(&format!(" {name}_deform_mm={:.2}", d * 1e3));
         }
@@ -634,6 +641,16 @@ fn take_screenshots(
             if let Some(cam) = cam {
                 fields.push_str(&screen_box(cam, &format!("{name}_rim_px"), rim.into_iter()));
             }
+        }
+    }
+    for (name, (count, points)) in classes {
+        fields.push_str(&format!(" {name}_count={count}"));
+        if let Some(cam) = cam {
+            fields.push_str(&screen_box(
+                cam,
+                &format!("{name}_all_px"),
+                points.into_iter(),
+            ));
         }
     }
     let path = plan.dir.join(format!("frame-{n:04}.png"));

@@ -153,36 +153,45 @@ fn frames(p: &Proc) -> Vec<Frame> {
 
 /// A desktop peer joining `room`, its camera on `focus`, saving a 320×240 frame every 0.5 s.
 fn desktop_peer(dir: &Path, x: &Xvfb, url: &str, room: &str, focus: &str) -> Proc {
+    desktop_peer_with(dir, x, url, room, focus, &[])
+}
+
+/// As [`desktop_peer`], with more arguments (a bot script on its hands).
+fn desktop_peer_with(
+    dir: &Path,
+    x: &Xvfb,
+    url: &str,
+    room: &str,
+    focus: &str,
+    extra: &[&str],
+) -> Proc {
     let shots = dir.join("shots");
     let shots_s = shots.to_str().unwrap().to_owned();
-    Proc::spawn_env(
-        dir,
-        "desktop",
-        &[
-            "join",
-            "--room",
-            room,
-            "--signal",
-            url,
-            "--desktop",
-            "--window",
-            "320x240",
-            "--focus",
-            focus,
-            "--hide-avatars",
-            "--no-hud",
-            "--screenshot-dir",
-            &shots_s,
-            "--screenshot-every",
-            "0.5",
-            "--screenshots",
-            "400",
-            "--duration",
-            "140",
-            "--quiet",
-        ],
-        &x.env(&[]),
-    )
+    let mut args = vec![
+        "join",
+        "--room",
+        room,
+        "--signal",
+        url,
+        "--desktop",
+        "--window",
+        "320x240",
+        "--focus",
+        focus,
+        "--hide-avatars",
+        "--no-hud",
+        "--screenshot-dir",
+        &shots_s,
+        "--screenshot-every",
+        "0.5",
+        "--screenshots",
+        "400",
+        "--duration",
+        "140",
+        "--quiet",
+    ];
+    args.extend_from_slice(extra);
+    Proc::spawn_env(dir, "desktop", &args, &x.env(&[]))
 }
 
 /// Wait until the desktop peer has saved `n` frames showing `kind` (the software renderer's
@@ -574,5 +583,169 @@ fn vr_without_a_runtime_says_why_and_opens_the_desktop_peer() {
     assert!(
         Path::new(field(&shot, "path")).exists(),
         "no screenshot file: {shot}"
+    );
+}
+
+/// Fraction of the pixels in box `b` (no margin) that differ by more than 30 (sum over
+/// channels) between two frames, and how many.
+fn diff_in(a: &Rgb, c: &Rgb, b: [f64; 4]) -> (f64, usize) {
+    let (mut n, mut diff) = (0usize, 0usize);
+    for (x, y) in a.region(b, 0.0) {
+        let (p, q) = (a.at(x, y), c.at(x, y));
+        n += 1;
+        let d: i32 = (0..3)
+            .map(|i| (i32::from(p[i]) - i32::from(q[i])).abs())
+            .sum();
+        if d > 30 {
+            diff += 1;
+        }
+    }
+    (diff as f64 / n.max(1) as f64, diff)
+}
+
+/// The screen box of every piece of `kind` in a saved frame's line, and how many pieces.
+fn all_of(p: &Proc, kind: &str) -> Vec<(u32, usize, [f64; 4], PathBuf)> {
+    p.stdout()
+        .lines()
+        .filter(|l| l.starts_with("screenshot ") && l.contains(&format!(" {kind}_all_px=")))
+        .map(|l| {
+            (
+                field(l, "n").parse().unwrap(),
+                field(l, &format!("{kind}_count")).parse().unwrap(),
+                px_box(field(l, &format!("{kind}_all_px"))),
+                PathBuf::from(field(l, "path")),
+            )
+        })
+        .collect()
+}
+
+/// Issue 31's pixels: the desktop peer's two hands hold the bunny by its left and right
+/// sides and pull it apart — the stretched frame differs from the rest frame on both sides,
+/// where the bunny grew — then a bot on another peer, which owns nothing, sweeps its cutter
+/// through the bunny between the hands (the cut gesture, `slice`): the desktop draws the
+/// pieces (two, or three when an ear comes off too), each hand still holding its own, and
+/// between them, where the bunny was, the background.
+#[test]
+fn two_desktop_hands_stretch_the_bunny_and_a_cut_between_them_opens_a_gap() {
+    require_netns();
+    let dir = scratch("pixels-stretch");
+    let x = Xvfb::start(&dir);
+    let (_host, url) = host(&dir, "stretch");
+    let mut desktop = desktop_peer_with(
+        &dir,
+        &x,
+        &url,
+        "stretch",
+        "bunny",
+        &[
+            "--bot",
+            "wait 3; reach left bunny at -0.07 0.01 0 in 0.6; grab left; \
+             reach right bunny at 0.07 0.01 0 in 0.6; grab right; \
+             pull left -0.025 0 0 in 1; pull right 0.025 0 0 in 1; wait 100",
+        ],
+    );
+    let rest = first_frames(&mut desktop, "bunny", 2);
+    let r0 = rest[0].clone();
+    assert!(r0.deform_mm < 8.0, "not at rest: {r0:?}"); // its sag under gravity
+                                                        // stretched: the bunny's box at least 20 px wider, three frames in a row (1 s) alike
+    let start = Instant::now();
+    let stretched = loop {
+        let f = frames_of(&desktop, "bunny");
+        let w0 = r0.bbox[2] - r0.bbox[0];
+        let still = |a: &Frame, b: &Frame| {
+            (a.deform_mm - b.deform_mm).abs() < 1.0
+                && (0..4).all(|k| (a.bbox[k] - b.bbox[k]).abs() < 1.5)
+        };
+        let run = f.windows(3).rev().find(|w| {
+            w[0].bbox[2] - w[0].bbox[0] > w0 + 20.0 && still(&w[0], &w[1]) && still(&w[1], &w[2])
+        });
+        if let Some(w) = run {
+            break w[2].clone();
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "the desktop peer never drew the bunny stretched\n{:?}\n{}",
+            f.last(),
+            desktop.logs()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    println!("rest {r0:?}\nstretched {stretched:?}");
+    let (a, s) = (Rgb::load(&r0.path), Rgb::load(&stretched.path));
+    // where it grew: left of the rest box and right of it
+    let (y0, y1) = (r0.bbox[1], r0.bbox[3]);
+    let left = [stretched.bbox[0], y0, r0.bbox[0] - 1.0, y1];
+    let right = [r0.bbox[2] + 1.0, y0, stretched.bbox[2], y1];
+    let ((fl, dl), (fr, dr)) = (diff_in(&a, &s, left), diff_in(&a, &s, right));
+    println!(
+        "grew left {left:?}: {dl} pixels ({:.0}%) changed; right {right:?}: {dr} ({:.0}%)",
+        fl * 100.0,
+        fr * 100.0
+    );
+    assert!(
+        stretched.bbox[0] < r0.bbox[0] - 2.0 && stretched.bbox[2] > r0.bbox[2] + 2.0,
+        "not stretched both ways: {:?} from {:?}",
+        stretched.bbox,
+        r0.bbox
+    );
+    assert!(
+        dl >= 40 && dr >= 40,
+        "the frame did not change where the bunny grew"
+    );
+    // the cut between the hands, by a peer that owns nothing
+    let bot = Proc::spawn(
+        &dir,
+        "slicer",
+        &[
+            "join",
+            "--room",
+            "stretch",
+            "--signal",
+            &url,
+            "--bot",
+            "wait 0.5; slice right bunny 0 0.02 0.14 0 0.02 -0.14 in 1; wait 40",
+            "--duration",
+            "60",
+            "--quiet",
+        ],
+    );
+    bot.wait_line("sliced bunny", Duration::from_secs(40));
+    let start = Instant::now();
+    let (cut_path, cut_box) = loop {
+        let f = all_of(&desktop, "bunny");
+        let pair = f
+            .windows(2)
+            .rev()
+            .find(|w| w[0].1 == 2 && w[1].1 == 2 && (w[0].2[0] - w[1].2[0]).abs() < 1.5);
+        if let Some(w) = pair {
+            break (w[1].3.clone(), w[1].2);
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(40),
+            "the desktop peer never drew the bunny's two pieces at rest\n{:?}\n{}\n{}",
+            f.last(),
+            desktop.logs(),
+            bot.logs()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    // between the pieces, in the middle of where the stretched bunny was (its middle rows):
+    // it changed
+    let (y0, y1) = (
+        r0.bbox[1] + 0.3 * (r0.bbox[3] - r0.bbox[1]),
+        r0.bbox[1] + 0.7 * (r0.bbox[3] - r0.bbox[1]),
+    );
+    let mid = 0.5 * (stretched.bbox[0] + stretched.bbox[2]);
+    let gap = [mid - 2.0, y0, mid + 2.0, y1];
+    let c = Rgb::load(&cut_path);
+    let (dg, _) = diff_in(&s, &c, gap);
+    println!(
+        "cut: pieces {cut_box:?}; the middle strip {gap:?}: {:.0}% changed",
+        dg * 100.0
+    );
+    assert!(
+        dg > 0.3,
+        "no gap opened between the pieces: {:.0}% changed",
+        dg * 100.0
     );
 }

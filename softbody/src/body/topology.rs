@@ -279,7 +279,12 @@ impl SoftBody {
                 normals: piece.mesh.normals.clone(),
                 triangles: piece.mesh.triangles.clone(),
             };
-            let plan = plan_piece(&baked, &self.config)
+            // the plane in the frame the piece is baked in
+            let baked_plane = CutPlane {
+                normal: plane.normal,
+                offset_m: plane.offset_m + plane.normal.dot(self.rest_center),
+            };
+            let plan = plan_piece(&baked, &self.config, &baked_plane)
                 .map_err(|e| CutError::Mesh(format!("piece {k} cannot be a soft body: {e}")))?;
             // The old vertex behind each of the piece's welded vertices (none for the cap's).
             let mut first_render = vec![usize::MAX; plan.rest_vertices.len()];
@@ -415,7 +420,11 @@ fn weld_exact(mesh: &Mesh) -> (WeldedMesh, FxHashMap<[u32; 3], u32>) {
 
 /// Plans one piece with `config`; with fewer than [`MIN_PIECE_PARTICLES`] particles, tries
 /// [`finer`] configs (up to [`MAX_REFINEMENTS`]) and keeps the one with the most particles.
-fn plan_piece(mesh: &Mesh, config: &SoftBodyConfig) -> Result<BodyPlan, SoftBodyError> {
+fn plan_piece(
+    mesh: &Mesh,
+    config: &SoftBodyConfig,
+    plane: &CutPlane,
+) -> Result<BodyPlan, SoftBodyError> {
     mesh.validate("<cut piece>")?;
     // A piece's center collider is its convex hull: balls around two sibling pieces would
     // overlap across the cut and throw the pieces apart; their hulls only touch.
@@ -438,6 +447,7 @@ fn plan_piece(mesh: &Mesh, config: &SoftBodyConfig) -> Result<BodyPlan, SoftBody
         }
         cfg = next;
     }
+    plan.shave_center(plane);
     Ok(plan)
 }
 
