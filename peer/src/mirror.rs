@@ -77,7 +77,14 @@ pub(crate) struct Build {
     pub(crate) job: softsync_softbody::BodyBuild,
     /// The log entries it replays (the object's log when it started).
     pub(crate) entries: Vec<TopologyEvent>,
+    /// When it started (the peer's clock): it lands [`BUILD_LANDS_AFTER`] later.
+    pub(crate) started: softsync_net::Instant,
 }
+
+/// How long after it starts a build lands, whatever the worker's speed: the same frame on
+/// every run (virtual time stays deterministic), and time enough for the worker (a bunny's
+/// piece takes ~8 ms on two cores), so the frame seldom waits for it.
+pub(crate) const BUILD_LANDS_AFTER: std::time::Duration = std::time::Duration::from_millis(30);
 
 impl Mirror {
     /// A world stepping by `dt_s` with `scene`'s static geometry, and no objects yet.

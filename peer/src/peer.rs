@@ -381,7 +381,7 @@ impl Peer {
                     .latest_state(id)
                     .unwrap_or_else(|| ObjectState::rigid(Vec3::ZERO, Quat::IDENTITY));
                 let avatar_of = kind.is_avatar().then_some(owner);
-                if !self.build_off_frame(id, kind, avatar_of, &s)? {
+                if !self.build_off_frame(now, id, kind, avatar_of, &s)? {
                     let body = self.mirror.build(&self.scene, kind, s.pos, s.rot)?;
                     self.mirror.insert(id, kind, body, avatar_of);
                 }

@@ -8,7 +8,7 @@
 use glam::Vec3;
 use softsync_softbody::cut::CutPlane;
 use softsync_softbody::rapier3d::prelude::*;
-use softsync_softbody::{Mesh, SoftBodyConfig, SoftBodyHandle, SoftBodySet};
+use softsync_softbody::{Mesh, SoftBodyConfig, SoftBodyHandle, SoftBodyPlan, SoftBodySet};
 
 const DT: f32 = 1.0 / 60.0;
 
@@ -31,8 +31,34 @@ fn nearest(ps: &[Vec3], p: Vec3) -> usize {
 
 #[test]
 fn a_bunny_cut_between_two_holding_hands_keeps_both_pieces_whole() {
+    held_cut(false);
+}
+
+/// As a room makes the pieces: each from the class's plan at rest at the body's center
+/// pose, cut keeping only itself (`peer/builds.rs`), so each hand's particle starts centimetres
+/// from the hand.
+#[test]
+fn pieces_built_at_rest_as_a_room_builds_them_stay_whole_in_the_hands() {
+    held_cut(true);
+}
+
+/// The thesis room's bunny class: 16 cm, particles 3 cm apart, stiffness 20.
+fn room_config() -> SoftBodyConfig {
+    SoftBodyConfig {
+        cluster: softsync_softbody::ClusterMethod::Distance { radius_m: 0.03 },
+        stiffness: 20.0,
+        ..SoftBodyConfig::default()
+    }
+}
+
+fn held_cut(as_room: bool) {
+    let (size, config) = if as_room {
+        (0.16, room_config())
+    } else {
+        (0.2, SoftBodyConfig::default())
+    };
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/bunny.obj");
-    let mut mesh = Mesh::load(path).unwrap().fit_size(0.2);
+    let mut mesh = Mesh::load(path).unwrap().fit_size(size);
     mesh.recenter();
     let lift = Vec3::new(0.0, 0.86, 0.0);
     let mesh = Mesh {
@@ -46,9 +72,7 @@ fn a_bunny_cut_between_two_holding_hands_keeps_both_pieces_whole() {
         None,
     );
     let mut set = SoftBodySet::new();
-    let h = set
-        .insert(&mesh, SoftBodyConfig::default(), &mut world)
-        .unwrap();
+    let h = set.insert(&mesh, config.clone(), &mut world).unwrap();
     for _ in 0..60 {
         set.step(&mut world, DT);
     }
@@ -58,7 +82,7 @@ fn a_bunny_cut_between_two_holding_hands_keeps_both_pieces_whole() {
     let mut hands: Vec<(SoftBodyHandle, usize, Vec3, Vec3)> = [-1.0f32, 1.0]
         .iter()
         .map(|s| {
-            let i = nearest(&ps, c + Vec3::new(s * 0.07, 0.01, 0.0));
+            let i = nearest(&ps, c + Vec3::new(s * 0.35 * size, 0.01, 0.0));
             (h, i, ps[i], ps[i] + Vec3::X * *s * 0.025)
         })
         .collect();
@@ -69,7 +93,19 @@ fn a_bunny_cut_between_two_holding_hands_keeps_both_pieces_whole() {
             // cut between the hands, then each hand takes the nearest particle of the pieces
             let (pos, rot) = set.get(h).unwrap().center_pose(&world);
             let plane = CutPlane::new(rot.inverse() * (c - pos), rot.inverse() * Vec3::X).unwrap();
-            let pieces = set.cut(h, &mut world, &plane).unwrap();
+            let pieces = if as_room {
+                let n = set.cut_piece_particles(h, &world, &plane).unwrap().len();
+                set.remove(h, &mut world);
+                let plan = SoftBodyPlan::new(&mesh, config.clone()).unwrap();
+                (0..n)
+                    .map(|k| {
+                        let b = set.insert_plan_at(&plan, &mut world, pos, rot).unwrap();
+                        set.cut_keep(b, &mut world, &plane, k).unwrap()
+                    })
+                    .collect::<Vec<_>>()
+            } else {
+                set.cut(h, &mut world, &plane).unwrap()
+            };
             assert!(pieces.len() >= 2);
             for hand in hands.iter_mut() {
                 let mut best = (f32::MAX, pieces[0], 0);

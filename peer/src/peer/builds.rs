@@ -5,7 +5,9 @@
 //! every peer's frame for as long as its pieces take. Here the replay runs on a worker thread
 //! ([`softsync_softbody::BodyBuild`]) while the frame goes on; the object is
 //! [`LocalBody::Building`] until its body lands, which costs the frame only the copy of its
-//! rapier bodies into the world.
+//! rapier bodies into the world. A build lands [`BUILD_LANDS_AFTER`] (30 ms) after it starts,
+//! whenever the worker finished (waiting for it if it has not): the frame it lands in
+//! depends on the peer's clock alone, so runs on virtual time stay deterministic.
 //!
 //! Consistency: the worker replays the same log entries from the same class plan placed at the
 //! same pose with the same arithmetic as the frame would, so every peer ends with the same
@@ -22,19 +24,20 @@ use softsync_softbody::BodyBuild;
 
 use super::Peer;
 use crate::events::{Event, PeerError};
-use crate::mirror::{build_step, Build, LocalBody};
+use crate::mirror::{build_step, Build, LocalBody, BUILD_LANDS_AFTER};
 use crate::scene::Kind;
 
 /// The longest a despawned body stays shown waiting for builds to land, seconds.
 const LEAVING_MAX_S: f64 = 1.0;
 
 impl Peer {
-    /// A `kind` object `id` was spawned at `s`: if it is a soft body whose log has entries
+    /// A `kind` object `id` was spawned at `s` (at `now`): if it is a soft body whose log has entries
     /// already, starts building it off the frame and makes it a [`LocalBody::Building`]
     /// object. False when the frame should build it (not soft, no history, off-frame builds
     /// off, or an entry the scene cannot turn into a step: the frame's replay reports it).
     pub(super) fn build_off_frame(
         &mut self,
+        now: Instant,
         id: NetId,
         kind: Kind,
         avatar_of: Option<PeerId>,
@@ -57,7 +60,15 @@ impl Peer {
         let plan = self.scene.soft_plan(kind).map_err(PeerError::Build)?;
         let job = BodyBuild::start(plan, s.pos, s.rot, steps);
         self.mirror.insert(id, kind, LocalBody::Building, avatar_of);
-        self.mirror.builds.insert(id, Build { job, entries: log });
+        let started = now;
+        self.mirror.builds.insert(
+            id,
+            Build {
+                job,
+                entries: log,
+                started,
+            },
+        );
         Ok(true)
     }
 
@@ -67,6 +78,7 @@ impl Peer {
     /// if `id` is not being built.
     pub(super) fn topology_while_building(
         &mut self,
+        now: Instant,
         id: NetId,
         seq: u32,
         event: &TopologyEvent,
@@ -88,7 +100,7 @@ impl Peer {
             .unwrap_or_else(|| ObjectState::rigid(glam::Vec3::ZERO, glam::Quat::IDENTITY));
         self.mirror.remove(id);
         self.counters.builds_restarted += 1;
-        match self.build_off_frame(id, kind, avatar_of, &s) {
+        match self.build_off_frame(now, id, kind, avatar_of, &s) {
             Ok(true) => {}
             Ok(false) | Err(_) => {
                 // the frame builds it and replays the whole log
@@ -117,11 +129,13 @@ impl Peer {
     /// While a despawned body is still shown, builds land together (all of a cut's pieces in
     /// one frame: never the body and one of its pieces in the world at once, overlapping).
     pub(super) fn land_builds(&mut self, now: Instant) {
+        // due, not merely done: when a build lands depends on the clock alone
         let mut ready: Vec<NetId> = self
             .mirror
             .builds
-            .iter_mut()
-            .filter_map(|(id, b)| b.job.is_ready().then_some(*id))
+            .iter()
+            .filter(|(_, b)| now.saturating_since(b.started) >= BUILD_LANDS_AFTER)
+            .map(|(id, _)| *id)
             .collect();
         ready.sort();
         let overdue = |since: &Instant| now.saturating_since(*since).as_secs_f64() > LEAVING_MAX_S;

@@ -313,7 +313,7 @@ impl Peer {
     /// Entry `seq` of `id`'s log arrived: apply it, or rebuild and replay if it is not the
     /// next one. A failure is a warning: the body keeps its last shape.
     pub(super) fn on_topology(&mut self, now: Instant, id: NetId, seq: u32, event: TopologyEvent) {
-        if self.topology_while_building(id, seq, &event) {
+        if self.topology_while_building(now, id, seq, &event) {
             return; // its build replays it, or it is applied when the build lands
         }
         let applied = self.mirror.topology_applied(id);

@@ -74,6 +74,8 @@ pub struct SoftBody {
     particle_radius_m: Vec<f32>,
     /// Per particle: a position it is driven to (a grab), if any.
     drives: Vec<Option<Vec3>>,
+    /// The center's orientation when the current grabs began (see `turn_center_by_hands`).
+    held_rotation: Option<Quat>,
     /// Per particle: displacement from its rigid rest target after the last step.
     displacement: Vec<Vec3>,
     scratch: Vec<Vec3>,
@@ -472,6 +474,7 @@ impl BodyPlan {
             particle_colliders,
             particle_radius_m,
             drives: vec![None; n],
+            held_rotation: None,
             displacement: vec![Vec3::ZERO; n],
             scratch: vec![Vec3::ZERO; n],
             rest_volume_m3,
@@ -518,6 +521,7 @@ impl SoftBody {
     /// the full rate instead of being amplified as in the thesis's form.
     fn apply_restoring_velocities(&mut self, world: &mut PhysicsWorld, dt_s: f32) {
         self.apply_rolling_resistance(world);
+        self.turn_center_by_hands(world, dt_s);
         let Some(center) = world.bodies.get(self.center) else {
             return;
         };
@@ -608,6 +612,47 @@ impl SoftBody {
             }
             body.set_linvel(new_v, true);
         }
+    }
+
+    /// A hand holds the body, not one particle alone: while any particle is driven (a grab),
+    /// the center keeps the orientation it had when the first grab began, turned back toward
+    /// it a fraction `1 − exp(−stiffness·dt)` of the way per step (the restoring rate). The
+    /// particles follow the center one way (thesis), so without this a held body whose
+    /// center tips — half a bunny after a cut between two hands, pulled by gravity off its cut
+    /// face — turns away under the hand and leaves the held particle behind: a collapse of
+    /// centimetres. Only the orientation: the center still moves, and a particle grab still
+    /// deforms the body as the thesis's does (a particle grab carries no rotation). Freed
+    /// when the last grab lets go.
+    fn turn_center_by_hands(&mut self, world: &mut PhysicsWorld, dt_s: f32) {
+        if self.config.space != SimulationSpace::World || self.drives.iter().all(Option::is_none) {
+            self.held_rotation = None;
+            return;
+        }
+        let Some(center) = world.bodies.get_mut(self.center) else {
+            return;
+        };
+        if !center.is_dynamic() {
+            return;
+        }
+        let r = *center.rotation();
+        let Some(held) = self.held_rotation else {
+            self.held_rotation = Some(r);
+            return;
+        };
+        let (axis, angle) = (held * r.inverse()).to_axis_angle();
+        // the short way round
+        let angle = if angle > std::f32::consts::PI {
+            angle - std::f32::consts::TAU
+        } else {
+            angle
+        };
+        let turn = axis * angle;
+        if !turn.is_finite() {
+            return;
+        }
+        let dt = dt_s.max(1e-6);
+        let alpha = 1.0 - (-self.config.stiffness * dt).exp();
+        center.set_angvel(turn * (alpha / dt), true);
     }
 
     /// Rolling resistance (`SoftBodyConfig::rolling_resistance`), above a rolling speed of
