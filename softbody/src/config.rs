@@ -165,8 +165,28 @@ pub struct SoftBodyConfig {
     /// Distance below which vertices are welded, metres. Default 1e-6.
     pub weld_epsilon_m: f32,
     /// Width of the slit a tear cuts (tear paper §3.1, the box's width), metres, in
-    /// [0.1 mm, 5 cm]. Default 3 mm.
+    /// [0.1 mm, 5 cm]; or 0 for an *incision* (the paper's zero-width, non-destructive tear):
+    /// the tissue is parted along the blade's path without removing any of it that shows —
+    /// the two lips are [`INCISION_WIDTH_M`] apart at rest (they must stay distinct vertices:
+    /// the body welds closer ones back into one), and the wound opens only as the tissue is
+    /// pulled. Default 3 mm.
     pub tear_width_m: f32,
+}
+
+/// How far apart an incision's lips are at rest (`tear_width_m: 0`), metres: two and a half
+/// times the tear's vertex clearance (20 µm), the least gap the mesh keeps as two distinct
+/// lips, fifty times the body's weld.
+pub const INCISION_WIDTH_M: f32 = 5e-5;
+
+impl SoftBodyConfig {
+    /// The width a tear cuts: `tear_width_m`, or an incision's [`INCISION_WIDTH_M`] for 0.
+    pub fn effective_tear_width_m(&self) -> f32 {
+        if self.tear_width_m == 0.0 {
+            INCISION_WIDTH_M
+        } else {
+            self.tear_width_m
+        }
+    }
 }
 
 impl Default for SoftBodyConfig {
@@ -229,12 +249,13 @@ impl SoftBodyConfig {
         check("friction", self.friction, 0.0, 100.0)?;
         check("rolling_resistance", self.rolling_resistance, 0.0, 1.0)?;
         check("weld_epsilon_m", self.weld_epsilon_m, 0.0, 1.0)?;
-        check(
-            "tear_width_m",
-            self.tear_width_m,
-            1e-4,
-            crate::cut::MAX_TEAR_WIDTH_M,
-        )?;
+        let w = self.tear_width_m;
+        if w != 0.0 && !(w.is_finite() && (1e-4..=crate::cut::MAX_TEAR_WIDTH_M).contains(&w)) {
+            return Err(SoftBodyError::Config(format!(
+                "tear_width_m = {w} is outside [0.0001, {}] (or 0 for an incision)",
+                crate::cut::MAX_TEAR_WIDTH_M
+            )));
+        }
         Ok(())
     }
 }

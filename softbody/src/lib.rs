@@ -21,7 +21,7 @@ pub use body::{Activity, SoftBody, SoftBodyPlan, StageClock, TearTimings};
 pub use cluster::{build_particle_map, ClusterMethod, ParticleMap, WeightedRows};
 pub use config::{
     CenterCollider, ContinuousCollision, ParticleCollider, RestoringScheme, SimulationSpace,
-    SoftBodyConfig, SoftRegion,
+    SoftBodyConfig, SoftRegion, INCISION_WIDTH_M,
 };
 pub use error::SoftBodyError;
 pub use mesh::{Mesh, MeshSource, Placement, WeldedMesh};

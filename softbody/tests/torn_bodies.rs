@@ -586,3 +586,74 @@ fn cutting_and_keeping_one_piece_makes_that_piece_of_the_whole_cut() {
     assert!(s.cut_keep(hk, &mut w, &plane, 2).is_err());
     assert!(s.get(hk).is_some());
 }
+
+/// The tear paper's zero-width incision (§3.1, `tear_width_m: 0`): the same stroke parts the
+/// bunny as a 3 mm tear does — a slit with open lips, no particle spanning it, links across it
+/// cut — but removes next to nothing: the surface keeps its area within 0.5 %, where the
+/// tear's removes a strip you can see; its lips are 50 µm apart at rest. A config of a
+/// negative or too-narrow width is still refused, saying an incision is 0.
+#[test]
+fn an_incision_parts_the_tissue_without_removing_any() {
+    let area = |m: &Mesh| -> f32 {
+        m.triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| m.positions[i as usize]);
+                0.5 * (b - a).cross(c - a).length()
+            })
+            .sum()
+    };
+    let mut removed = Vec::new();
+    for width in [0.0, 0.003] {
+        let what = format!("width {width}");
+        let mut world = PhysicsWorld::new();
+        let mut set = SoftBodySet::new();
+        let cfg = SoftBodyConfig {
+            space: SimulationSpace::Local,
+            tear_width_m: width,
+            ..Default::default()
+        };
+        let h = set.insert(&bunny(), cfg, &mut world).unwrap();
+        let before = area(set.get(h).unwrap().rest_mesh());
+        let segs = stroke(set.get(h).unwrap(), -Vec3::X, Vec3::Z, 8, 0.008);
+        let mut links = 0;
+        for s in &segs {
+            assert!(
+                set.tear(h, &mut world, s).unwrap().faces_clipped > 0,
+                "{what}"
+            );
+            links += set.get(h).unwrap().last_particle_update().links_removed;
+        }
+        let body = set.get(h).unwrap();
+        let report = MeshReport::of(body.rest_mesh());
+        assert!(report.is_sound(), "{what}: {report:?}");
+        assert!(report.boundary_edges > 0, "{what}: no slit: {report:?}");
+        assert!(links > 0, "{what}: nothing parted the particles");
+        assert_no_particle_spans_a_tear(body, &what);
+        assert_map_consistent(body, &what);
+        removed.push(1.0 - area(body.rest_mesh()) / before);
+    }
+    println!(
+        "area removed: incision {:.4} %, 3 mm tear {:.3} %",
+        removed[0] * 100.0,
+        removed[1] * 100.0
+    );
+    assert!(
+        removed[0].abs() < 0.005,
+        "the incision removed {:.3} %",
+        removed[0] * 100.0
+    );
+    assert!(
+        removed[1] > 20.0 * removed[0].abs().max(1e-5),
+        "{removed:?}"
+    );
+    for bad in [-0.001, 5e-5, f32::NAN] {
+        let cfg = SoftBodyConfig {
+            tear_width_m: bad,
+            ..Default::default()
+        };
+        let e = cfg.validate().unwrap_err().to_string();
+        assert!(e.contains("or 0 for an incision"), "{e}");
+    }
+    assert_eq!(INCISION_WIDTH_M, 5e-5);
+}

@@ -97,7 +97,10 @@ impl SoftBody {
         clock: Option<StageClock>,
     ) -> Result<TearStats, CutError> {
         if self.tear.is_none() {
-            self.tear = Some(TearMesh::new(&self.rest_mesh, self.config.tear_width_m)?);
+            self.tear = Some(TearMesh::new(
+                &self.rest_mesh,
+                self.config.effective_tear_width_m(),
+            )?);
         }
         let Some(tear) = self.tear.as_mut() else {
             return Err(CutError::Mesh("the tear mesh could not be made".into()));
