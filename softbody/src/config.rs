@@ -171,6 +171,12 @@ pub struct SoftBodyConfig {
     /// the body welds closer ones back into one), and the wound opens only as the tissue is
     /// pulled. Default 3 mm.
     pub tear_width_m: f32,
+    /// How far a tear's wound opens at rest, metres (tear paper §3.3.4): the particles beside
+    /// each tear segment's slit have their anchors moved away from it, up to this far (the
+    /// nearest most, fading to nothing two particle sizes out), so the lips part as tissue
+    /// does when cut. Their vertices follow them; the rest mesh is unchanged. In [0, 1 cm];
+    /// default 0 (a slit stays as it was cut).
+    pub slit_open_m: f32,
 }
 
 /// How far apart an incision's lips are at rest (`tear_width_m: 0`), metres: two and a half
@@ -216,6 +222,7 @@ impl Default for SoftBodyConfig {
             rolling_resistance: 0.05,
             weld_epsilon_m: 1e-6,
             tear_width_m: 0.003,
+            slit_open_m: 0.0,
         }
     }
 }
@@ -249,6 +256,7 @@ impl SoftBodyConfig {
         check("friction", self.friction, 0.0, 100.0)?;
         check("rolling_resistance", self.rolling_resistance, 0.0, 1.0)?;
         check("weld_epsilon_m", self.weld_epsilon_m, 0.0, 1.0)?;
+        check("slit_open_m", self.slit_open_m, 0.0, 0.01)?;
         let w = self.tear_width_m;
         if w != 0.0 && !(w.is_finite() && (1e-4..=crate::cut::MAX_TEAR_WIDTH_M).contains(&w)) {
             return Err(SoftBodyError::Config(format!(

@@ -65,6 +65,10 @@ pub struct SoftBody {
     map: ParticleMap,
     /// Particle rest positions relative to the rest center.
     rest_offsets: Vec<Vec3>,
+    /// Per particle: how far its anchor (the restoring target) sits from its rest position,
+    /// rest frame — a wound's opening (`slit_open_m`, tear paper §3.3.4). The vertices'
+    /// skinning measures from the rest position, so they follow.
+    anchor_shift: Vec<Vec3>,
     /// Per particle: `neighbour_share / Σ w`, so the shares of its neighbours sum to the share.
     neighbour_scale: Vec<f32>,
     center: RigidBodyHandle,
@@ -475,6 +479,7 @@ impl BodyPlan {
             particle_radius_m,
             drives: vec![None; n],
             held_rotation: None,
+            anchor_shift: vec![Vec3::ZERO; n],
             displacement: vec![Vec3::ZERO; n],
             scratch: vec![Vec3::ZERO; n],
             rest_volume_m3,
@@ -541,7 +546,7 @@ impl SoftBody {
                 .map(|b| (b.translation(), b.is_sleeping()))
                 .unwrap_or((Vec3::NAN, false));
             sleeping += asleep as usize;
-            let dest = c + r * self.rest_offsets[i];
+            let dest = c + r * (self.rest_offsets[i] + self.anchor_shift[i]);
             let u = x - dest;
             self.scratch[i] = if u.is_finite() { u } else { Vec3::ZERO };
             if x.is_finite() {
@@ -572,7 +577,7 @@ impl SoftBody {
                 pull += (self.scratch[i as usize] - uj) * w;
             }
             let correction = -uj + pull * self.neighbour_scale[j];
-            let dest = c + r * self.rest_offsets[j];
+            let dest = c + r * (self.rest_offsets[j] + self.anchor_shift[j]);
             let Some(body) = world.bodies.get_mut(h) else {
                 continue;
             };

@@ -14,7 +14,7 @@ use rapier3d::prelude::PhysicsWorld;
 
 use super::{neighbour_scale, BodyPlan, SoftBody, Spawn};
 use crate::cluster::ClusterMethod;
-use crate::cut::particles::{update_after_tear, TornVertices};
+use crate::cut::particles::{update_after_tear, TearBoxPlanes, TornVertices};
 use crate::cut::{cut_welded, CutError, CutPlane, TearMesh, TearSegment, TearStats};
 use crate::mesh::{enclosed_volume, Mesh, WeldedMesh};
 use crate::{SoftBodyConfig, SoftBodyError};
@@ -126,7 +126,41 @@ impl SoftBody {
             self.tear = None;
             return Err(e);
         }
+        self.open_slit(&planes);
         Ok(stats)
+    }
+
+    /// Tear paper §3.3.4, the wound opening: each particle beside the slit of box `b` (rest
+    /// frame; within two particle sizes of its mid-plane, along the box's length and depth
+    /// with that margin) has its anchor moved away from the slit, `slit_open_m` for one on the
+    /// mid-plane fading linearly to nothing at two particle sizes, at most `slit_open_m` in
+    /// all. The paper adds particles around the slit for this and notes their running time;
+    /// moving the anchors of the particles already there (the tear has just given each side
+    /// its own, Algorithm 4) opens the lips the same way without a new rapier body — and
+    /// without changing the particle count a room replicates.
+    fn open_slit(&mut self, b: &TearBoxPlanes) {
+        let open = self.config.slit_open_m;
+        if open <= 0.0 || self.rest_offsets.is_empty() {
+            return;
+        }
+        // the box's planes: [start, end, -side, +side, -up, +up], outward normals
+        let side = b.normals[3];
+        let mid = 0.5 * (b.offsets_m[3] - b.offsets_m[2]);
+        let size = self.map.particle_extent_m.iter().sum::<f32>()
+            / self.map.particle_extent_m.len().max(1) as f32;
+        let reach = (2.0 * size).max(1e-3);
+        for (i, o) in self.rest_offsets.iter().enumerate() {
+            let beside = [0usize, 1, 4, 5]
+                .iter()
+                .all(|&k| b.normals[k].dot(*o) <= b.offsets_m[k] + reach);
+            let d = side.dot(*o) - mid;
+            if !beside || d.abs() >= reach {
+                continue;
+            }
+            let push = side * d.signum() * open * (1.0 - d.abs() / reach);
+            let s = self.anchor_shift[i] + push;
+            self.anchor_shift[i] = s.clamp_length_max(open);
+        }
     }
 
     /// Ends the current tear stroke: the next segment starts a new slit.
