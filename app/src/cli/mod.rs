@@ -18,8 +18,10 @@ use values::*;
 const AFTER_HELP: &str = "\
 A bot script also runs on a desktop or VR peer: it then moves the hands relative to the
 tracked ones and its grip adds to the device's. Desktop controls: the right hand on the mouse
-cursor; left button grips (Ctrl: left hand), wheel reaches (Shift: zoom), E trigger,
-right-drag orbits, middle-drag/WASDQZ pans, P particles, H HUD, R reset.
+cursor; left button grips (Ctrl: left hand), wheel reaches (Shift: zoom), E trigger (the
+scalpel tears), X the cutter (sweep it across a body to cut it), right-drag orbits,
+middle-drag/WASDQZ pans, P particles, H HUD, R reset. VR: the tool button (X/A on Touch)
+switches a hand's trigger between scalpel and cutter.
 
 Every peer prints a stats line per second on stderr: peers, host, term, bytes/s up and down,
 RTT, objects owned. Exit codes: 0 done, 1 runtime failure, 2 usage or input error, 3 cannot
