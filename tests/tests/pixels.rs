@@ -278,8 +278,15 @@ fn union(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
 /// channels), how many that is, and how many of those are box-coloured in either frame (the
 /// change is on the box, not around it).
 fn changed(a: &Rgb, c: &Rgb, b: [f64; 4]) -> (f64, usize, usize) {
+    let (n, diff, on_box) = count_changed(a, c, b, 4.0);
+    (diff as f64 / n.max(1) as f64, diff, on_box)
+}
+
+/// Pixels in `b` (with `margin`), how many differ by more than 30 (sum over channels), and
+/// how many of those are box-coloured in either frame.
+fn count_changed(a: &Rgb, c: &Rgb, b: [f64; 4], margin: f64) -> (usize, usize, usize) {
     let (mut n, mut diff, mut on_box) = (0usize, 0usize, 0usize);
-    for (x, y) in a.region(b, 4.0) {
+    for (x, y) in a.region(b, margin) {
         let (p, q) = (a.at(x, y), c.at(x, y));
         n += 1;
         let d: i32 = (0..3)
@@ -292,7 +299,7 @@ fn changed(a: &Rgb, c: &Rgb, b: [f64; 4]) -> (f64, usize, usize) {
             }
         }
     }
-    (diff as f64 / n.max(1) as f64, diff, on_box)
+    (n, diff, on_box)
 }
 
 #[test]
@@ -590,17 +597,7 @@ fn vr_without_a_runtime_says_why_and_opens_the_desktop_peer() {
 /// Fraction of the pixels in box `b` (no margin) that differ by more than 30 (sum over
 /// channels) between two frames, and how many.
 fn diff_in(a: &Rgb, c: &Rgb, b: [f64; 4]) -> (f64, usize) {
-    let (mut n, mut diff) = (0usize, 0usize);
-    for (x, y) in a.region(b, 0.0) {
-        let (p, q) = (a.at(x, y), c.at(x, y));
-        n += 1;
-        let d: i32 = (0..3)
-            .map(|i| (i32::from(p[i]) - i32::from(q[i])).abs())
-            .sum();
-        if d > 30 {
-            diff += 1;
-        }
-    }
+    let (n, diff, _) = count_changed(a, c, b, 0.0);
     (diff as f64 / n.max(1) as f64, diff)
 }
 
