@@ -521,6 +521,51 @@ pub fn finer(config: &SoftBodyConfig) -> Option<SoftBodyConfig> {
     })
 }
 
+impl BodyPlan {
+    /// A cut's piece: its center's hull stays clear of the cut face by the largest particle
+    /// radius (at most 40 % of the piece's depth from the face). The sibling piece's particles
+    /// sit within a radius of that face; touching this hull (particles push centers, one way)
+    /// they would shove it and, while hands hold both pieces, tip it over. The hull's points
+    /// nearer the face than that move away from it along its normal.
+    pub(crate) fn shave_center(&mut self, plane: &crate::cut::CutPlane) {
+        if self.config.space != crate::SimulationSpace::World
+            || self.config.center_collider != crate::CenterCollider::ConvexHull
+        {
+            return;
+        }
+        let scale = self.config.center_scale;
+        let pts: Vec<Vec3> = self.rest_vertices.iter().map(|v| *v * scale).collect();
+        // which side of the plane the piece is on, and how deep it goes from the face
+        let dist = |p: Vec3| plane.normal.dot(p + self.rest_center) - plane.offset_m;
+        let mean = pts.iter().map(|p| dist(*p)).sum::<f32>() / pts.len().max(1) as f32;
+        let side = if mean >= 0.0 { 1.0 } else { -1.0 };
+        let depth = pts.iter().map(|p| side * dist(*p)).fold(0.0f32, f32::max);
+        let radius = self
+            .map
+            .particle_extent_m
+            .iter()
+            .fold(0.0f32, |m, e| m.max(e * self.config.particle_scale));
+        let d = radius.min(0.4 * depth);
+        if d <= 0.0 {
+            return;
+        }
+        let shaved: Vec<Vec3> = pts
+            .iter()
+            .map(|p| {
+                let s = side * dist(*p);
+                if s < d {
+                    *p + plane.normal * side * (d - s)
+                } else {
+                    *p
+                }
+            })
+            .collect();
+        if let Some(b) = rapier3d::prelude::ColliderBuilder::convex_hull(&shaved) {
+            self.center_shape = Some(b);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
