@@ -22,6 +22,7 @@
 
 mod probe;
 mod refusal;
+mod routes;
 mod signal;
 mod signaller;
 mod transport;

@@ -11,6 +11,7 @@ use matchbox_socket::{
 use softsync_net::{Instant, PeerEvent, PeerId, Transmit, Transport, PROTOCOL_VERSION};
 
 use crate::refusal::classify;
+use crate::routes::{Claim, Routes};
 use crate::signaller::WatchedBuilder;
 use crate::{valid_room_name, DEFAULT_MTU, PROOF_PARAM, ROLE_PARAM, TOKEN_PARAM, VERSION_PARAM};
 
@@ -195,7 +196,8 @@ pub struct TransportStats {
     pub unroutable_dropped: u64,
     /// Datagrams on a channel before its peer said who it is, dropped.
     pub unidentified_dropped: u64,
-    /// Channels whose peer claimed the id of a peer we already reach (ignored).
+    /// Channels whose peer claimed the id of a peer we already reach (ignored), or that
+    /// claimed an id without the server's word and gave way to the peer it vouches for.
     pub idents_refused: u64,
 }
 
@@ -209,10 +211,9 @@ pub struct MatchboxTransport {
     socks: Vec<Option<Sock>>,
     local: PeerId,
     mb_id: MbPeerId,
-    /// Identified channels: (socket, matchbox id) to the peer.
-    chan: HashMap<(usize, MbPeerId), PeerId>,
-    /// Each peer's channels, the first one used.
-    routes: HashMap<PeerId, Vec<(usize, MbPeerId)>>,
+    /// Identified channels and each peer's channels, and whose word an id is taken on
+    /// (`routes.rs`).
+    routes: Routes,
     /// Channels whose ident exchange is not complete (ours not confirmed, or theirs not
     /// heard): idents are repeated until it is (a channel's first datagrams can be lost).
     idents: HashMap<(usize, MbPeerId), IdentExchange>,
@@ -298,7 +299,7 @@ impl std::fmt::Debug for MatchboxTransport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("MatchboxTransport")
             .field("local", &self.local)
-            .field("peers", &self.routes.len())
+            .field("peers", &self.routes.peers().count())
             .field("sockets", &self.socks.iter().flatten().count())
             .field("closed", &self.closed)
             .finish()
@@ -353,8 +354,7 @@ impl MatchboxTransport {
             socks: vec![Some(sock)],
             local: net_id(mb_id),
             mb_id,
-            chan: HashMap::new(),
-            routes: HashMap::new(),
+            routes: Routes::default(),
             idents: HashMap::new(),
             identified: Default::default(),
             inbox: VecDeque::new(),
@@ -386,7 +386,7 @@ impl MatchboxTransport {
 
     /// Peers with open (identified) data channels.
     pub fn connected_peers(&self) -> Vec<PeerId> {
-        self.routes.keys().copied().collect()
+        self.routes.peers().collect()
     }
 
     /// The signaling server we are registered with now (the latest), if any is up.
@@ -492,15 +492,8 @@ impl MatchboxTransport {
                     PeerState::Disconnected => {
                         self.idents.remove(&(i, mb));
                         self.identified.remove(&(i, mb));
-                        if let Some(id) = self.chan.remove(&(i, mb)) {
-                            let left = self.routes.get_mut(&id).map(|r| {
-                                r.retain(|c| *c != (i, mb));
-                                r.is_empty()
-                            });
-                            if left == Some(true) {
-                                self.routes.remove(&id);
-                                self.events.push_back(PeerEvent::Disconnected(id));
-                            }
+                        if let Some(id) = self.routes.close((i, mb)) {
+                            self.events.push_back(PeerEvent::Disconnected(id));
                         }
                     }
                 }
@@ -515,8 +508,8 @@ impl MatchboxTransport {
                     self.stats.datagrams_down += 1;
                     let ident = parse_ident(&packet);
                     let Some((id, has_ours)) = ident else {
-                        match self.chan.get(&(i, mb)) {
-                            Some(id) => self.inbox.push_back((*id, packet.to_vec())),
+                        match self.routes.peer_of(&(i, mb)) {
+                            Some(id) => self.inbox.push_back((id, packet.to_vec())),
                             // before its ident: dropped (it repeats its ident)
                             None => self.stats.unidentified_dropped += 1,
                         }
@@ -541,22 +534,18 @@ impl MatchboxTransport {
                             replies.push(mb);
                         }
                     }
-                    if self.chan.contains_key(&(i, mb)) || id == self.local {
-                        continue;
-                    }
                     // The server vouches for a peer's first id (its UUID's); another id is
                     // taken only for a peer we have no channel to (one that registered again
-                    // after its server was lost), never as a second way to a live peer: a
-                    // channel can neither speak for a member nor duplicate one.
-                    if id != net_id(mb) && self.routes.contains_key(&id) {
-                        self.stats.idents_refused += 1;
-                        continue;
-                    }
-                    self.chan.insert((i, mb), id);
-                    let r = self.routes.entry(id).or_default();
-                    r.push((i, mb));
-                    if r.len() == 1 {
-                        self.events.push_back(PeerEvent::Connected(id));
+                    // after its server was lost), and gives way to the vouched one (`routes.rs`)
+                    match self.routes.claim((i, mb), id, id == net_id(mb), self.local) {
+                        Claim::Ignored => {}
+                        Claim::Refused => self.stats.idents_refused += 1,
+                        Claim::Taken { first, evicted } => {
+                            self.stats.idents_refused += evicted.len() as u64;
+                            if first {
+                                self.events.push_back(PeerEvent::Connected(id));
+                            }
+                        }
                     }
                 }
             }
@@ -590,7 +579,7 @@ impl MatchboxTransport {
         for (i, slot) in self.socks.iter_mut().enumerate() {
             let dead = slot.as_ref().is_some_and(|s| {
                 (s.ended || s.lost.load(Ordering::Acquire))
-                    && !self.chan.keys().any(|(j, _)| *j == i)
+                    && !self.routes.uses_socket(i)
                     && s.socket.connected_peers().next().is_none()
             });
             let is_latest_attempt = i + 1 == n;
@@ -656,7 +645,7 @@ impl Transport for MatchboxTransport {
             self.stats.oversize_dropped += 1;
             return;
         }
-        let Some(&(i, mb)) = self.routes.get(&to).and_then(|r| r.first()) else {
+        let Some((i, mb)) = self.routes.route(to) else {
             self.stats.unroutable_dropped += 1;
             return;
         };
@@ -707,7 +696,7 @@ impl Transport for MatchboxTransport {
     }
 
     fn relayed(&self, peer: PeerId) -> Option<bool> {
-        let &(i, mb) = self.routes.get(&peer)?.first()?;
+        let (i, mb) = self.routes.route(peer)?;
         self.socks.get(i)?.as_ref()?.socket.is_relayed(mb)
     }
 }
