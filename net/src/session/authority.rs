@@ -77,6 +77,8 @@ pub(crate) struct Record {
     pub owner: PeerId,
     pub epoch: AuthorityEpoch,
     pub policy: AuthorityPolicy,
+    /// Someone holds it, as far as the record says.
+    pub held: bool,
     /// The claim names the same object (class and particle count agree).
     pub same_object: bool,
 }
@@ -93,8 +95,14 @@ pub(crate) enum ClaimVerdict {
 }
 
 /// A claim of `claim_epoch` on an object recorded as `rec`: believed only if it is at most
-/// one grant ahead of our record (the first of a later term, or the next one) and the
-/// object is not locked to someone else.
+/// one grant ahead of our record (the first of a later term, or the next one) and it is a
+/// grant the host would have made on that record ([`decide_request`]): never of an object
+/// locked to someone else, nor of one the record says someone holds (a `Free` one is denied,
+/// an `OwnerMustAgree` one needs its owner's word, which a claim does not carry). A claim
+/// may not do what a request may not: a member that invents the next grant of a held body
+/// during a migration's claim window is refused. (The price: a grant of a held
+/// `OwnerMustAgree` body that the old host made and the new one missed is undone — its
+/// owner gets it back.)
 pub(crate) fn judge_claim(from: PeerId, claim_epoch: AuthorityEpoch, rec: Record) -> ClaimVerdict {
     if claim_epoch <= rec.epoch && rec.same_object {
         return ClaimVerdict::Stale;
@@ -104,8 +112,9 @@ pub(crate) fn judge_claim(from: PeerId, claim_epoch: AuthorityEpoch, rec: Record
     } else {
         claim_epoch.grant == 0
     };
-    let plausible =
-        rec.same_object && next && (rec.policy != AuthorityPolicy::Locked || rec.owner == from);
+    let grantable = rec.owner == from
+        || decide_request(from, rec.owner, rec.held, rec.policy) == Decision::Grant;
+    let plausible = rec.same_object && next && grantable;
     if plausible {
         ClaimVerdict::Believe
     } else {
@@ -324,6 +333,7 @@ impl Session {
             owner,
             epoch,
             policy: o.info.policy,
+            held,
             same_object: o.info.class == claim.class && o.info.particles == claim.particles,
         };
         match judge_claim(from, claim.epoch, rec) {
@@ -431,6 +441,7 @@ mod tests {
             owner,
             epoch: e,
             policy,
+            held: false,
             same_object: true,
         }
     }
@@ -456,5 +467,40 @@ mod tests {
             ClaimVerdict::Refuse,
             "another object under that id"
         );
+    }
+
+    /// Issue 32: a claim may not do what a request may not. A held body's next grant, claimed
+    /// by someone other than its owner in the claim window, is refused (a `Free` body held is
+    /// denied to a request; an `OwnerMustAgree` one needs its owner's word); its owner's own
+    /// claim, and a claim on a body nobody holds, are believed as before.
+    #[test]
+    fn a_claim_cannot_take_a_held_body_or_skip_its_owners_word() {
+        for policy in [AuthorityPolicy::Free, AuthorityPolicy::OwnerMustAgree] {
+            let held = Record {
+                held: true,
+                ..rec(A, epoch(2, 3), policy)
+            };
+            assert_eq!(
+                judge_claim(B, epoch(2, 4), held),
+                ClaimVerdict::Refuse,
+                "{policy:?}"
+            );
+            assert_eq!(
+                judge_claim(B, epoch(3, 0), held),
+                ClaimVerdict::Refuse,
+                "{policy:?}"
+            );
+            assert_eq!(
+                judge_claim(A, epoch(2, 4), held),
+                ClaimVerdict::Believe,
+                "{policy:?}"
+            );
+            let free = rec(A, epoch(2, 3), policy);
+            assert_eq!(
+                judge_claim(B, epoch(2, 4), free),
+                ClaimVerdict::Believe,
+                "{policy:?}"
+            );
+        }
     }
 }
