@@ -224,24 +224,44 @@ fn in_a_keyed_room_only_beacons_tagged_with_the_key_count() {
     }
 }
 
+/// Issue 32: a beacon counts only from a peer the room lost, claiming at most a room's
+/// worth of members. Unkeyed, a made-up beacon from a stranger, from a member, or from a lost
+/// peer claiming 100 members (more than `max_members`) takes nothing; the room's own beacons
+/// still heal a partition.
 #[test]
-fn a_room_without_a_key_trusts_a_beacon_of_its_configuration() {
-    // the threat model a key closes: without one, whoever can send to a member and knows
-    // the room's configuration can make it yield (as whoever can reach the signaling server
-    // can join and take objects)
+fn a_made_up_beacon_takes_no_room_even_without_a_key() {
     let mut h = room(3, steady_link());
+    h.auto_rejoin = true;
     let bytes = forged_beacon(&h);
     let now = h.now;
+    // a stranger, and a member of the room (which the room did not lose)
     h.session(0).handle_packet(now, PeerId(999), &bytes);
-    assert!(
-        dropped_towards(&h, 0, PeerId(999)) || {
-            h.step();
-            h.peers[0]
-                .events
-                .iter()
-                .any(|e| matches!(e, Event::Dropped { host, .. } if *host == PeerId(999)))
-        }
-    );
+    h.session(0).handle_packet(now, Harness::id(2), &bytes);
+    h.advance(ms(500));
+    assert!(!dropped_towards(&h, 0, PeerId(999)));
+    assert_eq!(h.peers[0].session.host_id(), Some(Harness::id(0)));
+    assert!(h.peers[0].session.stats().beacons_refused >= 2);
+    assert_eq!(h.rejoins, 0);
+    // a real partition: peer 0 alone, 1 and 2 go on; then a lost peer's made-up summary of
+    // 100 members is refused too, and the real beacons heal the room
+    split(&mut h, &[0], &[1, 2], true);
+    h.advance(ms(3000));
+    assert!(h.peers[0].session.lost_peers().contains(&Harness::id(2)));
+    let refused = h.peers[0].session.stats().beacons_refused;
+    let now = h.now;
+    h.session(0).handle_packet(now, Harness::id(2), &bytes);
+    assert_eq!(h.peers[0].session.stats().beacons_refused, refused + 1);
+    assert!(!dropped_towards(&h, 0, PeerId(999)));
+    split(&mut h, &[0], &[1, 2], false);
+    h.advance(ms(8000));
+    for i in 0..3 {
+        assert_eq!(
+            h.peers[i].session.host_id(),
+            Some(Harness::id(1)),
+            "peer {i}"
+        );
+        assert_eq!(h.peers[i].session.members().len(), 3, "peer {i}");
+    }
 }
 
 fn arb_summary() -> impl proptest::strategy::Strategy<Value = softsync_net::wire::RoomSummary> {

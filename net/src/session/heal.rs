@@ -16,6 +16,11 @@
 //!   [`Event::Dropped`] naming the winning host, and the application joins that host with a
 //!   fresh session (as after any drop: the winner's snapshot rebuilds its world).
 //!
+//! A beacon counts only from a peer our room lost, claiming at most `max_members` members
+//! (`SessionConfig`): a member or a stranger that makes one up takes nothing, key or not. (A
+//! peer that joined the other side during the partition, and so lost none of ours, learns it
+//! loses from its host, which did.)
+//!
 //! A peer just woken from a stall of its own ignores beacons: its member list still counts the
 //! peers that went on without it, and the stall path (a refusal of the newer term) brings it
 //! back instead.
@@ -160,6 +165,16 @@ impl Session {
         // still counts the peers that went on without us). The stall path settles it: the
         // room that went on tells us (a refusal of its newer term), and we rejoin it.
         if self.stalled_recently(now) {
+            return;
+        }
+        // Only a peer our room lost speaks for the room it went on as (a partition's other
+        // side: its members lost us as we lost them), and no room is bigger than a room may
+        // be: a stranger's or a member's made-up summary takes nothing (issue 32).
+        let plausible = self.heal.lost.contains_key(&from)
+            && theirs.members >= 1
+            && theirs.members as usize <= self.cfg.max_members;
+        if !plausible {
+            self.stats.beacons_refused += 1;
             return;
         }
         if let Some(k) = &self.cfg.room_key {
