@@ -88,8 +88,12 @@ pub struct Stats {
     pub beacons_sent: u64,
     /// Beacons heard from another room of ours (a partition healed).
     pub beacons_heard: u64,
-    /// Beacons ignored in a room with a key: no valid tag.
+    /// Beacons ignored: not from a peer the room lost, an implausible member count, or (in a
+    /// room with a key) no valid tag.
     pub beacons_refused: u64,
+    /// Requests of a member over its rate (`MAX_REQUESTS_PER_S` at the host, and keyframe
+    /// requests over `MAX_KEYFRAME_REQUESTS_PER_S`), refused.
+    pub requests_rate_limited: u64,
     /// Times this peer's room yielded to another after a partition (0 or 1 per session).
     pub merges: u64,
     /// Delta updates whose base was missing (a keyframe was requested).

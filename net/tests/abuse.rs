@@ -501,3 +501,72 @@ fn a_strangers_keyframe_request_reads_nothing_of_a_keyed_room() {
     assert_eq!(state_bytes, 0, "the stranger got state");
     assert!(host.stats().refused_controls >= 20);
 }
+
+/// Issue 32: a member's requests are rate-limited at the host. A modified client that sends
+/// 1,000 authority requests and releases in a second gets `MAX_REQUESTS_PER_S` of them
+/// served and the rest refused and counted; keyframe requests likewise. The next second it is
+/// served again, and the host's own requests are never limited.
+#[test]
+fn a_members_request_flood_is_limited_per_second_and_counted() {
+    use softsync_net::session::link::{MAX_KEYFRAME_REQUESTS_PER_S, MAX_REQUESTS_PER_S};
+    let cfg = SessionConfig::default();
+    let mut now = Instant::ZERO;
+    let mut host = Session::host(PeerId(1), cfg.clone(), now);
+    let mut m = Session::join(PeerId(2), PeerId(1), cfg, now);
+    for _ in 0..25 {
+        now += Duration::from_millis(20);
+        host.handle_timeout(now);
+        m.handle_timeout(now);
+        pump(now, &mut host, &mut [&mut m]);
+    }
+    assert!(m.is_connected());
+    let s = softsync_net::ObjectState::rigid(Vec3::ZERO, glam::Quat::IDENTITY);
+    let (id, _) = host.spawn(now, ClassId(0), s).unwrap();
+    pump(now, &mut host, &mut [&mut m]);
+    now += Duration::from_millis(20);
+    for k in 0..1000 {
+        let c = if k % 2 == 0 {
+            Control::AuthorityRequest { id }
+        } else {
+            Control::AuthorityRelease { id }
+        };
+        m.send_raw_control(now, PeerId(1), &c);
+        if k % 50 == 0 {
+            pump(now, &mut host, &mut [&mut m]);
+        }
+    }
+    pump(now, &mut host, &mut [&mut m]);
+    let limited = host.stats().requests_rate_limited;
+    assert_eq!(limited, 1000 - u64::from(MAX_REQUESTS_PER_S), "{limited}");
+    // keyframe requests, each naming the object, 200 in the same second
+    let before = host.stats().requests_rate_limited;
+    for k in 0..200u8 {
+        // a datagram of its own each (as a modified client would send them)
+        let header = softsync_net::wire::PacketHeader {
+            term: m.term(),
+            seq: k,
+            time_ms: now.wire_ms(),
+        };
+        let mut w = softsync_net::wire::PacketWriter::new(&header, 1200);
+        assert!(w.keyframe_request(&[id]));
+        host.handle_packet(now, PeerId(2), &w.finish().0);
+    }
+    assert_eq!(
+        host.stats().requests_rate_limited - before,
+        200 - u64::from(MAX_KEYFRAME_REQUESTS_PER_S)
+    );
+    // a second later it is served again; the host's own requests were never counted
+    now += Duration::from_millis(1100);
+    host.handle_timeout(now);
+    m.handle_timeout(now);
+    pump(now, &mut host, &mut [&mut m]);
+    let before = host.stats().requests_rate_limited;
+    m.request_authority(now, id).unwrap();
+    pump(now, &mut host, &mut [&mut m]);
+    assert_eq!(host.stats().requests_rate_limited, before);
+    for _ in 0..100 {
+        host.request_authority(now, id).unwrap();
+    }
+    assert_eq!(host.stats().requests_rate_limited, before);
+    assert!(m.is_connected() && host.members().len() == 2);
+}

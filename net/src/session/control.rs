@@ -180,7 +180,20 @@ impl Session {
             | Control::Resync { .. })
                 if self.is_member_client(from) =>
             {
-                self.on_request(now, from, msg);
+                // a member's requests are rate-limited (the host's own are not; topology
+                // requests have their own, per object: a fast scalpel makes 200 a second)
+                let topology = matches!(msg, Control::TopologyRequest { .. });
+                let admitted = from == self.local
+                    || topology
+                    || self
+                        .links
+                        .get_mut(&from)
+                        .is_none_or(|l| l.requests.admit(now, super::link::MAX_REQUESTS_PER_S));
+                if admitted {
+                    self.on_request(now, from, msg);
+                } else {
+                    self.stats.requests_rate_limited += 1;
+                }
             }
             _ => {}
         }

@@ -283,6 +283,38 @@ impl StateInFlight {
     }
 }
 
+/// Requests a member may make of the host per second (grabs, releases, authority answers,
+/// spawns, despawns, resync claims; topology events have their own rate per object,
+/// `MAX_TOPOLOGY_RATE`): a person's two hands make a few; past this a request is refused and
+/// counted (`Stats::requests_rate_limited`).
+pub const MAX_REQUESTS_PER_S: u32 = 60;
+
+/// Keyframe requests a member or our host may make of us per second (each names up to
+/// [`MAX_KEYFRAME_REQUEST`] objects; a healthy link asks after a loss burst, a few a second).
+pub const MAX_KEYFRAME_REQUESTS_PER_S: u32 = 30;
+
+/// A count per one-second window, to rate-limit what a peer asks of us.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct RateWindow {
+    window: Option<(Instant, u32)>,
+}
+
+impl RateWindow {
+    /// Counts one at `now` against `per_s`; false if over it (not counted).
+    pub fn admit(&mut self, now: Instant, per_s: u32) -> bool {
+        match &mut self.window {
+            Some((start, n)) if now < *start + Duration::from_secs(1) => {
+                if *n >= per_s {
+                    return false;
+                }
+                *n += 1;
+            }
+            w => *w = Some((now, 1)),
+        }
+        true
+    }
+}
+
 /// Objects whose keyframes we ask the peer for (a delta's base was missing), rate-limited.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct KeyframeRequests {
@@ -359,6 +391,9 @@ pub(crate) struct Link {
     pub pending_sample: Option<Instant>,
     /// Keyframes to ask it for.
     pub keyframes: KeyframeRequests,
+    /// What the peer asked of us this second: requests at the host, keyframe requests.
+    pub requests: RateWindow,
+    pub keyframe_asks: RateWindow,
     /// A ping of its to answer (its time).
     pub pong_due: Option<u32>,
     /// A ping of ours to send.

@@ -203,6 +203,14 @@ impl Session {
                 Section::KeyframeRequest { ids }
                     if self.members.contains_key(&from) || Some(from) == self.host =>
                 {
+                    let admitted = self.links.get_mut(&from).is_none_or(|l| {
+                        l.keyframe_asks
+                            .admit(now, super::link::MAX_KEYFRAME_REQUESTS_PER_S)
+                    });
+                    if !admitted {
+                        self.stats.requests_rate_limited += 1;
+                        continue;
+                    }
                     for id in ids {
                         let sends = self
                             .objects
