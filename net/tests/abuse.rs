@@ -570,3 +570,65 @@ fn a_members_request_flood_is_limited_per_second_and_counted() {
     assert_eq!(host.stats().requests_rate_limited, before);
     assert!(m.is_connected() && host.members().len() == 2);
 }
+
+/// Issue 32: throttled, then out. A member that keeps asking for ten times its request rate
+/// is refused past the rate at once and dropped once it has done so
+/// `REQUEST_FLOOD_STRIKES` seconds in a row, told why; an honest burst (one second over the
+/// rate, then quiet) is not.
+#[test]
+fn a_member_that_keeps_flooding_requests_is_dropped_with_a_reason() {
+    use softsync_net::session::link::{MAX_REQUESTS_PER_S, REQUEST_FLOOD_STRIKES};
+    let cfg = SessionConfig::default();
+    let mut now = Instant::ZERO;
+    let mut host = Session::host(PeerId(1), cfg.clone(), now);
+    let mut m = Session::join(PeerId(2), PeerId(1), cfg, now);
+    for _ in 0..25 {
+        now += Duration::from_millis(20);
+        host.handle_timeout(now);
+        m.handle_timeout(now);
+        pump(now, &mut host, &mut [&mut m]);
+    }
+    let s = softsync_net::ObjectState::rigid(Vec3::ZERO, glam::Quat::IDENTITY);
+    let (id, _) = host.spawn(now, ClassId(0), s).unwrap();
+    pump(now, &mut host, &mut [&mut m]);
+    let mut dropped_after = None;
+    for tick in 0..100 {
+        // 100 ms: the flood's share (ten times the rate), then the ordinary traffic
+        now += Duration::from_millis(100);
+        for _ in 0..MAX_REQUESTS_PER_S {
+            m.send_raw_control(now, PeerId(1), &Control::AuthorityRequest { id });
+        }
+        host.handle_timeout(now);
+        m.handle_timeout(now);
+        pump(now, &mut host, &mut [&mut m]);
+        if !host.members().contains_key(&PeerId(2)) {
+            dropped_after = Some(tick);
+            break;
+        }
+    }
+    let ticks = dropped_after.expect("the flooding member was never dropped");
+    // after REQUEST_FLOOD_STRIKES full seconds over twice the rate, and not much later
+    assert!(
+        (10 * REQUEST_FLOOD_STRIKES as usize..=10 * (REQUEST_FLOOD_STRIKES as usize + 2))
+            .contains(&ticks),
+        "dropped after {ticks} ticks of 100 ms"
+    );
+    assert_eq!(host.stats().dropped_over_quota, 1);
+    assert!(host.stats().requests_rate_limited > 1000);
+    // it is told why
+    for _ in 0..5 {
+        now += Duration::from_millis(100);
+        host.handle_timeout(now);
+        m.handle_timeout(now);
+        pump(now, &mut host, &mut [&mut m]);
+    }
+    let told = std::iter::from_fn(|| m.poll_event()).find_map(|e| match e {
+        Event::Dropped { reason, .. } => Some(reason),
+        _ => None,
+    });
+    assert!(
+        told.as_deref()
+            .is_some_and(|r| r.contains("twice the 60 requests a second")),
+        "{told:?}"
+    );
+}

@@ -193,6 +193,7 @@ impl Session {
                     self.on_request(now, from, msg);
                 } else {
                     self.stats.requests_rate_limited += 1;
+                    self.drop_if_flooding(now, from);
                 }
             }
             _ => {}

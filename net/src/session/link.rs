@@ -293,25 +293,49 @@ pub const MAX_REQUESTS_PER_S: u32 = 60;
 /// [`MAX_KEYFRAME_REQUEST`] objects; a healthy link asks after a loss burst, a few a second).
 pub const MAX_KEYFRAME_REQUESTS_PER_S: u32 = 30;
 
-/// A count per one-second window, to rate-limit what a peer asks of us.
+/// A member whose requests went over twice their rate this many seconds in a row is dropped
+/// (a flood, not a burst): `DropWhy::RequestFlood`.
+pub const REQUEST_FLOOD_STRIKES: u32 = 5;
+
+/// A count per one-second window, to rate-limit what a peer asks of us; and how many
+/// windows in a row it asked for twice its rate or more (a flood's strikes).
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct RateWindow {
-    window: Option<(Instant, u32)>,
+    /// Start, admitted, refused.
+    window: Option<(Instant, u32, u32)>,
+    strikes: u32,
 }
 
 impl RateWindow {
-    /// Counts one at `now` against `per_s`; false if over it (not counted).
+    /// Counts one at `now` against `per_s`; false if over it (counted as refused).
     pub fn admit(&mut self, now: Instant, per_s: u32) -> bool {
         match &mut self.window {
-            Some((start, n)) if now < *start + Duration::from_secs(1) => {
+            Some((start, n, refused)) if now < *start + Duration::from_secs(1) => {
                 if *n >= per_s {
+                    *refused += 1;
                     return false;
                 }
                 *n += 1;
             }
-            w => *w = Some((now, 1)),
+            w => {
+                // a window closed: was it a flood (twice the rate asked, or more)?
+                if let Some((start, _, refused)) = *w {
+                    let consecutive = now < start + Duration::from_secs(2);
+                    self.strikes = match (refused >= per_s, consecutive) {
+                        (true, true) => self.strikes + 1,
+                        (true, false) => 1,
+                        (false, _) => 0,
+                    };
+                }
+                *w = Some((now, 1, 0));
+            }
         }
         true
+    }
+
+    /// Windows in a row that asked for twice the rate or more.
+    pub fn strikes(&self) -> u32 {
+        self.strikes
     }
 }
 

@@ -27,6 +27,8 @@ pub(crate) enum DropWhy {
     OlderTerm(Term),
     /// It left this many control messages unacknowledged (`PeerBudget`).
     OverQuota(usize),
+    /// It asked for twice its request rate or more, seconds in a row.
+    RequestFlood,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -267,6 +269,12 @@ impl Session {
                  most {}); join again",
                 self.cfg.peer_budget.max_control_in_flight
             ),
+            DropWhy::RequestFlood => format!(
+                "dropped from the room: more than twice the {} requests a second a member may \
+                 make, {} seconds in a row",
+                super::link::MAX_REQUESTS_PER_S,
+                super::link::REQUEST_FLOOD_STRIKES
+            ),
         };
         // naming ourselves as the host to join again: a drop notice, which a joining session
         // (the dropped peer's fresh one, reached by a notice its old one provoked) ignores
@@ -364,6 +372,25 @@ impl Session {
                 }
             }
             Role::Joining | Role::Refused => {}
+        }
+    }
+}
+
+impl Session {
+    /// Host: a member whose requests have gone over twice their rate for
+    /// [`super::link::REQUEST_FLOOD_STRIKES`] seconds in a row is dropped, told why and
+    /// counted (`Stats::dropped_over_quota`): throttled first (refused past the rate), then
+    /// out.
+    pub(super) fn drop_if_flooding(&mut self, now: Instant, from: PeerId) {
+        let strikes = self.links.get(&from).map_or(0, |l| l.requests.strikes());
+        if self.role == Role::Host
+            && from != self.local
+            && self.members.contains_key(&from)
+            && strikes >= super::link::REQUEST_FLOOD_STRIKES
+        {
+            self.stats.dropped_over_quota += 1;
+            self.dropped.insert(from, DropWhy::RequestFlood);
+            self.host_peer_left(now, from);
         }
     }
 }
