@@ -62,13 +62,15 @@ fn a_torn_bunny_and_a_cut_box_survive_the_hosts_death_and_reach_a_late_joiner() 
                   tear right bunny -0.05 0.03 0 -0.025 0.03 0.005 0 0.03 0 0.025 0.03 -0.005 0.05 0.03 0 in 0.1; \
                   own softbox; cut softbox 0.2 1 0; wait 0.5";
     let b1d = dir.join("b1.jsonl");
-    let mut b1_args = dumped(&b1d, "30");
+    // 60 s: still running when the late joiner's last dump is compared with theirs, even when
+    // a loaded machine slows every join (30 s ran out once under two CPU hogs)
+    let mut b1_args = dumped(&b1d, "60");
     b1_args.extend(["--bot", script].map(String::from));
     let b1 = peer_on(&dir, "bot1", "join", &url, "cut", &strs(&b1_args));
     let b1_id = b1.peer_id();
     b1.wait_line("joined", Duration::from_secs(20));
     let b2d = dir.join("b2.jsonl");
-    let mut b2_args = dumped(&b2d, "30");
+    let mut b2_args = dumped(&b2d, "60");
     b2_args.extend(["--bot", "idle"].map(String::from));
     let b2 = peer_on(&dir, "bot2", "join", &url, "cut", &strs(&b2_args));
     let b2_id = b2.peer_id();
