@@ -194,7 +194,9 @@ impl Proc {
 
     /// The peer id it printed (`hosting …` / `joining …`).
     pub fn peer_id(&self) -> u64 {
-        let l = self.wait_line("peer=", Duration::from_secs(20));
+        // 40 s: a debug binary starting beside other rooms' processes on a loaded 2-core
+        // machine once took more than 20 s to print it
+        let l = self.wait_line("peer=", Duration::from_secs(40));
         field(&l, "peer").parse().unwrap()
     }
 }
