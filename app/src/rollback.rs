@@ -125,7 +125,11 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
                 // at its Hello, told the room syncs by rollback)
                 let server = share
                     .get_or_insert_with(|| scene_server(&scene_copy, peer.session().config(), me));
-                if let Some(t) = server.handle(now, from, &bytes) {
+                let session = peer.session();
+                let judged = server.handle_judged(now, from, &bytes, |t| {
+                    session.token_admits(t, from, now).is_ok()
+                });
+                if let Some(t) = judged {
                     transport.send(now, &t);
                 }
                 continue;

@@ -97,7 +97,8 @@ pub struct RoomOptions {
     /// by the host while it warms up).
     pub start_ready: bool,
     /// Where a joiner without the scene ([`Room::open_fetching_scene`]) keeps the scene it
-    /// receives (a folder per scene, named by its digest).
+    /// receives (a folder per scene, named by its digest). Default: this user's private cache
+    /// ([`softsync_peer::scene::cache::default_scene_cache`]), checked and cleaned at each use.
     pub scene_cache: PathBuf,
     /// The adaptive failure detector with 50 ms heartbeats
     /// ([`SessionConfig::fast_detection`]): a dead host is replaced in a few hundred ms
@@ -143,7 +144,7 @@ impl RoomOptions {
             peer: PeerConfig::default(),
             messages: MessageTypes::new(),
             start_ready: true,
-            scene_cache: std::env::temp_dir().join("softsync-scenes"),
+            scene_cache: softsync_peer::scene::cache::default_scene_cache(),
             fast_detection: false,
             uplink_bytes_per_s: None,
             state_route: softsync_net::StateRoute::Relay,
@@ -626,7 +627,11 @@ impl Room {
         let server = self
             .share
             .get_or_insert_with(|| crate::connect::scene_server(scene, cfg, me));
-        if let Some(t) = server.handle(now, from, datagram) {
+        let session = self.peer.session();
+        let judged = server.handle_judged(now, from, datagram, |t| {
+            session.token_admits(t, from, now).is_ok()
+        });
+        if let Some(t) = judged {
             self.transport.send(now, &t);
         }
     }

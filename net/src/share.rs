@@ -270,8 +270,23 @@ impl BlobServer {
         self.blob.as_ref().ok().map(|(_, d)| *d)
     }
 
-    /// The answer to a share datagram from `from`, if it deserves one.
+    /// The answer to a share datagram from `from`, if it deserves one. A join token is
+    /// taken on its signature alone: a member of a room uses
+    /// [`handle_judged`](Self::handle_judged) with its session's word on it.
     pub fn handle(&mut self, now: Instant, from: PeerId, datagram: &[u8]) -> Option<Transmit> {
+        self.handle_judged(now, from, datagram, |_| true)
+    }
+
+    /// [`handle`](Self::handle), a request's join token (signed for this room) also put to
+    /// `token_ok`: whether it is unexpired and not used by another peer
+    /// ([`Session::token_admits`](crate::session::Session::token_admits) of the requester).
+    pub fn handle_judged(
+        &mut self,
+        now: Instant,
+        from: PeerId,
+        datagram: &[u8],
+        token_ok: impl FnOnce(&RoomToken) -> bool,
+    ) -> Option<Transmit> {
         let Ok(ShareMsg::Request {
             offset,
             len,
@@ -285,9 +300,8 @@ impl BlobServer {
         let proven = match (&self.key, proof, token) {
             (None, _, _) => true,
             (Some((key, me)), Some(p), _) => key.verify_scene_proof(from, *me, &p),
-            // a token of this room, signed with its key (its expiry is the host's to check
-            // at the join: this server has no wall clock)
-            (Some((key, _)), None, Some(t)) => key.token_is_ours(&t),
+            // a token of this room, signed with its key, unexpired and nobody else's
+            (Some((key, _)), None, Some(t)) => key.token_is_ours(&t) && token_ok(&t),
             (Some(_), None, None) => false,
         };
         let msg = match &self.blob {

@@ -173,6 +173,9 @@ pub struct RollbackStats {
     /// Epoch announcements refused: not from the room's host, or naming another host than
     /// their sender, or a start frame past the frame counter's range.
     pub epochs_refused: u64,
+    /// Snapshot requests refused: from a peer that is not a member of the room's session (a
+    /// keyed room's snapshot goes only to peers that proved the key or a token).
+    pub snapshots_refused: u64,
 }
 
 /// A pending switch to an announced epoch.
@@ -362,6 +365,13 @@ impl RollbackPeer {
             }
         }
         if let Some((n, server)) = self.server.as_mut() {
+            // Only to members of the room's session: they passed its key or token check at
+            // their join (a stranger of a keyed room gets nothing; the session's members are
+            // the epochs' players).
+            if *n == epoch && !self.session.members().contains_key(&from) {
+                self.stats.snapshots_refused += 1;
+                return;
+            }
             if *n == epoch {
                 if let Some(t) = server.handle(now, from, share) {
                     self.outbox.push_back(Transmit {

@@ -224,3 +224,36 @@ fn joiners_that_first_reach_each_other_still_get_in() {
     }
     assert_agree(&room);
 }
+
+#[test]
+fn a_stranger_asking_for_the_epochs_snapshot_gets_nothing() {
+    let mut room = Room::new(net(10, 0.0));
+    room.add(1);
+    room.add(2);
+    room.run(Duration::from_secs(3));
+    let epoch = room.nodes[0].peer.epoch().unwrap().n;
+    let now = room.now();
+    let ask = softsync_net::share::ShareMsg::Request {
+        offset: 0,
+        len: 1024,
+        proof: None,
+        token: None,
+    }
+    .encode();
+    let datagram = softsync_rollback::socket::encode_snapshot(epoch, &ask);
+    // a member may ask (it is served a chunk); a peer outside the session may not
+    for (from, served) in [(PeerId(2), true), (PeerId(9), false)] {
+        let host = &mut room.nodes[0].peer;
+        host.handle_datagram(now, from, &datagram);
+        let mut to_it = 0;
+        while let Some(t) = host.poll_transmit(now) {
+            let snapshot = matches!(
+                softsync_rollback::socket::decode(&t.payload),
+                Ok(softsync_rollback::socket::Datagram::Snapshot { .. })
+            );
+            to_it += usize::from(t.to == from && snapshot);
+        }
+        assert_eq!(to_it > 0, served, "peer {from:?}");
+    }
+    assert_eq!(room.nodes[0].peer.stats().snapshots_refused, 1);
+}

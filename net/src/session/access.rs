@@ -285,8 +285,10 @@ pub(crate) struct Challenges {
     tokens_used: BTreeMap<[u8; 16], (PeerId, u64)>,
 }
 
-/// Most used tokens remembered (expired ones go first, then the soonest to expire).
-const MAX_TOKENS_USED: usize = 4096;
+/// Most used join tokens a session remembers. Expired ones are forgotten; a host that
+/// remembers this many unexpired ones takes no new token (it never forgets a valid one, which
+/// would let it be used twice); a member told of more by its host forgets the soonest to expire.
+pub const MAX_TOKENS_USED: usize = 4096;
 
 impl Session {
     /// Host: a joiner passed the other checks. Without a room key it is admitted; with one
@@ -353,10 +355,10 @@ impl Session {
     /// Host: a joiner shows a join token. Admitted if it is this room's, unexpired, and not
     /// used by another peer; refused with the reason otherwise.
     pub(super) fn on_token_proof(&mut self, now: Instant, from: PeerId, token: RoomToken) {
-        let Some(key) = self.cfg.room_key.clone() else {
+        if self.cfg.room_key.is_none() {
             self.stats.refused_controls += 1;
             return;
-        };
+        }
         if self.members.contains_key(&from) {
             return;
         }
@@ -366,11 +368,16 @@ impl Session {
             self.send_control(now, from, &Control::refused(reason));
             return;
         }
-        let verdict = key.check_token(&token, now).and_then(|()| {
-            match self.challenges.tokens_used.get(&token.nonce) {
-                Some((p, _)) if *p != from => Err("the join token was used by another peer"),
-                _ => Ok(()),
+        let verdict = self.token_admits(&token, from, now).and_then(|()| {
+            // bounded, and a valid token is never forgotten: when the room remembers as many
+            // unexpired tokens as it can, it takes no new one
+            let used = &self.challenges.tokens_used;
+            if !used.contains_key(&token.nonce) && self.tokens_used_live(now) >= MAX_TOKENS_USED {
+                return Err(
+                    "the room has taken as many join tokens as it remembers: ask for the key",
+                );
             }
+            Ok(())
         });
         if let Err(why) = verdict {
             self.stats.refused_joins += 1;
@@ -387,6 +394,35 @@ impl Session {
             self.note_token_used(now, token.nonce, from, token.expires_unix);
             self.broadcast(now, &used, None);
         }
+    }
+
+    /// Whether `token` admits peer `who` at `now`: signed with the room's key for this room,
+    /// unexpired, and not used by another peer (the host's check at a join; a member serving
+    /// the scene asks the same before it sends anything of a keyed room). Why not, if not.
+    pub fn token_admits(
+        &self,
+        token: &RoomToken,
+        who: PeerId,
+        now: Instant,
+    ) -> Result<(), &'static str> {
+        let Some(key) = self.cfg.room_key.as_ref() else {
+            return Err("this peer holds no room key to check a join token");
+        };
+        key.check_token(token, now)?;
+        match self.challenges.tokens_used.get(&token.nonce) {
+            Some((p, _)) if *p != who => Err("the join token was used by another peer"),
+            _ => Ok(()),
+        }
+    }
+
+    /// Used tokens not yet expired at `now` (all of them without a clock).
+    fn tokens_used_live(&self, now: Instant) -> usize {
+        let t = self.cfg.room_key.as_ref().and_then(|k| k.unix_now(now));
+        self.challenges
+            .tokens_used
+            .values()
+            .filter(|(_, exp)| t.is_none_or(|t| *exp > t))
+            .count()
     }
 
     /// A token was used (by us as host, or our host says so).
@@ -698,6 +734,91 @@ mod tokens {
         w.add(Session::join(PeerId(2), PeerId(1), token_cfg(&good), w.now));
         w.settle();
         assert!(refusal(&mut w, 2).unwrap().contains("no clock"));
+    }
+
+    #[test]
+    fn the_scene_goes_to_a_token_only_while_the_host_would_admit_it() {
+        use crate::share::{BlobServer, ShareMsg, NEEDS_KEY};
+        let t = key(9).issue_token(T0 + 3600, [7; 16]).unwrap();
+        let expired = key(9).issue_token(T0 - 1, [8; 16]).unwrap();
+        let mut w = Wire::new();
+        w.add(Session::host(PeerId(1), host_cfg(1), w.now));
+        w.add(Session::join(PeerId(2), PeerId(1), token_cfg(&t), w.now));
+        w.settle();
+        assert!(w.get(2).is_connected());
+        let now = w.now;
+        let mut server = BlobServer::new(vec![7; 3000]).with_key(Some(key(1)), PeerId(1));
+        let ask = |t: &RoomToken| {
+            ShareMsg::Request {
+                offset: 0,
+                len: 1024,
+                proof: None,
+                token: Some(t.clone()),
+            }
+            .encode()
+        };
+        let host = w.get(1);
+        let mut answer = |from: u64, t: &RoomToken| {
+            let p = PeerId(from);
+            let d = server
+                .handle_judged(now, p, &ask(t), |t| host.token_admits(t, p, now).is_ok())
+                .unwrap();
+            matches!(
+                ShareMsg::decode(&d.payload).unwrap(),
+                ShareMsg::Chunk { .. }
+            )
+        };
+        // the peer that used it: served; another peer with it, or an expired one: not
+        assert!(answer(2, &t));
+        assert!(!answer(3, &t));
+        assert!(!answer(4, &expired));
+        let no = server
+            .handle_judged(now, PeerId(3), &ask(&t), |_| false)
+            .unwrap();
+        assert_eq!(
+            ShareMsg::decode(&no.payload).unwrap(),
+            ShareMsg::Unavailable(NEEDS_KEY.into())
+        );
+        // the plain handle takes the signature alone (a server outside any session)
+        assert!(server.handle(now, PeerId(3), &ask(&t)).is_some());
+    }
+
+    #[test]
+    fn a_host_full_of_valid_tokens_takes_no_new_one_and_forgets_none() {
+        let mut w = Wire::new();
+        w.add(Session::host(PeerId(1), host_cfg(1), w.now));
+        let now = w.now;
+        for i in 0..MAX_TOKENS_USED as u64 {
+            let mut n = [0u8; 16];
+            n[..8].copy_from_slice(&i.to_le_bytes());
+            w.get(1)
+                .note_token_used(now, n, PeerId(1000 + i), T0 + 3600);
+        }
+        let t = key(9).issue_token(T0 + 3600, [9; 16]).unwrap();
+        w.add(Session::join(PeerId(2), PeerId(1), token_cfg(&t), w.now));
+        w.settle();
+        let r = refusal(&mut w, 2).unwrap_or_default();
+        assert!(r.contains("as many join tokens"), "{r:?}");
+        assert_eq!(w.get(1).challenges.tokens_used.len(), MAX_TOKENS_USED);
+        // once some have expired, a new one is taken (the expired ones forgotten)
+        let later = T0 + 3601;
+        let mut w2 = Wire::new();
+        w2.add(Session::host(PeerId(1), host_cfg(1), w2.now));
+        let now = w2.now;
+        for i in 0..MAX_TOKENS_USED as u64 {
+            let mut n = [0u8; 16];
+            n[..8].copy_from_slice(&i.to_le_bytes());
+            let exp = if i % 2 == 0 { T0 + 1 } else { later + 3600 };
+            w2.get(1).note_token_used(now, n, PeerId(1000 + i), exp);
+        }
+        w2.now += std::time::Duration::from_secs(2);
+        w2.add(Session::join(PeerId(2), PeerId(1), token_cfg(&t), w2.now));
+        w2.settle();
+        assert!(w2.get(2).is_connected(), "{:?}", refusal(&mut w2, 2));
+        assert_eq!(
+            w2.get(1).challenges.tokens_used.len(),
+            MAX_TOKENS_USED / 2 + 1
+        );
     }
 
     #[test]

@@ -139,15 +139,21 @@ impl Scene {
         }
         let digest = softsync_net::share::sha256(bundle);
         let hex: String = digest[..8].iter().map(|b| format!("{b:02x}")).collect();
+        // this user's private folder; no write follows a link (see `cache`)
+        super::cache::prepare(cache)?;
         let dir: PathBuf = cache.join(hex);
         for (p, bytes) in &b.files {
             let path = dir.join(p);
             if let Some(parent) = path.parent() {
-                std::fs::create_dir_all(parent)
-                    .map_err(|e| format!("scene cache {}: {e}", parent.display()))?;
+                super::cache::make_dirs(cache, parent)?;
             }
             write_atomically(&path, bytes)?;
         }
+        // the folder's time says when it was last used; the oldest scenes go
+        if let Ok(f) = std::fs::File::open(&dir) {
+            let _ = f.set_modified(std::time::SystemTime::now());
+        }
+        super::cache::clean(cache, &dir);
         // its meshes may name only files of the bundle: a hostile scene must not make this
         // peer read (and then serve to the next joiner) a file of its own
         Scene::load_with(&dir.join(&b.scene), super::file::MeshPaths::Confined)
@@ -162,7 +168,13 @@ fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), String> {
     let mut tmp = path.as_os_str().to_owned();
     tmp.push(format!(".partial-{}-{n}", std::process::id()));
     let tmp = PathBuf::from(tmp);
-    std::fs::write(&tmp, bytes)
+    // `create_new`: a fresh file (O_EXCL never follows a link planted at its name); the
+    // rename then replaces the name itself, never what a link there points to
+    std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&tmp)
+        .and_then(|mut f| std::io::Write::write_all(&mut f, bytes))
         .and_then(|()| std::fs::rename(&tmp, path))
         .map_err(|e| {
             let _ = std::fs::remove_file(&tmp);

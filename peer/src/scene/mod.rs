@@ -8,6 +8,7 @@
 //! refused at the handshake with a clear reason.
 
 mod bundle;
+pub mod cache;
 mod file;
 
 use std::path::{Path, PathBuf};
