@@ -120,7 +120,9 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
     while !stop.load(Ordering::SeqCst) && a.duration.is_none_or(|d| started.elapsed() < d) {
         let now = clock.now();
         while let Some((from, bytes)) = transport.recv(now) {
-            if softsync_net::share::is_share(&bytes) {
+            // the front door: the scene share here, the rest to the rollback peer's (which
+            // takes the session's and its own)
+            if softsync_net::door::classify(&bytes) == softsync_net::door::Door::Share {
                 // a joiner without the scene asks for ours (a state-sync one is then refused
                 // at its Hello, told the room syncs by rollback)
                 let server = share

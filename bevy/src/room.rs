@@ -11,8 +11,9 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use crate::connect::Connected;
+use softsync_net::door::{Door, FrontDoor};
 use softsync_net::messages::{Message, MessageTypes, RegisterError};
-use softsync_net::share::{self, BlobServer};
+use softsync_net::share::BlobServer;
 use softsync_net::PeerId;
 use softsync_net::{
     ConditionerConfig, Delivery, Instant, LinkConditioner, MessageRefusal, MessageTarget, RoomKey,
@@ -280,6 +281,8 @@ pub struct Room {
     /// Serves our scene to joiners without one (built at the first request; in a room with a
     /// key, only to those that prove it).
     share: Option<BlobServer>,
+    /// Every datagram received, sorted by protocol (and those no protocol here serves).
+    door: FrontDoor,
     fetched: Option<FetchedScene>,
     /// A failure met while pumped between frames, for the next [`Room::network_in`].
     deferred: Option<OpenError>,
@@ -396,6 +399,7 @@ impl Room {
             left: false,
             events: Vec::new(),
             share: None,
+            door: FrontDoor::default(),
             fetched,
             deferred: None,
             background_pumps: 0,
@@ -424,11 +428,17 @@ impl Room {
             left: false,
             events: Vec::new(),
             share: None,
+            door: FrontDoor::default(),
             fetched: None,
             deferred: None,
             background_pumps: 0,
             takeover: None,
         }
+    }
+
+    /// The datagrams received, per protocol ([`softsync_net::door`]), and those dropped unread.
+    pub fn front_door(&self) -> &FrontDoor {
+        &self.door
     }
 
     /// How we received the room's scene, if we did ([`Room::open_fetching_scene`]).
@@ -503,10 +513,13 @@ impl Room {
         }
         let now = self.now();
         while let Some((from, bytes)) = self.transport.recv(now) {
-            if share::is_share(&bytes) {
-                self.serve_scene(now, from, &bytes);
-            } else {
-                self.peer.handle_datagram(now, from, &bytes);
+            // the front door: each protocol's datagrams to its own code, the rest dropped
+            match self.door.sort(&bytes) {
+                Door::Share => self.serve_scene(now, from, &bytes),
+                Door::Session | Door::OtherVersion | Door::Refusal => {
+                    self.peer.handle_datagram(now, from, &bytes)
+                }
+                Door::Rollback | Door::Ident | Door::Unknown => self.door.drop_unserved(),
             }
         }
         while let Some(e) = self.transport.poll_peer_event() {

@@ -58,6 +58,10 @@ pub(crate) fn fetch_scene(
             transport.send(now, &t);
         }
         while let Some((peer, bytes)) = transport.recv(now) {
+            // the front door: only the scene share is spoken before our `Hello`
+            if softsync_net::door::classify(&bytes) != softsync_net::door::Door::Share {
+                continue;
+            }
             match share::ShareMsg::decode(&bytes) {
                 Ok(share::ShareMsg::Request { .. }) => {
                     let no = share::ShareMsg::Unavailable(share::NOT_IN_ROOM.into());

@@ -14,6 +14,7 @@
 //! (`harness`), fuzzing entry points (`fuzzing`) and `Session::send_raw_control`.
 
 pub mod bits;
+pub mod door;
 pub mod error;
 #[cfg(feature = "testing")]
 pub mod fuzzing;

@@ -33,7 +33,7 @@ use crate::transport::Transmit;
 use crate::wire::RoomToken;
 
 /// First byte of every share datagram.
-pub const SHARE_MARKER: u8 = 0xF5;
+pub const SHARE_MARKER: u8 = crate::door::SHARE;
 /// Bytes of blob per chunk (a chunk datagram is at most this plus 48 bytes).
 pub const CHUNK_BYTES: usize = 1024;
 /// What a server sends one requester at most, bytes per second.
@@ -67,7 +67,7 @@ pub fn sha256(bytes: &[u8]) -> [u8; 32] {
 
 /// Whether a datagram is one of this protocol's (the rest are the session's).
 pub fn is_share(datagram: &[u8]) -> bool {
-    datagram.first() == Some(&SHARE_MARKER)
+    crate::door::classify(datagram) == crate::door::Door::Share
 }
 
 /// A decoded share datagram.

@@ -632,3 +632,30 @@ fn a_member_that_keeps_flooding_requests_is_dropped_with_a_reason() {
         "{told:?}"
     );
 }
+
+#[test]
+fn another_protocols_datagram_is_never_answered_as_a_wrong_version() {
+    use softsync_net::door::{classify, Door};
+    let now = Instant::ZERO;
+    let mut host = Session::host(PeerId(1), SessionConfig::default(), now);
+    // a datagram of a protocol this build does not know (a newer peer's voice, say), and
+    // one of every registered non-session protocol: not the session's, so no refusal
+    // (answering each with a refusal datagram would amplify a flood)
+    for d in [
+        &[0xF6, 1, 2, 3][..],
+        &[0x80][..],
+        &[0xF7, 1, 0, 0, 0, 0][..],
+        &[0xF5, 1, 0, 0][..],
+        &softsync_net::wire::CHANNEL_IDENT[..],
+    ] {
+        assert!(!matches!(classify(d), Door::Session | Door::OtherVersion));
+        host.handle_packet(now, PeerId(9), d);
+        assert!(host.poll_transmit(now).is_none(), "answered {d:?}");
+    }
+    // a session of another version is told why
+    let other = softsync_net::wire::PROTOCOL_VERSION + 1;
+    assert_eq!(classify(&[other, 0, 0, 0, 0]), Door::OtherVersion);
+    host.handle_packet(now, PeerId(9), &[other, 0, 0, 0, 0]);
+    let t = host.poll_transmit(now).expect("a refusal");
+    assert_eq!(classify(&t.payload), Door::Refusal);
+}

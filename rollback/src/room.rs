@@ -34,6 +34,7 @@ use std::time::Duration;
 
 use ggrs::{DesyncDetection, GgrsError, GgrsEvent, GgrsRequest, P2PSession, PlayerType};
 use serde::{Deserialize, Serialize};
+use softsync_net::door::{self, Door};
 use softsync_net::messages::{Message, MessageTypes};
 use softsync_net::share::{sha256, BlobFetch, BlobServer, FetchError};
 use softsync_net::wire::{Delivery, MessageTarget};
@@ -335,9 +336,18 @@ impl RollbackPeer {
 
     /// A datagram from the transport (session, ggrs or snapshot).
     pub fn handle_datagram(&mut self, now: Instant, from: PeerId, bytes: &[u8]) {
-        if !socket::is_rollback(bytes) {
-            self.session.handle_packet(now, from, bytes);
-            return;
+        // the front door: the session's datagrams to it, ours below, the rest (a scene share
+        // the caller did not serve, an unknown marker) dropped and counted
+        match door::classify(bytes) {
+            Door::Rollback => {}
+            Door::Session | Door::OtherVersion | Door::Refusal => {
+                self.session.handle_packet(now, from, bytes);
+                return;
+            }
+            Door::Share | Door::Ident | Door::Unknown => {
+                self.stats.dropped += 1;
+                return;
+            }
         }
         match socket::decode(bytes) {
             Ok(Datagram::Ggrs { epoch, msg }) => {

@@ -17,7 +17,7 @@ use ggrs::{Message, NonBlockingSocket};
 use softsync_net::{PeerId, Transmit};
 
 /// First byte of every rollback datagram.
-pub const ROLLBACK_MARKER: u8 = 0xF7;
+pub const ROLLBACK_MARKER: u8 = softsync_net::door::ROLLBACK;
 /// Largest ggrs message we decode (its input messages carry a few frames of a few players).
 pub const MAX_GGRS_BYTES: usize = 4096;
 

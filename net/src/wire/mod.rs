@@ -216,6 +216,12 @@ pub const MAX_KEYFRAME_REQUEST: usize = 64;
 pub fn decode_packet(bytes: &[u8]) -> Result<(PacketHeader, Vec<Section<'_>>), NetError> {
     let mut r = ByteReader::new(bytes);
     let version = r.u8()?;
+    let (lo, hi) = crate::door::SESSION_VERSIONS;
+    if !(lo..=hi).contains(&version) {
+        // another protocol's marker (the front door's registry): not ours, and not a session
+        // of another version to be told so
+        return Err(decode_err(0, "not a session datagram"));
+    }
     if version != PROTOCOL_VERSION {
         return Err(NetError::VersionMismatch {
             ours: PROTOCOL_VERSION,
@@ -706,14 +712,17 @@ mod tests {
     }
 
     #[test]
-    fn a_refusal_decodes_as_one_and_a_cut_refusal_as_a_version_mismatch() {
+    fn a_refusal_decodes_as_one_and_a_cut_refusal_as_no_session_datagram() {
         let r = encode_refusal("full", Term(2));
         assert!(matches!(decode_datagram(&r), Ok(Datagram::Refusal(_))));
+        // not a session of another version (which a host answers): dropped unanswered
+        let cut = decode_datagram(&r[..2]);
+        assert!(matches!(cut, Err(NetError::Decode { .. })), "{cut:?}");
         assert_eq!(
-            decode_datagram(&r[..2]),
+            decode_datagram(&[PROTOCOL_VERSION + 1, 0]),
             Err(NetError::VersionMismatch {
                 ours: PROTOCOL_VERSION,
-                theirs: 0
+                theirs: PROTOCOL_VERSION + 1
             })
         );
     }
