@@ -123,14 +123,23 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
             // the front door: the scene share here, the rest to the rollback peer's (which
             // takes the session's and its own)
             if softsync_net::door::classify(&bytes) == softsync_net::door::Door::Share {
+                // a joiner takes the scene from the room's host only: a member names it
+                let session = peer.session();
+                if let (false, true, Some(host)) =
+                    (session.is_host(), session.is_connected(), session.host_id())
+                {
+                    if let Some(t) = softsync_net::share::ask_host(from, &bytes, host) {
+                        transport.send(now, &t);
+                    }
+                    continue;
+                }
                 // a joiner without the scene asks for ours (a state-sync one is then refused
                 // at its Hello, told the room syncs by rollback)
                 let server = share
                     .get_or_insert_with(|| scene_server(&scene_copy, peer.session().config(), me));
                 let session = peer.session();
-                let judged = server.handle_judged(now, from, &bytes, |t| {
-                    session.token_admits(t, from, now).is_ok()
-                });
+                let judged =
+                    server.handle_judged(now, from, &bytes, |t| session.token_admits(t, from, now));
                 if let Some(t) = judged {
                     transport.send(now, &t);
                 }

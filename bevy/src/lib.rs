@@ -52,9 +52,9 @@
 //! ```
 //!
 //! A joiner needs no copy of the scene: [`Room::open_fetching_scene`] receives the room's scene
-//! file and meshes from the first peer it reaches (SHA-256 verified, paths checked, kept under
-//! [`RoomOptions::scene_cache`]); every `Room` serves the scene it runs, in a room with a key
-//! only to peers that prove it.
+//! file and meshes from the room's host (a member it reaches first names the host; SHA-256
+//! verified, paths checked, kept under [`RoomOptions::scene_cache`]); the host's `Room` serves
+//! the scene it runs, in a room with a key only to peers that prove it or hold a valid token.
 //!
 //! The crate is headless (bevy's app, ECS, time and transforms): draw the entities with
 //! bevy's renderer, or not at all (a bot, a server). `docs/GUIDE.md` walks through a room of

@@ -314,10 +314,10 @@ impl Room {
         Self::open_with(Some(scene), opts)
     }
 
-    /// Join room `opts.name` without a scene of our own: the first peer of the room we reach
-    /// sends its scene (the scene file and its meshes, SHA-256 verified, kept under
-    /// [`RoomOptions::scene_cache`]), then we join as [`open`](Self::open) does. Every member
-    /// serves the scene it runs, so the first contact need not be the host.
+    /// Join room `opts.name` without a scene of our own: the room's host sends its scene (the
+    /// scene file and its meshes, SHA-256 verified, kept under [`RoomOptions::scene_cache`]),
+    /// then we join as [`open`](Self::open) does. A member we reach first names the host and
+    /// sends nothing, so the first contact need not be the host.
     pub fn open_fetching_scene(opts: RoomOptions) -> Result<Room, OpenError> {
         if opts.host {
             return Err(OpenError::Config(
@@ -632,6 +632,16 @@ impl Room {
     /// A joiner without the scene asks for ours: the bundle is built at the first request
     /// (from the files the scene was loaded from), or every request is told why there is none.
     fn serve_scene(&mut self, now: Instant, from: PeerId, datagram: &[u8]) {
+        // a joiner takes the scene from the room's host only: a member names it
+        let session = self.peer.session();
+        if let (false, Some(host)) = (session.is_host(), session.host_id()) {
+            if session.is_connected() {
+                if let Some(t) = softsync_net::share::ask_host(from, datagram, host) {
+                    self.transport.send(now, &t);
+                }
+                return;
+            }
+        }
         let (scene, cfg, me) = (
             self.peer.scene(),
             self.peer.session().config(),
@@ -641,9 +651,8 @@ impl Room {
             .share
             .get_or_insert_with(|| crate::connect::scene_server(scene, cfg, me));
         let session = self.peer.session();
-        let judged = server.handle_judged(now, from, datagram, |t| {
-            session.token_admits(t, from, now).is_ok()
-        });
+        let judged =
+            server.handle_judged(now, from, datagram, |t| session.token_admits(t, from, now));
         if let Some(t) = judged {
             self.transport.send(now, &t);
         }

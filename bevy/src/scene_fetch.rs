@@ -1,6 +1,6 @@
 //! A joiner without the room's scene receives it before it says `Hello`
-//! ([`crate::Room::open_fetching_scene`]): from its first contact, or the next peer it reaches
-//! when that one has none to give.
+//! ([`crate::Room::open_fetching_scene`]) from the room's host: a member it reaches first
+//! names the host (the scene is taken from nobody else), another joiner says it has none.
 
 // The I/O layer: this machine's clock and the wait for the scene's chunks.
 #![allow(clippy::disallowed_methods)]
@@ -19,6 +19,8 @@ use crate::room::{Clock, FetchedScene, OpenError, RoomOptions};
 /// joiner that reached us first has no scene to give and says so at once; this is for one
 /// that says nothing).
 const SCENE_CONTACT_PATIENCE: Duration = Duration::from_millis(1500);
+/// Members' "ask the host" answers followed at most (a migration may move the host meanwhile).
+const MAX_REDIRECTS: u32 = 16;
 
 /// Fetch the room's scene before we have a session, from `first` or, when it has none to give
 /// (a joiner like us) or stays silent, from the next peer we have a data channel to; link
@@ -44,6 +46,7 @@ pub(crate) fn fetch_scene(
     let mut tried = 1;
     let mut fetch = start_fetch(first, clock.now());
     let mut asked_at = clock.now();
+    let mut redirects = 0;
     let blob = loop {
         let now = clock.now();
         while let Some(e) = transport.poll_peer_event() {
@@ -81,6 +84,18 @@ pub(crate) fn fetch_scene(
         let from = fetch.source();
         let unable = match fetch.outcome() {
             Some(Ok(blob)) => break blob,
+            // a member, not the host: the scene comes from the host it names (a bounded
+            // number of times: members that disagree about the host are asked round and round)
+            Some(Err(FetchError::AskHost(host))) if host != me && redirects < MAX_REDIRECTS => {
+                redirects += 1;
+                if !contacts.contains(&host) {
+                    contacts.push(host);
+                }
+                fetch = start_fetch(host, now);
+                asked_at = now;
+                false
+            }
+            Some(Err(FetchError::AskHost(_))) => true,
             Some(Err(FetchError::Unavailable(why)))
                 if why == share::NOT_IN_ROOM || why == share::CANNOT_CHECK =>
             {
@@ -88,6 +103,14 @@ pub(crate) fn fetch_scene(
             }
             Some(Err(e)) => {
                 return Err(match e {
+                    // the host's word on our join token, as the handshake would say it
+                    FetchError::Unavailable(why) if why.starts_with(share::TOKEN_REFUSED) => {
+                        OpenError::Peer(format!(
+                            "room {:?}: {}",
+                            opts.name,
+                            &why[share::TOKEN_REFUSED.len()..]
+                        ))
+                    }
                     // Said as the handshake says it.
                     FetchError::Unavailable(why) if why == share::NEEDS_KEY => {
                         OpenError::Peer(match (&opts.room_key, &opts.room_token) {

@@ -1,8 +1,9 @@
-//! Sharing a blob (the room's scene, with its meshes) from any member to a peer that is not in
-//! the room yet, before it has a session: a sans-IO pull protocol beside the session's.
+//! Sharing a blob (the room's scene, with its meshes) from the room's host to a peer that is
+//! not in the room yet, before it has a session: a sans-IO pull protocol beside the session's.
 //!
-//! A joiner without the scene asks the first peer it reaches ([`BlobFetch`]); every member
-//! serves the scene it runs ([`BlobServer`]). The fetcher asks for fixed-size chunks by offset,
+//! A joiner without the scene asks the first peer it reaches ([`BlobFetch`]); a member that
+//! is not the host names the host ([`ask_host`]), and the host serves the scene it runs
+//! ([`BlobServer`]). The fetcher asks for fixed-size chunks by offset,
 //! a window of them at a time, asks again for any that do not come within a retry interval,
 //! and takes the blob only when it is whole and its SHA-256 matches the digest every chunk
 //! carries; a chunk that names another digest or size than the first one is a failure (the
@@ -17,7 +18,9 @@
 //!   ([`RoomKey::scene_proof`]);
 //! - `2` chunk: 32-byte SHA-256 of the whole blob, varint total length, varint offset, the
 //!   bytes (the rest of the datagram);
-//! - `3` unavailable: a UTF-8 reason (the rest, ≤ 200 bytes).
+//! - `3` unavailable: a UTF-8 reason (the rest, ≤ 200 bytes);
+//! - `4` ask the host: the room's host id (u64 LE). A member that is not the host sends no
+//!   chunk: a joiner takes the scene from the room's host only.
 //!
 //! Decoding never panics and never allocates more than the datagram's own length.
 
@@ -50,12 +53,16 @@ pub const CANNOT_CHECK: &str = "this peer holds no room key to check yours: ask 
 
 /// The reason a server with a key gives a request without a valid proof.
 pub const NEEDS_KEY: &str = "the room needs its key";
+/// How the reason for refusing a request's join token starts (the session's reason follows:
+/// expired, used by another peer).
+pub const TOKEN_REFUSED: &str = "the room refuses the join token: ";
 /// Longest reason an `unavailable` answer carries.
 pub const MAX_REASON: usize = 200;
 
 const KIND_REQUEST: u8 = 1;
 const KIND_CHUNK: u8 = 2;
 const KIND_UNAVAILABLE: u8 = 3;
+const KIND_ASK_HOST: u8 = 4;
 
 /// SHA-256 of `bytes`.
 pub fn sha256(bytes: &[u8]) -> [u8; 32] {
@@ -97,6 +104,8 @@ pub enum ShareMsg<'a> {
     },
     /// The peer has nothing to share (or will not), and why.
     Unavailable(String),
+    /// The peer is a member, not the room's host: ask the host, this peer.
+    AskHost(PeerId),
 }
 
 impl ShareMsg<'_> {
@@ -138,6 +147,10 @@ impl ShareMsg<'_> {
                     end -= 1;
                 }
                 out.extend_from_slice(&why.as_bytes()[..end]);
+            }
+            ShareMsg::AskHost(host) => {
+                out.push(KIND_ASK_HOST);
+                out.extend_from_slice(&host.0.to_le_bytes());
             }
         }
         out
@@ -216,9 +229,28 @@ impl ShareMsg<'_> {
                     std::str::from_utf8(rest).map_err(|_| decode_err(at, "reason not UTF-8"))?;
                 Ok(ShareMsg::Unavailable(why.to_owned()))
             }
+            KIND_ASK_HOST => {
+                let b = r.take(8)?;
+                if !r.is_empty() {
+                    return Err(decode_err(r.pos(), "bytes after the host's id"));
+                }
+                let mut id = [0u8; 8];
+                id.copy_from_slice(b);
+                Ok(ShareMsg::AskHost(PeerId(u64::from_le_bytes(id))))
+            }
             _ => Err(decode_err(at, "unknown share kind")),
         }
     }
+}
+
+/// A member's answer to a share `datagram` from `from` when it is not the room's host: the
+/// host's id, so the joiner asks there (`None` for what is not a request).
+pub fn ask_host(from: PeerId, datagram: &[u8], host: PeerId) -> Option<Transmit> {
+    matches!(ShareMsg::decode(datagram), Ok(ShareMsg::Request { .. })).then(|| Transmit {
+        to: from,
+        payload: ShareMsg::AskHost(host).encode(),
+        reliable: true,
+    })
 }
 
 /// Serves one blob to whoever asks, chunk by chunk, each requester within a byte rate.
@@ -274,18 +306,19 @@ impl BlobServer {
     /// taken on its signature alone: a member of a room uses
     /// [`handle_judged`](Self::handle_judged) with its session's word on it.
     pub fn handle(&mut self, now: Instant, from: PeerId, datagram: &[u8]) -> Option<Transmit> {
-        self.handle_judged(now, from, datagram, |_| true)
+        self.handle_judged(now, from, datagram, |_| Ok(()))
     }
 
     /// [`handle`](Self::handle), a request's join token (signed for this room) also put to
     /// `token_ok`: whether it is unexpired and not used by another peer
-    /// ([`Session::token_admits`](crate::session::Session::token_admits) of the requester).
+    /// ([`Session::token_admits`](crate::session::Session::token_admits) of the requester),
+    /// whose reason a refused requester is told (after [`TOKEN_REFUSED`]).
     pub fn handle_judged(
         &mut self,
         now: Instant,
         from: PeerId,
         datagram: &[u8],
-        token_ok: impl FnOnce(&RoomToken) -> bool,
+        token_ok: impl FnOnce(&RoomToken) -> Result<(), &'static str>,
     ) -> Option<Transmit> {
         let Ok(ShareMsg::Request {
             offset,
@@ -298,16 +331,18 @@ impl BlobServer {
             return None;
         };
         let proven = match (&self.key, proof, token) {
-            (None, _, _) => true,
-            (Some((key, me)), Some(p), _) => key.verify_scene_proof(from, *me, &p),
+            (None, _, _) => Ok(()),
+            (Some((key, me)), Some(p), _) if key.verify_scene_proof(from, *me, &p) => Ok(()),
             // a token of this room, signed with its key, unexpired and nobody else's
-            (Some((key, _)), None, Some(t)) => key.token_is_ours(&t) && token_ok(&t),
-            (Some(_), None, None) => false,
+            (Some((key, _)), None, Some(t)) if key.token_is_ours(&t) => {
+                token_ok(&t).map_err(|why| format!("{TOKEN_REFUSED}{why}"))
+            }
+            _ => Err(NEEDS_KEY.to_owned()),
         };
         let msg = match &self.blob {
-            _ if !proven => {
+            _ if proven.is_err() => {
                 self.refused += 1;
-                ShareMsg::Unavailable(NEEDS_KEY.into())
+                ShareMsg::Unavailable(proven.err().unwrap_or_default())
             }
             Err(why) => ShareMsg::Unavailable(why.clone()),
             Ok((blob, digest)) => {
@@ -376,6 +411,9 @@ pub enum FetchError {
     /// The peer has nothing to share.
     #[error("the peer has nothing to share: {0}")]
     Unavailable(String),
+    /// The peer is not the room's host and names it: the scene comes from the host only.
+    #[error("the peer is not the room's host: ask peer {}", .0 .0)]
+    AskHost(PeerId),
     /// The deadline passed.
     #[error("no complete blob within {0:?} ({1} of {2} bytes)")]
     TimedOut(Duration, u64, u64),
@@ -531,6 +569,10 @@ impl BlobFetch {
             } => (digest, total, offset, data),
             ShareMsg::Unavailable(why) => {
                 self.outcome = Some(Err(FetchError::Unavailable(why)));
+                return;
+            }
+            ShareMsg::AskHost(host) => {
+                self.outcome = Some(Err(FetchError::AskHost(host)));
                 return;
             }
             ShareMsg::Request { .. } => {

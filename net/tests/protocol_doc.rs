@@ -506,7 +506,7 @@ fn render() -> String {
         }
         .encode();
         let no = ShareMsg::Unavailable("no scene".into()).encode();
-        writeln!(w, "A joiner without the room's scene asks the first peer it reaches for it before it says `Hello`; every member answers with the scene it runs (the scene file and the files it reads, one bincode blob, `peer/src/scene/bundle.rs`). These datagrams start with `0x{SHARE_MARKER:02X}`, never a protocol version, and go on the transport's reliable channel; the session never sees them (`net/src/share.rs`). The joiner asks for {CHUNK_BYTES}-byte chunks by offset, up to 32 at a time, asks again for any not answered within 300 ms, refuses a blob over its bound (64 MiB) before allocating it, and takes it only whole and with the SHA-256 every chunk carries; a member sends one requester at most {} MiB/s.\n", SERVE_BYTES_PER_S / 1048576.0).unwrap();
+        writeln!(w, "A joiner without the room's scene asks the first peer it reaches for it before it says `Hello`; a member that is not the host answers with the host's id and nothing else, and the joiner asks the host, which answers with the scene it runs (the scene file and the files it reads, one bincode blob, `peer/src/scene/bundle.rs`). These datagrams start with `0x{SHARE_MARKER:02X}`, never a protocol version, and go on the transport's reliable channel; the session never sees them (`net/src/share.rs`). The joiner asks for {CHUNK_BYTES}-byte chunks by offset, up to 32 at a time, asks again for any not answered within 300 ms, refuses a blob over its bound (64 MiB) before allocating it, and takes it only whole and with the SHA-256 every chunk carries; a host sends one requester at most {} MiB/s. In a room with a key, a request shows the key's proof or a join token the host would admit (unexpired, not used by another peer).\n", SERVE_BYTES_PER_S / 1048576.0).unwrap();
         writeln!(w, "| datagram | layout | example |\n|---|---|---|").unwrap();
         writeln!(
             w,
@@ -518,8 +518,15 @@ fn render() -> String {
         writeln!(w, "| chunk | `F5 02`, 32-byte SHA-256 of the blob, varint total, varint offset, the bytes | `{} … {}` ({} bytes for 4 of data) |", hex(&chunk[..4]), hex(&chunk[34..]), chunk.len()).unwrap();
         writeln!(
             w,
-            "| unavailable | `F5 03`, UTF-8 reason ≤ 200 bytes | `{}` |\n",
+            "| unavailable | `F5 03`, UTF-8 reason ≤ 200 bytes | `{}` |",
             hex(&no)
+        )
+        .unwrap();
+        let ask = ShareMsg::AskHost(PeerId(0x0102030405060708)).encode();
+        writeln!(
+            w,
+            "| ask the host | `F5 04`, the host's id (u64 LE) | `{}` |\n",
+            hex(&ask)
         )
         .unwrap();
     }

@@ -761,7 +761,7 @@ mod tokens {
         let mut answer = |from: u64, t: &RoomToken| {
             let p = PeerId(from);
             let d = server
-                .handle_judged(now, p, &ask(t), |t| host.token_admits(t, p, now).is_ok())
+                .handle_judged(now, p, &ask(t), |t| host.token_admits(t, p, now))
                 .unwrap();
             matches!(
                 ShareMsg::decode(&d.payload).unwrap(),
@@ -773,8 +773,22 @@ mod tokens {
         assert!(!answer(3, &t));
         assert!(!answer(4, &expired));
         let no = server
-            .handle_judged(now, PeerId(3), &ask(&t), |_| false)
+            .handle_judged(now, PeerId(3), &ask(&t), |t| {
+                host.token_admits(t, PeerId(3), now)
+            })
             .unwrap();
+        assert_eq!(
+            ShareMsg::decode(&no.payload).unwrap(),
+            ShareMsg::Unavailable(format!(
+                "{}the join token was used by another peer",
+                crate::share::TOKEN_REFUSED
+            ))
+        );
+        let forged = RoomKey::new(b"another secret, 16 bytes or more", 1)
+            .for_room("lab")
+            .issue_token(T0 + 3600, [7; 16])
+            .unwrap();
+        let no = server.handle(now, PeerId(3), &ask(&forged)).unwrap();
         assert_eq!(
             ShareMsg::decode(&no.payload).unwrap(),
             ShareMsg::Unavailable(NEEDS_KEY.into())

@@ -320,3 +320,28 @@ fn a_room_with_a_key_shares_its_scene_only_with_a_keyholder() {
     bad.extend_from_slice(&[0; 31]);
     assert!(ShareMsg::decode(&bad).is_err());
 }
+
+#[test]
+fn a_member_names_the_host_and_sends_nothing_of_the_scene() {
+    const MEMBER: PeerId = PeerId(3);
+    let mut fetch = BlobFetch::new(Instant::ZERO, MEMBER, 1 << 20, Duration::from_secs(5));
+    let req = fetch.poll_transmit(Instant::ZERO).unwrap();
+    assert_eq!(req.to, MEMBER);
+    let a = ask_host(JOINER, &req.payload, HOST).unwrap();
+    assert_eq!(a.to, JOINER);
+    assert_eq!(
+        ShareMsg::decode(&a.payload).unwrap(),
+        ShareMsg::AskHost(HOST)
+    );
+    fetch.handle(MEMBER, &a.payload);
+    assert_eq!(fetch.outcome(), Some(Err(FetchError::AskHost(HOST))));
+    // only a request is answered so; a cut or padded answer does not decode
+    assert!(ask_host(JOINER, &a.payload, HOST).is_none());
+    assert!(ShareMsg::decode(&a.payload[..5]).is_err());
+    let mut long = a.payload.clone();
+    long.push(0);
+    assert!(ShareMsg::decode(&long).is_err());
+    // then the host, asked, serves the verified blob
+    let data = blob(5000, 3);
+    assert_eq!(run(&data, 1, 0.0, 1 << 20).0.unwrap(), data);
+}
