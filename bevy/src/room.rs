@@ -699,6 +699,15 @@ impl Room {
         self.peer.send(now, to, delivery, msg)
     }
 
+    /// Host: kick `peer` out and ban it for the room's life, telling it `reason` (see
+    /// [`softsync_net::Session::kick`]); sent at once.
+    pub fn kick(&mut self, peer: PeerId, reason: &str) -> Result<(), softsync_net::KickError> {
+        let now = self.now();
+        self.peer.kick(now, peer, reason)?;
+        self.flush();
+        Ok(())
+    }
+
     /// Leave the room: a `Leave` to everyone (a host is replaced at once, authority returns),
     /// and a moment for the transport to send it. Once only.
     pub fn leave(&mut self) {

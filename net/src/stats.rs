@@ -117,6 +117,11 @@ pub struct Stats {
     pub controls_over_quota: u64,
     /// Host: members dropped for acknowledging too little (`PeerBudget::max_control_in_flight`).
     pub dropped_over_quota: u64,
+    /// Host: peers kicked out and banned (`Session::kick`).
+    pub kicked: u64,
+    /// Datagrams from banned peers dropped (a host answers them with the reason, at most
+    /// once per heartbeat).
+    pub banned_dropped: u64,
     /// Host: repeated `Hello`s of members not answered with another `Welcome` (one was in
     /// flight, or sent less than `PeerBudget::rewelcome_every` ago).
     pub repeated_hellos_ignored: u64,

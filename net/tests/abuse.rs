@@ -659,3 +659,77 @@ fn another_protocols_datagram_is_never_answered_as_a_wrong_version() {
     let t = host.poll_transmit(now).expect("a refusal");
     assert_eq!(classify(&t.payload), Door::Refusal);
 }
+
+fn reason_of(events: &[Event]) -> Option<String> {
+    events.iter().rev().find_map(|e| match e {
+        Event::Refused { reason } | Event::Dropped { reason, .. } => Some(reason.clone()),
+        _ => None,
+    })
+}
+
+#[test]
+fn a_kicked_peer_is_out_for_the_rooms_life_even_after_a_migration() {
+    let cfg = SessionConfig::default();
+    let mut h = Harness::new(4, cfg.clone(), ConditionerConfig::default());
+    h.advance(Duration::from_secs(1));
+    assert_eq!(h.session(0).members().len(), 4);
+    // the prankster holds an object when it is kicked
+    let now = h.now;
+    let s = softsync_net::ObjectState::rigid(Vec3::ZERO, glam::Quat::IDENTITY);
+    let (id, _) = h.session(0).spawn(now, ClassId(0), s).unwrap();
+    h.advance(Duration::from_millis(300));
+    let now = h.now;
+    h.session(3).request_authority(now, id).unwrap();
+    h.advance(Duration::from_millis(500));
+    assert_eq!(h.session(0).owner(id), Some(Harness::id(3)));
+    // only the host kicks
+    let now = h.now;
+    assert_eq!(
+        h.session(1).kick(now, Harness::id(3), "no"),
+        Err(softsync_net::KickError::NotHost)
+    );
+    h.session(0)
+        .kick(now, Harness::id(3), "drew on the patient")
+        .unwrap();
+    h.advance(Duration::from_secs(1));
+    assert!(!h.session(0).members().contains_key(&Harness::id(3)));
+    let r = reason_of(&h.peers[3].events).unwrap_or_default();
+    assert!(
+        r.contains("banned") && r.contains("drew on the patient"),
+        "{r:?}"
+    );
+    for i in 0..3 {
+        assert!(h.session(i).is_banned(Harness::id(3)), "peer {i}");
+        assert_ne!(h.session(i).owner(id), Some(Harness::id(3)), "peer {i}");
+    }
+    assert_eq!(h.session(0).stats().kicked, 1);
+    // it comes back with a fresh session: refused, with the reason
+    let rejoin = |h: &mut Harness, contact: PeerId| {
+        let now = h.now;
+        h.peers[3].session = Session::join(Harness::id(3), contact, cfg.clone(), now);
+        h.peers[3].events.clear();
+        h.advance(Duration::from_secs(2));
+        reason_of(&h.peers[3].events).unwrap_or_default()
+    };
+    let r = rejoin(&mut h, Harness::id(0));
+    assert!(r.contains("banned"), "{r:?}");
+    assert_eq!(h.session(0).members().len(), 3);
+    assert!(h.session(0).stats().banned_dropped > 0);
+    // the host dies: the next one keeps the ban (asked first, a member would redirect it)
+    h.kill(0);
+    h.advance(Duration::from_secs(3));
+    let new_host = h.host_index().unwrap();
+    assert_ne!(new_host, 0);
+    let r = rejoin(&mut h, Harness::id(new_host));
+    assert!(r.contains("banned"), "{r:?}");
+    assert!(!h.session(new_host).members().contains_key(&Harness::id(3)));
+    // a new member learns the bans with its snapshot
+    let late = h.add_peer_with(cfg.clone(), new_host);
+    h.advance(Duration::from_secs(2));
+    assert!(h.session(late).is_connected());
+    assert!(h.session(late).is_banned(Harness::id(3)));
+    assert_eq!(
+        h.session(late).banned(),
+        vec![(Harness::id(3), "drew on the patient".to_string())]
+    );
+}

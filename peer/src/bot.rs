@@ -46,6 +46,10 @@
 //!                               scalpel again
 //! say TEXT                      send TEXT to everyone in the room (a reliable
 //!                               [`Say`](crate::messages::Say) message; at most 200 bytes)
+//! kick PEER [REASON]            the host kicks PEER out and bans it for the room's life
+//!                               (`Session::kick`); PEER is an id as the peer printed it
+//!                               (decimal, or hex with 0x) or `newest` (the member that
+//!                               joined last); REASON at most 120 bytes
 //! loop                          start again from the top (last line)
 //! ```
 //!
@@ -63,7 +67,7 @@ use std::collections::VecDeque;
 
 use glam::{Quat, Vec3};
 use softsync_interaction::{HandInput, HandSample};
-use softsync_net::{Delivery, Instant, MessageTarget, NetId};
+use softsync_net::{Delivery, Instant, MessageTarget, NetId, PeerId};
 
 use crate::device::{clamp01, DeviceFrame};
 use crate::peer::Peer;
@@ -101,6 +105,8 @@ pub enum Cmd {
     Slice(usize, Option<String>, Vec3, Vec3, f64),
     /// Send a line of text to the room.
     Say(String),
+    /// Host: kick a peer (`None`: the member that joined last) and ban it, with a reason.
+    Kick(Option<u64>, String),
     /// Restart.
     Loop,
 }
@@ -263,6 +269,23 @@ pub fn parse(text: &str) -> Result<Vec<Cmd>, ScriptError> {
                         return Err("say needs a text of 1 to 200 bytes".into());
                     }
                     Cmd::Say(text.to_owned())
+                }
+                "kick" => {
+                    let who = match arg(1)? {
+                        "newest" => None,
+                        id => Some(
+                            id.strip_prefix("0x")
+                                .map_or_else(|| id.parse::<u64>(), |h| u64::from_str_radix(h, 16))
+                                .map_err(|_| {
+                                    format!("kick: {id:?} is not a peer id or `newest`")
+                                })?,
+                        ),
+                    };
+                    let reason = w[2..].join(" ");
+                    if reason.len() > 120 {
+                        return Err("kick: the reason is at most 120 bytes".into());
+                    }
+                    Cmd::Kick(who, reason)
                 }
                 "grab" => Cmd::Grab(hand(arg(1)?)?, dur(&w, 2, 3.0)?),
                 "squeeze" => Cmd::Squeeze(hand(arg(1)?)?, num(arg(2)?)? as f32, dur(&w, 3, 0.5)?),
@@ -706,6 +729,25 @@ impl Bot {
                 }
                 None
             }
+            Cmd::Kick(who, reason) => {
+                let me = peer.me();
+                let target = who.map(PeerId).or_else(|| {
+                    let members = peer.session().members();
+                    members
+                        .iter()
+                        .filter(|(p, _)| **p != me)
+                        .max_by_key(|(_, seq)| **seq)
+                        .map(|(p, _)| *p)
+                });
+                match target {
+                    Some(p) => match peer.kick(now, p, &reason) {
+                        Ok(()) => self.say(format!("kicked peer {} ({reason:?})", p.0)),
+                        Err(e) => self.say(format!("kick: {e}")),
+                    },
+                    None => self.say("kick: nobody else in the room".into()),
+                }
+                None
+            }
             Cmd::Loop => {
                 self.pc = 0;
                 None
@@ -993,6 +1035,17 @@ mod tests {
             [Cmd::Say("the valve is open".into())]
         );
         assert!(parse("say").is_err());
+        assert_eq!(
+            parse("kick newest spam in the chat; kick 0x1f; kick 42 x").unwrap(),
+            [
+                Cmd::Kick(None, "spam in the chat".into()),
+                Cmd::Kick(Some(31), String::new()),
+                Cmd::Kick(Some(42), "x".into())
+            ]
+        );
+        assert!(parse("kick").is_err());
+        assert!(parse("kick someone").is_err());
+        assert!(parse(&format!("kick newest {}", "x".repeat(121))).is_err());
         assert!(parse(&format!("say {}", "x".repeat(201))).is_err());
         assert!(parse("move left 1 2").is_err());
         assert!(parse("move left 1 2 NaN").is_err());

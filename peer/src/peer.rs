@@ -347,7 +347,9 @@ impl Peer {
                 }
                 self.rejoin(now, host, reason);
             }
-            SessionEvent::PeerJoined(_) => self.events.push_back(Event::Room(e)),
+            SessionEvent::PeerJoined(_) | SessionEvent::Kicked(_) => {
+                self.events.push_back(Event::Room(e))
+            }
             SessionEvent::PeerLeft(p) => {
                 self.forget_hands_of(p);
                 self.events.push_back(Event::Room(e));
@@ -489,6 +491,17 @@ impl Peer {
     ) -> Result<u32, MessageRefusal> {
         self.session
             .send(now, &self.message_types, to, delivery, msg)
+    }
+
+    /// Host: kick `peer` out of the room and ban it for the room's life, telling it `reason`
+    /// ([`Session::kick`]: its id and join token stay out after a migration too).
+    pub fn kick(
+        &mut self,
+        now: Instant,
+        peer: PeerId,
+        reason: &str,
+    ) -> Result<(), softsync_net::KickError> {
+        self.session.kick(now, peer, reason)
     }
 
     /// Send raw bytes of message type `kind`.

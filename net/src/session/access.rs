@@ -280,9 +280,9 @@ impl PartialEq for RoomKey {
 /// whom, until when): every member keeps the latter, so a new host knows them.
 #[derive(Debug, Default)]
 pub(crate) struct Challenges {
-    open: BTreeMap<PeerId, ([u8; 16], Instant)>,
+    pub(super) open: BTreeMap<PeerId, ([u8; 16], Instant)>,
     issued: u64,
-    tokens_used: BTreeMap<[u8; 16], (PeerId, u64)>,
+    pub(super) tokens_used: BTreeMap<[u8; 16], (PeerId, u64)>,
 }
 
 /// Most used join tokens a session remembers. Expired ones are forgotten; a host that
@@ -409,6 +409,9 @@ impl Session {
             return Err("this peer holds no room key to check a join token");
         };
         key.check_token(token, now)?;
+        if self.token_banned(&token.nonce) || self.is_banned(who) {
+            return Err("banned from this room by its host");
+        }
         match self.challenges.tokens_used.get(&token.nonce) {
             Some((p, _)) if *p != who => Err("the join token was used by another peer"),
             _ => Ok(()),

@@ -123,6 +123,11 @@ impl Session {
                 peer,
                 expires_unix,
             } if from_host => self.note_token_used(now, nonce, peer, expires_unix),
+            Control::Banned {
+                peer,
+                token,
+                reason,
+            } if from_host => self.on_banned(peer, token, reason),
             Control::Redirect { host }
                 if self.role == Role::Joining && from != host && Some(from) == self.host =>
             {

@@ -161,6 +161,7 @@ impl Session {
         self.send_snapshot(now, to);
         self.send_retained(now, to);
         self.send_tokens_used(now, to);
+        self.send_bans(now, to);
     }
 
     /// The host welcomed us.

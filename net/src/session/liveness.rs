@@ -29,6 +29,8 @@ pub(crate) enum DropWhy {
     OverQuota(usize),
     /// It asked for twice its request rate or more, seconds in a row.
     RequestFlood,
+    /// The host kicked it out and banned it (`Session::kick`).
+    Banned,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -68,7 +70,12 @@ impl DroppedPeers {
     }
 
     /// Why `p` is out, if it is due to be told at `now` (once per `every`); noted as told.
-    fn due_notice(&mut self, p: PeerId, now: Instant, every: Duration) -> Option<DropWhy> {
+    pub(super) fn due_notice(
+        &mut self,
+        p: PeerId,
+        now: Instant,
+        every: Duration,
+    ) -> Option<DropWhy> {
         let d = self.peers.get_mut(&p)?;
         if d.told.is_some_and(|t| now.saturating_since(t) < every) {
             return None;
@@ -268,6 +275,10 @@ impl Session {
                 "dropped from the room: {n} control messages unacknowledged (the host keeps at \
                  most {}); join again",
                 self.cfg.peer_budget.max_control_in_flight
+            ),
+            DropWhy::Banned => format!(
+                "kicked out of the room and banned by its host: {}",
+                self.ban_reason(to).unwrap_or("no reason given")
             ),
             DropWhy::RequestFlood => format!(
                 "dropped from the room: more than twice the {} requests a second a member may \

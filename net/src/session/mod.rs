@@ -26,6 +26,7 @@
 
 mod access;
 mod authority;
+pub mod ban;
 mod budget;
 mod control;
 mod delta;
@@ -47,6 +48,7 @@ use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
 
 pub use access::RoomKey;
+pub use ban::{KickError, MAX_BANNED};
 pub use registry::{DisplayedState, ObjectState};
 
 use self::authority::PendingAsks;
@@ -106,6 +108,9 @@ pub enum Event {
     PeerJoined(PeerId),
     /// A peer left or timed out.
     PeerLeft(PeerId),
+    /// Host: we kicked this peer out and banned it ([`Session::kick`]); a `PeerLeft` for a
+    /// member precedes it.
+    Kicked(PeerId),
     /// A new host took over.
     HostChanged {
         /// New host.
@@ -225,6 +230,7 @@ pub struct Session {
     last_relay_at: Option<Instant>,
     messages: messages::Messages,
     challenges: access::Challenges,
+    bans: ban::Bans,
     /// Peers the room lost, and the beacons that heal a partition.
     heal: heal::Heal,
 }
@@ -257,6 +263,7 @@ impl Session {
             last_relay_at: None,
             messages: messages::Messages::default(),
             challenges: access::Challenges::default(),
+            bans: ban::Bans::default(),
             heal: heal::Heal::default(),
         }
     }

@@ -31,7 +31,7 @@ enum Applied {
 impl Session {
     /// A datagram from `from`.
     pub(super) fn receive(&mut self, now: Instant, from: PeerId, bytes: &[u8]) {
-        if self.departed.contains(from) {
+        if self.departed.contains(from) || self.refuse_if_banned(now, from) {
             return;
         }
         let datagram = decode_datagram(bytes);

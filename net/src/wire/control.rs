@@ -210,6 +210,17 @@ pub enum Control {
         /// When it expires (seconds since the Unix epoch): forgotten after.
         expires_unix: u64,
     },
+    /// Host → members (and to a joiner after its snapshot): `peer` is banned from the room
+    /// for its life (kicked), with the join token it came in with; every member keeps the
+    /// list, so a new host after a migration keeps it out.
+    Banned {
+        /// The banned peer.
+        peer: PeerId,
+        /// The nonce of the join token it used, if it used one.
+        token: Option<[u8; 16]>,
+        /// Why (at most 120 bytes).
+        reason: String,
+    },
 }
 
 /// A join token: admission to room `room` until `expires_unix` (seconds since the Unix
