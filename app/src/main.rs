@@ -136,6 +136,15 @@ fn run(args: &[String]) -> Result<ExitCode, Failure> {
             bench::comanip(&out, quick).map_err(Failure::runtime)?;
             Ok(ExitCode::SUCCESS)
         }
+        Command::BenchAbuse {
+            out,
+            seconds,
+            attacks,
+            hostile,
+        } => {
+            bench::abuse(&out, seconds, &attacks, &hostile).map_err(Failure::runtime)?;
+            Ok(ExitCode::SUCCESS)
+        }
         Command::BenchRoomLoad {
             out,
             seconds,

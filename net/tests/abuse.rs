@@ -733,3 +733,21 @@ fn a_kicked_peer_is_out_for_the_rooms_life_even_after_a_migration() {
         vec![(Harness::id(3), "drew on the patient".to_string())]
     );
 }
+
+#[test]
+fn a_flood_of_other_versions_gets_a_few_refusals_not_one_each() {
+    use softsync_net::session::MAX_VERSION_REFUSALS_PER_S;
+    let mut host = Session::host(PeerId(1), SessionConfig::default(), Instant::ZERO);
+    let other = softsync_net::wire::PROTOCOL_VERSION + 1;
+    let mut answered = 0;
+    for second in 0..3u64 {
+        for k in 0..1000u64 {
+            let now = Instant::from_millis(second * 1000 + k / 2);
+            host.handle_packet(now, PeerId(10 + k % 7), &[other, 0, 0, 0, 0]);
+            while host.poll_transmit(now).is_some() {
+                answered += 1;
+            }
+        }
+    }
+    assert_eq!(answered, 3 * MAX_VERSION_REFUSALS_PER_S as usize);
+}

@@ -40,7 +40,7 @@ struct LoadRow {
 
 /// CPU time (user + system) a process has used so far, seconds (from `/proc`; `None` where
 /// there is none).
-fn cpu_seconds(pid: u32) -> Option<f64> {
+pub(super) fn cpu_seconds(pid: u32) -> Option<f64> {
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
     // the fields after the command's closing parenthesis: utime and stime are 14th and 15th
     let rest = stat.rsplit_once(')')?.1;

@@ -18,6 +18,7 @@
 //! `softsync bench room-load` (rooms of growing size) is in [`load`]; both spawn peers with
 //! this module's [`Proc`].
 
+mod abuse;
 mod auto;
 mod comanip;
 mod lb;
@@ -26,6 +27,7 @@ mod soak;
 mod soak_check;
 mod views;
 
+pub use abuse::{abuse, ATTACKS};
 pub use auto::auto;
 pub use comanip::comanip;
 pub use lb::{signal_lb, LbPlan};
@@ -54,6 +56,16 @@ struct Proc {
 impl Proc {
     fn spawn(dir: &Path, name: &str, args: &[String]) -> Result<Proc, String> {
         let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+        Self::spawn_program(dir, name, &exe, args)
+    }
+
+    /// Any program (the hostile client), its output in `dir/NAME.out` and `.err`.
+    fn spawn_program(
+        dir: &Path,
+        name: &str,
+        exe: &Path,
+        args: &[impl AsRef<std::ffi::OsStr>],
+    ) -> Result<Proc, String> {
         let out = dir.join(format!("{name}.out"));
         let file = std::fs::File::create(&out).map_err(|e| e.to_string())?;
         let err =

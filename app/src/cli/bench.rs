@@ -46,6 +46,24 @@ pub(super) enum BenchSub {
         #[arg(long)]
         quick: bool,
     },
+    /// A live room of four honest peers and one hostile process (`softsync-hostile`, built
+    /// from the test crate): one attack after another, each after a window of the honest room
+    /// alone (`RESULT abuse.host`). Run it in a network namespace (scripts/bench-abuse).
+    Abuse {
+        /// Output directory.
+        #[arg(long, default_value = "docs/results/abuse")]
+        out: PathBuf,
+        /// Seconds per attack (and per honest window before it).
+        #[arg(long, default_value_t = 60.0, value_parser = positive::<600>)]
+        seconds: f64,
+        /// Attacks, comma-separated: hello-flood, never-ack, request-flood, junk, idents,
+        /// beacons (default: all).
+        #[arg(long, value_parser = attacks)]
+        attacks: Option<Attacks>,
+        /// The hostile client (default: `softsync-hostile` beside this binary).
+        #[arg(long, value_name = "PATH")]
+        hostile: Option<PathBuf>,
+    },
     /// Rooms of growing size.
     RoomLoad {
         /// Output directory.

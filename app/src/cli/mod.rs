@@ -319,6 +319,17 @@ pub enum Command {
         /// Fewer rooms.
         quick: bool,
     },
+    /// A room under attack.
+    BenchAbuse {
+        /// Output directory.
+        out: PathBuf,
+        /// Seconds per attack.
+        seconds: f64,
+        /// Attacks.
+        attacks: Vec<String>,
+        /// The hostile client.
+        hostile: PathBuf,
+    },
     /// Rooms of growing size.
     BenchRoomLoad {
         /// Output directory.
@@ -586,6 +597,33 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
         Sub::Bench {
             which: BenchSub::Comanip { out, quick },
         } => Command::BenchComanip { out, quick },
+        Sub::Bench {
+            which:
+                BenchSub::Abuse {
+                    out,
+                    seconds,
+                    attacks,
+                    hostile,
+                },
+        } => Command::BenchAbuse {
+            out,
+            seconds,
+            attacks: attacks.map_or_else(
+                || {
+                    crate::bench::ATTACKS
+                        .iter()
+                        .map(|a| a.to_string())
+                        .collect()
+                },
+                |a| a.0,
+            ),
+            hostile: hostile.unwrap_or_else(|| {
+                std::env::current_exe()
+                    .ok()
+                    .and_then(|e| e.parent().map(|d| d.join("softsync-hostile")))
+                    .unwrap_or_else(|| PathBuf::from("softsync-hostile"))
+            }),
+        },
         Sub::Bench {
             which:
                 BenchSub::RoomLoad {

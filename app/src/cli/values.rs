@@ -98,6 +98,27 @@ pub(super) fn room_sizes(v: &str) -> Result<Sizes, String> {
         .map(Sizes)
 }
 
+/// Attack names of `bench abuse`.
+#[derive(Clone, Debug)]
+pub(super) struct Attacks(pub(super) Vec<String>);
+
+pub(super) fn attacks(v: &str) -> Result<Attacks, String> {
+    v.split(',')
+        .map(|a| {
+            let a = a.trim();
+            if crate::bench::ATTACKS.contains(&a) {
+                Ok(a.to_owned())
+            } else {
+                Err(format!(
+                    "{a:?} is not an attack ({})",
+                    crate::bench::ATTACKS.join(", ")
+                ))
+            }
+        })
+        .collect::<Result<_, _>>()
+        .map(Attacks)
+}
+
 pub(super) fn condition(v: &str) -> Result<ConditionerConfig, String> {
     parse_condition(v).map_err(|e| e.0)
 }

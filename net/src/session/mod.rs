@@ -49,6 +49,7 @@ use std::time::Duration;
 
 pub use access::RoomKey;
 pub use ban::{KickError, MAX_BANNED};
+pub use recv::MAX_VERSION_REFUSALS_PER_S;
 pub use registry::{DisplayedState, ObjectState};
 
 use self::authority::PendingAsks;
@@ -231,6 +232,8 @@ pub struct Session {
     messages: messages::Messages,
     challenges: access::Challenges,
     bans: ban::Bans,
+    /// The second (since time zero) and how many version refusals were sent in it.
+    version_refusals: (u64, u32),
     /// Peers the room lost, and the beacons that heal a partition.
     heal: heal::Heal,
 }
@@ -264,6 +267,7 @@ impl Session {
             messages: messages::Messages::default(),
             challenges: access::Challenges::default(),
             bans: ban::Bans::default(),
+            version_refusals: (0, 0),
             heal: heal::Heal::default(),
         }
     }

@@ -15,6 +15,10 @@ use crate::error::NetError;
 use crate::ids::{NetId, PeerId};
 use crate::policy::StateRoute;
 use crate::time::Instant;
+
+/// Refusals a host sends peers of another protocol version, per second in all (the rest of
+/// such datagrams are dropped unanswered: a flood of them gets no flood back).
+pub const MAX_VERSION_REFUSALS_PER_S: u32 = 10;
 use crate::wire::{
     decode_datagram, decode_state_block_sized, encode_refusal, ChunkEnc, Control, Datagram,
     EntryLayout, PacketHeader, PartBody, PosEnc, Refusal, Section, StateEntry,
@@ -76,7 +80,13 @@ impl Session {
             Ok(Datagram::Refusal(refusal)) => return self.on_refusal(now, from, refusal),
             Err(NetError::VersionMismatch { ours, theirs }) => {
                 self.stats.decode_errors += 1;
-                if self.role == Role::Host {
+                // at most MAX_VERSION_REFUSALS_PER_S in all: a flood of datagrams of other
+                // versions must not make the host send one refusal for each
+                let second = now.as_micros() / 1_000_000;
+                let (at, n) = self.version_refusals;
+                let n = if at == second { n } else { 0 };
+                if self.role == Role::Host && n < MAX_VERSION_REFUSALS_PER_S {
+                    self.version_refusals = (second, n + 1);
                     let reason = format!(
                         "protocol version mismatch: host speaks {ours}, you speak {theirs}"
                     );

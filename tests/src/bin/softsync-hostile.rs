@@ -19,9 +19,9 @@
 //! - `beacons`: once a member, forged beacons of a bigger room with itself as host and forged
 //!   epochs of a rollback room, 100 a second.
 //!
-//! It prints `hostile id N`, `joined` when the host welcomed it, `told: REASON` for every
-//! refusal or drop notice it receives (once per distinct reason), and `sent N datagrams` at
-//! the end. Exit 0 after `--seconds` (default 30), 2 on wrong arguments, 1 when it could not
+//! It prints `hostile id N`, `joined` when the host welcomed it, `told: REASON` for a
+//! refusal or drop notice it receives (the first five distinct reasons), and at the end how
+//! many datagrams it sent and how many refusals came back. Exit 0 after `--seconds` (default 30), 2 on wrong arguments, 1 when it could not
 //! connect.
 
 // A process of its own, paced by the wall clock.
@@ -146,6 +146,7 @@ fn run(a: &Args) -> Result<(), String> {
     let mut rng = SeededRng::new(me.0);
     let mut told: Vec<String> = Vec::new();
     let (mut sent, mut joined, mut deaf) = (0u64, false, false);
+    let mut refusals = 0u64;
     let mut last_attack = clock.now();
     let end = Duration::from_secs_f64(a.seconds);
     while clock.now().saturating_since(Instant::ZERO) < end {
@@ -154,10 +155,8 @@ fn run(a: &Args) -> Result<(), String> {
             // every refusal or drop notice is reported, whatever else we do with it
             if door::classify(&bytes) == Door::Refusal {
                 if let Some(r) = decode_refusal(&bytes) {
-                    if !told.contains(&r.reason) {
-                        println!("told: {}", r.reason);
-                        told.push(r.reason.clone());
-                    }
+                    refusals += 1;
+                    note(&mut told, r.reason);
                 }
             }
             if a.attack.joins() && !deaf {
@@ -172,11 +171,8 @@ fn run(a: &Args) -> Result<(), String> {
                     joined = true;
                     println!("joined");
                 }
-                Event::Refused { reason } | Event::Dropped { reason, .. }
-                    if !told.contains(&reason) =>
-                {
-                    println!("told: {reason}");
-                    told.push(reason);
+                Event::Refused { reason } | Event::Dropped { reason, .. } => {
+                    note(&mut told, reason)
                 }
                 _ => {}
             }
@@ -268,8 +264,16 @@ fn run(a: &Args) -> Result<(), String> {
         }
         std::thread::sleep(Duration::from_millis(1));
     }
-    println!("sent {sent} datagrams");
+    println!("sent {sent} datagrams; {refusals} refusal datagrams received");
     Ok(())
+}
+
+/// Print a reason the first time (the first five distinct ones only).
+fn note(told: &mut Vec<String>, reason: String) {
+    if told.len() < 5 && !told.contains(&reason) {
+        println!("told: {reason}");
+        told.push(reason);
+    }
 }
 
 /// One junk datagram of kind `k` (of several), as a stranger.
