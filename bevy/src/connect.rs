@@ -68,7 +68,7 @@ pub fn connect(opts: &RoomOptions) -> Result<Connected, OpenError> {
     );
     mcfg.ice_servers = opts.ice_servers.clone();
     mcfg.ice_username = opts.ice_username.clone();
-    mcfg.signal_proof = opts.room_key.as_ref().map(|k| k.signal_proof(&opts.name));
+    mcfg.signal_key = opts.room_key.clone();
     mcfg.signal_token = opts.room_token.as_ref().map(|t| t.to_string());
     mcfg.ice_credential = opts.ice_credential.clone();
     mcfg.connect_timeout = opts.connect_timeout.min(Duration::from_secs(30));

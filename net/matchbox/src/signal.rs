@@ -64,6 +64,9 @@ impl Default for SignalLimits {
 /// An accepted upgrade that never got an id (the client went away mid-handshake) stops
 /// counting after this long.
 const PENDING_EXPIRY: Duration = Duration::from_secs(30);
+/// Most room-key proofs remembered (each until it expires, 5 minutes at most): past it, new
+/// keyed connections wait.
+pub const MAX_PROOF_NONCES: usize = 65_536;
 
 #[derive(Default, Debug)]
 struct Registry {
@@ -73,6 +76,9 @@ struct Registry {
     pending: HashMap<SocketAddr, (String, Instant)>,
     /// Room of every socket that has an id.
     peers: HashMap<MbPeerId, String>,
+    /// Nonces of the room-key proofs that let a connection in, until their expiry: a proof
+    /// is good once (a replayed URL is refused).
+    nonces: BTreeMap<[u8; 16], u64>,
 }
 
 impl Registry {
@@ -170,28 +176,56 @@ impl SignalServer {
                         format!("invalid room name {room:?}"),
                     ));
                 }
+                let unix_now = std::time::SystemTime::now()
+                    .duration_since(std::time::UNIX_EPOCH)
+                    .map_or(0, |d| d.as_secs());
+                let mut proven = None;
                 if let Some(k) = &key {
                     let proof = meta.query_params.get(PROOF_PARAM).map(String::as_str);
                     let token = meta
                         .query_params
                         .get(TOKEN_PARAM)
                         .and_then(|t| t.parse::<RoomToken>().ok());
-                    let unix_now = std::time::SystemTime::now()
-                        .duration_since(std::time::UNIX_EPOCH)
-                        .map_or(0, |d| d.as_secs());
-                    if !k.admits_signal(&room, proof, token.as_ref(), unix_now) {
-                        return Err(refuse(
-                            StatusCode::FORBIDDEN,
-                            format!(
-                                "room {room:?} needs its key on this signaling server \
-                                 (--room-key-file, or a join token: --room-token)"
-                            ),
-                        ));
+                    let verdict = match (proof, token) {
+                        (Some(p), _) => k.check_signal_proof(&room, p, unix_now).map(Some),
+                        (None, Some(t)) if k.admits_signal_token(&room, &t, unix_now) => Ok(None),
+                        (None, Some(_)) => Err("the join token is not this room's, or expired"),
+                        (None, None) => Err("no key's proof or join token"),
+                    };
+                    match verdict {
+                        Ok(p) => proven = p,
+                        Err(why) => {
+                            return Err(refuse(
+                                StatusCode::FORBIDDEN,
+                                format!(
+                                    "room {room:?} needs its key on this signaling server \
+                                     (--room-key-file, or a join token: --room-token): {why}"
+                                ),
+                            ))
+                        }
                     }
                 }
                 let role = meta.query_params.get(ROLE_PARAM).map(String::as_str);
                 let mut reg = lock(&r1);
                 reg.expire_pending(Instant::now());
+                if let Some((nonce, _)) = proven {
+                    reg.nonces.retain(|_, exp| *exp > unix_now);
+                    if reg.nonces.contains_key(&nonce) {
+                        return Err(refuse(
+                            StatusCode::FORBIDDEN,
+                            format!(
+                                "room {room:?}: this room-key proof was used already (a \
+                                 replayed URL); a peer makes a fresh one for each connection"
+                            ),
+                        ));
+                    }
+                    if reg.nonces.len() >= MAX_PROOF_NONCES {
+                        return Err(refuse(
+                            StatusCode::SERVICE_UNAVAILABLE,
+                            "too many keyed connections in the last minutes: try again".into(),
+                        ));
+                    }
+                }
                 if reg.sockets() >= limits.max_sockets {
                     return Err(refuse(
                         StatusCode::SERVICE_UNAVAILABLE,
@@ -225,6 +259,9 @@ impl SignalServer {
                             format!("role must be host, join or member, not {other:?}"),
                         ))
                     }
+                }
+                if let Some((nonce, exp)) = proven {
+                    reg.nonces.insert(nonce, exp);
                 }
                 *reg.rooms.entry(room.clone()).or_insert(0) += 1;
                 if let Some((old, _)) = reg.pending.insert(meta.origin, (room, Instant::now())) {

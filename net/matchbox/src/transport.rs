@@ -66,8 +66,9 @@ pub struct MatchboxConfig {
     /// The protocol version announced to the signaling server (the build's own by default;
     /// tests set another to see the refusal).
     pub protocol_version: u8,
-    /// For a signaling server that wants the room's key: `RoomKey::signal_proof` of the room.
-    pub signal_proof: Option<String>,
+    /// For a signaling server that wants the room's key: the key, whose fresh proof
+    /// (`RoomKey::signal_proof`, good for 5 minutes and once) each connection shows.
+    pub signal_key: Option<softsync_net::RoomKey>,
     /// Or a join token of the room (its text form).
     pub signal_token: Option<String>,
     /// Signaling servers to register the room with, in turn, when the current one is lost
@@ -89,7 +90,7 @@ impl MatchboxConfig {
             connect_timeout: Duration::from_secs(10),
             mtu: DEFAULT_MTU,
             protocol_version: PROTOCOL_VERSION,
-            signal_proof: None,
+            signal_key: None,
             signal_token: None,
             fallback_urls: Vec::new(),
         }
@@ -104,13 +105,34 @@ impl MatchboxConfig {
             self.room,
             self.protocol_version
         );
-        if let Some(p) = &self.signal_proof {
+        if let Some(k) = &self.signal_key {
+            let now = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_secs());
+            let p = k.signal_proof(&self.room, now, fresh_nonce());
             url.push_str(&format!("&{PROOF_PARAM}={p}"));
         } else if let Some(t) = &self.signal_token {
             url.push_str(&format!("&{TOKEN_PARAM}={t}"));
         }
         url
     }
+}
+
+/// 16 random bytes for a signaling proof, from the system's source (should that fail, the
+/// clock and a counter: still never the same twice in this process).
+fn fresh_nonce() -> [u8; 16] {
+    use ring::rand::SecureRandom;
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let mut n = [0u8; 16];
+    if ring::rand::SystemRandom::new().fill(&mut n).is_err() {
+        let t = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as u64);
+        n[..8].copy_from_slice(&t.to_le_bytes());
+        n[8..].copy_from_slice(&COUNTER.fetch_add(1, Ordering::Relaxed).to_le_bytes());
+    }
+    n
 }
 
 /// Why a connection could not be made.

@@ -111,3 +111,53 @@ fn limits_refuse_with_a_reason() {
     let e = MatchboxTransport::connect(&cfg(&url, "three", Role::Host)).unwrap_err();
     assert!(e.to_string().contains("server is full"), "{e}");
 }
+
+/// A keyed server: a connection shows a fresh proof of the room's key (5 minutes, once); the
+/// same URL again (a captured one), an old proof or a wrong key is refused with HTTP 403.
+#[test]
+fn a_keyed_server_takes_each_proof_once_and_refuses_stale_or_foreign_ones() {
+    use softsync_net::RoomKey;
+    let key = RoomKey::new(b"the lab's secret, 16 bytes or more", 1);
+    let server = SignalServer::start_keyed(
+        "127.0.0.1:0".parse().unwrap(),
+        softsync_net_matchbox::SignalLimits::default(),
+        Some(key.clone()),
+    )
+    .unwrap();
+    let url = server.url();
+    let mut open = Vec::new();
+    let mut status = |u: &str| match tungstenite::connect(u) {
+        Ok(ws) => {
+            open.push(ws); // the room lives while its socket does
+            101
+        }
+        Err(tungstenite::Error::Http(r)) => r.status().as_u16(),
+        Err(e) => panic!("{e}"),
+    };
+    let mut host = cfg(&url, "lab", Role::Host);
+    host.signal_key = Some(key.clone());
+    let captured = host.room_url();
+    assert_eq!(status(&captured), 101, "a fresh proof is let in");
+    assert_eq!(status(&captured), 403, "the same URL again is refused");
+    // the transport makes a fresh proof for every connection
+    let mut join = cfg(&url, "lab", Role::Join);
+    join.signal_key = Some(key.clone());
+    let _a = MatchboxTransport::connect(&join).unwrap();
+    let _b = MatchboxTransport::connect(&join).unwrap();
+    // an old proof, another key's, or none
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_secs();
+    let base = format!("{url}/lab?softsync={PROTOCOL_VERSION}&role=join");
+    let old = key.signal_proof("lab", now - 600, [1; 16]);
+    assert_eq!(status(&format!("{base}&proof={old}")), 403);
+    let other =
+        RoomKey::new(b"somebody else's secret, 16+ bytes", 1).signal_proof("lab", now, [2; 16]);
+    assert_eq!(status(&format!("{base}&proof={other}")), 403);
+    assert_eq!(status(&base), 403);
+    let mut keyless = cfg(&url, "lab", Role::Join);
+    keyless.signal_key = None;
+    let e = MatchboxTransport::connect(&keyless).unwrap_err();
+    assert!(e.to_string().contains("needs its key"), "{e}");
+}

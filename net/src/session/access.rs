@@ -115,46 +115,87 @@ impl RoomKey {
         Ok(())
     }
 
-    /// What a peer of room `room` shows the signaling server to be let in (hex): HMAC-SHA256
-    /// of `"softsync-signal-v1" ‖ room`. Bound to the room, not to a connection: it keeps
-    /// outsiders off the server (a captured URL is as good as the proof; use `wss://`).
-    pub fn signal_proof(&self, room: &str) -> String {
+    fn signal_mac(&self, room: &str, expires_unix: u64, nonce: &[u8; 16]) -> hmac::Tag {
         let mut ctx = hmac::Context::with_key(&self.key);
-        ctx.update(b"softsync-signal-v1");
+        ctx.update(b"softsync-signal-v2");
+        ctx.update(&(room.len() as u64).to_le_bytes());
         ctx.update(room.as_bytes());
+        ctx.update(&expires_unix.to_le_bytes());
+        ctx.update(nonce);
         ctx.sign()
-            .as_ref()
-            .iter()
-            .map(|b| format!("{b:02x}"))
-            .collect()
     }
 
-    /// The signaling server's check of a connection to room `room`: a right
-    /// [`signal_proof`](Self::signal_proof), or a join token of this key for that room that
-    /// has not expired at `unix_now`.
-    pub fn admits_signal(
+    /// What a peer of room `room` shows the signaling server to be let in, made at
+    /// `unix_now` with a fresh random `nonce` (the I/O layer draws it):
+    /// `EXPIRES.NONCE.MAC` (decimal, then hex), the MAC HMAC-SHA256 under the key of
+    /// `"softsync-signal-v2" ‖ room length (u64 LE) ‖ room ‖ expires (u64 LE) ‖ nonce`. It is
+    /// good for [`SIGNAL_PROOF_LIFETIME_S`] and, at a server that remembers nonces, once: a
+    /// captured URL is worth little (still, use `wss://`).
+    pub fn signal_proof(&self, room: &str, unix_now: u64, nonce: [u8; 16]) -> String {
+        let expires = unix_now.saturating_add(SIGNAL_PROOF_LIFETIME_S);
+        let hex = |b: &[u8]| b.iter().map(|x| format!("{x:02x}")).collect::<String>();
+        format!(
+            "{expires}.{}.{}",
+            hex(&nonce),
+            hex(self.signal_mac(room, expires, &nonce).as_ref())
+        )
+    }
+
+    /// The signaling server's check of a [`signal_proof`](Self::signal_proof) for room
+    /// `room` at `unix_now`: its nonce and expiry if it is right and current (not expired,
+    /// not made further ahead than its lifetime and a minute of clock skew), else why not.
+    /// The server refuses a nonce it has seen before its expiry.
+    pub fn check_signal_proof(
         &self,
         room: &str,
-        proof: Option<&str>,
-        token: Option<&RoomToken>,
+        proof: &str,
         unix_now: u64,
-    ) -> bool {
-        if let Some(p) = proof {
-            let want = self.signal_proof(room);
-            return p.len() == want.len()
-                && p.bytes()
-                    .zip(want.bytes())
-                    .fold(0u8, |acc, (a, b)| acc | (a ^ b))
-                    == 0;
-        }
-        match token {
-            Some(t) => {
-                t.room == room
-                    && t.expires_unix > unix_now
-                    && self.clone().for_room(room).token_is_ours(t)
+    ) -> Result<([u8; 16], u64), &'static str> {
+        let bad = "the room key's proof is malformed";
+        let mut parts = proof.split('.');
+        let (Some(e), Some(n), Some(m), None) =
+            (parts.next(), parts.next(), parts.next(), parts.next())
+        else {
+            return Err(bad);
+        };
+        let expires: u64 = e.parse().map_err(|_| bad)?;
+        let unhex = |h: &str, out: &mut [u8]| -> Result<(), &'static str> {
+            if h.len() != 2 * out.len() || !h.is_ascii() {
+                return Err(bad);
             }
-            None => false,
+            for (k, o) in out.iter_mut().enumerate() {
+                *o = u8::from_str_radix(&h[2 * k..2 * k + 2], 16).map_err(|_| bad)?;
+            }
+            Ok(())
+        };
+        let mut nonce = [0u8; 16];
+        let mut mac = [0u8; 32];
+        unhex(n, &mut nonce)?;
+        unhex(m, &mut mac)?;
+        let mut msg = Vec::with_capacity(64 + room.len());
+        msg.extend_from_slice(b"softsync-signal-v2");
+        msg.extend_from_slice(&(room.len() as u64).to_le_bytes());
+        msg.extend_from_slice(room.as_bytes());
+        msg.extend_from_slice(&expires.to_le_bytes());
+        msg.extend_from_slice(&nonce);
+        if hmac::verify(&self.key, &msg, &mac).is_err() {
+            return Err("wrong room key");
         }
+        if expires <= unix_now {
+            return Err("the room key's proof expired (check this machine's clock)");
+        }
+        if expires > unix_now + SIGNAL_PROOF_LIFETIME_S + 60 {
+            return Err("the room key's proof is from the future (check this machine's clock)");
+        }
+        Ok((nonce, expires))
+    }
+
+    /// The signaling server's check of a connection to room `room` without a proof: a join
+    /// token of this key for that room that has not expired at `unix_now`.
+    pub fn admits_signal_token(&self, room: &str, token: &RoomToken, unix_now: u64) -> bool {
+        token.room == room
+            && token.expires_unix > unix_now
+            && self.clone().for_room(room).token_is_ours(token)
     }
 
     /// Whether `token` is signed with this key for this key's room (its expiry aside).
@@ -284,6 +325,9 @@ pub(crate) struct Challenges {
     issued: u64,
     pub(super) tokens_used: BTreeMap<[u8; 16], (PeerId, u64)>,
 }
+
+/// Seconds a signaling proof ([`RoomKey::signal_proof`]) is good for.
+pub const SIGNAL_PROOF_LIFETIME_S: u64 = 300;
 
 /// Most used join tokens a session remembers. Expired ones are forgotten; a host that
 /// remembers this many unexpired ones takes no new token (it never forgets a valid one, which
@@ -737,6 +781,51 @@ mod tokens {
         w.add(Session::join(PeerId(2), PeerId(1), token_cfg(&good), w.now));
         w.settle();
         assert!(refusal(&mut w, 2).unwrap().contains("no clock"));
+    }
+
+    #[test]
+    fn a_signaling_proof_is_bound_to_room_key_and_time_and_tells_what_is_wrong() {
+        let k = key(1);
+        let p = k.signal_proof("lab", T0, [3; 16]);
+        assert_eq!(
+            k.check_signal_proof("lab", &p, T0 + 10),
+            Ok(([3; 16], T0 + SIGNAL_PROOF_LIFETIME_S))
+        );
+        // another seed, the same secret: the same verdict
+        assert!(key(2).check_signal_proof("lab", &p, T0).is_ok());
+        assert_eq!(
+            k.check_signal_proof("kitchen", &p, T0),
+            Err("wrong room key")
+        );
+        let other = RoomKey::new(b"another secret of 16+ bytes", 1);
+        assert_eq!(
+            other.check_signal_proof("lab", &p, T0),
+            Err("wrong room key")
+        );
+        let late = k.check_signal_proof("lab", &p, T0 + SIGNAL_PROOF_LIFETIME_S);
+        assert!(late.unwrap_err().contains("expired"));
+        let ahead = k.signal_proof("lab", T0 + 3600, [3; 16]);
+        assert!(k
+            .check_signal_proof("lab", &ahead, T0)
+            .unwrap_err()
+            .contains("future"));
+        // a longer life under the same MAC, or a changed nonce: wrong
+        let (e, rest) = p.split_once('.').unwrap();
+        let longer = format!("{}.{rest}", e.parse::<u64>().unwrap() + 100);
+        assert_eq!(
+            k.check_signal_proof("lab", &longer, T0),
+            Err("wrong room key")
+        );
+        for bad in [
+            "",
+            "1.2",
+            "x.y.z",
+            "1.2.3.4",
+            &p[..p.len() - 2],
+            &format!("{p}ff"),
+        ] {
+            assert!(k.check_signal_proof("lab", bad, T0).is_err(), "{bad:?}");
+        }
     }
 
     #[test]

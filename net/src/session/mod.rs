@@ -47,7 +47,7 @@ pub mod topology;
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
 
-pub use access::RoomKey;
+pub use access::{RoomKey, SIGNAL_PROOF_LIFETIME_S};
 pub use ban::{KickError, MAX_BANNED};
 pub use recv::MAX_VERSION_REFUSALS_PER_S;
 pub use registry::{DisplayedState, ObjectState};
