@@ -751,3 +751,118 @@ fn a_flood_of_other_versions_gets_a_few_refusals_not_one_each() {
     }
     assert_eq!(answered, 3 * MAX_VERSION_REFUSALS_PER_S as usize);
 }
+
+/// A joined host and member (peer 2), and an object of the host's.
+fn joined_with_object() -> (Instant, Session, Session, NetId) {
+    let cfg = SessionConfig::default();
+    let mut now = Instant::ZERO;
+    let mut host = Session::host(PeerId(1), cfg.clone(), now);
+    let mut m = Session::join(PeerId(2), PeerId(1), cfg, now);
+    for _ in 0..25 {
+        now += Duration::from_millis(20);
+        host.handle_timeout(now);
+        m.handle_timeout(now);
+        pump(now, &mut host, &mut [&mut m]);
+    }
+    let s = softsync_net::ObjectState::rigid(Vec3::ZERO, glam::Quat::IDENTITY);
+    let (id, _) = host.spawn(now, ClassId(0), s).unwrap();
+    pump(now, &mut host, &mut [&mut m]);
+    assert!(m.is_connected());
+    (now, host, m, id)
+}
+
+/// Ticks of 100 ms, `flood` run each, until the member is out of the host's room; then the
+/// reason it was told.
+fn flood_until_dropped(
+    mut now: Instant,
+    host: &mut Session,
+    m: &mut Session,
+    mut flood: impl FnMut(Instant, &mut Session, &mut Session),
+) -> (usize, String) {
+    let mut dropped_after = None;
+    for tick in 0..100 {
+        now += Duration::from_millis(100);
+        flood(now, host, m);
+        host.handle_timeout(now);
+        m.handle_timeout(now);
+        pump(now, host, &mut [m]);
+        if !host.members().contains_key(&PeerId(2)) {
+            dropped_after = Some(tick);
+            break;
+        }
+    }
+    let ticks = dropped_after.unwrap_or_else(|| {
+        panic!(
+            "the flooding member was never dropped: {} refused, {:?} messages refused",
+            host.stats().requests_rate_limited,
+            host.stats().messages.refused
+        )
+    });
+    for _ in 0..5 {
+        now += Duration::from_millis(100);
+        host.handle_timeout(now);
+        m.handle_timeout(now);
+        pump(now, host, &mut [m]);
+    }
+    let told = std::iter::from_fn(|| m.poll_event())
+        .find_map(|e| match e {
+            Event::Dropped { reason, .. } => Some(reason),
+            _ => None,
+        })
+        .unwrap_or_default();
+    (ticks, told)
+}
+
+#[test]
+fn a_member_that_keeps_flooding_keyframe_requests_or_messages_is_dropped_with_a_reason() {
+    use softsync_net::session::link::{MAX_KEYFRAME_REQUESTS_PER_S, REQUEST_FLOOD_STRIKES};
+    use softsync_net::wire::{
+        AppMessage, Delivery, MessageKind, MessageTarget, PacketHeader, PacketWriter,
+    };
+    let strikes = REQUEST_FLOOD_STRIKES as usize;
+    // keyframe requests at ten times their rate, each in its own datagram
+    let (now, mut host, mut m, id) = joined_with_object();
+    let mut seq = 0u8;
+    let (ticks, told) = flood_until_dropped(now, &mut host, &mut m, |now, host, m| {
+        for _ in 0..MAX_KEYFRAME_REQUESTS_PER_S {
+            seq = seq.wrapping_add(1);
+            let header = PacketHeader {
+                term: m.term(),
+                seq,
+                time_ms: 0,
+            };
+            let mut w = PacketWriter::new(&header, 1200);
+            assert!(w.keyframe_request(&[id]));
+            let (bytes, _) = w.finish();
+            host.handle_packet(now, PeerId(2), &bytes);
+        }
+    });
+    assert!(
+        (10 * strikes..=10 * (strikes + 2)).contains(&ticks),
+        "after {ticks} ticks"
+    );
+    assert!(told.contains("twice the 30 keyframe requests"), "{told:?}");
+    // application messages at ten times the rates of every kind together (300 a second)
+    let (now, mut host, mut m, _) = joined_with_object();
+    let mut n = 0;
+    let (ticks, told) = flood_until_dropped(now, &mut host, &mut m, |now, _host, m| {
+        for _ in 0..300 {
+            n += 1;
+            let msg = AppMessage {
+                origin: PeerId(2),
+                seq: n,
+                kind: MessageKind(0),
+                to: MessageTarget::Everyone,
+                delivery: Delivery::Reliable,
+                payload: b"spam".to_vec(),
+            };
+            m.send_raw_control(now, PeerId(1), &Control::Message(msg));
+        }
+    });
+    assert!(
+        (10 * strikes..=10 * (strikes + 3)).contains(&ticks),
+        "after {ticks} ticks"
+    );
+    assert!(told.contains("application messages a second"), "{told:?}");
+    assert_eq!(host.stats().dropped_over_quota, 1);
+}

@@ -293,8 +293,8 @@ pub const MAX_REQUESTS_PER_S: u32 = 60;
 /// [`MAX_KEYFRAME_REQUEST`] objects; a healthy link asks after a loss burst, a few a second).
 pub const MAX_KEYFRAME_REQUESTS_PER_S: u32 = 30;
 
-/// A member whose requests went over twice their rate this many seconds in a row is dropped
-/// (a flood, not a burst): `DropWhy::RequestFlood`.
+/// A member whose requests, keyframe requests or application messages went over twice their
+/// rate this many seconds in a row is dropped (a flood, not a burst): `DropWhy::Flood`.
 pub const REQUEST_FLOOD_STRIKES: u32 = 5;
 
 /// A count per one-second window, to rate-limit what a peer asks of us; and how many
@@ -415,9 +415,11 @@ pub(crate) struct Link {
     pub pending_sample: Option<Instant>,
     /// Keyframes to ask it for.
     pub keyframes: KeyframeRequests,
-    /// What the peer asked of us this second: requests at the host, keyframe requests.
+    /// What the peer asked of us this second: requests at the host, keyframe requests,
+    /// application messages (all kinds together, against their rates' sum).
     pub requests: RateWindow,
     pub keyframe_asks: RateWindow,
+    pub message_asks: RateWindow,
     /// A ping of its to answer (its time).
     pub pong_due: Option<u32>,
     /// A ping of ours to send.

@@ -27,8 +27,8 @@ pub(crate) enum DropWhy {
     OlderTerm(Term),
     /// It left this many control messages unacknowledged (`PeerBudget`).
     OverQuota(usize),
-    /// It asked for twice its request rate or more, seconds in a row.
-    RequestFlood,
+    /// It asked for twice its rate of something or more, seconds in a row.
+    Flood(FloodKind),
     /// The host kicked it out and banned it (`Session::kick`).
     Banned,
 }
@@ -38,6 +38,17 @@ struct Dropped {
     why: DropWhy,
     /// When it was last told (at most once per heartbeat interval).
     told: Option<Instant>,
+}
+
+/// What a member flooded the host with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum FloodKind {
+    /// Requests (grabs, releases, answers, spawns, despawns, resyncs).
+    Requests,
+    /// Keyframe requests.
+    Keyframes,
+    /// Application messages.
+    Messages,
 }
 
 /// Host: peers out of the room that may not know it, with why and when it last told them
@@ -280,12 +291,21 @@ impl Session {
                 "kicked out of the room and banned by its host: {}",
                 self.ban_reason(to).unwrap_or("no reason given")
             ),
-            DropWhy::RequestFlood => format!(
-                "dropped from the room: more than twice the {} requests a second a member may \
-                 make, {} seconds in a row",
-                super::link::MAX_REQUESTS_PER_S,
-                super::link::REQUEST_FLOOD_STRIKES
-            ),
+            DropWhy::Flood(kind) => {
+                let (n, what) = match kind {
+                    FloodKind::Requests => (super::link::MAX_REQUESTS_PER_S, "requests"),
+                    FloodKind::Keyframes => (
+                        super::link::MAX_KEYFRAME_REQUESTS_PER_S,
+                        "keyframe requests",
+                    ),
+                    FloodKind::Messages => (self.message_flood_rate(), "application messages"),
+                };
+                format!(
+                    "dropped from the room: more than twice the {n} {what} a second a member \
+                     may make, {} seconds in a row",
+                    super::link::REQUEST_FLOOD_STRIKES
+                )
+            }
         };
         // naming ourselves as the host to join again: a drop notice, which a joining session
         // (the dropped peer's fresh one, reached by a notice its old one provoked) ignores
@@ -388,21 +408,37 @@ impl Session {
 }
 
 impl Session {
-    /// Host: a member whose requests have gone over twice their rate for
-    /// [`super::link::REQUEST_FLOOD_STRIKES`] seconds in a row is dropped, told why and
+    /// Host: a member whose requests, keyframe requests or application messages have gone
+    /// over twice their rate for [`super::link::REQUEST_FLOOD_STRIKES`] seconds in a row is
+    /// dropped, told why and
     /// counted (`Stats::dropped_over_quota`): throttled first (refused past the rate), then
     /// out.
     pub(super) fn drop_if_flooding(&mut self, now: Instant, from: PeerId) {
-        let strikes = self.links.get(&from).map_or(0, |l| l.requests.strikes());
-        if self.role == Role::Host
-            && from != self.local
-            && self.members.contains_key(&from)
-            && strikes >= super::link::REQUEST_FLOOD_STRIKES
-        {
+        let Some(l) = self.links.get(&from) else {
+            return;
+        };
+        let strikes = super::link::REQUEST_FLOOD_STRIKES;
+        let kind = if l.requests.strikes() >= strikes {
+            FloodKind::Requests
+        } else if l.keyframe_asks.strikes() >= strikes {
+            FloodKind::Keyframes
+        } else if l.message_asks.strikes() >= strikes {
+            FloodKind::Messages
+        } else {
+            return;
+        };
+        if self.role == Role::Host && from != self.local && self.members.contains_key(&from) {
             self.stats.dropped_over_quota += 1;
-            self.dropped.insert(from, DropWhy::RequestFlood);
+            self.dropped.insert(from, DropWhy::Flood(kind));
             self.host_peer_left(now, from);
         }
+    }
+
+    /// Application messages a member may send a second, every kind together (its reliable
+    /// and unreliable rates): twice this, seconds in a row, is a flood.
+    pub(super) fn message_flood_rate(&self) -> u32 {
+        let m = &self.cfg.messages;
+        (m.rate_per_s + m.unreliable_rate_per_s).ceil().max(1.0) as u32
     }
 }
 

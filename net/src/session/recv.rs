@@ -219,6 +219,7 @@ impl Session {
                     });
                     if !admitted {
                         self.stats.requests_rate_limited += 1;
+                        self.drop_if_flooding(now, from);
                         continue;
                     }
                     for id in ids {

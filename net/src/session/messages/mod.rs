@@ -288,6 +288,16 @@ impl Session {
         from: PeerId,
         msg: &AppMessage,
     ) -> Result<Vec<PeerId>, MessageRefusal> {
+        if from != self.local {
+            // every message of a member counts toward a flood, well-formed or not (twice its
+            // rates, seconds in a row: dropped by the caller, `drop_if_flooding`)
+            let flood_rate = self.message_flood_rate();
+            if let Some(l) = self.links.get_mut(&from) {
+                if !l.message_asks.admit(now, flood_rate) {
+                    return Err(MessageRefusal::RateLimited);
+                }
+            }
+        }
         let cfg = &self.cfg.messages;
         if msg.origin != from || !msg.valid() {
             return Err(MessageRefusal::Malformed);
@@ -362,6 +372,12 @@ impl Session {
             Err(reason) => {
                 if from != self.local {
                     *self.stats.messages.refused.entry(reason).or_default() += 1;
+                    if reason == MessageRefusal::RateLimited {
+                        self.drop_if_flooding(now, from);
+                        if !self.members.contains_key(&from) {
+                            return; // dropped: told why, nothing more to answer
+                        }
+                    }
                 }
                 if msg.delivery.is_reliable() {
                     if from == self.local {
