@@ -92,7 +92,12 @@ fn run(args: &[String]) -> Result<ExitCode, Failure> {
         Command::Signal {
             bind,
             room_key_file,
-        } => signal(bind, room_key(room_key_file.as_deref())?),
+            tls,
+        } => signal(
+            bind,
+            room_key(room_key_file.as_deref())?,
+            tls_identity(tls.as_ref())?,
+        ),
         Command::Peer(p) => peer(*p),
         Command::BenchNetLive {
             out,
@@ -198,14 +203,29 @@ fn run(args: &[String]) -> Result<ExitCode, Failure> {
     }
 }
 
+/// `--tls-cert` and `--tls-key`, read (a clear usage error if they cannot be).
+fn tls_identity(
+    files: Option<&(PathBuf, PathBuf)>,
+) -> Result<Option<softsync_net_matchbox::TlsIdentity>, Failure> {
+    files
+        .map(|(cert, key)| softsync_net_matchbox::TlsIdentity::from_pem_files(cert, key))
+        .transpose()
+        .map_err(Failure::usage)
+}
+
 fn signal(
     bind: std::net::SocketAddr,
     key: Option<softsync_net::RoomKey>,
+    tls: Option<softsync_net_matchbox::TlsIdentity>,
 ) -> Result<ExitCode, Failure> {
     let keyed = key.is_some();
-    let server =
-        SignalServer::start_keyed(bind, softsync_net_matchbox::SignalLimits::default(), key)
-            .map_err(Failure::connect)?;
+    let server = SignalServer::start_secure(
+        bind,
+        softsync_net_matchbox::SignalLimits::default(),
+        key,
+        tls,
+    )
+    .map_err(Failure::connect)?;
     if keyed {
         println!("rooms on this server need the room key (or a join token)");
     }
@@ -495,6 +515,8 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     opts.ice_credential = ice_credential(&a)?;
     opts.connect_timeout = a.connect_timeout;
     opts.room_key = room_key(a.room_key_file.as_deref())?;
+    opts.tls = tls_identity(a.tls.as_ref())?;
+    opts.tls_ca = a.tls_ca.clone();
     opts.room_token = match (&a.room_token, std::env::var("SOFTSYNC_ROOM_TOKEN")) {
         (Some(t), _) => Some(t.clone()),
         (None, Ok(t)) => Some(

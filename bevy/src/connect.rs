@@ -38,10 +38,11 @@ pub fn connect(opts: &RoomOptions) -> Result<Connected, OpenError> {
         (Some(u), _) => (None, u.clone()),
         (None, true) => {
             // a room with a key keeps outsiders off its embedded signaling server too
-            let s = SignalServer::start_keyed(
+            let s = SignalServer::start_secure(
                 opts.bind,
                 softsync_net_matchbox::SignalLimits::default(),
                 opts.room_key.clone(),
+                opts.tls.clone(),
             )
             .map_err(|e| OpenError::Connect(format!("signaling on {}: {e}", opts.bind)))?;
             let url = s.url();
@@ -69,6 +70,7 @@ pub fn connect(opts: &RoomOptions) -> Result<Connected, OpenError> {
     mcfg.ice_servers = opts.ice_servers.clone();
     mcfg.ice_username = opts.ice_username.clone();
     mcfg.signal_key = opts.room_key.clone();
+    mcfg.tls_ca = opts.tls_ca.clone();
     mcfg.signal_token = opts.room_token.as_ref().map(|t| t.to_string());
     mcfg.ice_credential = opts.ice_credential.clone();
     mcfg.connect_timeout = opts.connect_timeout.min(Duration::from_secs(30));

@@ -19,7 +19,7 @@ use softsync_net::{
     ConditionerConfig, Delivery, Instant, LinkConditioner, MessageRefusal, MessageTarget, RoomKey,
     SendPolicy, Session, SessionConfig, Transport,
 };
-use softsync_net_matchbox::{MatchboxTransport, SignalServer};
+use softsync_net_matchbox::{MatchboxTransport, SignalServer, TlsIdentity};
 use softsync_peer::messages::SignalingMoved;
 use softsync_peer::{Event, Peer, PeerConfig, PeerError, Scene};
 
@@ -71,6 +71,12 @@ pub struct RoomOptions {
     /// A joiner's address for the room's signaling should it become host after the host that
     /// served signaling died (see [`Room`]'s docs on signaling). None: it serves none.
     pub takeover_bind: Option<SocketAddr>,
+    /// The embedded signaling server's certificate and key: it then speaks `wss://` (a host's
+    /// own, or a new host's after a takeover).
+    pub tls: Option<TlsIdentity>,
+    /// For `wss://` signaling whose certificate the web's roots do not vouch for: a PEM file
+    /// of the CA certificates to trust besides them.
+    pub tls_ca: Option<PathBuf>,
     /// STUN/TURN servers (`stun:…`, `turn:…`); none on a LAN.
     pub ice_servers: Vec<String>,
     /// TURN credentials.
@@ -129,6 +135,8 @@ impl RoomOptions {
             signal: None,
             bind: SocketAddr::from(([127, 0, 0, 1], 3536)),
             takeover_bind: None,
+            tls: None,
+            tls_ca: None,
             ice_servers: Vec::new(),
             ice_username: None,
             ice_credential: None,
@@ -289,7 +297,7 @@ pub struct Room {
     /// Pumps between frames ([`Room::pump_between_frames`]).
     background_pumps: u64,
     /// Where to serve the room's signaling if we take over from a host that served it.
-    takeover: Option<(SocketAddr, Option<RoomKey>)>,
+    takeover: Option<(SocketAddr, Option<RoomKey>, Option<TlsIdentity>)>,
 }
 
 /// How a joiner received the room's scene ([`Room::open_fetching_scene`]).
@@ -406,7 +414,7 @@ impl Room {
             takeover: (!opts.host)
                 .then_some(opts.takeover_bind)
                 .flatten()
-                .map(|b| (b, opts.room_key.clone())),
+                .map(|b| (b, opts.room_key.clone(), opts.tls.clone())),
         })
     }
 
@@ -574,16 +582,17 @@ impl Room {
     /// We are the new host: if our predecessor served the room's signaling and we have an
     /// address for it, serve it now, register there ourselves and tell the room.
     fn serve_signaling_after_takeover(&mut self, now: Instant) {
-        let Some((bind, key)) = self.takeover.take() else {
+        let Some((bind, key, tls)) = self.takeover.take() else {
             return;
         };
         if self.signal.is_some() {
             return;
         }
-        let server = match SignalServer::start_keyed(
+        let server = match SignalServer::start_secure(
             bind,
             softsync_net_matchbox::SignalLimits::default(),
             key,
+            tls,
         ) {
             Ok(s) => s,
             Err(e) => {

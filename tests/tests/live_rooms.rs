@@ -759,3 +759,56 @@ fn k_a_full_room_refuses_a_joiner_with_the_reason() {
         assert!(logs.contains(reason), "{name}: {logs}");
     }
 }
+
+/// Signaling over TLS: `softsync signal --tls-cert --tls-key` serves `wss://`; a host and a
+/// bot that trust its CA (`--tls-ca`) meet there and the bot gets the scene and joins; a
+/// joiner that does not trust it stops with the certificate error.
+#[test]
+fn l_signaling_over_tls_lets_in_peers_that_trust_the_certificate() {
+    require_netns();
+    let dir = scratch("tls");
+    let data = |f: &str| {
+        common::repo_file(&format!("net/matchbox/tests/data/{f}"))
+            .display()
+            .to_string()
+    };
+    let (cert, key, ca) = (data("server.pem"), data("server.key"), data("ca.pem"));
+    let signal = Proc::spawn(
+        &dir,
+        "signal",
+        &[
+            "signal",
+            "--bind",
+            "127.0.0.1:0",
+            "--tls-cert",
+            &cert,
+            "--tls-key",
+            &key,
+        ],
+    );
+    let url = signal_url(&signal);
+    assert!(url.starts_with("wss://"), "{url}");
+    let host = peer_on(
+        &dir,
+        "host",
+        "host",
+        &url,
+        "tls",
+        &["--tls-ca", &ca, "--duration", "30"],
+    );
+    host.wait_line("hosting", Duration::from_secs(30));
+    let bot = peer_on(
+        &dir,
+        "bot",
+        "join",
+        &url,
+        "tls",
+        &["--tls-ca", &ca, "--duration", "30"],
+    );
+    bot.wait_line("joined", Duration::from_secs(40));
+    let mut stranger = peer_on(&dir, "stranger", "join", &url, "tls", &["--duration", "10"]);
+    let code = stranger.wait_exit(Duration::from_secs(30));
+    let logs = stranger.logs();
+    assert_ne!(code, 0, "{logs}");
+    assert!(logs.to_lowercase().contains("certificate"), "{logs}");
+}

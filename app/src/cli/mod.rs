@@ -48,6 +48,12 @@ enum Sub {
         /// proof or a join token, or is refused (HTTP 403) before it sees anyone.
         #[arg(long, value_name = "FILE")]
         room_key_file: Option<PathBuf>,
+        /// Serve `wss://` with this certificate chain (PEM; with --tls-key).
+        #[arg(long, value_name = "FILE", requires = "tls_key")]
+        tls_cert: Option<PathBuf>,
+        /// The certificate's private key (PEM).
+        #[arg(long, value_name = "FILE", requires = "tls_cert")]
+        tls_key: Option<PathBuf>,
     },
     /// Print a join token for a room with a key: whoever shows it gets in once (the first
     /// peer to use it; that peer may come back with it) until it expires.
@@ -163,6 +169,17 @@ struct PeerOpts {
     /// SOFTSYNC_ROOM_KEY. Use 16 or more random bytes.
     #[arg(long, value_name = "FILE")]
     room_key_file: Option<PathBuf>,
+    /// The embedded signaling server (a host's, or a new host's after --takeover-bind)
+    /// serves `wss://` with this certificate chain (PEM; with --tls-key).
+    #[arg(long, value_name = "FILE", requires = "tls_key")]
+    tls_cert: Option<PathBuf>,
+    /// The certificate's private key (PEM).
+    #[arg(long, value_name = "FILE", requires = "tls_cert")]
+    tls_key: Option<PathBuf>,
+    /// For `wss://` signaling whose certificate the web's roots do not vouch for: a PEM file
+    /// of CA certificates to trust besides them.
+    #[arg(long, value_name = "FILE")]
+    tls_ca: Option<PathBuf>,
     /// A join token (`softsync token`) for a room with a key, instead of the key (or set
     /// SOFTSYNC_ROOM_TOKEN).
     #[arg(long, value_name = "TOKEN", value_parser = token)]
@@ -282,6 +299,8 @@ pub enum Command {
         bind: SocketAddr,
         /// The rooms' secret's file.
         room_key_file: Option<PathBuf>,
+        /// Certificate and key files for `wss://`.
+        tls: Option<(PathBuf, PathBuf)>,
     },
     /// A peer.
     Peer(Box<PeerArgs>),
@@ -416,6 +435,10 @@ pub struct PeerArgs {
     pub rejoin_limit: u32,
     /// The room secret's file.
     pub room_key_file: Option<PathBuf>,
+    /// Certificate and key files for the embedded signaling server's `wss://`.
+    pub tls: Option<(PathBuf, PathBuf)>,
+    /// Extra CA certificates for `wss://` signaling.
+    pub tls_ca: Option<PathBuf>,
     /// A join token.
     pub room_token: Option<softsync_net::wire::RoomToken>,
     /// The adaptive failure detector and 50 ms heartbeats.
@@ -557,9 +580,12 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
         Sub::Signal {
             bind,
             room_key_file,
+            tls_cert,
+            tls_key,
         } => Command::Signal {
             bind,
             room_key_file,
+            tls: tls_cert.zip(tls_key),
         },
         Sub::Token {
             room,
@@ -744,6 +770,8 @@ fn peer_args(
         connect_timeout: Duration::from_secs_f64(p.connect_timeout),
         rejoin_limit: p.rejoin_limit,
         room_key_file: p.room_key_file,
+        tls: p.tls_cert.zip(p.tls_key),
+        tls_ca: p.tls_ca,
         room_token: p.room_token,
         fast_detection: p.fast_detection,
         max_members: usize::from(p.max_members),

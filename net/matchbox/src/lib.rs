@@ -25,11 +25,13 @@ mod refusal;
 mod routes;
 mod signal;
 mod signaller;
+mod tls;
 mod transport;
 
 pub use probe::{ProbeEvent, SignalProbe};
 
 pub use signal::{RoomInfo, SignalError, SignalLimits, SignalServer};
+pub use tls::{client_connector, TlsIdentity};
 pub use transport::{
     ConnectError, MatchboxConfig, MatchboxTransport, Role, TransportStats, IDENT_MAGIC,
 };

@@ -16,6 +16,7 @@ use softsync_net::PROTOCOL_VERSION;
 use softsync_net::wire::RoomToken;
 use softsync_net::RoomKey;
 
+use crate::tls::{Terminator, TlsIdentity};
 use crate::{valid_room_name, PROOF_PARAM, ROLE_PARAM, TOKEN_PARAM, VERSION_HEADER, VERSION_PARAM};
 
 /// Why the signaling server could not start.
@@ -131,6 +132,12 @@ pub struct SignalServer {
     registry: Arc<Mutex<Registry>>,
     shutdown: Option<tokio::sync::oneshot::Sender<()>>,
     thread: Option<JoinHandle<()>>,
+    /// TLS in front of the server (`wss://`), if it has a certificate.
+    terminator: Option<Terminator>,
+}
+
+fn t_addr(t: &Terminator) -> SocketAddr {
+    t.addr()
 }
 
 impl SignalServer {
@@ -153,6 +160,29 @@ impl SignalServer {
         limits: SignalLimits,
         key: Option<RoomKey>,
     ) -> Result<Self, SignalError> {
+        Self::start_secure(bind, limits, key, None)
+    }
+
+    /// [`SignalServer::start_keyed`], over TLS (`wss://`) when `tls` is given: the matchbox
+    /// server then listens on loopback and a TLS terminator takes `bind` (see `tls.rs`).
+    pub fn start_secure(
+        bind: SocketAddr,
+        limits: SignalLimits,
+        key: Option<RoomKey>,
+        tls: Option<TlsIdentity>,
+    ) -> Result<Self, SignalError> {
+        let public = match &tls {
+            Some(_) => Some(
+                std::net::TcpListener::bind(bind)
+                    .map_err(|source| SignalError::Bind { addr: bind, source })?,
+            ),
+            None => None,
+        };
+        let bind = if public.is_some() {
+            SocketAddr::from(([127, 0, 0, 1], 0))
+        } else {
+            bind
+        };
         let registry = Arc::new(Mutex::new(Registry::default()));
         let (tx, rx) = tokio::sync::oneshot::channel();
         let (r1, r2, r3) = (registry.clone(), registry.clone(), registry.clone());
@@ -302,11 +332,20 @@ impl SignalServer {
                 }
             })
             .map_err(SignalError::Runtime)?;
+        let (addr, terminator) = match (public, tls) {
+            (Some(listener), Some(identity)) => {
+                let t = Terminator::start(listener, addr, &identity, limits.max_sockets)
+                    .map_err(SignalError::Runtime)?;
+                (t_addr(&t), Some(t))
+            }
+            _ => (addr, None),
+        };
         Ok(SignalServer {
             addr,
             registry,
             shutdown: Some(tx),
             thread: Some(thread),
+            terminator,
         })
     }
 
@@ -315,9 +354,14 @@ impl SignalServer {
         self.addr
     }
 
-    /// The server's base URL, `ws://ADDR`.
+    /// The server's base URL, `ws://ADDR` (`wss://ADDR` over TLS).
     pub fn url(&self) -> String {
-        format!("ws://{}", self.addr)
+        let scheme = if self.terminator.is_some() {
+            "wss"
+        } else {
+            "ws"
+        };
+        format!("{scheme}://{}", self.addr)
     }
 
     /// The rooms that have peers, by name.
@@ -338,6 +382,7 @@ impl SignalServer {
     }
 
     fn shutdown_now(&mut self) {
+        self.terminator.take();
         if let Some(tx) = self.shutdown.take() {
             let _ = tx.send(());
         }

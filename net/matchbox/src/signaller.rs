@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-use async_tungstenite::smol::{connect_async, ConnectStream};
+use async_tungstenite::smol::{connect_async_with_tls_connector, ConnectStream};
 use async_tungstenite::tungstenite::Message as WsMessage;
 use async_tungstenite::WebSocketStream;
 use futures::StreamExt;
@@ -15,9 +15,19 @@ use matchbox_socket::async_trait::async_trait;
 use matchbox_socket::{PeerEvent, PeerRequest, SignalingError, Signaller, SignallerBuilder};
 
 /// Builds [`WatchedSignaller`]s that raise `lost` when their websocket ends.
-#[derive(Debug, Clone, Default)]
+#[derive(Clone, Default)]
 pub(crate) struct WatchedBuilder {
     pub(crate) lost: Arc<AtomicBool>,
+    /// What `wss://` trusts (`None`: the web's roots only).
+    pub(crate) tls: Option<futures_rustls::TlsConnector>,
+}
+
+impl std::fmt::Debug for WatchedBuilder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("WatchedBuilder")
+            .field("lost", &self.lost)
+            .finish()
+    }
 }
 
 struct WatchedSignaller {
@@ -34,7 +44,8 @@ impl SignallerBuilder for WatchedBuilder {
     ) -> Result<Box<dyn Signaller>, SignalingError> {
         // as matchbox's own: `attempts` tries 3 s apart, the last error as NegotiationFailed
         let ws = loop {
-            match connect_async(&room_url).await.map_err(SignalingError::from) {
+            let tried = connect_async_with_tls_connector(&room_url, self.tls.clone()).await;
+            match tried.map_err(SignalingError::from) {
                 Ok((ws, _)) => break ws,
                 Err(e) => match attempts.as_mut() {
                     Some(a) if *a <= 1 => {

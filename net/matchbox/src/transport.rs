@@ -69,6 +69,9 @@ pub struct MatchboxConfig {
     /// For a signaling server that wants the room's key: the key, whose fresh proof
     /// (`RoomKey::signal_proof`, good for 5 minutes and once) each connection shows.
     pub signal_key: Option<softsync_net::RoomKey>,
+    /// For `wss://` to a server whose certificate the web's roots do not vouch for: a PEM
+    /// file of the CA certificates to trust besides them.
+    pub tls_ca: Option<std::path::PathBuf>,
     /// Or a join token of the room (its text form).
     pub signal_token: Option<String>,
     /// Signaling servers to register the room with, in turn, when the current one is lost
@@ -91,6 +94,7 @@ impl MatchboxConfig {
             mtu: DEFAULT_MTU,
             protocol_version: PROTOCOL_VERSION,
             signal_key: None,
+            tls_ca: None,
             signal_token: None,
             fallback_urls: Vec::new(),
         }
@@ -199,6 +203,9 @@ pub enum ConnectError {
     /// The socket's thread could not start.
     #[error("cannot start the WebRTC thread: {0}")]
     Thread(std::io::Error),
+    /// The TLS settings could not be read (the CA file).
+    #[error("signaling TLS: {0}")]
+    Tls(String),
 }
 
 /// Counters of one transport.
@@ -625,7 +632,12 @@ impl Sock {
             username: cfg.ice_username.clone(),
             credential: cfg.ice_credential.clone(),
         };
-        let watch = WatchedBuilder::default();
+        let watch = WatchedBuilder {
+            tls: Some(
+                crate::tls::client_connector(cfg.tls_ca.as_deref()).map_err(ConnectError::Tls)?,
+            ),
+            ..WatchedBuilder::default()
+        };
         let lost = watch.lost.clone();
         let (socket, message_loop) = WebRtcSocket::builder(cfg.room_url())
             .ice_server(ice)

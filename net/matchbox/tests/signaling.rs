@@ -161,3 +161,46 @@ fn a_keyed_server_takes_each_proof_once_and_refuses_stale_or_foreign_ones() {
     let e = MatchboxTransport::connect(&keyless).unwrap_err();
     assert!(e.to_string().contains("needs its key"), "{e}");
 }
+
+/// Signaling over TLS: a server with a certificate speaks `wss://`; a client that trusts its
+/// CA connects (and the server's refusals come through as before); one that does not is
+/// refused by its own TLS check, with the reason.
+#[test]
+fn a_server_with_a_certificate_speaks_wss_to_clients_that_trust_it() {
+    use softsync_net_matchbox::TlsIdentity;
+    let data = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
+    let id =
+        TlsIdentity::from_pem_files(&data.join("server.pem"), &data.join("server.key")).unwrap();
+    let server = SignalServer::start_secure(
+        "127.0.0.1:0".parse().unwrap(),
+        softsync_net_matchbox::SignalLimits::default(),
+        None,
+        Some(id),
+    )
+    .unwrap();
+    let url = server.url();
+    assert!(url.starts_with("wss://127.0.0.1:"), "{url}");
+    let trusting = |room: &str, role: Role| {
+        let mut c = cfg(&url, room, role);
+        c.tls_ca = Some(data.join("ca.pem"));
+        c
+    };
+    let e = MatchboxTransport::connect(&trusting("empty", Role::Join)).unwrap_err();
+    assert!(matches!(e, ConnectError::RoomNotFound { .. }), "{e:?}");
+    let host = MatchboxTransport::connect(&trusting("lab", Role::Host)).unwrap();
+    assert_ne!(host.local_id().0, 0);
+    // no CA given: the web's roots do not vouch for this certificate
+    let e = MatchboxTransport::connect(&cfg(&url, "lab2", Role::Host)).unwrap_err();
+    assert!(e.to_string().to_lowercase().contains("certificate"), "{e}");
+    // a wrong file is a clear error before anything connects
+    let mut bad = cfg(&url, "lab3", Role::Host);
+    bad.tls_ca = Some(data.join("README.md"));
+    let e = MatchboxTransport::connect(&bad).unwrap_err();
+    assert!(matches!(e, ConnectError::Tls(_)), "{e:?}");
+    assert!(
+        TlsIdentity::from_pem_files(&data.join("ca.pem"), &data.join("ca.pem")).is_err(),
+        "a certificate is no key"
+    );
+    drop(host);
+    server.stop();
+}
