@@ -26,11 +26,15 @@ impl PendingAsks {
 
     /// The owner answered `by`'s ask for `id`; false if there was none.
     fn answer(&mut self, id: NetId, by: PeerId) -> bool {
-        self.asks.get_mut(&id).is_some_and(|s| s.remove(&by))
+        let answered = self.asks.get_mut(&id).is_some_and(|s| s.remove(&by));
+        if self.asks.get(&id).is_some_and(BTreeSet::is_empty) {
+            self.asks.remove(&id);
+        }
+        answered
     }
 
-    /// `id` was granted: its other asks are moot.
-    fn clear(&mut self, id: NetId) {
+    /// `id` was granted or despawned: its other asks are moot.
+    pub(super) fn clear(&mut self, id: NetId) {
         self.asks.remove(&id);
     }
 
@@ -39,6 +43,7 @@ impl PendingAsks {
         for asks in self.asks.values_mut() {
             asks.remove(&p);
         }
+        self.asks.retain(|_, a| !a.is_empty());
     }
 }
 
@@ -221,6 +226,8 @@ impl Session {
         };
         let epoch = o.info.epoch.bumped(term);
         self.set_owner(id, to, epoch, held);
+        // a new owner: asks of the old one are moot
+        self.asks.clear(id);
         // the new owner sends keyframes on its own link; our relay chains restart
         for l in self.links.values_mut() {
             l.recv.forget_object(id);

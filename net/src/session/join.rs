@@ -222,6 +222,8 @@ impl Session {
     pub(super) fn host_peer_left(&mut self, now: Instant, p: PeerId) {
         self.members.remove(&p);
         self.links.remove(&p);
+        // and its statistics (kept for every member ever dropped, the fuzzer found)
+        self.stats.links.remove(&p);
         self.events.push_back(Event::PeerLeft(p));
         self.broadcast(now, &Control::PeerLeft { peer: p }, None);
         // authority returns to the host

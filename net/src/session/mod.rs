@@ -30,6 +30,7 @@ pub mod ban;
 mod budget;
 mod control;
 mod delta;
+mod footprint;
 mod heal;
 mod join;
 pub mod link;
@@ -49,6 +50,7 @@ use std::time::Duration;
 
 pub use access::{RoomKey, SIGNAL_PROOF_LIFETIME_S};
 pub use ban::{KickError, MAX_BANNED};
+pub use footprint::{Footprint, Leftovers, PeerFootprint};
 pub use recv::MAX_VERSION_REFUSALS_PER_S;
 pub use registry::{DisplayedState, ObjectState};
 

@@ -312,6 +312,13 @@ impl Session {
         if self.objects.remove(id) {
             self.forget_object_messages(id);
             self.events.push_back(Event::Despawned(id));
+            // its delta state on every link goes with it (the fuzzer found it kept)
+            for l in self.links.values_mut() {
+                l.spawn_pending.remove(&id);
+                l.pending.retain(|e| e.id != id);
+                l.send.forget_object(id);
+                l.recv.forget_object(id);
+            }
         }
     }
 
@@ -326,6 +333,7 @@ impl Session {
                 l.send.forget_object(id);
                 l.recv.forget_object(id);
             }
+            self.asks.clear(id);
             self.broadcast(now, &Control::Despawn { id }, None);
         }
     }

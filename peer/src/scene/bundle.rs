@@ -151,7 +151,7 @@ impl Scene {
         }
         // the folder's time says when it was last used; the oldest scenes go
         if let Ok(f) = std::fs::File::open(&dir) {
-            let _ = f.set_modified(std::time::SystemTime::now());
+            let _ = f.set_modified(super::cache::wall_now());
         }
         super::cache::clean(cache, &dir);
         // its meshes may name only files of the bundle: a hostile scene must not make this

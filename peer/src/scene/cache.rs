@@ -18,6 +18,12 @@ pub const KEEP_SCENES: usize = 16;
 /// A scene not unpacked again for this long is removed.
 pub const KEEP_FOR: Duration = Duration::from_secs(30 * 24 * 3600);
 
+/// The wall clock: the cache's folders are dated by it (file times are the system's).
+#[allow(clippy::disallowed_methods)]
+pub(crate) fn wall_now() -> SystemTime {
+    SystemTime::now()
+}
+
 /// This user's default scene cache (see the module's documentation).
 pub fn default_scene_cache() -> PathBuf {
     let nonempty = |v: &str| {
@@ -107,7 +113,7 @@ pub fn clean(cache: &Path, keep: &Path) -> Vec<PathBuf> {
     let Ok(entries) = std::fs::read_dir(cache) else {
         return Vec::new();
     };
-    let now = SystemTime::now();
+    let now = wall_now();
     let mut scenes: Vec<(SystemTime, PathBuf)> = entries
         .flatten()
         .filter_map(|e| {
@@ -117,7 +123,7 @@ pub fn clean(cache: &Path, keep: &Path) -> Vec<PathBuf> {
         })
         .filter(|(_, p)| p != keep)
         .collect();
-    scenes.sort_by(|a, b| b.0.cmp(&a.0));
+    scenes.sort_by_key(|s| std::cmp::Reverse(s.0));
     let mut removed = Vec::new();
     for (i, (at, p)) in scenes.into_iter().enumerate() {
         let age = now.duration_since(at).unwrap_or_default();
@@ -180,7 +186,7 @@ mod tests {
     fn cleaning_keeps_the_newest_scenes_and_the_one_in_use() {
         let c = scratch("clean");
         prepare(&c).unwrap();
-        let t0 = SystemTime::now() - Duration::from_secs(7200);
+        let t0 = wall_now() - Duration::from_secs(7200);
         let mut dirs = Vec::new();
         for i in 0..KEEP_SCENES + 4 {
             let p = c.join(format!("scene{i:02}"));
@@ -192,7 +198,7 @@ mod tests {
         }
         // one far too old
         let f = std::fs::File::open(&dirs[KEEP_SCENES + 3]).unwrap();
-        f.set_modified(SystemTime::now() - KEEP_FOR - Duration::from_secs(60))
+        f.set_modified(wall_now() - KEEP_FOR - Duration::from_secs(60))
             .unwrap();
         // a file that is not a scene folder stays
         std::fs::write(c.join("note"), b"x").unwrap();

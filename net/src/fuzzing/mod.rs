@@ -1,13 +1,46 @@
-//! Entry point shared by the cargo-fuzz target (`net/fuzz`) and the stable tests: feed
-//! arbitrary bytes to every decoder and to live sessions; panics are bugs.
+//! Entry points shared by the cargo-fuzz targets (`net/fuzz`) and the stable tests
+//! (`net/tests/fuzz_sessions.rs`): arbitrary bytes fed to every decoder and to a joined pair
+//! ([`decode_all`]), and bytes read as a script that plays a whole room of sessions over
+//! virtual time with a hostile peer in it ([`play_session`]). Every broken invariant panics,
+//! so libFuzzer reports it with its input.
+
+//!
+//! Laid out as: this file (the decoders' entry point), `script.rs` (the script: setup, steps,
+//! checks and the entry points that play it), `room.rs` (the room of sessions a script plays
+//! in), `checks.rs` (the invariants checked after each step, the hostile peer's forgeries),
+//! `seeds.rs` (the seed scripts), `corpus.rs` (the committed corpora and the known issues'
+//! scripts).
+
+mod checks;
+mod corpus;
+mod room;
+mod script;
+mod seeds;
+
+pub use corpus::{fixed_issue_scripts, known_issue_scripts, seed_corpus};
+pub use script::*;
+pub use seeds::seed_scripts;
+#[allow(unused_imports)] // what the submodules share, through `use super::*`
+use {checks::*, corpus::*, room::*, seeds::*};
+
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
+use std::time::Duration;
 
 use glam::{Quat, Vec3};
 
-use crate::ids::{ClassId, PeerId};
-use crate::policy::{ClassConfig, SendPolicy, SessionConfig, SoftBodyMode};
-use crate::session::{ObjectState, Session};
+use crate::ids::{AuthorityEpoch, ClassId, NetId, PeerId, Term};
+use crate::policy::{
+    AuthorityPolicy, ClassConfig, MessageConfig, SendPolicy, SessionConfig, SoftBodyMode,
+    StateRoute,
+};
+use crate::rng::SeededRng;
+use crate::session::{Event, ObjectState, RoomKey, Session};
 use crate::time::Instant;
-use crate::wire::{decode_packet, decode_state_block, Control, EntryLayout, Section};
+use crate::wire::{
+    decode_packet, decode_state_block, encode_beacon, AppMessage, Control, Delivery, DenyReason,
+    EntryLayout, MessageKind, MessageRefusal, MessageTarget, PacketHeader, PacketWriter,
+    RoomSummary, RoomToken, Section, SpawnInfo, TopologyEvent, PROTOCOL_VERSION,
+};
 
 /// Decode `data` every way we can; asserts that decoded state stays finite.
 pub fn decode_all(data: &[u8]) {
@@ -92,3 +125,5 @@ fn joined_pair(class: ClassConfig) -> (Session, Session, Option<crate::ids::NetI
     }
     (host, client, id)
 }
+
+// ================================================================ sessions played

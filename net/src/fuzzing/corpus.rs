@@ -1,0 +1,202 @@
+//! The committed corpora: the seed scripts and the datagrams their sessions sent, and the
+//! known issues' smallest scripts.
+
+use super::*;
+
+/// The committed seed corpora, as `(path under net/fuzz/corpus, bytes)`: the scripts of
+/// [`seed_scripts`] for `play_session`, and for `decode_packet` one datagram of each kind
+/// (its sections' tags, or a refusal) and size that the seeds' sessions sent.
+pub fn seed_corpus() -> Vec<(String, Vec<u8>)> {
+    let mut out = Vec::new();
+    let mut kinds: BTreeMap<String, Vec<u8>> = BTreeMap::new();
+    for (name, script) in seed_scripts() {
+        let bytes = script.to_bytes();
+        // what the room's sessions sent (the hostile peer's own bytes are never kept)
+        let (_, datagrams) = play_script(&script, Checks::DEFAULT, true);
+        for d in datagrams {
+            let size = match d.len() {
+                0..=31 => "small",
+                32..=255 => "medium",
+                _ => "large",
+            };
+            kinds
+                .entry(format!("{}-{size}", datagram_kind(&d)))
+                .or_insert(d);
+        }
+        out.push((format!("play_session/{name}"), bytes));
+    }
+    for (kind, d) in kinds {
+        out.push((format!("decode_packet/{kind}"), d));
+    }
+    // the fixed issues' scripts: regression seeds
+    for (name, _, script) in fixed_issue_scripts() {
+        out.push((format!("play_session/{name}"), script.to_bytes()));
+    }
+    out
+}
+
+/// A datagram's kind for a file name: its sections' tags in order (`ack-reliable-state`),
+/// or `refusal`.
+pub(super) fn datagram_kind(d: &[u8]) -> String {
+    match crate::wire::decode_datagram(d) {
+        Ok(crate::wire::Datagram::Refusal(_)) => "refusal".into(),
+        Ok(crate::wire::Datagram::Packet { sections, .. }) => {
+            let mut names: Vec<&str> = sections
+                .iter()
+                .map(|s| match s {
+                    Section::Ack { .. } => "ack",
+                    Section::Reliable { .. } => "reliable",
+                    Section::Ping { .. } => "ping",
+                    Section::Pong { .. } => "pong",
+                    Section::KeyframeRequest { .. } => "keyframes",
+                    Section::State { .. } => "state",
+                    Section::StateAck { .. } => "stateack",
+                    Section::Message(_) => "message",
+                    Section::Beacon(_) => "beacon",
+                })
+                .collect();
+            names.dedup();
+            if names.is_empty() {
+                "empty".into()
+            } else {
+                names.join("-")
+            }
+        }
+        Err(_) => "undecodable".into(),
+    }
+}
+
+/// For each of [`KNOWN_ISSUES`], in order: a name, the issue's index, and the smallest script
+/// found that shows it (with [`Checks::STRICT`]). Committed under
+/// `net/fuzz/artifacts/play_session/`.
+pub fn known_issue_scripts() -> Vec<(&'static str, usize, Script)> {
+    use Step::*;
+    let room = Setup::default();
+    vec![
+        (
+            "known-4-ghost-of-an-object-the-heir-never-saw",
+            4,
+            Script {
+                setup: room,
+                steps: vec![
+                    Cut { a: 0, b: 1 },
+                    Spawn { peer: 0, shape: 0 },
+                    wait(10),
+                    Leave { peer: 0 },
+                    wait(200),
+                ],
+            },
+        ),
+        (
+            "known-5-joiner-of-a-stalled-host-left-behind",
+            5,
+            Script {
+                setup: room,
+                steps: vec![Freeze { peer: 0 }, wait(200), Join { contact: 0 }],
+            },
+        ),
+        (
+            "known-6-member-cut-off-from-the-heir-left-behind",
+            6,
+            Script {
+                setup: Setup {
+                    three_members: true,
+                    ..room
+                },
+                steps: vec![Crash { peer: 0 }, Cut { a: 0, b: 2 }, wait(250)],
+            },
+        ),
+        (
+            "known-7-restarted-member-never-welcomed",
+            7,
+            Script {
+                setup: room,
+                steps: vec![
+                    Spawn { peer: 0, shape: 1 },
+                    wait(6),
+                    Freeze { peer: 0 },
+                    wait(94),
+                ],
+            },
+        ),
+        (
+            "known-8-member-ahead-of-the-new-host-s-epoch",
+            8,
+            Script {
+                setup: Setup {
+                    three_members: true,
+                    ..room
+                },
+                steps: vec![
+                    Spawn { peer: 1, shape: 0 },
+                    wait(20),
+                    // the owner's own grab waits in the frozen host's socket
+                    Freeze { peer: 0 },
+                    Grab { peer: 0, object: 0 },
+                    Cut { a: 0, b: 1 },
+                    Freeze { peer: 0 },
+                    Crash { peer: 0 },
+                    wait(250),
+                ],
+            },
+        ),
+        (
+            "known-3-host-leaves-as-a-peer-joins",
+            3,
+            Script {
+                setup: room,
+                steps: vec![Join { contact: 0 }, Leave { peer: 0 }],
+            },
+        ),
+    ]
+}
+
+/// The scripts of the issues this fuzzer found that are fixed (0-2 of
+/// `net/fuzz/artifacts/README.md`: a host's statistics of dropped members, a client's delta
+/// state of despawned objects, the host's asks of despawned objects): with
+/// [`Checks::STRICT`] they pass now. Committed under `net/fuzz/corpus/play_session/` as seeds.
+pub fn fixed_issue_scripts() -> Vec<(&'static str, usize, Script)> {
+    use Step::*;
+    let room = Setup::default();
+    vec![
+        (
+            "fixed-0-link-stats-of-a-dropped-member",
+            0,
+            Script {
+                setup: room,
+                steps: vec![Crash { peer: 2 }, wait(150)],
+            },
+        ),
+        (
+            "fixed-1-delta-state-of-a-despawned-object",
+            1,
+            Script {
+                setup: room,
+                steps: vec![
+                    Spawn { peer: 0, shape: 0 },
+                    wait(30),
+                    Despawn { peer: 0, object: 0 },
+                    wait(30),
+                ],
+            },
+        ),
+        (
+            "fixed-2-asks-of-a-despawned-object",
+            2,
+            Script {
+                setup: Setup {
+                    refuse_asks: true,
+                    ..room
+                },
+                steps: vec![
+                    Spawn { peer: 1, shape: 1 },
+                    wait(30),
+                    Grab { peer: 2, object: 0 },
+                    wait(30),
+                    Despawn { peer: 1, object: 0 },
+                    wait(30),
+                ],
+            },
+        ),
+    ]
+}
