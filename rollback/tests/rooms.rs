@@ -257,3 +257,35 @@ fn a_stranger_asking_for_the_epochs_snapshot_gets_nothing() {
     }
     assert_eq!(room.nodes[0].peer.stats().snapshots_refused, 1);
 }
+
+#[test]
+fn hostile_rollback_datagrams_change_nothing_and_the_room_goes_on_agreeing() {
+    let mut room = Room::new(net(10, 0.0));
+    room.add(1);
+    room.add(2);
+    room.run(Duration::from_secs(3));
+    let epoch = room.nodes[0].peer.epoch().unwrap().n;
+    // a stranger (9) and a member (2) send junk of every kind, this epoch's and others'
+    let mut r = 0x2026_1128u64;
+    let mut next = || {
+        r = r.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+        (r >> 33) as u32
+    };
+    for k in 0..2000u32 {
+        let now = room.now();
+        let e = if k % 3 == 0 { next() } else { epoch };
+        let mut d = vec![
+            softsync_rollback::socket::ROLLBACK_MARKER,
+            1 + (k % 3) as u8,
+        ];
+        d.extend_from_slice(&e.to_le_bytes());
+        for _ in 0..next() % 200 {
+            d.push(next() as u8);
+        }
+        let from = if k % 2 == 0 { PeerId(9) } else { PeerId(2) };
+        room.nodes[0].peer.handle_datagram(now, from, &d);
+    }
+    room.run(Duration::from_secs(3));
+    assert_eq!(room.desyncs(), 0, "warnings: {:?}", room.warnings());
+    assert_agree(&room);
+}

@@ -35,8 +35,23 @@ impl Mesh {
     /// Parses a glTF 2.0 document (JSON `.gltf` or binary `.glb`): every triangle primitive of
     /// every mesh, with node transforms of the default scene applied. Buffers come from the GLB
     /// chunk, `data:` URIs, or files next to `source`.
+    ///
+    /// The `gltf` crate (1.4) panics on some malformed documents (its validation indexes an
+    /// accessor before checking it exists: found by `tests/hostile_meshes.rs`); such a panic
+    /// is caught and reported as a malformed file, so a hostile mesh cannot take a peer down.
     pub fn from_gltf_slice(bytes: &[u8], source: impl AsRef<Path>) -> Result<Self, SoftBodyError> {
         let src = source.as_ref();
+        std::panic::catch_unwind(|| Self::from_gltf_slice_unguarded(bytes, src)).unwrap_or_else(
+            |_| {
+                Err(SoftBodyError::malformed(
+                    src,
+                    "invalid glTF (the glTF parser failed on it)",
+                ))
+            },
+        )
+    }
+
+    fn from_gltf_slice_unguarded(bytes: &[u8], src: &Path) -> Result<Self, SoftBodyError> {
         let gltf = gltf::Gltf::from_slice(bytes)
             .map_err(|e| SoftBodyError::malformed(src, format!("invalid glTF: {e}")))?;
         let mut buffers: Vec<Vec<u8>> = Vec::new();
