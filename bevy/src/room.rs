@@ -359,7 +359,7 @@ impl Room {
             (scene, Session::host(me, cfg, now0), None)
         } else {
             // The first data channel is our contact (a peer that is not the host redirects).
-            let c = crate::connect::first_contact(transport.as_mut(), &opts, started)?;
+            let mut c = crate::connect::first_contact(transport.as_mut(), &opts, started)?;
             let scene = match scene {
                 Some(s) => s,
                 None => {
@@ -370,6 +370,9 @@ impl Room {
                         started,
                         &mut link_news,
                     )?;
+                    // the scene came from the room's host: say Hello there first (a first
+                    // contact that is another joiner could not answer it)
+                    c = f.from;
                     fetched = Some(f);
                     s
                 }

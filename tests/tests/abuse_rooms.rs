@@ -105,13 +105,23 @@ fn a_member_flooding_the_host_is_dropped_with_a_reason_while_two_bots_squeeze_an
         .trim()
         .parse::<u64>()
         .unwrap();
-    for (k, (_, d)) in bots.iter().enumerate() {
-        let j = read_dump(d);
-        // 1.5 s before its end (10 lines a second): both bots at rest, neither gone yet (the
-        // bots leave about together, and an avatar despawns first where its owner left)
-        let last = j.iter().rev().nth(15).expect("bot dump too short");
-        let at_host = nearest(&h, last["wall_ms"].as_u64().unwrap());
-        assert_agree(at_host, last, &format!("bot {k}"));
+    // one moment both bots are in (2 s before the first of them left; at rest) — the bots
+    // leave at different times, and an avatar despawns first where its owner left
+    let dumps: Vec<_> = bots.iter().map(|(_, d)| read_dump(d)).collect();
+    let at = dumps
+        .iter()
+        .map(|j| {
+            j.last().expect("bot dump empty")["wall_ms"]
+                .as_u64()
+                .unwrap()
+        })
+        .min()
+        .unwrap()
+        - 2000;
+    for (k, j) in dumps.iter().enumerate() {
+        let line = nearest(j, at);
+        let at_host = nearest(&h, line["wall_ms"].as_u64().unwrap());
+        assert_agree(at_host, line, &format!("bot {k}"));
         let members: Vec<u64> = at_host["members"]
             .as_array()
             .unwrap()
