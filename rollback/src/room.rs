@@ -1,3 +1,6 @@
+//! Over 800 lines: the epoch switch, the snapshot served and fetched, and ggrs's socket share
+//! one peer's state; issue 40 (the house without knots) splits them.
+//!
 //! A peer of a rollback room: the session keeps membership (hello, welcome, host, migration:
 //! the host model), ggrs runs the world from everyone's inputs.
 //!
