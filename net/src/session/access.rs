@@ -682,5 +682,5 @@ mod joining_guards {
 }
 
 #[cfg(test)]
-#[path = "access_tokens.rs"]
+#[path = "access/tests.rs"]
 mod tokens;
