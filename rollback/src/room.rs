@@ -180,6 +180,8 @@ pub struct RollbackStats {
     /// Snapshot requests refused: from a peer that is not a member of the room's session (a
     /// keyed room's snapshot goes only to peers that proved the key or a token).
     pub snapshots_refused: u64,
+    /// Epochs whose ggrs session failed (ggrs panicked) and was dropped until the next.
+    pub ggrs_failures: u64,
 }
 
 /// A pending switch to an announced epoch.
@@ -724,7 +726,22 @@ impl RollbackPeer {
         for h in g.local_player_handles() {
             let _ = g.add_local_input(h, self.local_input);
         }
-        let requests = match g.advance_frame() {
+        // ggrs 0.13 panics when a disconnect makes it roll back past its prediction window (a
+        // peer stalled, then died; seen once in CI under load): that epoch's ggrs session
+        // cannot go on, but our world is untouched (the panic comes before any request). It
+        // is dropped; the next epoch (the host announces one when the members change)
+        // rebuilds it. A peer must not die of it.
+        let advanced = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| g.advance_frame()));
+        let Ok(advanced) = advanced else {
+            self.ggrs = None;
+            self.stats.ggrs_failures += 1;
+            self.events.push_back(RollbackEvent::Warning(
+                "ggrs failed in this epoch (a rollback past its window): waiting for the next"
+                    .into(),
+            ));
+            return;
+        };
+        let requests = match advanced {
             Ok(r) => r,
             Err(GgrsError::PredictionThreshold) | Err(GgrsError::NotSynchronized) => {
                 self.stats.stalled_ticks += 1;
