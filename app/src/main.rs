@@ -93,10 +93,17 @@ fn run(args: &[String]) -> Result<ExitCode, Failure> {
             bind,
             room_key_file,
             tls,
+            max_sockets,
+            max_per_source,
         } => signal(
             bind,
             room_key(room_key_file.as_deref())?,
             tls_identity(tls.as_ref())?,
+            softsync_net_matchbox::SignalLimits {
+                max_sockets,
+                max_per_source,
+                ..Default::default()
+            },
         ),
         Command::Peer(p) => peer(*p),
         Command::BenchNetLive {
@@ -217,22 +224,44 @@ fn signal(
     bind: std::net::SocketAddr,
     key: Option<softsync_net::RoomKey>,
     tls: Option<softsync_net_matchbox::TlsIdentity>,
+    limits: softsync_net_matchbox::SignalLimits,
 ) -> Result<ExitCode, Failure> {
     let keyed = key.is_some();
-    let server = SignalServer::start_secure(
-        bind,
-        softsync_net_matchbox::SignalLimits::default(),
-        key,
-        tls,
-    )
-    .map_err(Failure::connect)?;
+    let server = SignalServer::start_secure(bind, limits, key, tls).map_err(Failure::connect)?;
     if keyed {
         println!("rooms on this server need the room key (or a join token)");
     }
     println!("signaling on {}", server.url());
     let mut last = Vec::new();
+    let mut last_gate = server.gate_stats();
     loop {
         std::thread::sleep(Duration::from_millis(500));
+        let g = server.gate_stats();
+        let refusals = |g: &softsync_net_matchbox::GateStats| {
+            g.refused_full
+                + g.refused_source
+                + g.tls_failed
+                + g.slow
+                + g.bad_request
+                + g.bad_frames
+                + g.flood_dropped
+                + g.idle_closed
+        };
+        if refusals(&g) != refusals(&last_gate) {
+            eprintln!(
+                "gate: refused {} (full) {} (per address); closed {} (TLS) {} (slow) {} (not an upgrade) {} (bad frames) {} (floods) {} (idle); {} open",
+                g.refused_full,
+                g.refused_source,
+                g.tls_failed,
+                g.slow,
+                g.bad_request,
+                g.bad_frames,
+                g.flood_dropped,
+                g.idle_closed,
+                g.open
+            );
+            last_gate = g;
+        }
         let rooms = server.rooms();
         if rooms != last {
             let list: Vec<String> = rooms

@@ -211,7 +211,15 @@ pub fn signal_lb(out: &Path, plan: &LbPlan) -> Result<bool, String> {
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
     let mut instances = Vec::new();
     for (k, addr) in INSTANCES.iter().enumerate() {
-        let args = ["signal", "--bind", addr].map(String::from);
+        let args = [
+            "signal",
+            "--bind",
+            addr,
+            // every connection comes from HAProxy's address
+            "--max-per-source",
+            "4096",
+        ]
+        .map(String::from);
         instances.push(Some(Proc::spawn(&dir, &format!("s{}", k + 1), &args)?));
     }
     let haproxy_log = std::fs::File::create(dir.join("haproxy.err")).map_err(|e| e.to_string())?;
@@ -347,7 +355,7 @@ fn run(
     instances[0] = Some(Proc::spawn(
         dir,
         "s1-again",
-        &["signal", "--bind", INSTANCES[0]].map(String::from),
+        &["signal", "--bind", INSTANCES[0], "--max-per-source", "4096"].map(String::from),
     )?);
     wait_port(INSTANCES[0], Duration::from_secs(20))?;
     // HAProxy takes it back after `rise` checks (4 × 250 ms)

@@ -54,6 +54,13 @@ enum Sub {
         /// The certificate's private key (PEM).
         #[arg(long, value_name = "FILE", requires = "tls_cert")]
         tls_key: Option<PathBuf>,
+        /// Connections at once, in all (more are refused with HTTP 503).
+        #[arg(long, default_value_t = 1024, value_name = "N")]
+        max_sockets: usize,
+        /// Connections at once from one address (more are refused with HTTP 429). Behind a
+        /// load balancer every connection comes from its address: raise this there.
+        #[arg(long, default_value_t = 256, value_name = "N")]
+        max_per_source: usize,
     },
     /// Print a join token for a room with a key: whoever shows it gets in once (the first
     /// peer to use it; that peer may come back with it) until it expires.
@@ -301,6 +308,10 @@ pub enum Command {
         room_key_file: Option<PathBuf>,
         /// Certificate and key files for `wss://`.
         tls: Option<(PathBuf, PathBuf)>,
+        /// Connections at once, in all.
+        max_sockets: usize,
+        /// Connections at once from one address.
+        max_per_source: usize,
     },
     /// A peer.
     Peer(Box<PeerArgs>),
@@ -582,10 +593,14 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
             room_key_file,
             tls_cert,
             tls_key,
+            max_sockets,
+            max_per_source,
         } => Command::Signal {
             bind,
             room_key_file,
             tls: tls_cert.zip(tls_key),
+            max_sockets,
+            max_per_source,
         },
         Sub::Token {
             room,

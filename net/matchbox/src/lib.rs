@@ -20,6 +20,7 @@
 
 #![allow(clippy::disallowed_methods)] // an I/O adapter: it reads the clock and waits for threads
 
+mod gate;
 mod probe;
 mod refusal;
 mod routes;
@@ -28,6 +29,7 @@ mod signaller;
 mod tls;
 mod transport;
 
+pub use gate::{GateStats, MAX_HEAD_BYTES};
 pub use probe::{ProbeEvent, SignalProbe};
 
 pub use signal::{RoomInfo, SignalError, SignalLimits, SignalServer};

@@ -16,7 +16,8 @@ use softsync_net::PROTOCOL_VERSION;
 use softsync_net::wire::RoomToken;
 use softsync_net::RoomKey;
 
-use crate::tls::{Terminator, TlsIdentity};
+use crate::gate::{Gate, GateStats};
+use crate::tls::TlsIdentity;
 use crate::{valid_room_name, PROOF_PARAM, ROLE_PARAM, TOKEN_PARAM, VERSION_HEADER, VERSION_PARAM};
 
 /// Why the signaling server could not start.
@@ -51,6 +52,23 @@ pub struct SignalLimits {
     pub max_sockets: usize,
     /// Sockets in one room (HTTP 409 beyond); the session's own member cap is 64.
     pub max_per_room: usize,
+    /// Connections from one address at once (more are closed at once). Behind a load
+    /// balancer every connection comes from its address: raise this there.
+    pub max_per_source: usize,
+    /// Time for the TLS handshake and the HTTP upgrade request together.
+    pub upgrade_timeout: Duration,
+    /// Longest websocket message a client may send (matchbox's signals are SDP and ICE
+    /// candidates, a few KiB).
+    pub max_message_bytes: usize,
+    /// Websocket messages per second per connection (ten seconds' worth in a burst).
+    pub messages_per_s: u32,
+    /// Bytes per second per connection (ten seconds' worth in a burst).
+    pub bytes_per_s: u32,
+    /// A connection silent this long is closed (matchbox sends a keep-alive every 10 s).
+    pub idle_timeout: Duration,
+    /// A connection throttled this long in all (its messages waiting for the rates) is a
+    /// flood, and closed.
+    pub throttle_limit: Duration,
 }
 
 impl Default for SignalLimits {
@@ -58,6 +76,13 @@ impl Default for SignalLimits {
         SignalLimits {
             max_sockets: 1024,
             max_per_room: 64,
+            max_per_source: 256,
+            upgrade_timeout: Duration::from_secs(10),
+            max_message_bytes: 64 * 1024,
+            messages_per_s: 100,
+            bytes_per_s: 256 * 1024,
+            idle_timeout: Duration::from_secs(60),
+            throttle_limit: Duration::from_secs(10),
         }
     }
 }
@@ -132,12 +157,9 @@ pub struct SignalServer {
     registry: Arc<Mutex<Registry>>,
     shutdown: Option<tokio::sync::oneshot::Sender<()>>,
     thread: Option<JoinHandle<()>>,
-    /// TLS in front of the server (`wss://`), if it has a certificate.
-    terminator: Option<Terminator>,
-}
-
-fn t_addr(t: &Terminator) -> SocketAddr {
-    t.addr()
+    /// The front gate (`gate.rs`) on the public port.
+    gate: Option<Gate>,
+    tls: bool,
 }
 
 impl SignalServer {
@@ -163,26 +185,19 @@ impl SignalServer {
         Self::start_secure(bind, limits, key, None)
     }
 
-    /// [`SignalServer::start_keyed`], over TLS (`wss://`) when `tls` is given: the matchbox
-    /// server then listens on loopback and a TLS terminator takes `bind` (see `tls.rs`).
+    /// [`SignalServer::start_keyed`], over TLS (`wss://`) when `tls` is given. The matchbox
+    /// server listens on loopback; the front gate (`gate.rs`: connection counts, time limits,
+    /// frame rules and rates, and TLS) takes `bind`.
     pub fn start_secure(
         bind: SocketAddr,
         limits: SignalLimits,
         key: Option<RoomKey>,
         tls: Option<TlsIdentity>,
     ) -> Result<Self, SignalError> {
-        let public = match &tls {
-            Some(_) => Some(
-                std::net::TcpListener::bind(bind)
-                    .map_err(|source| SignalError::Bind { addr: bind, source })?,
-            ),
-            None => None,
-        };
-        let bind = if public.is_some() {
-            SocketAddr::from(([127, 0, 0, 1], 0))
-        } else {
-            bind
-        };
+        let public = std::net::TcpListener::bind(bind)
+            .map_err(|source| SignalError::Bind { addr: bind, source })?;
+        let public_addr = bind;
+        let bind = SocketAddr::from(([127, 0, 0, 1], 0));
         let registry = Arc::new(Mutex::new(Registry::default()));
         let (tx, rx) = tokio::sync::oneshot::channel();
         let (r1, r2, r3) = (registry.clone(), registry.clone(), registry.clone());
@@ -332,20 +347,20 @@ impl SignalServer {
                 }
             })
             .map_err(SignalError::Runtime)?;
-        let (addr, terminator) = match (public, tls) {
-            (Some(listener), Some(identity)) => {
-                let t = Terminator::start(listener, addr, &identity, limits.max_sockets)
-                    .map_err(SignalError::Runtime)?;
-                (t_addr(&t), Some(t))
-            }
-            _ => (addr, None),
-        };
+        let secure = tls.is_some();
+        let acceptor = tls.map(|t| t.acceptor());
+        let gate =
+            Gate::start(public, addr, acceptor, limits).map_err(|source| SignalError::Bind {
+                addr: public_addr,
+                source,
+            })?;
         Ok(SignalServer {
-            addr,
+            addr: gate.addr(),
             registry,
             shutdown: Some(tx),
             thread: Some(thread),
-            terminator,
+            gate: Some(gate),
+            tls: secure,
         })
     }
 
@@ -356,11 +371,7 @@ impl SignalServer {
 
     /// The server's base URL, `ws://ADDR` (`wss://ADDR` over TLS).
     pub fn url(&self) -> String {
-        let scheme = if self.terminator.is_some() {
-            "wss"
-        } else {
-            "ws"
-        };
+        let scheme = if self.tls { "wss" } else { "ws" };
         format!("{scheme}://{}", self.addr)
     }
 
@@ -376,13 +387,18 @@ impl SignalServer {
             .collect()
     }
 
+    /// What the front gate has let in, refused and closed.
+    pub fn gate_stats(&self) -> GateStats {
+        self.gate.as_ref().map(Gate::stats).unwrap_or_default()
+    }
+
     /// Stop serving: close every websocket and wait (a few seconds at most) for the thread.
     pub fn stop(mut self) {
         self.shutdown_now();
     }
 
     fn shutdown_now(&mut self) {
-        self.terminator.take();
+        self.gate.take();
         if let Some(tx) = self.shutdown.take() {
             let _ = tx.send(());
         }

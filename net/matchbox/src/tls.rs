@@ -5,25 +5,15 @@
 //! ([`MatchboxConfig::tls_ca`](crate::MatchboxConfig::tls_ca)).
 //!
 //! Server: [`TlsIdentity`] (a PEM certificate chain and its key) makes a
-//! [`SignalServer`](crate::SignalServer) speak TLS: the matchbox server listens on loopback
-//! and a terminator in front of it takes the public port, completes each TLS handshake
-//! (within [`HANDSHAKE_TIMEOUT`]) and copies bytes both ways, one thread per connection, at
-//! most the server's socket limit at once (more are closed at once).
+//! [`SignalServer`](crate::SignalServer) speak TLS: its front gate (`gate.rs`) completes each
+//! TLS handshake within the server's upgrade timeout, then checks the plain bytes as it does
+//! for `ws://`.
 
-use std::net::{SocketAddr, TcpListener, TcpStream};
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Arc;
-use std::thread::JoinHandle;
-use std::time::Duration;
 
-use async_io::Async;
-use futures::io::AsyncReadExt;
 use rustls::pki_types::pem::PemObject;
 use rustls::pki_types::{CertificateDer, PrivateKeyDer};
-
-/// How long a client may take over its TLS handshake.
-pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(10);
 
 fn provider() -> Arc<rustls::crypto::CryptoProvider> {
     Arc::new(rustls::crypto::ring::default_provider())
@@ -67,6 +57,11 @@ impl TlsIdentity {
             config: Arc::new(config),
         })
     }
+
+    /// The server side of the handshake.
+    pub(crate) fn acceptor(&self) -> futures_rustls::TlsAcceptor {
+        futures_rustls::TlsAcceptor::from(self.config.clone())
+    }
 }
 
 /// What a client trusts for `wss://`: the web's roots, and the certificates of `extra_ca`
@@ -96,104 +91,4 @@ pub fn client_connector(extra_ca: Option<&Path>) -> Result<futures_rustls::TlsCo
         .with_root_certificates(roots)
         .with_no_client_auth();
     Ok(futures_rustls::TlsConnector::from(Arc::new(config)))
-}
-
-/// The TLS terminator in front of a signaling server: runs until dropped.
-#[derive(Debug)]
-pub(crate) struct Terminator {
-    addr: SocketAddr,
-    stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
-}
-
-impl Terminator {
-    /// The public address.
-    pub(crate) fn addr(&self) -> SocketAddr {
-        self.addr
-    }
-
-    /// Take `listener` (the public port) and serve TLS there, each connection's plain bytes
-    /// to `backend`; at most `max_conns` at once.
-    pub(crate) fn start(
-        listener: TcpListener,
-        backend: SocketAddr,
-        identity: &TlsIdentity,
-        max_conns: usize,
-    ) -> std::io::Result<Self> {
-        let addr = listener.local_addr()?;
-        let stop = Arc::new(AtomicBool::new(false));
-        let acceptor = futures_rustls::TlsAcceptor::from(identity.config.clone());
-        let live = Arc::new(AtomicUsize::new(0));
-        let stop2 = stop.clone();
-        let thread = std::thread::Builder::new()
-            .name("signaling-tls".into())
-            .spawn(move || {
-                for conn in listener.incoming() {
-                    if stop2.load(Ordering::Acquire) {
-                        break;
-                    }
-                    let Ok(conn) = conn else { continue };
-                    if live.load(Ordering::Acquire) >= max_conns {
-                        continue; // dropped: closed at once
-                    }
-                    live.fetch_add(1, Ordering::AcqRel);
-                    let (acceptor, live) = (acceptor.clone(), live.clone());
-                    let spawned = std::thread::Builder::new()
-                        .name("signaling-tls-conn".into())
-                        .spawn(move || {
-                            let _ = async_io::block_on(proxy(conn, backend, acceptor));
-                            live.fetch_sub(1, Ordering::AcqRel);
-                        });
-                    if spawned.is_err() {
-                        // no thread for it: the connection is closed
-                    }
-                }
-            })?;
-        Ok(Terminator {
-            addr,
-            stop,
-            thread: Some(thread),
-        })
-    }
-}
-
-impl Drop for Terminator {
-    fn drop(&mut self) {
-        self.stop.store(true, Ordering::Release);
-        // wake the accept loop
-        let _ = TcpStream::connect_timeout(&self.addr, Duration::from_secs(1));
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-    }
-}
-
-/// One connection: the TLS handshake (bounded in time), then bytes both ways until either
-/// side closes.
-async fn proxy(
-    conn: TcpStream,
-    backend: SocketAddr,
-    acceptor: futures_rustls::TlsAcceptor,
-) -> std::io::Result<()> {
-    let conn = Async::new(conn)?;
-    let handshake = acceptor.accept(conn);
-    let timeout = async {
-        async_io::Timer::after(HANDSHAKE_TIMEOUT).await;
-        Err(std::io::Error::new(
-            std::io::ErrorKind::TimedOut,
-            "TLS handshake too slow",
-        ))
-    };
-    let tls = futures::future::select(Box::pin(handshake), Box::pin(timeout))
-        .await
-        .factor_first()
-        .0?;
-    let plain = Async::<TcpStream>::connect(backend).await?;
-    let (tls_r, tls_w) = tls.split();
-    let (plain_r, plain_w) = plain.split();
-    let (mut plain_w, mut tls_w) = (plain_w, tls_w);
-    let up = futures::io::copy(tls_r, &mut plain_w);
-    let down = futures::io::copy(plain_r, &mut tls_w);
-    let _ = futures::future::select(Box::pin(up), Box::pin(down)).await;
-    Ok(())
 }

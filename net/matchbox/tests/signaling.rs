@@ -101,6 +101,7 @@ fn limits_refuse_with_a_reason() {
     let limits = softsync_net_matchbox::SignalLimits {
         max_sockets: 2,
         max_per_room: 1,
+        ..Default::default()
     };
     let server = SignalServer::start_with("127.0.0.1:0".parse().unwrap(), limits).unwrap();
     let url = server.url();
