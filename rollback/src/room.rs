@@ -76,11 +76,27 @@ impl Message for Epoch {
 /// room sees it in the host's refusal, and is told to join with `--sync rollback`).
 pub const EPOCH_NAME: &str = softsync_peer::events::ROLLBACK_EPOCH_TYPE;
 
-/// Add the rollback room's message type to a room's table (host and joiners alike: it is
+/// A member's word to the host that its ggrs session of epoch `epoch` failed
+/// (`softsync.rollback.resync`): the host answers with a new epoch of the same players.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Resync {
+    /// The epoch whose session failed.
+    pub epoch: u32,
+}
+
+impl Message for Resync {
+    const NAME: &'static str = "softsync.rollback.resync";
+}
+
+/// A peer whose ggrs session failed asks the host again this often until a new epoch comes.
+const RESYNC_RETRY: Duration = Duration::from_secs(1);
+
+/// Add the rollback room's message types to a room's table (host and joiners alike: they are
 /// part of the room's configuration digest, so a state-sync peer cannot join by mistake).
 pub fn register(types: &mut MessageTypes) {
     // Registered once per table; a second time is a no-op error.
     let _ = types.register::<Epoch>();
+    let _ = types.register::<Resync>();
 }
 
 /// Settings of a rollback peer.
@@ -180,8 +196,11 @@ pub struct RollbackStats {
     /// Snapshot requests refused: from a peer that is not a member of the room's session (a
     /// keyed room's snapshot goes only to peers that proved the key or a token).
     pub snapshots_refused: u64,
-    /// Epochs whose ggrs session failed (ggrs panicked) and was dropped until the next.
+    /// Epochs whose ggrs session failed here (ggrs panicked) and was dropped; the host then
+    /// starts a new epoch of the same players.
     pub ggrs_failures: u64,
+    /// Host: epochs started because a member's ggrs session failed.
+    pub resyncs: u64,
 }
 
 /// A pending switch to an announced epoch.
@@ -217,6 +236,11 @@ pub struct RollbackPeer {
     stats: RollbackStats,
     switch_started: Option<std::time::Instant>,
     ticks: u64,
+    /// Our ggrs session failed: the world frame it had confirmed (our saved states up to it
+    /// are right), and when we last asked the host for a new epoch.
+    failed: Option<(i32, Option<Instant>)>,
+    /// Host: a member's (or our own) ggrs session of this epoch failed; a new one is due.
+    resync: Option<u32>,
     /// A joiner's way in: the next connected peer is asked when a contact stays silent (it
     /// may be another joiner), as a state-sync peer does.
     joining: Joining,
@@ -235,7 +259,7 @@ impl RollbackPeer {
         let types = MessageTypes::from_config(session.config()).ok_or_else(|| {
             WorldError::Build("the room's message table names a type twice".into())
         })?;
-        if types.kind::<Epoch>().is_none() {
+        if types.kind::<Epoch>().is_none() || types.kind::<Resync>().is_none() {
             return Err(WorldError::Build(
                 "the session's message table has no rollback epoch type (rollback::room::register)"
                     .into(),
@@ -257,6 +281,8 @@ impl RollbackPeer {
             pending: None,
             server: None,
             announced: None,
+            failed: None,
+            resync: None,
             local_input: PlayerInput::default(),
             outbox: VecDeque::new(),
             events: VecDeque::new(),
@@ -294,6 +320,9 @@ impl RollbackPeer {
 
     /// The newest frame whose inputs every player has given (world frame), once running.
     pub fn confirmed_frame(&self) -> Option<i32> {
+        if let Some((f, _)) = self.failed {
+            return Some(f);
+        }
         let (g, (_, start)) = (self.ggrs.as_ref()?, self.epoch.as_ref()?);
         let c = g.confirmed_frame();
         if c < 0 {
@@ -442,6 +471,7 @@ impl RollbackPeer {
             self.session.join_via(now, next);
         }
         self.drain_session(now);
+        self.ask_resync(now);
         self.host_duties(now);
         self.try_switch(now);
         self.run_ggrs();
@@ -476,7 +506,19 @@ impl RollbackPeer {
                     Some(Err(r)) => self
                         .events
                         .push_back(RollbackEvent::Warning(format!("bad epoch message: {r:?}"))),
-                    None => self.events.push_back(RollbackEvent::Room(e)),
+                    None => match self.types.decode::<Resync>(m) {
+                        Some(Ok(r)) => {
+                            let running = self.epoch.as_ref().map(|e| e.0.n);
+                            if self.session.is_host()
+                                && running == Some(r.epoch)
+                                && self.session.members().contains_key(&m.from)
+                            {
+                                self.resync = Some(r.epoch);
+                            }
+                        }
+                        Some(Err(_)) => self.stats.dropped += 1,
+                        None => self.events.push_back(RollbackEvent::Room(e)),
+                    },
                 },
                 other => {
                     if matches!(other, Event::Joined { .. }) {
@@ -501,7 +543,36 @@ impl RollbackPeer {
         });
     }
 
-    /// Host: a new epoch when the members are not the running epoch's players.
+    /// Our ggrs session failed: ask the host for a new epoch (the host notes its own), again
+    /// every [`RESYNC_RETRY`] until one comes (the message or the host may be lost).
+    fn ask_resync(&mut self, now: Instant) {
+        let Some((_, asked)) = self.failed.as_mut() else {
+            return;
+        };
+        let Some(n) = self.epoch.as_ref().map(|e| e.0.n) else {
+            return;
+        };
+        if self.pending.is_some() || asked.is_some_and(|t| now - t < RESYNC_RETRY) {
+            return;
+        }
+        *asked = Some(now);
+        if self.session.is_host() {
+            self.resync = Some(n);
+        } else if let Err(e) = self.session.send(
+            now,
+            &self.types,
+            MessageTarget::Host,
+            Delivery::Reliable,
+            &Resync { epoch: n },
+        ) {
+            self.events.push_back(RollbackEvent::Warning(format!(
+                "cannot ask the host for a new epoch: {e:?}"
+            )));
+        }
+    }
+
+    /// Host: a new epoch when the members are not the running epoch's players, or when a
+    /// player's ggrs session failed.
     fn host_duties(&mut self, now: Instant) {
         if !self.session.is_host() || self.pending.is_some() {
             return;
@@ -512,17 +583,18 @@ impl RollbackPeer {
             players.push(self.me);
         }
         players.sort();
-        if self.announced.as_ref() == Some(&players) {
-            return;
-        }
         let Some((running, _)) = self.epoch.as_ref() else {
             return;
         };
-        // Only joins need a new ggrs session; a player that left is disconnected by ggrs
-        // (its slot goes at the next epoch). A new host announces nothing until someone
-        // joins.
+        let resync = self.resync == Some(running.n);
+        if self.announced.as_ref() == Some(&players) && !resync {
+            return;
+        }
+        // Only joins (and failed sessions) need a new ggrs session; a player that left is
+        // disconnected by ggrs (its slot goes at the next epoch). A new host announces
+        // nothing until someone joins.
         let joined = players.iter().any(|p| !running.players.contains(p));
-        if !joined {
+        if !joined && !resync {
             self.announced = Some(players);
             return;
         }
@@ -533,6 +605,9 @@ impl RollbackPeer {
             return;
         };
         let n = running.n + 1;
+        if resync {
+            self.stats.resyncs += 1;
+        }
         self.announce(now, n, &snap, players);
     }
 
@@ -600,8 +675,9 @@ impl RollbackPeer {
         let mine = match self.confirmed_frame() {
             _ if !previous => None,
             Some(c) if c >= frame => self.snapshot_at(frame),
-            Some(_) => return, // not confirmed that far yet
-            None => None,
+            // not confirmed that far yet (unless our ggrs failed: then never)
+            Some(_) if self.failed.is_none() => return,
+            Some(_) | None => None,
         };
         let Some(p) = self.pending.as_mut() else {
             return;
@@ -668,6 +744,8 @@ impl RollbackPeer {
         match built {
             Ok(s) => {
                 self.ggrs = Some(s);
+                self.failed = None;
+                self.resync = None;
                 self.world = Some(world);
                 self.ring.clear();
                 self.server = Some((epoch.n, BlobServer::new(blob)));
@@ -686,6 +764,28 @@ impl RollbackPeer {
                 "epoch {}: ggrs: {e}",
                 epoch.n
             ))),
+        }
+    }
+
+    /// This epoch's ggrs session failed, having confirmed its frame `confirmed`: drop it and
+    /// ask for a new epoch.
+    fn ggrs_failed(&mut self, confirmed: i32) {
+        self.ggrs = None;
+        self.stats.ggrs_failures += 1;
+        let start = self.epoch.as_ref().map_or(0, |e| e.1);
+        self.failed = Some((start.saturating_add(confirmed.max(0)), None));
+        self.events.push_back(RollbackEvent::Warning(
+            "ggrs failed in this epoch (a rollback past its window): a new epoch is asked for"
+                .into(),
+        ));
+    }
+
+    /// Tests: what a ggrs panic does to this peer (its session dropped at its confirmed
+    /// frame). ggrs 0.13's panic cannot be provoked on purpose.
+    #[doc(hidden)]
+    pub fn simulate_ggrs_failure(&mut self) {
+        if let Some(c) = self.ggrs.as_ref().map(|g| g.confirmed_frame()) {
+            self.ggrs_failed(c);
         }
     }
 
@@ -727,18 +827,15 @@ impl RollbackPeer {
             let _ = g.add_local_input(h, self.local_input);
         }
         // ggrs 0.13 panics when a disconnect makes it roll back past its prediction window (a
-        // peer stalled, then died; seen once in CI under load): that epoch's ggrs session
-        // cannot go on, but our world is untouched (the panic comes before any request). It
-        // is dropped; the next epoch (the host announces one when the members change)
-        // rebuilds it. A peer must not die of it.
+        // peer stalled, then died, and the survivors disagree on its last frame; seen once in
+        // CI under load): that epoch's ggrs session cannot go on, but our world is untouched
+        // (the panic comes before any request) and our saved states up to the frame it had
+        // confirmed are right. The session is dropped and the host starts a new epoch of the
+        // same players from a confirmed frame (`ask_resync`). A peer must not die of it.
+        let confirmed = g.confirmed_frame();
         let advanced = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| g.advance_frame()));
         let Ok(advanced) = advanced else {
-            self.ggrs = None;
-            self.stats.ggrs_failures += 1;
-            self.events.push_back(RollbackEvent::Warning(
-                "ggrs failed in this epoch (a rollback past its window): waiting for the next"
-                    .into(),
-            ));
+            self.ggrs_failed(confirmed);
             return;
         };
         let requests = match advanced {

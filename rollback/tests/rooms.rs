@@ -132,6 +132,46 @@ fn a_peer_killed_mid_grab_leaves_the_others_going_from_an_agreed_state_and_a_lat
     assert_agree(&room);
 }
 
+/// ggrs 0.13 can panic after a stalled peer dies (a rollback past its window). The peer
+/// survives it: its session is dropped, the host starts a new epoch of the same players from
+/// a confirmed frame, and the room goes on agreeing — whether a member's session failed or the
+/// host's own.
+#[test]
+fn a_peer_whose_ggrs_session_fails_is_given_a_new_epoch_and_the_room_goes_on_agreeing() {
+    let mut room = Room::new(net(20, 0.02));
+    room.add(1);
+    room.add(2);
+    room.add(3);
+    room.run(Duration::from_secs(3));
+    let n0 = room.nodes[0].peer.epoch().map(|e| e.n).unwrap();
+    assert!(room
+        .nodes
+        .iter()
+        .all(|n| n.peer.epoch().map(|e| e.n) == Some(n0)));
+    for (who, round) in [(1usize, 1u32), (0, 2)] {
+        let before = room.nodes[who].peer.stats().frames;
+        room.nodes[who].peer.simulate_ggrs_failure();
+        room.run(Duration::from_secs(4));
+        for n in &room.nodes {
+            let e = n.peer.epoch().unwrap();
+            assert_eq!(
+                e.n,
+                n0 + round,
+                "peer {}: {:?}",
+                n.peer.me().0,
+                n.peer.stats()
+            );
+            assert_eq!(e.players.len(), 3);
+        }
+        let s = room.nodes[who].peer.stats();
+        assert_eq!(s.ggrs_failures, 1);
+        assert!(s.frames > before + 60, "peer {} stopped: {s:?}", who + 1);
+        assert_agree(&room);
+    }
+    assert_eq!(room.nodes[0].peer.stats().resyncs, 2);
+    assert_eq!(room.desyncs(), 0, "warnings: {:?}", room.warnings());
+}
+
 #[test]
 fn a_members_forged_epoch_is_refused_and_the_room_still_takes_joiners() {
     let mut room = Room::new(net(10, 0.0));
