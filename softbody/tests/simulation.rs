@@ -585,3 +585,25 @@ fn a_body_from_a_plan_is_the_body_insert_builds() {
     };
     assert!(SoftBodyPlan::new(&mesh, bad).is_err());
 }
+
+/// A centre-only state (no particles: thesis §5.4.1) moves the centre, and the particles
+/// come along rigidly, keeping their shape around it; a non-finite centre changes nothing.
+#[test]
+fn a_centre_only_state_carries_the_particles_along_rigidly() {
+    let (mut world, mut set, h) = local_sphere();
+    let b = set.get_mut(h).unwrap();
+    let (c, q) = b.center_pose(&world);
+    let before = b.particle_positions(&world);
+    let turn = Quat::from_rotation_y(0.7);
+    let (c2, q2) = (c + Vec3::new(0.1, 0.2, -0.05), turn * q);
+    b.apply_state(&mut world, c2, q2, &[]).unwrap();
+    let after = b.particle_positions(&world);
+    let (got_c, got_q) = b.center_pose(&world);
+    assert!(got_c.distance(c2) < 1e-6 && got_q.angle_between(q2) < 1e-5);
+    for (p, p2) in before.iter().zip(&after) {
+        let expect = c2 + turn * (*p - c);
+        assert!(p2.distance(expect) < 1e-5, "{p2} != {expect}");
+    }
+    assert!(b.apply_state(&mut world, Vec3::NAN, q2, &[]).is_err());
+    assert_eq!(b.particle_positions(&world), after);
+}

@@ -228,6 +228,8 @@ pub struct TransportStats {
     /// Channels whose peer claimed the id of a peer we already reach (ignored), or that
     /// claimed an id without the server's word and gave way to the peer it vouches for.
     pub idents_refused: u64,
+    /// Idents on completed exchanges not answered: more than one per 200 ms on a channel.
+    pub ident_replies_withheld: u64,
 }
 
 /// A softsync [`Transport`] over matchbox WebRTC sockets (full mesh).
@@ -246,9 +248,10 @@ pub struct MatchboxTransport {
     /// Channels whose ident exchange is not complete (ours not confirmed, or theirs not
     /// heard): idents are repeated until it is (a channel's first datagrams can be lost).
     idents: HashMap<(usize, MbPeerId), IdentExchange>,
-    /// Channels whose ident exchange completed (an ident still arriving on one means the
-    /// other side lacks our confirmation: it is answered).
-    identified: std::collections::HashSet<(usize, MbPeerId)>,
+    /// Channels whose ident exchange completed, with when we last answered an ident on one
+    /// (one still arriving means the other side lacks our confirmation: it is answered, at
+    /// most once per [`IDENT_REPEAT`] — a peer that floods idents gets no echo of each).
+    identified: HashMap<(usize, MbPeerId), std::time::Instant>,
     inbox: VecDeque<(PeerId, Vec<u8>)>,
     events: VecDeque<PeerEvent>,
     closed: Option<String>,
@@ -547,8 +550,14 @@ impl MatchboxTransport {
                     // an ident (never passed on): note the exchange; answer one that lacks ours,
                     // and any on a completed exchange (the other side is still repeating: it
                     // lacks our confirmation)
-                    if self.identified.contains(&(i, mb)) {
-                        replies.push(mb);
+                    if let Some(last) = self.identified.get_mut(&(i, mb)) {
+                        let now = std::time::Instant::now();
+                        if now.duration_since(*last) >= IDENT_REPEAT {
+                            *last = now;
+                            replies.push(mb);
+                        } else {
+                            self.stats.ident_replies_withheld += 1;
+                        }
                     } else {
                         let now = std::time::Instant::now();
                         let x = self.idents.entry((i, mb)).or_insert(IdentExchange {
@@ -596,7 +605,7 @@ impl MatchboxTransport {
             let identified = &mut self.identified;
             self.idents.retain(|key, x| {
                 if x.heard && x.confirmed {
-                    identified.insert(*key);
+                    identified.insert(*key, now.checked_sub(IDENT_REPEAT).unwrap_or(now));
                     return false;
                 }
                 now.duration_since(x.opened) < IDENT_GIVE_UP

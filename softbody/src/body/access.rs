@@ -132,6 +132,11 @@ impl SoftBody {
     /// velocities zeroed, mesh deformed to match. For a peer that shows a body another peer
     /// simulates, and for the peer that just received authority. Refuses a wrong particle
     /// count or non-finite values, changing nothing.
+    ///
+    /// No particles at all is the centre-only state (thesis §5.4.1: only the centre is sent,
+    /// every peer simulates the particles itself): the centre takes the pose and the particles
+    /// come along rigidly, keeping their shape relative to it, for the local simulation to
+    /// deform from there.
     pub fn apply_state(
         &mut self,
         world: &mut PhysicsWorld,
@@ -139,6 +144,9 @@ impl SoftBody {
         center_rot: Quat,
         particles: &[Vec3],
     ) -> Result<(), SoftBodyError> {
+        if particles.is_empty() && !self.particles.is_empty() {
+            return self.apply_center_only(world, center_pos, center_rot);
+        }
         if particles.len() != self.particles.len() {
             return Err(SoftBodyError::Config(format!(
                 "state has {} particles, the body {}",
@@ -164,6 +172,39 @@ impl SoftBody {
         for (&h, &p) in self.particles.iter().zip(particles) {
             if let Some(b) = world.bodies.get_mut(h) {
                 b.set_translation(p, true);
+                b.set_linvel(Vec3::ZERO, true);
+            }
+        }
+        self.deform(world);
+        Ok(())
+    }
+
+    /// [`Self::apply_state`] with the centre only: the particles follow the centre's move
+    /// rigidly.
+    fn apply_center_only(
+        &mut self,
+        world: &mut PhysicsWorld,
+        center_pos: Vec3,
+        center_rot: Quat,
+    ) -> Result<(), SoftBodyError> {
+        if !(center_pos.is_finite() && center_rot.is_finite() && center_rot.length_squared() > 0.5)
+        {
+            return Err(SoftBodyError::Config("state is not finite".into()));
+        }
+        let new = rapier3d::prelude::Pose::from_parts(center_pos, center_rot.normalize());
+        let Some(c) = world.bodies.get_mut(self.center) else {
+            return Ok(());
+        };
+        let old = *c.position();
+        c.set_position(new, true);
+        if c.is_dynamic() {
+            c.set_linvel(Vec3::ZERO, true);
+            c.set_angvel(Vec3::ZERO, true);
+        }
+        for &h in &self.particles {
+            if let Some(b) = world.bodies.get_mut(h) {
+                let local = old.inverse_transform_point(b.translation());
+                b.set_translation(new.transform_point(local), true);
                 b.set_linvel(Vec3::ZERO, true);
             }
         }
