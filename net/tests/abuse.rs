@@ -392,8 +392,10 @@ fn a_flood_of_hellos_from_a_member_gets_one_welcome() {
     }
     pump(now, &mut host, &mut [&mut m]);
     assert_eq!(host.stats().repeated_hellos_ignored, 79);
+    // (that burst was over the member's 10 Hellos a second: the next second starts afresh)
+    now += Duration::from_millis(1000);
     // a member that acknowledges each Welcome and says Hello again at once, every 20 ms for
-    // a second: two more of its burst of three, then one a second
+    // a second: the rest of its burst of three, then one a second
     let mut answered = 0;
     for _ in 0..50 {
         now += Duration::from_millis(20);
@@ -864,5 +866,35 @@ fn a_member_that_keeps_flooding_keyframe_requests_or_messages_is_dropped_with_a_
         "after {ticks} ticks"
     );
     assert!(told.contains("application messages a second"), "{told:?}");
+    assert_eq!(host.stats().dropped_over_quota, 1);
+}
+
+/// A member that keeps repeating `Hello` (80 in every datagram, 800 a second) is ignored
+/// past 10 a second and, after five seconds of that, dropped with the reason: each of them
+/// cost the host a reliable message to take in.
+#[test]
+fn a_member_that_keeps_repeating_hello_is_dropped_with_a_reason() {
+    use softsync_net::session::link::{MAX_HELLOS_PER_S, REQUEST_FLOOD_STRIKES};
+    let strikes = REQUEST_FLOOD_STRIKES as usize;
+    let (now, mut host, mut m, _) = joined_with_object();
+    let hello = Control::Hello {
+        protocol: softsync_net::PROTOCOL_VERSION,
+        config_digest: SessionConfig::default().digest(),
+    };
+    let (ticks, told) = flood_until_dropped(now, &mut host, &mut m, |now, _host, m| {
+        for _ in 0..80 {
+            m.send_raw_control(now, PeerId(1), &hello);
+        }
+    });
+    assert!(
+        (10 * strikes..=10 * (strikes + 3)).contains(&ticks),
+        "after {ticks} ticks"
+    );
+    assert!(
+        told.contains(&format!(
+            "twice the {MAX_HELLOS_PER_S} repeated Hellos a second"
+        )),
+        "{told:?}"
+    );
     assert_eq!(host.stats().dropped_over_quota, 1);
 }

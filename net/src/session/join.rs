@@ -64,6 +64,17 @@ impl Session {
             // Bounded, since each costs a snapshot: never while a Welcome to it is in flight
             // (that one arrives by itself), and a burst of `REWELCOME_BURST` at most, then
             // one per `rewelcome_every`.
+            // More than `MAX_HELLOS_PER_S` a second is ignored at once; twice that for
+            // `REQUEST_FLOOD_STRIKES` seconds is a flood, and the member is dropped.
+            let admitted = self
+                .links
+                .get_mut(&from)
+                .is_some_and(|l| l.hello_asks.admit(now, super::link::MAX_HELLOS_PER_S));
+            if !admitted {
+                self.stats.repeated_hellos_ignored += 1;
+                self.drop_if_flooding(now, from);
+                return;
+            }
             if protocol == PROTOCOL_VERSION && digest == self.cfg.digest() {
                 let every = self.cfg.peer_budget.rewelcome_every.as_secs_f32().max(1e-3);
                 let allowed = self.links.get_mut(&from).is_some_and(|l| {

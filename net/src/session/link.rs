@@ -288,6 +288,10 @@ impl StateInFlight {
 /// `MAX_TOPOLOGY_RATE`): a person's two hands make a few; past this a request is refused and
 /// counted (`Stats::requests_rate_limited`).
 pub const MAX_REQUESTS_PER_S: u32 = 60;
+/// `Hello`s a member may repeat a second (an honest joiner that missed its `Welcome` repeats
+/// one every few hundred milliseconds); twice this for [`REQUEST_FLOOD_STRIKES`] seconds is a
+/// flood, and the member is dropped.
+pub const MAX_HELLOS_PER_S: u32 = 10;
 
 /// Keyframe requests a member or our host may make of us per second (each names up to
 /// [`MAX_KEYFRAME_REQUEST`] objects; a healthy link asks after a loss burst, a few a second).
@@ -420,6 +424,8 @@ pub(crate) struct Link {
     pub requests: RateWindow,
     pub keyframe_asks: RateWindow,
     pub message_asks: RateWindow,
+    /// `Hello`s it repeated this second, as a member.
+    pub hello_asks: RateWindow,
     /// A ping of its to answer (its time).
     pub pong_due: Option<u32>,
     /// A ping of ours to send.

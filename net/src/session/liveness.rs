@@ -49,6 +49,8 @@ pub(crate) enum FloodKind {
     Keyframes,
     /// Application messages.
     Messages,
+    /// `Hello`s repeated by a member.
+    Hellos,
 }
 
 /// Host: peers out of the room that may not know it, with why and when it last told them
@@ -299,6 +301,7 @@ impl Session {
                         "keyframe requests",
                     ),
                     FloodKind::Messages => (self.message_flood_rate(), "application messages"),
+                    FloodKind::Hellos => (super::link::MAX_HELLOS_PER_S, "repeated Hellos"),
                 };
                 format!(
                     "dropped from the room: more than twice the {n} {what} a second a member \
@@ -424,6 +427,8 @@ impl Session {
             FloodKind::Keyframes
         } else if l.message_asks.strikes() >= strikes {
             FloodKind::Messages
+        } else if l.hello_asks.strikes() >= strikes {
+            FloodKind::Hellos
         } else {
             return;
         };
