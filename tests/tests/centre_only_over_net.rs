@@ -12,28 +12,19 @@ use std::time::Duration;
 
 use common::hub::{Node, CLIENT, DT, HOST};
 use glam::{Quat, Vec3};
-use softsync_interaction::{HandConfig, HandInput, HandSample, SoftGrab};
+use softsync_interaction::{HandInput, HandSample, SoftGrab};
 use softsync_net::{Instant, MemoryHub, NetId, PeerId};
-use softsync_peer::{Event, PeerConfig, Scene};
+use softsync_peer::Event;
 
+/// The `bench-ball` room with its soft classes centre-only, and hands that grab a soft body
+/// by its centre (thesis 4.1.1: one particle cannot lift the ball).
 fn node(hub: &MemoryHub, me: PeerId, seed: u64) -> Node {
-    let assets = common::repo_file("assets");
-    let mut scene = Scene::by_name("bench-ball", &assets).unwrap();
-    for c in scene.classes.iter_mut().filter(|c| c.is_soft()) {
-        c.replication.centre_only = Some(true);
-    }
-    let config = PeerConfig {
-        hand: HandConfig {
-            physical_controller: false,
-            hover_radius_m: 0.015,
-            // the whole ball by its centre (thesis 4.1.1): one particle cannot lift it
-            soft_grab: SoftGrab::Center,
-            ..HandConfig::default()
-        },
-        dt_s: DT,
-        ..PeerConfig::default()
-    };
-    Node::with_config(hub, me, seed, scene, config)
+    Node::bench_ball(hub, me, seed, |scene, hand| {
+        for c in scene.classes.iter_mut().filter(|c| c.is_soft()) {
+            c.replication.centre_only = Some(true);
+        }
+        hand.soft_grab = SoftGrab::Center;
+    })
 }
 
 fn frame(n: &mut Node, now: Instant, hand: Option<HandInput>) {

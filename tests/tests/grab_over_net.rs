@@ -13,26 +13,15 @@ use std::time::Duration;
 
 use common::hub::{Node, CLIENT, DT, HOST};
 use glam::{Quat, Vec3};
-use softsync_interaction::{HandConfig, HandInput, HandSample};
+use softsync_interaction::{HandInput, HandSample};
 use softsync_net::{Instant, MemoryHub, NetId, ObjectState, PeerId};
-use softsync_peer::{Event, PeerConfig, Scene};
+use softsync_peer::Event;
 
 const RIGHT: usize = 1;
 
 /// A peer of the `bench-ball` room with a hand that reaches exactly, as the app gives bots.
 fn node(hub: &MemoryHub, me: PeerId, seed: u64) -> Node {
-    let assets = common::repo_file("assets");
-    let scene = Scene::by_name("bench-ball", &assets).unwrap();
-    let config = PeerConfig {
-        hand: HandConfig {
-            physical_controller: false,
-            hover_radius_m: 0.015,
-            ..HandConfig::default()
-        },
-        dt_s: DT,
-        ..PeerConfig::default()
-    };
-    Node::with_config(hub, me, seed, scene, config)
+    Node::bench_ball(hub, me, seed, |_, _| {})
 }
 
 /// One frame of a driver, the right hand's input if given; the peer must say no warning.

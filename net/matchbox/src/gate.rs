@@ -340,18 +340,19 @@ async fn relay<S: AsyncRead + AsyncWrite + Unpin>(mut client: S, deadline: Insta
     let mut head = Vec::with_capacity(1024);
     let mut buf = vec![0u8; 16 * 1024];
     let end = loop {
-        if let Some(end) = find_end(&head) {
-            break end;
-        }
-        if head.len() > MAX_HEAD_BYTES {
-            bump(&c.bad_request);
-            answer(
-                &mut client,
-                "431 Request Header Fields Too Large",
-                "softsync signaling: the request's head is too long\n",
-            )
-            .await;
-            return;
+        match find_end(&head) {
+            Some(end) if end <= MAX_HEAD_BYTES => break end,
+            None if head.len() <= MAX_HEAD_BYTES => {}
+            _ => {
+                bump(&c.bad_request);
+                answer(
+                    &mut client,
+                    "431 Request Header Fields Too Large",
+                    "softsync signaling: the request's head is too long\n",
+                )
+                .await;
+                return;
+            }
         }
         let left = deadline.saturating_duration_since(Instant::now());
         match within(left, client.read(&mut buf)).await {
@@ -363,16 +364,6 @@ async fn relay<S: AsyncRead + AsyncWrite + Unpin>(mut client: S, deadline: Insta
             Some(Ok(n)) => head.extend_from_slice(&buf[..n]),
         }
     };
-    if end > MAX_HEAD_BYTES {
-        bump(&c.bad_request);
-        answer(
-            &mut client,
-            "431 Request Header Fields Too Large",
-            "softsync signaling: the request's head is too long\n",
-        )
-        .await;
-        return;
-    }
     if !is_upgrade(&head[..end]) {
         bump(&c.bad_request);
         answer(

@@ -50,6 +50,30 @@ impl Node {
         Self::with_config(hub, me, seed, scene, config)
     }
 
+    /// A peer of the `bench-ball` room (one soft ball on the table) whose hands reach
+    /// exactly, as the app gives bots; `tweak` changes the scene and the hands first.
+    pub fn bench_ball(
+        hub: &MemoryHub,
+        me: PeerId,
+        seed: u64,
+        tweak: impl FnOnce(&mut Scene, &mut softsync_interaction::HandConfig),
+    ) -> Self {
+        let assets = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets");
+        let mut scene = Scene::by_name("bench-ball", &assets).unwrap();
+        let mut hand = softsync_interaction::HandConfig {
+            physical_controller: false,
+            hover_radius_m: 0.015,
+            ..Default::default()
+        };
+        tweak(&mut scene, &mut hand);
+        let config = PeerConfig {
+            hand,
+            dt_s: DT,
+            ..PeerConfig::default()
+        };
+        Self::with_config(hub, me, seed, scene, config)
+    }
+
     pub fn with_config(
         hub: &MemoryHub,
         me: PeerId,
