@@ -11,8 +11,11 @@ use softsync_net::ConditionerConfig;
 
 mod bench;
 mod values;
+mod view;
 use bench::BenchSub;
 use values::*;
+pub use view::ViewArgs;
+use view::ViewOpts;
 
 /// What `softsync help` prints after the commands.
 const AFTER_HELP: &str = "\
@@ -236,55 +239,6 @@ struct PeerOpts {
     view: ViewOpts,
 }
 
-/// Options of the desktop and VR views (each needs --desktop or --vr).
-#[derive(Args, Debug)]
-#[command(next_help_heading = "Front ends")]
-struct ViewOpts {
-    /// Desktop window size, WIDTHxHEIGHT (64-8192).
-    #[arg(long, value_name = "WxH", value_parser = window_size)]
-    window: Option<(u32, u32)>,
-    /// Start the camera close to an object (softbox, bunny, softball, …).
-    #[arg(long, value_name = "KIND")]
-    focus: Option<String>,
-    /// Draw soft-body particles and their neighbour links (thesis Fig. 1.1).
-    #[arg(long)]
-    particles: bool,
-    /// Draw no avatars.
-    #[arg(long)]
-    hide_avatars: bool,
-    /// No HUD.
-    #[arg(long)]
-    no_hud: bool,
-    /// Save frame-NNNN.png there every --screenshot-every S and print a line per frame
-    /// (soft bodies' deformation and screen boxes), at most --screenshots N.
-    #[arg(long, value_name = "DIR")]
-    screenshot_dir: Option<PathBuf>,
-    /// Seconds between screenshots (default 1).
-    #[arg(long, value_name = "S", value_parser = positive::<3600>)]
-    screenshot_every: Option<f64>,
-    /// Most screenshots (1-100000, default 60).
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=100_000))]
-    screenshots: Option<u32>,
-}
-
-impl ViewOpts {
-    /// The first view flag given, if any (they need a front end).
-    fn first_given(&self) -> Option<&'static str> {
-        [
-            (self.window.is_some(), "window"),
-            (self.focus.is_some(), "focus"),
-            (self.particles, "particles"),
-            (self.hide_avatars, "hide-avatars"),
-            (self.no_hud, "no-hud"),
-            (self.screenshot_dir.is_some(), "screenshot-dir"),
-            (self.screenshot_every.is_some(), "screenshot-every"),
-            (self.screenshots.is_some(), "screenshots"),
-        ]
-        .into_iter()
-        .find_map(|(given, name)| given.then_some(name))
-    }
-}
-
 /// A usage error (exit code 2).
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]
@@ -484,28 +438,6 @@ pub enum FrontEnd {
     Desktop,
     /// An OpenXR headset (desktop if none).
     Vr,
-}
-
-/// Options of the desktop and VR views.
-#[derive(Clone, Debug)]
-#[cfg_attr(not(feature = "desktop"), allow(dead_code))]
-pub struct ViewArgs {
-    /// Window size.
-    pub window: (u32, u32),
-    /// Start the camera at this kind of object.
-    pub focus: Option<String>,
-    /// Particle overlay.
-    pub particles: bool,
-    /// Draw no avatars.
-    pub hide_avatars: bool,
-    /// No HUD.
-    pub no_hud: bool,
-    /// Screenshot folder.
-    pub screenshot_dir: Option<PathBuf>,
-    /// Screenshot period.
-    pub screenshot_every: Duration,
-    /// Screenshot count.
-    pub screenshots: u32,
 }
 
 /// Parse `lat=40ms,jitter=8ms,loss=2%,seed=7`.
