@@ -91,6 +91,9 @@ pub struct Stats {
     /// Beacons ignored: not from a peer the room lost, an implausible member count, or (in a
     /// room with a key) no valid tag.
     pub beacons_refused: u64,
+    /// Beacons of strangers whose room loses to ours, answered with our beacon (they may
+    /// have lost us without our ever knowing them; see `session::heal`).
+    pub beacons_answered_strangers: u64,
     /// Requests of a member over its rate (`MAX_REQUESTS_PER_S` at the host, and keyframe
     /// requests over `MAX_KEYFRAME_REQUESTS_PER_S`), refused.
     pub requests_rate_limited: u64,

@@ -498,3 +498,42 @@ proptest! {
         prop_assert!(max_particle_error(&truth, &seen) < 0.0015);
     }
 }
+
+/// Found by `ownership_invariant_under_random_event_orders` (its regression seed): the host
+/// dies; member 101 takes over in term 2 and 104 follows it, while 102, which never heard
+/// 101's `NewHost`, takes over in term 2 too and keeps 104 as a member. Then 101 dies. 104
+/// must follow the heir it expects, 102, although 102's term is the same as its own (a
+/// rival's takeover); before, it refused a `NewHost` that was not of a newer term, and
+/// followed the dead 101 for good, the room disagreeing on every owner.
+#[test]
+fn a_member_of_a_dead_rival_host_of_the_same_term_follows_the_heir() {
+    let mut h = room(
+        5,
+        ConditionerConfig::rough(11702536440765864462, 15, 10, 0.05),
+    );
+    let ids: Vec<NetId> = (0..3)
+        .map(|k| spawn_rigid(&mut h, 0, Vec3::X * k as f32).0)
+        .collect();
+    h.advance(Duration::from_millis(500));
+    h.kill(0);
+    h.advance(Duration::from_millis(265));
+    let now = h.now;
+    let _ = h.session(1).request_authority(now, ids[0]);
+    h.advance(Duration::from_millis(268));
+    let now = h.now;
+    let _ = h.session(2).request_authority(now, ids[0]);
+    h.advance(Duration::from_millis(333));
+    h.kill(1);
+    h.advance(Duration::from_millis(5000));
+    for i in 2..5 {
+        let s = &h.peers[i].session;
+        assert_eq!(s.host_id(), Some(Harness::id(2)), "peer {i}'s host");
+        for id in &ids {
+            assert_eq!(
+                s.owner(*id),
+                Some(Harness::id(2)),
+                "peer {i}: owner of {id:?}"
+            );
+        }
+    }
+}

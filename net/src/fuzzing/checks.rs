@@ -124,19 +124,16 @@ impl Room {
         trace(|| format!("{:>8} ms  settling", self.now.as_micros() / 1000));
         let start = self.now;
         self.deadline = start + SETTLE;
-        let mut verdict = self.divergence(strict);
+        let mut verdict = self.divergence();
         while verdict.is_err() && self.now < self.deadline {
             self.wait(Duration::from_secs(1));
-            verdict = self.divergence(strict);
+            verdict = self.divergence();
         }
-        // known issue 3: a takeover soon after a join may split the room for good; 5 and 6:
-        // a peer may be left following a host that is not the host of its term any more; 7:
-        // a joiner may never get in
-        let may_split =
-            self.takeover_after_join || self.someone_left_behind() || self.joiner_stuck();
+        // known issue 12: a rejoining peer may never get in
+        let stuck = self.joiner_stuck();
         match verdict {
             Ok(n) => self.outcome.converged = Some(n),
-            Err(_) if may_split && !strict => {}
+            Err(_) if stuck && !strict => {}
             Err(why) => {
                 self.trace_rooms();
                 panic!(
@@ -148,10 +145,8 @@ impl Room {
     }
 
     /// How the live honest peers differ from one room with one view of the objects, if they
-    /// do; else how many they are. Not `strict`: replicas of objects the host does not have
-    /// are left out (known issue 4), and objects a peer holds at an earlier term's epoch
-    /// other than the host's (known issue 8).
-    pub(super) fn divergence(&self, strict: bool) -> Result<usize, String> {
+    /// do; else how many they are.
+    pub(super) fn divergence(&self) -> Result<usize, String> {
         let live: Vec<&Session> = self
             .peers
             .iter()
@@ -165,36 +160,10 @@ impl Room {
         else {
             return Ok(0);
         };
-        let hosted: Option<BTreeMap<NetId, Option<AuthorityEpoch>>> = live
-            .iter()
-            .find(|s| s.is_host() && s.host_id() == first.host_id())
-            .map(|h| {
-                h.object_ids()
-                    .into_iter()
-                    .map(|id| (id, h.epoch(id)))
-                    .collect()
-            });
-        // known issue 8: objects some peer holds at an earlier term's epoch other than the
-        // host's
-        let skip: BTreeSet<NetId> = match (&hosted, strict) {
-            (Some(h), false) => live
-                .iter()
-                .flat_map(|s| s.object_ids().into_iter().map(move |id| (s, id)))
-                .filter(|(s, id)| {
-                    let e = s.epoch(*id);
-                    h.get(id).is_some_and(|he| *he != e) && e.is_some_and(|e| e.term < s.term().0)
-                })
-                .map(|(_, id)| id)
-                .collect(),
-            _ => BTreeSet::new(),
-        };
         let view = |s: &Session| {
             let objects: Vec<_> = s
                 .object_ids()
                 .into_iter()
-                // known issue 4: replicas of objects the host does not have
-                .filter(|id| strict || hosted.as_ref().is_none_or(|h| h.contains_key(id)))
-                .filter(|id| !skip.contains(id))
                 .map(|id| (id, s.owner(id), s.epoch(id)))
                 .collect();
             (s.is_connected(), s.host_id(), s.term(), objects)
@@ -229,28 +198,7 @@ impl Room {
         Ok(live.len())
     }
 
-    /// A live peer follows a host that is no live host of its term (known issues 5, 6), or a
-    /// host counts as a member a live peer that is in another room (known issue 6).
-    pub(super) fn someone_left_behind(&self) -> bool {
-        let live = || self.peers.iter().filter(|p| !p.gone).map(|p| &p.session);
-        let stranded = live().any(|s| {
-            s.is_connected()
-                && !live().any(|h| {
-                    h.is_host() && Some(h.local_id()) == s.host_id() && h.term() == s.term()
-                })
-        });
-        let kept = live().any(|h| {
-            h.is_host()
-                && live().any(|m| {
-                    m.is_connected()
-                        && h.members().contains_key(&m.local_id())
-                        && m.host_id() != Some(h.local_id())
-                })
-        });
-        stranded || kept
-    }
-
-    /// A live peer that was not refused is still joining (known issue 7).
+    /// A live peer that was not refused is still joining (known issue 12).
     pub(super) fn joiner_stuck(&self) -> bool {
         self.peers
             .iter()

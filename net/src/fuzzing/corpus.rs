@@ -68,92 +68,58 @@ pub(super) fn datagram_kind(d: &[u8]) -> String {
 
 /// For each of [`KNOWN_ISSUES`], in order: a name, the issue's index, and the smallest script
 /// found that shows it (with [`Checks::STRICT`]). Committed under
-/// `net/fuzz/artifacts/play_session/`.
+/// `net/fuzz/artifacts/play_session/`. One now: 12 (0-11 are fixed,
+/// [`fixed_issue_scripts`]).
 pub fn known_issue_scripts() -> Vec<(&'static str, usize, Script)> {
     use Step::*;
-    let room = Setup::default();
-    vec![
-        (
-            "known-4-ghost-of-an-object-the-heir-never-saw",
-            4,
-            Script {
-                setup: room,
-                steps: vec![
-                    Cut { a: 0, b: 1 },
-                    Spawn { peer: 0, shape: 0 },
-                    wait(10),
-                    Leave { peer: 0 },
-                    wait(200),
-                ],
+    let lossy = |loss: u8| Wait { ms: 232, loss };
+    vec![(
+        "known-12-rejoiner-out-of-step-with-its-host",
+        12,
+        Script {
+            setup: Setup {
+                keyed: true,
+                three_members: true,
+                ..Setup::default()
             },
-        ),
-        (
-            "known-5-joiner-of-a-stalled-host-left-behind",
-            5,
-            Script {
-                setup: room,
-                steps: vec![Freeze { peer: 0 }, wait(200), Join { contact: 0 }],
-            },
-        ),
-        (
-            "known-6-member-cut-off-from-the-heir-left-behind",
-            6,
-            Script {
-                setup: Setup {
-                    three_members: true,
-                    ..room
+            steps: vec![
+                Release {
+                    peer: 12,
+                    object: 0,
                 },
-                steps: vec![Crash { peer: 0 }, Cut { a: 0, b: 2 }, wait(250)],
-            },
-        ),
-        (
-            "known-7-restarted-member-never-welcomed",
-            7,
-            Script {
-                setup: room,
-                steps: vec![
-                    Spawn { peer: 0, shape: 1 },
-                    wait(6),
-                    Freeze { peer: 0 },
-                    wait(94),
-                ],
-            },
-        ),
-        (
-            "known-8-member-ahead-of-the-new-host-s-epoch",
-            8,
-            Script {
-                setup: Setup {
-                    three_members: true,
-                    ..room
+                wait(0),
+                Release { peer: 4, object: 0 },
+                lossy(3),
+                Wait { ms: 0, loss: 232 },
+                Release { peer: 0, object: 0 },
+                Move {
+                    peer: 4,
+                    object: 0,
+                    to: 0,
                 },
-                steps: vec![
-                    Spawn { peer: 1, shape: 0 },
-                    wait(20),
-                    // the owner's own grab waits in the frozen host's socket
-                    Freeze { peer: 0 },
-                    Grab { peer: 0, object: 0 },
-                    Cut { a: 0, b: 1 },
-                    Freeze { peer: 0 },
-                    Crash { peer: 0 },
-                    wait(250),
-                ],
-            },
-        ),
-        (
-            "known-3-host-leaves-as-a-peer-joins",
-            3,
-            Script {
-                setup: room,
-                steps: vec![Join { contact: 0 }, Leave { peer: 0 }],
-            },
-        ),
-    ]
+                Despawn { peer: 3, object: 0 },
+                lossy(3),
+                Wait { ms: 0, loss: 216 },
+                Despawn { peer: 0, object: 0 },
+                Despawn { peer: 3, object: 0 },
+                lossy(3),
+                wait(0),
+                Move {
+                    peer: 0,
+                    object: 0,
+                    to: 232,
+                },
+                Release { peer: 0, object: 0 },
+                Despawn { peer: 3, object: 0 },
+                wait(0),
+                Leave { peer: 0 },
+            ],
+        },
+    )]
 }
 
-/// The scripts of the issues this fuzzer found that are fixed (0-2 of
-/// `net/fuzz/artifacts/README.md`: a host's statistics of dropped members, a client's delta
-/// state of despawned objects, the host's asks of despawned objects): with
+/// The scripts of the issues this fuzzer found that are fixed (0-9 of
+/// `net/fuzz/artifacts/README.md`: the leaks 0-2, the rooms that never converged 3-11): with
 /// [`Checks::STRICT`] they pass now. Committed under `net/fuzz/corpus/play_session/` as seeds.
 pub fn fixed_issue_scripts() -> Vec<(&'static str, usize, Script)> {
     use Step::*;
@@ -196,6 +162,156 @@ pub fn fixed_issue_scripts() -> Vec<(&'static str, usize, Script)> {
                     Despawn { peer: 1, object: 0 },
                     wait(30),
                 ],
+            },
+        ),
+        (
+            "fixed-4-ghost-of-an-object-the-heir-never-saw",
+            4,
+            Script {
+                setup: room,
+                steps: vec![
+                    Cut { a: 0, b: 1 },
+                    Spawn { peer: 0, shape: 0 },
+                    wait(10),
+                    Leave { peer: 0 },
+                    wait(200),
+                ],
+            },
+        ),
+        (
+            "fixed-5-joiner-of-a-stalled-host-left-behind",
+            5,
+            Script {
+                setup: room,
+                steps: vec![Freeze { peer: 0 }, wait(200), Join { contact: 0 }],
+            },
+        ),
+        (
+            "fixed-6-member-cut-off-from-the-heir-left-behind",
+            6,
+            Script {
+                setup: Setup {
+                    three_members: true,
+                    ..room
+                },
+                steps: vec![Crash { peer: 0 }, Cut { a: 0, b: 2 }, wait(250)],
+            },
+        ),
+        (
+            "fixed-7-restarted-member-never-welcomed",
+            7,
+            Script {
+                setup: room,
+                steps: vec![
+                    Spawn { peer: 0, shape: 1 },
+                    wait(6),
+                    Freeze { peer: 0 },
+                    wait(94),
+                ],
+            },
+        ),
+        (
+            "fixed-8-member-ahead-of-the-new-host-s-epoch",
+            8,
+            Script {
+                setup: Setup {
+                    three_members: true,
+                    ..room
+                },
+                steps: vec![
+                    Spawn { peer: 1, shape: 0 },
+                    wait(20),
+                    // the owner's own grab waits in the frozen host's socket
+                    Freeze { peer: 0 },
+                    Grab { peer: 0, object: 0 },
+                    Cut { a: 0, b: 1 },
+                    Freeze { peer: 0 },
+                    Crash { peer: 0 },
+                    wait(250),
+                ],
+            },
+        ),
+        (
+            "fixed-3-host-leaves-as-a-peer-joins",
+            3,
+            Script {
+                setup: room,
+                steps: vec![Join { contact: 0 }, Leave { peer: 0 }],
+            },
+        ),
+        (
+            "fixed-9-two-heirs-one-never-told",
+            9,
+            Script {
+                setup: room,
+                steps: vec![
+                    Spawn { peer: 1, shape: 0 },
+                    Wait { ms: 20, loss: 69 },
+                    Spawn {
+                        peer: 201,
+                        shape: 0,
+                    },
+                    Join { contact: 0 },
+                    Spawn {
+                        peer: 255,
+                        shape: 255,
+                    },
+                    Leave { peer: 250 },
+                    Freeze { peer: 0 },
+                    Wait { ms: 1, loss: 0 },
+                    Wait { ms: 32, loss: 200 },
+                    Crash { peer: 0 },
+                ],
+            },
+        ),
+        (
+            "fixed-6-rival-room-kept-as-a-member",
+            6,
+            Script {
+                setup: room,
+                steps: vec![
+                    Cut { a: 0, b: 1 },
+                    wait(1),
+                    wait(140),
+                    Leave { peer: 0 },
+                    wait(200),
+                ],
+            },
+        ),
+        (
+            "fixed-11-host-defers-a-rejoiners-hello-behind-an-old-new-host",
+            11,
+            Script {
+                setup: room,
+                steps: {
+                    let mut steps = vec![
+                        Spawn { peer: 0, shape: 0 },
+                        Spawn { peer: 1, shape: 22 },
+                        Spawn { peer: 2, shape: 2 },
+                        wait(30),
+                        Move {
+                            peer: 0,
+                            object: 0,
+                            to: 9,
+                        },
+                        Move {
+                            peer: 1,
+                            object: 0,
+                            to: 247,
+                        },
+                    ];
+                    // 14 long waits, almost every datagram lost: members time out, take over,
+                    // yield and rejoin again and again
+                    steps.extend((0..14).map(|_| Wait { ms: 247, loss: 247 }));
+                    steps.extend([
+                        Grab {
+                            peer: 0,
+                            object: 30,
+                        },
+                        wait(0),
+                    ]);
+                    steps
+                },
             },
         ),
     ]

@@ -52,10 +52,6 @@ pub(super) struct Room {
     pub(super) loss: f64,
     pub(super) rejoins: u32,
     pub(super) hostile_spoke: bool,
-    /// When an honest peer last joined (known issue 3).
-    pub(super) last_join: Option<Instant>,
-    /// A host changed soon after a peer joined (known issue 3: the room may split for good).
-    pub(super) takeover_after_join: bool,
     pub(super) outcome: Outcome,
     pub(super) step: usize,
 }
@@ -89,8 +85,6 @@ impl Room {
             loss: 0.0,
             rejoins: 0,
             hostile_spoke: false,
-            last_join: None,
-            takeover_after_join: false,
             outcome: Outcome::default(),
             step: 0,
         };
@@ -326,8 +320,6 @@ impl Room {
         let agree = !self.setup.refuse_asks;
         let mut rejoin = Vec::new();
         let o = &mut self.outcome;
-        // the split needs a takeover before the next heal tick after the join
-        let window = self.cfg.heartbeat_interval;
         for (i, p) in self.peers.iter_mut().enumerate() {
             if p.gone {
                 continue;
@@ -346,16 +338,8 @@ impl Room {
                         o.refused += 1;
                         p.refused = true;
                     }
-                    Event::Joined { .. } => {
-                        o.joined += 1;
-                        self.last_join = Some(now);
-                    }
-                    Event::HostChanged { .. } => {
-                        o.host_changes += 1;
-                        if self.last_join.is_some_and(|t| now < t + window) {
-                            self.takeover_after_join = true;
-                        }
-                    }
+                    Event::Joined { .. } => o.joined += 1,
+                    Event::HostChanged { .. } => o.host_changes += 1,
                     Event::AuthorityChanged { .. } => o.authority_changes += 1,
                     Event::AuthorityDenied { .. } => o.denied += 1,
                     Event::Spawned { .. } => o.spawned += 1,

@@ -73,14 +73,21 @@ impl Session {
 
     /// A control message that arrived from `from`. After a `NewHost` we have not adopted yet,
     /// its sender's later messages (the snapshot, ownership changes) wait for it.
+    /// Only a client follows a `NewHost`, so only a client defers; a `Hello` is a joining
+    /// session's, never part of what follows a `NewHost` (the fuzzer found a host that kept a
+    /// rejoining peer's `Hello`s behind that peer's old `NewHost` for good).
     pub(super) fn deliver_control(&mut self, now: Instant, from: PeerId, c: Control) {
-        let c = match self.succession.defer(from, c) {
-            Deferred::NotPending(c) => c,
-            Deferred::Kept => return,
-            Deferred::Overflow => {
-                self.stats.refused_controls += 1;
-                return;
+        let c = if self.role == Role::Client && !matches!(c, Control::Hello { .. }) {
+            match self.succession.defer(from, c) {
+                Deferred::NotPending(c) => c,
+                Deferred::Kept => return,
+                Deferred::Overflow => {
+                    self.stats.refused_controls += 1;
+                    return;
+                }
             }
+        } else {
+            c
         };
         self.handle_control(now, from, c);
     }
@@ -146,6 +153,7 @@ impl Session {
             // ---- objects and owners, from our host (spawn.rs, authority.rs)
             Control::Spawn(info) if from_host => self.on_spawn_from_host(now, info),
             Control::Despawn { id } if from_host => self.on_despawn_from_host(id),
+            Control::SnapshotEnd if from_host => self.on_snapshot_end(),
             Control::OwnerChanged {
                 id,
                 owner,

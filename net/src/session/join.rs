@@ -208,6 +208,7 @@ impl Session {
 
     /// Our host says `peer` left or timed out.
     pub(super) fn on_peer_left(&mut self, peer: PeerId) {
+        self.heal_remember_members();
         self.members.remove(&peer);
         self.forget_message_origin(peer);
         // Its sequences die with its membership: should it join again, it does so with a
@@ -231,6 +232,7 @@ impl Session {
     /// Host: member `p` is gone (timed out or left): drop it, tell the others, take its
     /// objects back.
     pub(super) fn host_peer_left(&mut self, now: Instant, p: PeerId) {
+        self.heal_remember_members();
         self.members.remove(&p);
         self.links.remove(&p);
         // and its statistics (kept for every member ever dropped, the fuzzer found)

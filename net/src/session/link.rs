@@ -379,6 +379,12 @@ impl KeyframeRequests {
     pub fn any_due(&self) -> bool {
         !self.due.is_empty()
     }
+
+    /// `id` is gone: nothing to ask of it, nothing to remember.
+    pub fn forget(&mut self, id: NetId) {
+        self.due.remove(&id);
+        self.asked_at.remove(&id);
+    }
 }
 
 /// Everything this peer keeps about one remote peer.

@@ -282,7 +282,9 @@ impl Session {
             DropWhy::OlderTerm(old) => format!(
                 "the room moved on: peer {} became host in term {} while this peer was out of \
                  touch (it still spoke for term {}); join again",
-                self.local.0, self.term.0, old.0
+                self.host.unwrap_or(self.local).0,
+                self.term.0,
+                old.0
             ),
             DropWhy::OverQuota(n) => format!(
                 "dropped from the room: {n} control messages unacknowledged (the host keeps at \
@@ -310,11 +312,12 @@ impl Session {
                 )
             }
         };
-        // naming ourselves as the host to join again: a drop notice, which a joining session
-        // (the dropped peer's fresh one, reached by a notice its old one provoked) ignores
+        // naming our host (ourselves, if we are the host) as the host to join again: a drop
+        // notice, which a joining session (the dropped peer's fresh one, reached by a notice
+        // its old one provoked) ignores
         self.raw_out.push_back(Transmit {
             to,
-            payload: encode_refusal_to(&reason, self.term, Some(self.local)),
+            payload: encode_refusal_to(&reason, self.term, Some(self.host.unwrap_or(self.local))),
             reliable: true,
         });
     }

@@ -4,12 +4,12 @@
 //! `NewHost` only from the heir they expect, and tell the new host what they own (`Resync`),
 //! which it believes within a window and within what a claimant can know.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::time::Duration;
 
 use super::spawn::spawn_request;
 use super::{Event, Role, Session, LOST_ID_WINDOW, MAX_TERM_JUMP};
-use crate::ids::{PeerId, Term};
+use crate::ids::{NetId, PeerId, Term};
 use crate::time::Instant;
 use crate::wire::{Control, SpawnInfo};
 
@@ -57,6 +57,8 @@ pub(crate) enum Deferred {
 pub(crate) struct Succession {
     pending: BTreeMap<PeerId, PendingNewHost>,
     resync_until: Option<Instant>,
+    /// After we followed a new host: the replicas (not ours) its snapshot has not named yet.
+    unconfirmed: BTreeSet<NetId>,
 }
 
 impl Succession {
@@ -99,8 +101,9 @@ impl Succession {
             .unwrap_or_default()
     }
 
-    /// Forget `NewHost`s older than `keep_for`; then the first for a term newer than `term`
-    /// whose sender `acceptable` says may take over.
+    /// Forget `NewHost`s older than `keep_for`; then the first for a term at least `term`
+    /// (ours: a rival's takeover of our host's room) whose sender `acceptable` says may take
+    /// over.
     fn ready(
         &mut self,
         now: Instant,
@@ -112,9 +115,19 @@ impl Succession {
         let from = self
             .pending
             .iter()
-            .find(|(p, n)| n.term > term && acceptable(**p))
+            .find(|(p, n)| n.term >= term && acceptable(**p))
             .map(|(p, _)| *p)?;
         self.pending.remove(&from).map(|p| (from, p))
+    }
+
+    /// Note that a new host's snapshot named `id`; whether it was waiting to be named.
+    pub fn confirm(&mut self, id: NetId) -> bool {
+        self.unconfirmed.remove(&id)
+    }
+
+    /// The replicas the new host's snapshot did not name, once it is whole (emptied).
+    pub fn unconfirmed(&mut self) -> Vec<NetId> {
+        std::mem::take(&mut self.unconfirmed).into_iter().collect()
     }
 
     /// Believe members' claims until `until` (we just took over).
@@ -147,6 +160,7 @@ impl Session {
             .copied()
             .filter(|p| *p == old_host || !self.alive(*p, now))
             .collect();
+        self.heal_remember_members();
         for p in &dead {
             self.members.remove(p);
             self.forget_message_origin(*p);
@@ -161,6 +175,9 @@ impl Session {
             .map_or(1, |m| m.saturating_add(1));
         self.objects.reserve_lost_ids(LOST_ID_WINDOW);
         self.succession.open_resync(now + self.cfg.peer_timeout * 2);
+        self.succession.unconfirmed.clear();
+        // a host follows no `NewHost`: what was kept for one goes
+        self.succession.pending.clear();
         let me = self.local;
         let mut changed = Vec::new();
         for o in self.objects.iter_mut() {
@@ -227,8 +244,11 @@ impl Session {
         term: Term,
         members: Vec<(PeerId, u32)>,
     ) {
+        // The same term as ours is a rival's: two members took over the same host's room, each
+        // deaf to the other, and ours is dead too (only the heir we expect is followed, and
+        // only once our host is silent).
         let ahead = term.0.saturating_sub(self.term.0);
-        if !(1..=MAX_TERM_JUMP).contains(&ahead) || !self.members.contains_key(&from) {
+        if term < self.term || ahead > MAX_TERM_JUMP || !self.members.contains_key(&from) {
             self.stats.refused_controls += 1;
             return;
         }
@@ -287,6 +307,7 @@ impl Session {
         self.term = term;
         self.host = Some(host);
         self.role = Role::Client;
+        self.heal_remember_members();
         self.members = members.into_iter().collect();
         self.succession.pending.clear();
         // Peers the new room does not have (the old host, members it found dead) lose their
@@ -306,11 +327,21 @@ impl Session {
         for l in self.links.values_mut() {
             l.reset_replication();
         }
+        // the replicas we may not claim wait for the new host's snapshot to name them: those we
+        // do not own, and those a rival host of the new host's term granted us (claims are
+        // of older terms only: every grant of its term is the new host's)
+        let local = self.local;
+        self.succession.unconfirmed = self
+            .objects
+            .iter()
+            .filter(|o| !o.claimable(local, term))
+            .map(|o| o.info.id)
+            .collect();
         // tell the new host what we own, so an in-flight handoff is not lost
         let claims: Vec<SpawnInfo> = self
             .objects
             .iter()
-            .filter(|o| o.info.owner == self.local)
+            .filter(|o| o.claimable(local, term))
             .map(|o| o.info.clone())
             .collect();
         for chunk in claims.chunks(16) {
@@ -390,13 +421,13 @@ mod tests {
     }
 
     #[test]
-    fn waiting_new_hosts_expire_and_only_a_newer_term_from_an_acceptable_peer_is_ready() {
+    fn waiting_new_hosts_expire_and_only_a_term_as_new_as_ours_from_an_acceptable_peer_is_ready() {
         let mut s = Succession::default();
         let t0 = Instant::from_millis(1000);
         let keep = Duration::from_secs(3);
         s.keep(PeerId(1), t0, Term(2), vec![]);
         s.keep(PeerId(2), t0, Term(3), vec![]);
-        assert!(s.ready(t0, keep, Term(3), |_| true).is_none(), "not newer");
+        assert!(s.ready(t0, keep, Term(4), |_| true).is_none(), "older");
         assert!(
             s.ready(t0, keep, Term(1), |_| false).is_none(),
             "not acceptable"

@@ -107,7 +107,15 @@ impl Session {
         // A non-member speaking for an older term of this room: it was out of touch while the
         // room elected this host (a stalled old host, or a member the election left out as
         // dead). Its objects have new owners; it is told, and ignored until it joins again.
-        if !is_member && self.role == Role::Host && header.term.0 != 0 && header.term < self.term {
+        // A member tells it too, naming our host: it may still follow us as its host of that
+        // term (we were its host, stalled, and rejoined the room that went on; or it never
+        // learned we left), and answering its pings as a stranger's would keep it following
+        // us for good (the fuzzer's known issues 5 and 6).
+        if !is_member
+            && matches!(self.role, Role::Host | Role::Client)
+            && header.term.0 != 0
+            && header.term < self.term
+        {
             self.dropped.insert(from, DropWhy::OlderTerm(header.term));
             self.tell_dropped(now, from);
             return;
@@ -117,6 +125,20 @@ impl Session {
             self.stats.dropped_old_term += 1;
             return;
         }
+        // A non-member of our term or a newer one (not a joiner): a member of a rival room of
+        // the same term, or of one that went on without us, or a member our host has not
+        // told us of yet. Heard, but its pings are not answered: our pongs would keep us a
+        // live member of its room, which then never loses us, and beacons count only from
+        // peers a room lost, so the two rooms would never merge (the fuzzer's known issue 6).
+        let sections =
+            if !is_member && header.term.0 != 0 && matches!(self.role, Role::Host | Role::Client) {
+                sections
+                    .into_iter()
+                    .filter(|s| !matches!(s, Section::Ping { .. }))
+                    .collect()
+            } else {
+                sections
+            };
         self.on_packet(now, from, known, bytes.len(), &header, sections);
     }
 

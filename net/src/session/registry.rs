@@ -11,7 +11,7 @@ use glam::{Quat, Vec3};
 
 use super::delta::PartQ;
 use crate::error::NetError;
-use crate::ids::{NetId, PeerId};
+use crate::ids::{NetId, PeerId, Term};
 use crate::interp::{Snapshot, SnapshotBuffer};
 use crate::policy::{ClassConfig, SoftBodyMode};
 use crate::quant::{dequantize_quat, quantize_quat, QuatQ};
@@ -99,6 +99,13 @@ pub(crate) struct Object {
 }
 
 impl Object {
+    /// Whether `local` may claim this object from a new host of `term` (`Resync`): it owns
+    /// it at an epoch of an older term (a grant of `term` itself came from a rival host of
+    /// that term, which the new host's record overrides).
+    pub fn claimable(&self, local: PeerId, term: Term) -> bool {
+        self.info.owner == local && self.info.epoch.term < term.0
+    }
+
     /// A replica of `info` (particles at the center until state arrives).
     fn new(now: Instant, info: SpawnInfo, class: &ClassConfig) -> Self {
         let pos = class

@@ -257,6 +257,7 @@ impl Session {
             self.send_spawn(now, to, info);
             self.send_topology_log(now, to, id);
         }
+        self.send_control(now, to, &Control::SnapshotEnd);
     }
 
     /// Add a replica of `info`; `request`: our spawn request it answers.
@@ -280,8 +281,15 @@ impl Session {
         if self.class(info.class).is_none() {
             return;
         }
-        if let Some(o) = self.objects.get(info.id) {
+        // named by a new host's snapshot: its record of the owner stands, even at an older
+        // epoch than ours (it missed the old host's last grant) — unless we claimed the
+        // object (`Resync`), which settles it
+        let confirmed = self.succession.confirm(info.id);
+        if let Some(o) = self.objects.get_mut(info.id) {
             if o.info.class == info.class && o.info.particles == info.particles {
+                if confirmed && info.epoch < o.info.epoch {
+                    o.info.epoch = info.epoch;
+                }
                 self.set_owner(info.id, info.owner, info.epoch, info.held);
                 return;
             }
@@ -307,6 +315,14 @@ impl Session {
         }
     }
 
+    /// Our host's snapshot is whole: after a takeover, the replicas it did not name that we
+    /// did not claim go (the heir never had them, or had the old host's `Despawn` of them).
+    pub(super) fn on_snapshot_end(&mut self) {
+        for id in self.succession.unconfirmed() {
+            self.on_despawn_from_host(id);
+        }
+    }
+
     /// Our host removed an object.
     pub(super) fn on_despawn_from_host(&mut self, id: NetId) {
         if self.objects.remove(id) {
@@ -318,6 +334,7 @@ impl Session {
                 l.pending.retain(|e| e.id != id);
                 l.send.forget_object(id);
                 l.recv.forget_object(id);
+                l.keyframes.forget(id);
             }
         }
     }
@@ -332,6 +349,7 @@ impl Session {
                 l.pending.retain(|e| e.id != id);
                 l.send.forget_object(id);
                 l.recv.forget_object(id);
+                l.keyframes.forget(id);
             }
             self.asks.clear(id);
             self.broadcast(now, &Control::Despawn { id }, None);

@@ -221,6 +221,11 @@ pub enum Control {
         /// Why (at most 120 bytes).
         reason: String,
     },
+    /// Host → joiner, or a new host → member: the snapshot is whole; every object the host
+    /// has was named (`Spawn`) since the `Welcome` or the `NewHost`. After a takeover, a
+    /// member drops the replicas it did not name that it does not own (its `Resync` claims
+    /// those), so no member keeps an object the new host never had (protocol 7).
+    SnapshotEnd,
 }
 
 /// A join token: admission to room `room` until `expires_unix` (seconds since the Unix

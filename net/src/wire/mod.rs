@@ -30,7 +30,7 @@ use crate::error::{decode_err, NetError};
 use crate::ids::{NetId, PeerId, Term};
 
 /// Version byte at offset 0 of every datagram.
-pub const PROTOCOL_VERSION: u8 = 6;
+pub const PROTOCOL_VERSION: u8 = 7;
 /// First byte of the version-independent refusal datagram.
 pub const REFUSAL_MARKER: u8 = 0;
 /// The first bytes of a transport's channel identification (a WebRTC transport's first
