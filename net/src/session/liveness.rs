@@ -82,6 +82,13 @@ impl DroppedPeers {
         self.peers.remove(&p);
     }
 
+    /// Forget every peer (we take over: whom we told as a member are not out of our room;
+    /// the soak found a member told of an older term while a client, then shut out of the
+    /// room it hosted once it had rejoined).
+    pub fn clear(&mut self) {
+        self.peers.clear();
+    }
+
     /// Why `p` is out, if it is due to be told at `now` (once per `every`); noted as told.
     pub(super) fn due_notice(
         &mut self,

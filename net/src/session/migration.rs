@@ -178,6 +178,9 @@ impl Session {
         self.succession.unconfirmed.clear();
         // a host follows no `NewHost`: what was kept for one goes
         self.succession.pending.clear();
+        // peers told of an older term while we were a client may have joined since: as
+        // host we judge them afresh
+        self.dropped.clear();
         let me = self.local;
         let mut changed = Vec::new();
         for o in self.objects.iter_mut() {
