@@ -29,6 +29,7 @@ pub mod pbd;
 pub mod reference;
 pub mod scene;
 pub mod spec;
+pub mod statics;
 pub mod tets;
 
 pub use builders::build_model;

@@ -1,0 +1,116 @@
+//! Our reference against an independent FEM code (scikit-fem, `scripts/fem-reference`) on the
+//! static cantilever, whose answer is unique: see `softsync_softbody::methods::statics`.
+//!
+//! `cargo run --release -p softsync-softbody --example fem_check [-- --quick]`
+//!
+//! Reads the FEM's answers (`docs/results/methods/fem/fem.csv`, written by
+//! `scripts/fem-reference --all`), solves the same cantilever with our reference's material and
+//! solver (stable Neo-Hookean XPBD tets, 80 substeps × 2 iterations, the reference's budget)
+//! at k = 2, 4 (and 8) cells across the section, and prints and writes under
+//! `docs/results/methods/fem/`: `RESULT reference.fem …` lines (`results.txt`), `ours.csv`.
+//! Each line compares ours at level k with the FEM's converged answer (quadratic tets, the
+//! finest level: `fem`, `fem_change_pct`) and with the FEM's linear tets at the same level
+//! (`fem_p1`: the same discretization as ours, so `diff_p1_pct` is our solver's own error).
+
+use std::collections::BTreeMap;
+
+use softsync_benchkit::{Csv, ResultLine};
+use softsync_softbody::methods::statics::{cantilever_tip_mm, StaticSolve};
+
+/// (problem, quantity, case, element, level) → (value, change_pct)
+type Table = BTreeMap<(String, String, String, String, u32), (f64, Option<f64>)>;
+
+fn read_fem(path: &str) -> Table {
+    let text = std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("{path}: {e} (run scripts/fem-reference --all)"));
+    let mut t = Table::new();
+    for line in text.lines().skip(1) {
+        let c: Vec<&str> = line.split(',').collect();
+        if c.len() < 8 {
+            continue;
+        }
+        let (Ok(level), Ok(value)) = (c[4].parse::<u32>(), c[6].parse::<f64>()) else {
+            continue;
+        };
+        t.insert(
+            (c[0].into(), c[1].into(), c[2].into(), c[3].into(), level),
+            (value, c[7].parse().ok()),
+        );
+    }
+    t
+}
+
+fn main() {
+    let quick = std::env::args().any(|a| a == "--quick");
+    let dir = "docs/results/methods/fem";
+    let fem = read_fem(&format!("{dir}/fem.csv"));
+    let levels: &[usize] = if quick { &[2, 4] } else { &[2, 4, 8] };
+    let mut csv = Csv::new(&[
+        "case",
+        "level",
+        "nodes",
+        "steps",
+        "ours_mm",
+        "fem_p1_mm",
+        "fem_mm",
+        "diff_p1_pct",
+        "diff_pct",
+    ]);
+    let mut lines = Vec::new();
+    for (young, case) in [(1e6f32, "E=1e6 snh"), (1e5, "E=1e5 snh")] {
+        // the converged answer: the finest quadratic level
+        let Some((&(.., fem_level), &(fem_mm, fem_change))) = fem
+            .iter()
+            .filter(|(k, _)| k.0 == "cantilever" && k.2 == case && k.3 == "P2")
+            .max_by_key(|(k, _)| k.4)
+        else {
+            panic!("no P2 answer for {case} in {dir}/fem.csv");
+        };
+        for &k in levels {
+            let a = cantilever_tip_mm(young, k, StaticSolve::default());
+            let p1 = fem
+                .get(&(
+                    "cantilever".into(),
+                    "tip_mm".into(),
+                    case.into(),
+                    "P1".into(),
+                    k as u32,
+                ))
+                .map(|v| v.0);
+            let ours = f64::from(a.value);
+            let diff = 100.0 * (ours - fem_mm) / fem_mm;
+            let diff_p1 = p1.map(|p| 100.0 * (ours - p) / p);
+            let line = ResultLine::new("reference.fem")
+                .field("problem", "cantilever")
+                .field("quantity", "tip_mm")
+                .field("case", case.replace(' ', "_"))
+                .field("level", k)
+                .fixed("fem", fem_mm, 3)
+                .fixed("fem_change_pct", fem_change.unwrap_or(f64::NAN), 2)
+                .field("fem_level", fem_level)
+                .fixed("ours", ours, 3)
+                .fixed("diff_pct", diff, 1)
+                .fixed("fem_p1", p1.unwrap_or(f64::NAN), 3)
+                .fixed("diff_p1_pct", diff_p1.unwrap_or(f64::NAN), 1);
+            println!("{line}");
+            lines.push(line.to_string());
+            csv.row([
+                case.to_string(),
+                k.to_string(),
+                a.nodes.to_string(),
+                a.steps.to_string(),
+                format!("{ours:.4}"),
+                p1.map_or(String::new(), |p| format!("{p:.4}")),
+                format!("{fem_mm:.4}"),
+                diff_p1.map_or(String::new(), |d| format!("{d:.2}")),
+                format!("{diff:.2}"),
+            ]);
+        }
+    }
+    if !quick {
+        csv.write(format!("{dir}/ours.csv"))
+            .expect("write ours.csv");
+        std::fs::write(format!("{dir}/results.txt"), lines.join("\n") + "\n")
+            .expect("write results.txt");
+    }
+}

@@ -1,0 +1,242 @@
+//! Static problems whose answer is unique, solved with our accuracy reference's material —
+//! stable Neo-Hookean XPBD tets ([`NeoHookeanGroup`], the energy of
+//! [`MethodKind::NeoHookean`](super::MethodKind::NeoHookean)) — and brought to static
+//! equilibrium by damped steps. An independent finite-element code solves the same problems
+//! (`scripts/fem-reference`, scikit-fem; its answers are committed in
+//! `docs/results/methods/fem/answers.json`), so our reference is checked by code nobody here
+//! wrote, where the answer does not depend on chaos (a bounce, a slip) as whole scenarios do.
+//!
+//! The problems (SI units; ν = [`NU`] everywhere, density 1000 kg/m³):
+//! - **cantilever**: a 0.16 × 0.04 × 0.04 m box clamped at x = 0, sagging under gravity; the
+//!   answer is the tip's sag (the mean y-displacement of the nodes of the face x = 0.16).
+
+use glam::Vec3;
+use rapier3d::prelude::PhysicsWorld;
+
+use crate::methods::pbd::{
+    tet_volume, NeoHookeanGroup, PbdBody, PbdParams, SolverKind, SurfaceMap,
+};
+
+/// Poisson's ratio of every static problem (the FEM script's too).
+pub const NU: f32 = 0.4;
+/// Density, kg/m³.
+pub const DENSITY_KG_M3: f32 = 1000.0;
+/// The cantilever's size, metres (x along the beam, y up).
+pub const BEAM_M: Vec3 = Vec3::new(0.16, 0.04, 0.04);
+
+/// Bulk modulus for Young's modulus `young_pa` and Poisson's ratio `nu`.
+pub fn bulk_pa(young_pa: f32, nu: f32) -> f32 {
+    young_pa / (3.0 * (1.0 - 2.0 * nu))
+}
+
+/// A box of `size` from the origin split into `cells` cells, six tets each (around each
+/// cell's main diagonal, positively oriented): nodes and tets.
+pub fn box_tets(size: Vec3, cells: [usize; 3]) -> (Vec<Vec3>, Vec<[u32; 4]>) {
+    let [nx, ny, nz] = cells.map(|c| c.max(1));
+    let step = size / Vec3::new(nx as f32, ny as f32, nz as f32);
+    let id = |i: usize, j: usize, k: usize| (i * (ny + 1) * (nz + 1) + j * (nz + 1) + k) as u32;
+    let mut x = Vec::with_capacity((nx + 1) * (ny + 1) * (nz + 1));
+    for i in 0..=nx {
+        for j in 0..=ny {
+            for k in 0..=nz {
+                x.push(Vec3::new(i as f32, j as f32, k as f32) * step);
+            }
+        }
+    }
+    let mut tets = Vec::with_capacity(nx * ny * nz * 6);
+    for i in 0..nx {
+        for j in 0..ny {
+            for k in 0..nz {
+                let c = [
+                    id(i, j, k),
+                    id(i + 1, j, k),
+                    id(i, j + 1, k),
+                    id(i + 1, j + 1, k),
+                    id(i, j, k + 1),
+                    id(i + 1, j, k + 1),
+                    id(i, j + 1, k + 1),
+                    id(i + 1, j + 1, k + 1),
+                ];
+                for t in [
+                    [0, 1, 3, 7],
+                    [0, 1, 7, 5],
+                    [0, 5, 7, 4],
+                    [0, 3, 2, 7],
+                    [0, 2, 6, 7],
+                    [0, 6, 4, 7],
+                ] {
+                    let mut tet = t.map(|q| c[q]);
+                    if tet_volume(tet.map(|q| x[q as usize])) < 0.0 {
+                        tet.swap(2, 3);
+                    }
+                    tets.push(tet);
+                }
+            }
+        }
+    }
+    (x, tets)
+}
+
+/// Lumped masses: each tet's mass shared by its four nodes.
+fn lumped_masses(x: &[Vec3], tets: &[[u32; 4]], density: f32) -> Vec<f32> {
+    let mut m = vec![0.0f32; x.len()];
+    for t in tets {
+        let v = tet_volume(t.map(|q| x[q as usize])).abs();
+        for q in t {
+            m[*q as usize] += density * v / 4.0;
+        }
+    }
+    m
+}
+
+/// How a static solve by damped steps went.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StaticAnswer {
+    /// The answer (its unit is the problem's).
+    pub value: f32,
+    /// Steps of 1/60 s taken.
+    pub steps: usize,
+    /// Fastest particle speed at the end, m/s (the equilibrium's residual).
+    pub max_speed_mps: f32,
+    /// Nodes and tets.
+    pub nodes: usize,
+    /// Tets.
+    pub tets: usize,
+}
+
+/// Settings of a static solve by damped steps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StaticSolve {
+    /// Substeps per 1/60 s step.
+    pub substeps: u32,
+    /// Gauss–Seidel iterations per substep.
+    pub iterations: u32,
+    /// Velocity damping, 1/s.
+    pub damping_per_s: f32,
+    /// Stop once the answer changes by less than this (relative) over half a second, twice.
+    pub rest_rel: f32,
+    /// Most steps.
+    pub max_steps: usize,
+}
+
+impl Default for StaticSolve {
+    fn default() -> Self {
+        Self {
+            substeps: 80,
+            iterations: 2,
+            damping_per_s: 30.0,
+            rest_rel: 1e-4,
+            max_steps: 1800,
+        }
+    }
+}
+
+/// The cantilever ([`BEAM_M`], clamped at x = 0) of Young's modulus `young_pa` at `k` cells
+/// across its 0.04 m section (4k along it), sagging under gravity: the tip's sag, mm.
+pub fn cantilever_tip_mm(young_pa: f32, k: usize, solve: StaticSolve) -> StaticAnswer {
+    let (x, tets) = box_tets(BEAM_M, [4 * k, k, k]);
+    let mass = lumped_masses(&x, &tets, DENSITY_KG_M3);
+    let params = PbdParams {
+        solver: SolverKind::Xpbd,
+        substeps: solve.substeps,
+        iterations: solve.iterations,
+        damping_per_s: solve.damping_per_s,
+        contact_radius_m: 0.0,
+        sleep_after_s: 0.0,
+        two_way: false,
+        ..Default::default()
+    };
+    let n_tets = tets.len();
+    let weight = vec![1.0; n_tets];
+    let group = NeoHookeanGroup::new(tets, &x, &weight, young_pa, bulk_pa(young_pa, NU));
+    let mut b = PbdBody::new(
+        "cantilever",
+        params,
+        x.clone(),
+        &mass,
+        SurfaceMap::Direct,
+        Vec::new(),
+    );
+    b.neo_hookean = Some(group);
+    b.pin_box(Vec3::splat(-1.0), Vec3::new(1e-6, 1.0, 1.0));
+    let tip: Vec<usize> = (0..x.len())
+        .filter(|i| (x[*i].x - BEAM_M.x).abs() < 1e-6)
+        .collect();
+    let world = PhysicsWorld::new();
+    let sag_mm = |b: &PbdBody| {
+        1000.0
+            * tip
+                .iter()
+                .map(|i| x[*i].y - b.positions()[*i].y)
+                .sum::<f32>()
+            / tip.len().max(1) as f32
+    };
+    let (steps, max_speed) = settle(&mut b, &world, solve, sag_mm);
+    StaticAnswer {
+        value: sag_mm(&b),
+        steps,
+        max_speed_mps: max_speed,
+        nodes: x.len(),
+        tets: n_tets,
+    }
+}
+
+/// Steps `b` at 60 Hz until `answer` changes by less than `solve.rest_rel` (relative) over
+/// half a second, twice in a row (or `max_steps`); the steps taken and the fastest particle
+/// speed at the end (the equilibrium's residual motion).
+fn settle(
+    b: &mut PbdBody,
+    world: &PhysicsWorld,
+    solve: StaticSolve,
+    answer: impl Fn(&PbdBody) -> f32,
+) -> (usize, f32) {
+    let dt = 1.0 / 60.0;
+    let mut calm = 0;
+    let mut last = answer(b);
+    let mut speed = f32::INFINITY;
+    for step in 1..=solve.max_steps {
+        let before = b.positions().to_vec();
+        b.step(world, dt);
+        if step % 30 != 0 {
+            continue;
+        }
+        speed = b
+            .positions()
+            .iter()
+            .zip(&before)
+            .map(|(p, q)| p.distance(*q) / dt)
+            .fold(0.0, f32::max);
+        let now = answer(b);
+        if !now.is_finite() {
+            return (step, f32::INFINITY);
+        }
+        let change = (now - last).abs() / now.abs().max(1e-9);
+        last = now;
+        calm = if change < solve.rest_rel { calm + 1 } else { 0 };
+        if calm >= 2 {
+            return (step, speed);
+        }
+    }
+    (solve.max_steps, speed)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_box_lattice_fills_the_box_with_positive_tets() {
+        let size = Vec3::new(0.16, 0.04, 0.04);
+        let (x, tets) = box_tets(size, [8, 2, 2]);
+        assert_eq!(x.len(), 9 * 3 * 3);
+        assert_eq!(tets.len(), 8 * 2 * 2 * 6);
+        let vol: f32 = tets
+            .iter()
+            .map(|t| tet_volume(t.map(|q| x[q as usize])))
+            .inspect(|v| assert!(*v > 0.0))
+            .sum();
+        assert!((vol - size.x * size.y * size.z).abs() < 1e-9);
+        let m: f32 = lumped_masses(&x, &tets, DENSITY_KG_M3).iter().sum();
+        assert!((m - 1000.0 * size.x * size.y * size.z).abs() < 1e-5);
+    }
+}
