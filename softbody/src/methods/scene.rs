@@ -11,9 +11,7 @@ use rapier3d::prelude::{ColliderBuilder, PhysicsWorld, RigidBodyBuilder, RigidBo
 
 use crate::methods::builders::build_model;
 use crate::methods::model::DeformableModel;
-use crate::methods::pbd::{
-    tet_volume, DistanceGroup, PbdBody, PbdParams, SolverKind, SurfaceMap, VolumeGroup,
-};
+use crate::methods::pbd::{DistanceGroup, PbdBody, PbdParams, SolverKind, SurfaceMap, VolumeGroup};
 use crate::methods::spec::MethodSpec;
 use crate::metrics::rigid_fit_error;
 use crate::scenario::{ramp, ScenarioKind, SceneFrame};
@@ -377,50 +375,7 @@ pub fn cantilever_beam(
     iterations: u32,
     young_pa: f32,
 ) -> PbdBody {
-    let (nx, ny, nz) = (8usize, 2usize, 2usize);
-    let h = 0.05f32;
-    let id = |i: usize, j: usize, k: usize| (i * (ny + 1) * (nz + 1) + j * (nz + 1) + k) as u32;
-    let mut x = Vec::new();
-    for i in 0..=nx {
-        for j in 0..=ny {
-            for k in 0..=nz {
-                x.push(Vec3::new(i as f32, j as f32, k as f32) * h);
-            }
-        }
-    }
-    let mut tets = Vec::new();
-    for i in 0..nx {
-        for j in 0..ny {
-            for k in 0..nz {
-                let c = [
-                    id(i, j, k),
-                    id(i + 1, j, k),
-                    id(i, j + 1, k),
-                    id(i + 1, j + 1, k),
-                    id(i, j, k + 1),
-                    id(i + 1, j, k + 1),
-                    id(i, j + 1, k + 1),
-                    id(i + 1, j + 1, k + 1),
-                ];
-                // Six tets around the 0–7 diagonal.
-                for t in [
-                    [0, 1, 3, 7],
-                    [0, 1, 7, 5],
-                    [0, 5, 7, 4],
-                    [0, 3, 2, 7],
-                    [0, 2, 6, 7],
-                    [0, 6, 4, 7],
-                ] {
-                    let mut tet = t.map(|q| c[q]);
-                    let p = tet.map(|q| x[q as usize]);
-                    if tet_volume(p) < 0.0 {
-                        tet.swap(2, 3);
-                    }
-                    tets.push(tet);
-                }
-            }
-        }
-    }
+    let (x, tets) = crate::methods::statics::box_tets(Vec3::new(0.4, 0.1, 0.1), [8, 2, 2]);
     let volume = 0.4 * 0.1 * 0.1;
     let mass = vec![1000.0 * volume / x.len() as f32; x.len()];
     let params = PbdParams {
