@@ -15,7 +15,7 @@
 use std::collections::BTreeMap;
 
 use softsync_benchkit::{Csv, ResultLine};
-use softsync_softbody::methods::statics::{cantilever_tip_mm, StaticSolve};
+use softsync_softbody::methods::statics::{cantilever_tip_mm, compress_cube, StaticSolve};
 
 /// (problem, quantity, case, element, level) → (value, change_pct)
 type Table = BTreeMap<(String, String, String, String, u32), (f64, Option<f64>)>;
@@ -50,9 +50,9 @@ fn main() {
         "level",
         "nodes",
         "steps",
-        "ours_mm",
-        "fem_p1_mm",
-        "fem_mm",
+        "ours",
+        "fem_p1",
+        "fem",
         "diff_p1_pct",
         "diff_pct",
     ]);
@@ -105,6 +105,53 @@ fn main() {
                 diff_p1.map_or(String::new(), |d| format!("{d:.2}")),
                 format!("{diff:.2}"),
             ]);
+        }
+    }
+    // The compression: homogeneous, so every level has the exact answer (the FEM's finest P2
+    // level, which matches the closed form to 1e-11); ours at each level against it.
+    let strains = [0.1f32, 0.2, 0.4, 0.7];
+    let cube_levels: &[usize] = if quick { &[1, 2] } else { &[1, 2, 4] };
+    for &k in cube_levels {
+        let answers = compress_cube(k, &strains, StaticSolve::default());
+        for c in &answers {
+            let case = format!("s={}", c.strain);
+            for (quantity, ours) in [("force_n", c.force_n), ("bulge_mm", c.bulge_mm)] {
+                let Some((&(.., fem_level), &(fem, fem_change))) = fem
+                    .iter()
+                    .filter(|(key, _)| {
+                        key.0 == "compress" && key.1 == quantity && key.2 == case && key.3 == "P2"
+                    })
+                    .max_by_key(|(key, _)| key.4)
+                else {
+                    panic!("no P2 compress answer for {quantity} {case} in {dir}/fem.csv");
+                };
+                let ours = f64::from(ours);
+                let diff = 100.0 * (ours - fem) / fem;
+                let line = ResultLine::new("reference.fem")
+                    .field("problem", "compress")
+                    .field("quantity", quantity)
+                    .field("case", &case)
+                    .field("level", k)
+                    .fixed("fem", fem, 3)
+                    .fixed("fem_change_pct", fem_change.unwrap_or(0.0), 2)
+                    .field("fem_level", fem_level)
+                    .fixed("ours", ours, 3)
+                    .fixed("diff_pct", diff, 2)
+                    .field("steps", c.solve.steps);
+                println!("{line}");
+                lines.push(line.to_string());
+                csv.row([
+                    format!("compress {quantity} {case}"),
+                    k.to_string(),
+                    c.solve.nodes.to_string(),
+                    c.solve.steps.to_string(),
+                    format!("{ours:.4}"),
+                    String::new(),
+                    format!("{fem:.4}"),
+                    String::new(),
+                    format!("{diff:.2}"),
+                ]);
+            }
         }
     }
     if !quick {

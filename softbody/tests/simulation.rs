@@ -77,10 +77,14 @@ fn squash_to_30_percent_and_recover_volume_within_2_s() {
             cluster.name(),
             height * 100.0
         );
+        // Squeezed to a third of its height, it bulges instead of losing its volume (the
+        // volume term keeps 0.80 of it at these fine clusters; without it the sphere kept less than
+        // 0.6).
         assert!(
-            s.metrics().volume_ratio < 0.6,
-            "{}: volume barely changed",
-            cluster.name()
+            s.metrics().volume_ratio > 0.75,
+            "{}: volume {} squeezed",
+            cluster.name(),
+            s.metrics().volume_ratio
         );
         s.run_until(ScenarioKind::Squeeze.release_s() + 2.0);
         let m = s.metrics();

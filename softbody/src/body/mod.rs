@@ -86,6 +86,11 @@ pub struct SoftBody {
     /// Per particle: displacement from its rigid rest target after the last step.
     displacement: Vec<Vec3>,
     scratch: Vec<Vec3>,
+    /// Per particle: the velocity this step's restoring gives it (`None`: left alone).
+    planned_v: Vec<Option<Vec3>>,
+    /// The volume term's scratch: ∂V/∂x per welded vertex, and per particle.
+    vertex_grad: Vec<Vec3>,
+    particle_grad: Vec<Vec3>,
     /// Deformed welded vertices, world space.
     vertices: Vec<Vec3>,
     render_positions: Vec<Vec3>,
@@ -438,6 +443,9 @@ impl BodyPlan {
             anchor_shift: vec![Vec3::ZERO; n],
             displacement: vec![Vec3::ZERO; n],
             scratch: vec![Vec3::ZERO; n],
+            planned_v: Vec::with_capacity(n),
+            vertex_grad: Vec::new(),
+            particle_grad: Vec::new(),
             rest_volume_m3,
             size_m,
             roll_radius_m,
@@ -525,6 +533,8 @@ impl SoftBody {
         let thesis = self.config.restoring == RestoringScheme::Thesis;
         // Thesis: expectedDelta = fixedDeltaTime / 0.0111112 (Appendix A.7).
         let thesis_gain = self.config.stiffness * dt / 0.011_111_2;
+        self.planned_v.clear();
+        self.planned_v.resize(self.particles.len(), None);
         for (j, &h) in self.particles.iter().enumerate() {
             let uj = self.scratch[j];
             let (ids, ws) = self.map.neighbours.row(j);
@@ -571,7 +581,112 @@ impl SoftBody {
             {
                 continue;
             }
-            body.set_linvel(new_v, true);
+            self.planned_v[j] = Some(new_v);
+        }
+        self.keep_volume(dt, r, vc, wc);
+        for (j, &h) in self.particles.iter().enumerate() {
+            if let (Some(v), Some(body)) = (self.planned_v[j], world.bodies.get_mut(h)) {
+                body.set_linvel(v, true);
+            }
+        }
+    }
+
+    /// How freely the volume term moves particle `j`, in [0, 1]: 0 if grabbed or pressed in
+    /// (its displacement from its target, `self.scratch`, is inward along the volume gradient
+    /// by half its radius or more), 1 if not pressed in at all, linear between (no switch
+    /// that flips from one step to the next). A particle a plate or a hand presses in cannot
+    /// move out: what it was given would be taken back by the contact, and the volume never
+    /// restored. The free particles take it all and the body bulges.
+    fn freedom(&self, j: usize) -> f32 {
+        if self.drives[j].is_some() {
+            return 0.0;
+        }
+        let g = self.particle_grad[j];
+        let len = g.length();
+        if len <= 0.0 {
+            return 0.0;
+        }
+        let inward = -self.scratch[j].dot(g) / len;
+        (1.0 - inward / (0.5 * self.particle_radius_m[j]).max(1e-9)).clamp(0.0, 1.0)
+    }
+
+    /// The volume term (`SoftBodyConfig::volume_stiffness`): a global pressure. With `V` the
+    /// enclosed volume of the deformed surface (as the last step left it), `gₚ = ∂V/∂xₚ`
+    /// through the skinning (each vertex is its rest place plus the weighted displacement of
+    /// its particles, so `gₚ = Σᵥ wᵥₚ ∂V/∂xᵥ`), and `V'` the volume the planned velocities
+    /// of the free particles ([`freedom`](Self::freedom) `f`, weighting each) would give after the step
+    /// (`V + dt Σ fₚ gₚ·(vₚ − rigid)`, first order: rigid motion changes no volume), the free
+    /// particles' velocities change by `−β (V' − V₀) fₚ gₚ / (dt Σ fₚ|g|²)`, `β = 1 − exp(−rate·dt)`:
+    /// the smallest change (least squares) that corrects the fraction β of the volume error.
+    /// Grabbed and pressed-in particles keep their velocity and are not counted in `V'`:
+    /// what presses them decides where they go, and the next step measures it.
+    fn keep_volume(&mut self, dt: f32, r: Quat, vc: Vec3, wc: Vec3) {
+        let rate = self.config.volume_stiffness;
+        if rate <= 0.0 || self.tear.is_some() || self.rest_volume_m3 <= 0.0 {
+            return;
+        }
+        let tris = &self.welded.triangles;
+        self.vertex_grad.clear();
+        self.vertex_grad.resize(self.vertices.len(), Vec3::ZERO);
+        let mut volume = 0.0f32;
+        for t in tris {
+            let [a, b, c] = t.map(|i| self.vertices[i as usize]);
+            volume += a.dot(b.cross(c)) / 6.0;
+            self.vertex_grad[t[0] as usize] += b.cross(c) / 6.0;
+            self.vertex_grad[t[1] as usize] += c.cross(a) / 6.0;
+            self.vertex_grad[t[2] as usize] += a.cross(b) / 6.0;
+        }
+        if !volume.is_finite() || volume <= 0.0 {
+            return;
+        }
+        self.particle_grad.clear();
+        self.particle_grad.resize(self.particles.len(), Vec3::ZERO);
+        for (v, g) in self.vertex_grad.iter().enumerate() {
+            if !self.map.soft_vertex[v] {
+                continue;
+            }
+            let (ids, ws) = self.map.vertex_particles.row(v);
+            for (&p, &w) in ids.iter().zip(ws) {
+                self.particle_grad[p as usize] += *g * w;
+            }
+        }
+        let mut change = 0.0f32;
+        let mut norm = 0.0f32;
+        for (j, g) in self.particle_grad.iter().enumerate() {
+            // Pressed in: its restoring pushes it out into what presses it, which takes that
+            // back; counting it in full would promise volume that never comes.
+            let free = self.freedom(j);
+            if free <= 0.0 {
+                continue;
+            }
+            if let Some(v) = self.planned_v[j] {
+                let rigid = vc + wc.cross(r * (self.rest_offsets[j] + self.anchor_shift[j]));
+                change += free * g.dot(v - rigid) * dt;
+            }
+            norm += free * g.length_squared();
+        }
+        let error = volume + change - self.rest_volume_m3;
+        if norm <= 0.0 || !error.is_finite() {
+            return;
+        }
+        let beta = 1.0 - (-rate * dt).exp();
+        let scale = -beta * error / (dt * norm);
+        let max_dv = self.config.max_velocity_change_mps;
+        for (j, g) in self.particle_grad.iter().enumerate() {
+            let free = self.freedom(j);
+            if free <= 0.0 {
+                continue;
+            }
+            let mut dv = *g * (scale * free);
+            let len = dv.length();
+            if len > max_dv {
+                dv *= max_dv / len;
+            }
+            if let Some(v) = &mut self.planned_v[j] {
+                *v += dv;
+            } else if len > 1e-6 {
+                self.planned_v[j] = Some(dv);
+            }
         }
     }
 

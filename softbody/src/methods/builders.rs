@@ -261,6 +261,7 @@ pub fn build_model(
                 restoring: spec.restoring,
                 self_collisions: spec.self_collisions,
                 rolling_resistance: spec.rolling_resistance,
+                volume_stiffness: spec.volume_stiffness,
                 soft_region: spec.soft_region,
                 space: if anchored {
                     SimulationSpace::Local

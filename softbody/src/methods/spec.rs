@@ -125,6 +125,10 @@ pub struct MethodSpec {
     /// default that config's). Particle method only.
     #[serde(default = "default_rolling_resistance")]
     pub rolling_resistance: f32,
+    /// The particle method's volume term (`SoftBodyConfig::volume_stiffness`, 1/s; default
+    /// that config's, 0 turns it off). Particle method only.
+    #[serde(default = "default_volume_stiffness")]
+    pub volume_stiffness: f32,
 }
 
 fn exact_restoring() -> RestoringScheme {
@@ -133,6 +137,10 @@ fn exact_restoring() -> RestoringScheme {
 
 fn default_rolling_resistance() -> f32 {
     crate::SoftBodyConfig::default().rolling_resistance
+}
+
+fn default_volume_stiffness() -> f32 {
+    crate::SoftBodyConfig::default().volume_stiffness
 }
 
 impl MethodSpec {
@@ -150,7 +158,14 @@ impl MethodSpec {
             restoring: RestoringScheme::Exact,
             self_collisions: false,
             rolling_resistance: default_rolling_resistance(),
+            volume_stiffness: default_volume_stiffness(),
         }
+    }
+
+    /// With the particle method's volume term rate, 1/s (0 turns it off).
+    pub fn volume_stiffness(mut self, rate_per_s: f32) -> Self {
+        self.volume_stiffness = rate_per_s;
+        self
     }
 
     /// With the particle method's rolling resistance (0 turns it off).
@@ -254,6 +269,10 @@ impl MethodSpec {
             && self.rolling_resistance != default_rolling_resistance()
         {
             region += &format!(" roll{}", self.rolling_resistance);
+        }
+        if self.kind == MethodKind::Particle && self.volume_stiffness != default_volume_stiffness()
+        {
+            region += &format!(" vol{}", self.volume_stiffness);
         }
         match self.kind {
             MethodKind::Surface | MethodKind::Ispc => {

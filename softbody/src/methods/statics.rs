@@ -9,12 +9,18 @@
 //! The problems (SI units; ν = [`NU`] everywhere, density 1000 kg/m³):
 //! - **cantilever**: a 0.16 × 0.04 × 0.04 m box clamped at x = 0, sagging under gravity; the
 //!   answer is the tip's sag (the mean y-displacement of the nodes of the face x = 0.16).
+//! - **compress**: a cube of side [`CUBE_M`] (E = [`CUBE_YOUNG_PA`], no gravity) between
+//!   frictionless plates, compressed by a strain s (the top plate moved down by s × the side),
+//!   a quarter of a larger block (symmetry planes x = 0 and z = 0). The answers: the plates'
+//!   reaction force and the bulge (the mean x-displacement of the face x = side). The
+//!   deformation is homogeneous, so every mesh has the exact answer: this checks the material
+//!   and the solver, not the discretization.
 
 use glam::Vec3;
 use rapier3d::prelude::PhysicsWorld;
 
 use crate::methods::pbd::{
-    tet_volume, NeoHookeanGroup, PbdBody, PbdParams, SolverKind, SurfaceMap,
+    tet_volume, NeoHookeanGroup, PbdBody, PbdParams, Slide, SolverKind, SurfaceMap,
 };
 
 /// Poisson's ratio of every static problem (the FEM script's too).
@@ -23,6 +29,11 @@ pub const NU: f32 = 0.4;
 pub const DENSITY_KG_M3: f32 = 1000.0;
 /// The cantilever's size, metres (x along the beam, y up).
 pub const BEAM_M: Vec3 = Vec3::new(0.16, 0.04, 0.04);
+
+/// The compression's cube side, metres.
+pub const CUBE_M: f32 = 0.04;
+/// The compression's Young's modulus, Pa.
+pub const CUBE_YOUNG_PA: f32 = 2e5;
 
 /// Bulk modulus for Young's modulus `young_pa` and Poisson's ratio `nu`.
 pub fn bulk_pa(young_pa: f32, nu: f32) -> f32 {
@@ -181,6 +192,126 @@ pub fn cantilever_tip_mm(young_pa: f32, k: usize, solve: StaticSolve) -> StaticA
     }
 }
 
+/// The compression's answer at one strain.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Compression {
+    /// The strain s: the top plate moved down by s × [`CUBE_M`].
+    pub strain: f32,
+    /// The plates' reaction, N (positive in compression).
+    pub force_n: f32,
+    /// The mean x-displacement of the face x = [`CUBE_M`], mm.
+    pub bulge_mm: f32,
+    /// Tets turned inside out at the end (the exact answer has none).
+    pub inverted: usize,
+    /// The solve at this strain (its `value` is the force).
+    pub solve: StaticAnswer,
+}
+
+/// The compression ([`CUBE_M`], E = [`CUBE_YOUNG_PA`], `k`³ cells) at each of `strains`, in
+/// order: the top plate moves to the next strain over a quarter second, then the body settles
+/// (on the force). Frictionless plates and symmetry planes are [`Slide`]s; the force is the
+/// sum of the elastic forces on the top face's particles ([`NeoHookeanGroup::elastic_forces`]).
+pub fn compress_cube(k: usize, strains: &[f32], solve: StaticSolve) -> Vec<Compression> {
+    let (x, tets) = box_tets(Vec3::splat(CUBE_M), [k, k, k]);
+    let mass = lumped_masses(&x, &tets, DENSITY_KG_M3);
+    let params = PbdParams {
+        solver: SolverKind::Xpbd,
+        substeps: solve.substeps,
+        iterations: solve.iterations,
+        damping_per_s: solve.damping_per_s,
+        contact_radius_m: 0.0,
+        sleep_after_s: 0.0,
+        two_way: false,
+        ..Default::default()
+    };
+    let n_tets = tets.len();
+    let group = NeoHookeanGroup::new(
+        tets,
+        &x,
+        &vec![1.0; n_tets],
+        CUBE_YOUNG_PA,
+        bulk_pa(CUBE_YOUNG_PA, NU),
+    );
+    let mut b = PbdBody::new(
+        "cube",
+        params,
+        x.clone(),
+        &mass,
+        SurfaceMap::Direct,
+        Vec::new(),
+    );
+    b.neo_hookean = Some(group);
+    let on = |i: usize, axis: usize, at: f32| (x[i][axis] - at).abs() < 1e-7;
+    let top: Vec<usize> = (0..x.len()).filter(|&i| on(i, 1, CUBE_M)).collect();
+    let side: Vec<usize> = (0..x.len()).filter(|&i| on(i, 0, CUBE_M)).collect();
+    for i in 0..x.len() {
+        for (axis, at) in [(1u8, 0.0), (1, CUBE_M), (0, 0.0), (2, 0.0)] {
+            if on(i, usize::from(axis), at) {
+                b.slides.push(Slide {
+                    node: i as u32,
+                    axis,
+                    at_m: at,
+                });
+            }
+        }
+    }
+    let mut world = PhysicsWorld::new();
+    world.gravity = Vec3::ZERO;
+    let mut forces = Vec::new();
+    let mut force_n = move |b: &PbdBody| {
+        let Some(g) = &b.neo_hookean else {
+            return f32::NAN;
+        };
+        g.elastic_forces(b.positions(), &mut forces);
+        top.iter().map(|&i| forces[i].y).sum::<f32>()
+    };
+    let bulge_mm = |b: &PbdBody| {
+        1000.0
+            * side
+                .iter()
+                .map(|&i| b.positions()[i].x - CUBE_M)
+                .sum::<f32>()
+            / side.len().max(1) as f32
+    };
+    let mut out = Vec::with_capacity(strains.len());
+    let mut at = CUBE_M;
+    const RAMP_STEPS: usize = 15;
+    for &s in strains {
+        let goal = CUBE_M * (1.0 - s);
+        for r in 1..=RAMP_STEPS {
+            let y = at + (goal - at) * r as f32 / RAMP_STEPS as f32;
+            move_top(&mut b, y);
+            b.step(&world, 1.0 / 60.0);
+        }
+        at = goal;
+        let (steps, max_speed) = settle(&mut b, &world, solve, &mut force_n);
+        let force = force_n(&b);
+        out.push(Compression {
+            strain: s,
+            force_n: force,
+            bulge_mm: bulge_mm(&b),
+            inverted: b.count_inverted(),
+            solve: StaticAnswer {
+                value: force,
+                steps: steps + RAMP_STEPS,
+                max_speed_mps: max_speed,
+                nodes: x.len(),
+                tets: n_tets,
+            },
+        });
+    }
+    out
+}
+
+/// Moves the compression's top plate (the slides on y that are not at 0) to `y`.
+fn move_top(b: &mut PbdBody, y: f32) {
+    for s in &mut b.slides {
+        if s.axis == 1 && s.at_m != 0.0 {
+            s.at_m = y;
+        }
+    }
+}
+
 /// Steps `b` at 60 Hz until `answer` changes by less than `solve.rest_rel` (relative) over
 /// half a second, twice in a row (or `max_steps`); the steps taken and the fastest particle
 /// speed at the end (the equilibrium's residual motion).
@@ -188,7 +319,7 @@ fn settle(
     b: &mut PbdBody,
     world: &PhysicsWorld,
     solve: StaticSolve,
-    answer: impl Fn(&PbdBody) -> f32,
+    mut answer: impl FnMut(&PbdBody) -> f32,
 ) -> (usize, f32) {
     let dt = 1.0 / 60.0;
     let mut calm = 0;
@@ -223,6 +354,21 @@ fn settle(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The compression is homogeneous: at a small strain, on the coarsest mesh, the force
+    /// and bulge are the closed form's (`scripts/fem/reference.py`'s `uniaxial_analytic`,
+    /// whose answers the FEM reproduces to 1e-11).
+    #[test]
+    fn a_cube_compressed_ten_percent_gives_the_closed_form_answer() {
+        let c = compress_cube(1, &[0.1], StaticSolve::default());
+        let (force, bulge) = (c[0].force_n, c[0].bulge_mm);
+        assert!(
+            (force - 35.10).abs() < 0.02 * 35.10,
+            "force {force} N, {:?}",
+            c[0]
+        );
+        assert!((bulge - 1.6926).abs() < 0.02 * 1.6926, "bulge {bulge} mm");
+    }
 
     #[test]
     fn the_box_lattice_fills_the_box_with_positive_tets() {

@@ -108,6 +108,19 @@ impl Energy {
     }
 }
 
+/// A particle held on a frictionless plane normal to a coordinate axis: its coordinate `axis`
+/// (0 = x, 1 = y, 2 = z) is `at_m`, the other two are free. A plate it slides on, or a
+/// symmetry plane; move `at_m` to move the plate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Slide {
+    /// The particle.
+    pub node: u32,
+    /// The axis the plane is normal to: 0, 1 or 2.
+    pub axis: u8,
+    /// Where the plane is along that axis, metres.
+    pub at_m: f32,
+}
+
 /// A position-based body: particles, constraint groups, a surface, contacts with the world.
 #[derive(Clone, Debug)]
 pub struct PbdBody {
@@ -150,6 +163,9 @@ pub struct PbdBody {
     pub pin_surface: bool,
     /// Surface vertices held at a position: (vertex, position).
     held: Vec<(u32, Vec3)>,
+    /// Particles held on frictionless planes (a plate, a symmetry plane), projected with the
+    /// other constraints at every iteration.
+    pub slides: Vec<Slide>,
     /// What the last step's contacts did to each near collider, and which they were.
     reactions: Vec<Reaction>,
     reaction_targets: Vec<(ColliderHandle, Option<RigidBodyHandle>)>,
@@ -200,6 +216,7 @@ impl PbdBody {
             colliding_nodes: None,
             pin_surface: false,
             held: Vec::new(),
+            slides: Vec::new(),
             reactions: Vec::new(),
             reaction_targets: Vec::new(),
             collider_inv_mass: Vec::new(),
@@ -437,6 +454,12 @@ impl PbdBody {
             let (p, _) = self.surface_map.point(&self.x, &self.prev, s as usize);
             self.surface_map
                 .move_point(&mut self.x, &self.inv_mass, s as usize, at - p);
+        }
+        for s in &self.slides {
+            let i = s.node as usize;
+            if self.inv_mass.get(i).is_some_and(|w| *w > 0.0) && s.at_m.is_finite() {
+                self.x[i][usize::from(s.axis.min(2))] = s.at_m;
+            }
         }
     }
 

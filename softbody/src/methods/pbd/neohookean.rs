@@ -256,6 +256,26 @@ impl NeoHookeanGroup {
             .sum()
     }
 
+    /// The elastic force on every particle over the positions `x`, N: `f = −∂E/∂x` (the
+    /// first Piola–Kirchhoff stress `P = μ F + λ' (J − γ) cof F` of each tet, `−V₀ P D_m⁻ᵀ` on
+    /// its nodes). `out` is cleared and sized to `x`. At static equilibrium the forces on held
+    /// particles are what holds them: a plate's reaction.
+    pub fn elastic_forces(&self, x: &[Vec3], out: &mut Vec<Vec3>) {
+        out.clear();
+        out.resize(x.len(), Vec3::ZERO);
+        let (mu, lambda_snh) = (self.mu_pa, self.lambda_snh());
+        let gamma = 1.0 + mu / lambda_snh;
+        for (k, t) in self.tets.iter().enumerate() {
+            let f = self.deformation(k, x);
+            let p = f * mu + det_gradient(f) * (lambda_snh * (f.determinant() - gamma));
+            let g = self.node_gradients(k, p);
+            let v0 = self.rest_m3[k] * self.weight[k];
+            for (j, &node) in t.iter().enumerate() {
+                out[node as usize] -= g[j] * v0;
+            }
+        }
+    }
+
     /// Number of tets of non-positive volume over the positions `x`.
     pub fn count_inverted(&self, x: &[Vec3]) -> usize {
         (0..self.tets.len())
@@ -295,5 +315,35 @@ mod tests {
         let want = 4.5 * k * eps * eps;
         let got = energy_density(vol, mu, l);
         assert!((got - want).abs() < 0.05 * want, "volume {got} vs {want}");
+    }
+
+    /// The elastic forces are minus the energy's gradient (central differences).
+    #[test]
+    fn elastic_forces_are_minus_the_energy_gradient() {
+        let x0 = vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z, Vec3::ONE];
+        let tets = vec![[0, 1, 2, 3], [1, 4, 2, 3]];
+        let g = NeoHookeanGroup::new(tets, &x0, &[1.0, 0.7], 1.0e4, 3.0e4);
+        let x: Vec<Vec3> = x0
+            .iter()
+            .enumerate()
+            .map(|(i, p)| *p * 1.1 + Vec3::new(0.05 * i as f32, -0.03, 0.02 * (i % 2) as f32))
+            .collect();
+        let mut f = Vec::new();
+        g.elastic_forces(&x, &mut f);
+        let h = 1e-3f32;
+        for node in 0..x.len() {
+            for axis in 0..3 {
+                let mut a = x.clone();
+                let mut b = x.clone();
+                a[node][axis] += h;
+                b[node][axis] -= h;
+                let grad = (g.energy_j(&a) - g.energy_j(&b)) / (2.0 * h);
+                let got = -f[node][axis];
+                assert!(
+                    (got - grad).abs() < 2e-3 * grad.abs().max(100.0),
+                    "node {node} axis {axis}: force {got} vs gradient {grad}"
+                );
+            }
+        }
     }
 }
