@@ -500,7 +500,9 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
             let loading = softsync_benchkit::Progress::spinner(format!("loading scene {name}"));
             let scene = Scene::by_name(name, &assets_dir(a.assets.as_deref()));
             loading.finish();
-            Some(scene.map_err(Failure::usage)?)
+            let scene = scene.map_err(Failure::usage)?;
+            print_materials(&scene, a.sim_hz);
+            Some(scene)
         }
     };
     #[cfg(feature = "desktop")]
@@ -692,4 +694,28 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
         AppExit::Success => ExitCode::SUCCESS,
         AppExit::Error(code) => ExitCode::from(code.get()),
     })
+}
+
+/// Each soft class that named a material: the setting found for it and how near it is (and
+/// a warning if it was fitted at another step rate than this peer's).
+fn print_materials(scene: &Scene, sim_hz: f64) {
+    for c in &scene.classes {
+        let (Some(setting), Some(named)) = (
+            &c.material,
+            c.material.as_ref().and_then(|s| s.config.material),
+        ) else {
+            continue;
+        };
+        eprintln!(
+            "class {:?}: material E {} kPa, ν {} at {} Hz → {setting}",
+            c.name, named.young_kpa, named.poisson, named.rate_hz
+        );
+        if (f64::from(named.rate_hz) - sim_hz).abs() > 0.5 {
+            eprintln!(
+                "class {:?}: warning: its material was fitted at {} Hz but this peer steps at {sim_hz} Hz \
+                 (the particle method is a different material at another rate: set material.rate_hz)",
+                c.name, named.rate_hz
+            );
+        }
+    }
 }

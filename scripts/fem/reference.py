@@ -415,12 +415,9 @@ def cantilever(k, order, moduli=BEAM_MODULI):
                    time_s=time.time() - t, note=note)
 
 
-def compress(k, order, strains=STRAINS):
-    """Cube of side 0.04 m (k^3 cubes), E = 2e5 Pa, no gravity, between frictionless plates:
-    u_y = 0 on y = 0, u_y = -s 0.04 on y = 0.04, symmetry u_x = 0 on x = 0 and u_z = 0 on
-    z = 0. force_n: total reaction on the top face (N, positive in compression) = minus the sum
-    of the internal forces of its y dofs; bulge_mm: mean x-displacement of the vertices of the
-    face x = 0.04, mm. The strain s is the load parameter, stepped through every s at once."""
+def compress_problem(k, order):
+    """The `compress` discretisation: (disc, dirichlet dofs, their prescribed values per unit
+    strain, the top face's y dofs, the x dofs of the vertices on the face x = 0.04)."""
     disc = Discretisation(box(CUBE, CUBE, CUBE, k, k, k), order)
     dofs = disc.vb.get_dofs
     bottom = dofs(lambda x: np.isclose(x[1], 0.0)).all("u^2")
@@ -432,6 +429,16 @@ def compress(k, order, strains=STRAINS):
                                  np.zeros(len(sym_x) + len(sym_z))])
     assert len(np.unique(dirichlet)) == len(dirichlet)
     side = disc.vertex_dofs(disc.face_vertices(0, CUBE), 0)
+    return disc, dirichlet, prescribed, top, side
+
+
+def compress(k, order, strains=STRAINS):
+    """Cube of side 0.04 m (k^3 cubes), E = 2e5 Pa, no gravity, between frictionless plates:
+    u_y = 0 on y = 0, u_y = -s 0.04 on y = 0.04, symmetry u_x = 0 on x = 0 and u_z = 0 on
+    z = 0. force_n: total reaction on the top face (N, positive in compression) = minus the sum
+    of the internal forces of its y dofs; bulge_mm: mean x-displacement of the vertices of the
+    face x = 0.04, mm. The strain s is the load parameter, stepped through every s at once."""
+    disc, dirichlet, prescribed, top, side = compress_problem(k, order)
     mat = snh_parameters(CUBE_E)
     t = time.time()
     try:
@@ -463,6 +470,205 @@ def analytic_rows():
             yield dict(problem="compress", quantity=quantity, case=f"s={s:g}",
                        element="analytic", level="", dofs="", value=value, time_s=0.0,
                        note="closed form, uniaxial stress")
+
+
+# --------------------------------------------------------------------------------------
+# Stability of the compression's homogeneous solution (--stability)
+# --------------------------------------------------------------------------------------
+# Past some strain a block squeezed between plates need not stay homogeneous: it can barrel,
+# wrinkle or crease, and then the problem has more than one equilibrium. The homogeneous
+# state stays an equilibrium of every mesh (it is a linear displacement field, which every
+# element reproduces exactly), and the Newton path above, started homogeneous, never leaves
+# it. It is a *stable* equilibrium only while the tangent stiffness restricted to the free
+# dofs, K_ff (the Hessian of the energy there), is positive definite. --stability follows the
+# homogeneous path through STABILITY_STRAINS and reports at each strain K_ff's smallest
+# eigenvalue relative to its value at rest (1 at s = 0; negative: the homogeneous state is a
+# saddle and a lower-energy, non-homogeneous state exists nearby), the number of negative
+# eigenvalues, where the unstable mode lives, and the strain where the smallest eigenvalue
+# crosses zero (the first bifurcation), refined by regula falsi along the path.
+#
+# Plain eigenvalues of K_ff (not against the mass matrix): the magnitudes depend on that
+# choice, the signs, the counts and the critical strain do not (Sylvester's law of inertia).
+# The material itself never loses strong ellipticity: its acoustic tensor is
+# mu I + lam' (cof F n)(cof F n)^T >= mu I for every F and direction n (the (J - gamma) term
+# drops out), so a negative eigenvalue is an instability of the body and its free surfaces,
+# not of the material.
+
+STABILITY_STRAINS = tuple(round(0.05 * i, 2) for i in range(1, 15))    # 0.05, 0.1, ..., 0.7
+STABILITY_MESHES = ((1, 1), (1, 2), (1, 4), (1, 8), (2, 1), (2, 2), (2, 4))   # (order, k)
+STABILITY_FINE_MESHES = ((2, 8),)       # --stability --fine adds these (minutes, not seconds)
+CRITICAL_STRAIN_TOL = 1e-4              # regula falsi stops when the bracket is this narrow
+DENSE_CROSSCHECK_MAX = 2500             # free dofs up to which a dense eigensolve checks it
+
+
+def inertia_factor(k):
+    """Sparse LU of the symmetric matrix `k` with diagonal pivots only, so the row and column
+    permutations agree and L U = P k P^T with U = D L^T: the signs of U's diagonal are the
+    signs of k's eigenvalues (Sylvester's law of inertia). Returns (LU, negative count)."""
+    lu = sla.splu(k.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                  options=dict(SymmetricMode=True))
+    d = lu.U.diagonal()
+    if not np.array_equal(lu.perm_r, lu.perm_c) or not np.all(np.isfinite(d)) or np.any(d == 0):
+        raise RuntimeError("no symmetric LU with nonzero pivots: inertia unknown")
+    return lu, int(np.sum(d < 0))
+
+
+def smallest_eigenpair(k, guess, margin):
+    """Smallest eigenvalue of the symmetric sparse matrix `k` and its unit eigenvector, by
+    shift-invert Lanczos (ARPACK) about a shift sigma shown to lie below the whole spectrum
+    (k - sigma I has no negative pivot), so that the eigenvalue nearest sigma is the smallest.
+    sigma starts at min(guess, 0) * 1.25 - margin and moves down until that holds."""
+    n = k.shape[0]
+    eye = sp.identity(n, format="csc")
+    sigma = 1.25 * min(guess, 0.0) - margin
+    for _ in range(60):
+        lu, negative = inertia_factor(k - sigma * eye)
+        if negative == 0:
+            break
+        sigma = 2.0 * sigma - margin
+    else:
+        raise RuntimeError("found no shift below the spectrum")
+    op = sla.LinearOperator((n, n), matvec=lu.solve, dtype=float)
+    v0 = np.random.default_rng(0).standard_normal(n)
+    w, v = sla.eigsh(k, k=1, sigma=sigma, which="LM", OPinv=op, v0=v0, tol=1e-13)
+    lam, vec = float(w[0]), v[:, 0] / np.linalg.norm(v[:, 0])
+    residual = np.linalg.norm(k @ vec - lam * vec)
+    if not residual <= 1e-7 * (abs(lam) + margin):
+        raise RuntimeError(f"eigenpair residual {residual:.1e} for eigenvalue {lam:.6g}")
+    return lam, vec
+
+
+def compress_stability(k, order, strains=STABILITY_STRAINS):
+    """The `compress` problem's homogeneous path at level k, element P`order`: one row per
+    strain (point=grid) and one for the critical strain (point=critical). Row fields:
+    min_eig = smallest eigenvalue of K_ff (N/m), min_eig_rel = that / the same at rest,
+    negative = number of negative eigenvalues of K_ff, surface_share = share of the smallest
+    mode's squared amplitude on the free faces x = 0.04 and z = 0.04 (whose dofs are
+    surface_dofs of the free dofs), force_rel_err = the plate force against the closed form
+    (shows the path is the homogeneous one), dense_err = |min_eig - dense eigensolver| /
+    rest value where a dense check was made."""
+    t = time.time()
+    disc, dirichlet, prescribed, top, _ = compress_problem(k, order)
+    mat = snh_parameters(CUBE_E)
+    free = np.setdiff1d(np.arange(disc.ndofs), dirichlet)
+    loc = disc.vb.doflocs[:, free]
+    on_face = np.isclose(loc[0], CUBE) | np.isclose(loc[2], CUBE)
+    zero = np.zeros(disc.ndofs)
+    k_rest = disc.tangent(zero, mat)[free][:, free]
+    lam_rest, _ = smallest_eigenpair(k_rest, 0.0, 1e-9 * abs(k_rest.diagonal()).mean())
+    base = dict(problem="compress", element=f"P{order}", level=k, free_dofs=len(free),
+                surface_dofs=float(on_face.mean()))
+    last = [lam_rest]
+
+    def measure(s, u):
+        kff = disc.tangent(u, mat)[free][:, free]
+        lam, vec = smallest_eigenpair(kff, last[0], 0.25 * lam_rest)
+        last[0] = lam
+        negative = inertia_factor(kff)[1]
+        dense_err = ""
+        if len(free) <= DENSE_CROSSCHECK_MAX:
+            w = np.linalg.eigvalsh(kff.toarray())
+            dense_err = abs(lam - w[0]) / lam_rest
+            if int(np.sum(w < 0)) != negative:
+                raise RuntimeError(f"inertia {negative} but {int(np.sum(w < 0))} negative "
+                                   "eigenvalues found densely")
+        force = -disc.forces(u, mat)[0][top].sum()
+        return dict(base, strain=s, min_eig=lam, min_eig_rel=lam / lam_rest, negative=negative,
+                    surface_share=float(np.sum(vec[on_face] ** 2)),
+                    force_rel_err=abs(force / uniaxial_analytic(CUBE_E, s)[0] - 1),
+                    dense_err=dense_err)
+
+    sol, steps, iters, facts = load_path(disc, mat, dirichlet, prescribed, zero,
+                                         list(strains), 0.05)
+    rows = []
+    for s in strains:
+        rows.append(dict(measure(s, sol[s]), point="grid"))
+    # the first zero crossing of min_eig along the path, from the grid bracket by the Illinois
+    # variant of regula falsi (each trial strain solved by Newton from the interpolated path)
+    crossing = next((i for i, r in enumerate(rows) if r["min_eig"] <= 0.0), None)
+    if crossing is None:
+        critical = dict(base, strain="", point="critical",
+                        note=f"stable up to s={strains[-1]:g}")
+    else:
+        if crossing == 0:
+            lo = (0.0, zero, 1.0)
+        else:
+            lo = (strains[crossing - 1], sol[strains[crossing - 1]], rows[crossing - 1]["min_eig_rel"])
+        hi = (strains[crossing], sol[strains[crossing]], rows[crossing]["min_eig_rel"])
+        weight_lo = weight_hi = 1.0      # Illinois: halve the stale end's weight
+        solver, side, trials, near = TangentSolver(), 0, 0, rows[crossing]
+        while hi[0] - lo[0] > CRITICAL_STRAIN_TOL and trials < 40:
+            f_lo, f_hi = weight_lo * lo[2], weight_hi * hi[2]
+            s = hi[0] - f_hi * (hi[0] - lo[0]) / (f_hi - f_lo)
+            s = min(max(s, lo[0] + 0.25 * CRITICAL_STRAIN_TOL), hi[0] - 0.25 * CRITICAL_STRAIN_TOL)
+            pred = lo[1] + (s - lo[0]) / (hi[0] - lo[0]) * (hi[1] - lo[1])
+            pred[dirichlet] = prescribed * s
+            u, _ = newton(disc, mat, pred, free, zero, solver, [])
+            r = measure(s, u)
+            trials += 1
+            if abs(r["min_eig_rel"]) < abs(near["min_eig_rel"]):
+                near = r
+            if r["min_eig"] > 0.0:
+                lo, weight_lo = (s, u, r["min_eig_rel"]), 1.0
+                weight_hi = weight_hi / 2 if side == +1 else 1.0
+                side = +1
+            else:
+                hi, weight_hi = (s, u, r["min_eig_rel"]), 1.0
+                weight_lo = weight_lo / 2 if side == -1 else 1.0
+                side = -1
+        s_c = lo[0] + lo[2] * (hi[0] - lo[0]) / (lo[2] - hi[2])
+        critical = dict(near, strain=s_c, point="critical",
+                        note=f"bracket [{lo[0]:.6f}, {hi[0]:.6f}] after {trials} trial strains; "
+                             f"eigen data at the trial nearest zero (s={near['strain']:.6f})")
+    rows.append(critical)
+    note = f"path: {steps} steps, {iters} Newton its, {facts} LU; {time.time() - t:.1f} s"
+    for r in rows:
+        r.setdefault("note", note)
+    return rows
+
+
+STABILITY_COLS = ["problem", "element", "level", "free_dofs", "point", "strain", "min_eig",
+                  "min_eig_rel", "negative", "surface_share", "surface_dofs", "force_rel_err",
+                  "dense_err", "note"]
+
+
+def stability_line(r):
+    head = (f"RESULT reference.fem_stability problem={r['problem']} element={r['element']} "
+            f"level={r['level']}")
+    if r["point"] == "critical":
+        if r["strain"] == "":
+            return head + f" critical_strain=none ({r['note']})"
+        return head + f" critical_strain={r['strain']:.4f}"
+    return head + (f" strain={r['strain']:g} min_eig_rel={r['min_eig_rel']:.4f} "
+                   f"negative={r['negative']} surface_share={r['surface_share']:.2f}")
+
+
+def run_stability(fine):
+    t0 = time.time()
+    meshes = STABILITY_MESHES + (STABILITY_FINE_MESHES if fine else ())
+    rows, lines = [], []
+    for order, k in meshes:
+        for r in compress_stability(k, order):
+            rows.append(r)
+            lines.append(stability_line(r))
+            print(lines[-1], flush=True)
+        print(f"# P{order} k={k}: {rows[-1]['note']}; {rows[-2]['note']}", flush=True)
+    OUT_DIR.mkdir(parents=True, exist_ok=True)
+    with open(OUT_DIR / "stability.csv", "w", newline="") as fh:
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(STABILITY_COLS)
+        for r in rows:
+            w.writerow([fmt(r.get(c, ""), 8) if c != "strain" or r["point"] == "critical"
+                        else f"{r[c]:g}" for c in STABILITY_COLS])
+    (OUT_DIR / "stability.txt").write_text("\n".join(lines) + "\n")
+    worst_dense = max((r["dense_err"] for r in rows if r.get("dense_err", "") != ""),
+                      default=0.0)
+    worst_force = max(r["force_rel_err"] for r in rows if "force_rel_err" in r)
+    print(f"# dense cross-check: max |min_eig - dense| / rest value {worst_dense:.1e}; "
+          f"homogeneous path: max plate-force error vs closed form {worst_force:.1e}")
+    print(f"wrote {OUT_DIR.relative_to(ROOT)}/stability.csv, stability.txt "
+          f"in {time.time() - t0:.0f} s")
+    return 0 if worst_dense <= 1e-8 and worst_force <= CHECK_RTOL else 1
 
 
 # --------------------------------------------------------------------------------------
@@ -771,13 +977,21 @@ def main():
     mode.add_argument("--all", action="store_true", help="every problem at every level")
     mode.add_argument("--check", action="store_true", help="small levels vs check.json")
     mode.add_argument("--bless", action="store_true", help="rewrite check.json")
+    mode.add_argument("--stability", action="store_true",
+                      help="smallest tangent eigenvalue along the compression's homogeneous path")
+    ap.add_argument("--fine", action="store_true",
+                    help="with --stability: also P2 at level 8 (a few minutes more)")
     args = ap.parse_args()
+    if args.fine and not args.stability:
+        ap.error("--fine only goes with --stability")
     for name, pin in PINS.items():
         have = versions()[name]
         if have != pin:
             print(f"warning: {name} {have} is not the pinned {pin}", file=sys.stderr)
     if args.all:
         return run_all()
+    if args.stability:
+        return run_stability(args.fine)
     return run_check(bless=args.bless)
 
 

@@ -114,7 +114,11 @@ fn main() {
         println!("{line}");
         lines.push(line.to_string());
         for (name, r, color) in [
-            (format!("particle {config}, volume term"), &with[0], colors[2 * ci]),
+            (
+                format!("particle {config}, volume term"),
+                &with[0],
+                colors[2 * ci],
+            ),
             (
                 format!("particle {config}, without"),
                 &without[0],

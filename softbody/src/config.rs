@@ -188,6 +188,12 @@ pub struct SoftBodyConfig {
     /// torn body (its surface is open). 0 turns it off; in [0, 1e4]; default 90: the squeeze
     /// then keeps 0.89 of the volume (the Neo-Hookean reference 0.88; without it 0.44).
     pub volume_stiffness: f32,
+    /// A named material (Young's modulus, Poisson's ratio, the room's step rate) this body
+    /// should behave as. The config does not apply it by itself: a scene's loader
+    /// (`methods::material::particle_setting`) measures the class's body and sets
+    /// `stiffness`, `volume_stiffness` and, past what the rate allows, `particle_mass_kg` to
+    /// the nearest setting, and says how near it is. Default none.
+    pub material: Option<crate::methods::material::NamedMaterial>,
 }
 
 /// How far apart an incision's lips are at rest (`tear_width_m: 0`), metres: two and a half
@@ -235,6 +241,7 @@ impl Default for SoftBodyConfig {
             tear_width_m: 0.003,
             slit_open_m: 0.0,
             volume_stiffness: 90.0,
+            material: None,
         }
     }
 }
@@ -270,6 +277,9 @@ impl SoftBodyConfig {
         check("weld_epsilon_m", self.weld_epsilon_m, 0.0, 1.0)?;
         check("slit_open_m", self.slit_open_m, 0.0, 0.01)?;
         check("volume_stiffness", self.volume_stiffness, 0.0, 1e4)?;
+        if let Some(m) = &self.material {
+            m.validate()?;
+        }
         let w = self.tear_width_m;
         if w != 0.0 && !(w.is_finite() && (1e-4..=crate::cut::MAX_TEAR_WIDTH_M).contains(&w)) {
             return Err(SoftBodyError::Config(format!(

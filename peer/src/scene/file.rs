@@ -593,7 +593,17 @@ fn class(c: ClassFile, dir: &Path, meshes: MeshPaths) -> Result<Class, String> {
         _ => None,
     };
     let mut auto_class = None;
+    let mut material = None;
     if let (BodyClass::Soft(cfg), Some(m)) = (&mut body, &mesh) {
+        if let Some(named) = cfg.material {
+            // The class's own body, measured: the nearest setting to the named material.
+            let (lo, hi) = softsync_softbody::mesh::bounds(&m.positions);
+            let size = (hi - lo).max_element();
+            let setting = softsync_softbody::methods::material::particle_setting(cfg, size, &named)
+                .map_err(|e| format!("body: {e}"))?;
+            **cfg = setting.config.clone();
+            material = Some(Box::new(setting));
+        }
         // Built once now: a setting that fails only on a real mesh (too few particles, no
         // hull for the centre) stops the scene here, not at the first spawn.
         let mut world = PhysicsWorld::new();
@@ -616,6 +626,7 @@ fn class(c: ClassFile, dir: &Path, meshes: MeshPaths) -> Result<Class, String> {
         authority: c.authority,
         mesh,
         auto: auto_class,
+        material,
     })
 }
 
@@ -704,6 +715,38 @@ mod tests {
             }
         }
         assert!(n >= 2, "{n} scenes shipped");
+    }
+
+    /// A class that names a material loads with the setting found for it (measured on its own
+    /// body, within 2 % of the modulus and 0.03 of the ratio asked for); an out-of-range
+    /// material is refused with the field named.
+    #[test]
+    fn a_material_class_loads_and_a_wrong_material_is_refused() {
+        let text = swap(
+            "stiffness: 20.0",
+            "material: (young_kpa: 3.0, poisson: 0.4, rate_hz: 60.0)",
+        );
+        let scene = Scene::parse(&text, &assets().join("material.ron")).unwrap();
+        let c = scene.classes.iter().find(|c| c.name == "bunny").unwrap();
+        let setting = c.material.as_ref().expect("the material's setting");
+        assert!(setting.young_err_pct.abs() < 2.0, "{setting}");
+        assert!(setting.poisson_err.abs() < 0.03, "{setting}");
+        let BodyClass::Soft(cfg) = &c.body else {
+            panic!("the bunny is soft");
+        };
+        assert_eq!(cfg.stiffness, setting.config.stiffness);
+        assert_ne!(cfg.stiffness, 20.0, "the setting was not applied");
+        for (field, bad) in [
+            ("young_kpa", "young_kpa: 0.0, poisson: 0.4"),
+            ("poisson", "young_kpa: 3.0, poisson: 0.5"),
+            ("rate_hz", "young_kpa: 3.0, poisson: 0.4, rate_hz: 1.0"),
+        ] {
+            let e = err(&swap("stiffness: 20.0", &format!("material: ({bad})")));
+            assert!(
+                e.contains(&format!("material.{field}")) && e.contains("\"bunny\""),
+                "{e}"
+            );
+        }
     }
 
     #[test]

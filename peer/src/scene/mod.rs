@@ -126,6 +126,9 @@ pub struct Class {
     mesh: Option<Mesh>,
     /// A soft class with `method: auto`: its resolution ladder.
     pub auto: Option<Box<AutoClass>>,
+    /// A soft class that named a material (`body: Soft(material: (young_kpa: …, poisson: …))`):
+    /// the setting found for it and how near it is (printed when the scene loads).
+    pub material: Option<Box<softsync_softbody::methods::material::ParticleSetting>>,
 }
 
 /// A soft class's `method: auto` (see `softbody::methods::auto`): the ladder of resolutions,
@@ -559,6 +562,7 @@ fn avatar_classes() -> [Class; 2] {
         authority: AuthorityPolicy::Free,
         mesh: None,
         auto: None,
+        material: None,
     };
     [
         part("head", Vec3::new(0.08, 0.1, 0.09)),

@@ -15,6 +15,8 @@
 //! | [`native`] | rapier 0.36's own soft bodies as a model |
 //! | [`scene`] | rest / drop / squeeze / poke / impact scenarios for any model |
 //! | [`choice`] | cheapest method meeting an error and frame budget, from measured curves |
+//! | [`material`] | a named material (Young's modulus, Poisson's ratio) as the particle method's knobs, fitted on the static compression |
+//! | [`statics`] | static problems with unique answers (cantilever, compression) for the independent FEM check |
 //! | [`auto`] | `method: auto` at run time: a resolution ladder probed at load, a per-body controller |
 
 pub mod auto;
@@ -22,6 +24,7 @@ pub mod builders;
 pub mod choice;
 pub mod ispc;
 pub mod lattice;
+pub mod material;
 pub mod model;
 pub mod native;
 pub mod particle;
