@@ -231,7 +231,7 @@ pub fn measure_particle_compression(
             }
             set.pre_physics(&mut world, dt);
             world.step();
-            set.post_physics(&mut world);
+            set.post_physics(&world);
             if step >= close_steps + hold_steps - measure_steps {
                 let top = plates[0].1;
                 force += world
