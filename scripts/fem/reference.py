@@ -36,6 +36,15 @@ Run (through the wrapper, which makes the pinned virtualenv):
                                     scripts/fem/check.json (relative 1e-6) and the compression
                                     against its analytic answer; exit 1 on any mismatch
     scripts/fem-reference --bless   recomputes the --check values and rewrites check.json
+    scripts/fem-reference --stability [--fine]
+                                    stability of the compression's homogeneous solution: the
+                                    smallest eigenvalue of the free-dof tangent stiffness at
+                                    s = 0.05 ... 0.7 and the strain where it crosses zero, for
+                                    P1 k = 1, 2, 4, 8 and P2 k = 1, 2, 4 (under a minute; --fine
+                                    adds P2 k = 8, ~5 min, 1 GB); writes
+                                    docs/results/methods/fem/{stability.csv,stability.txt}
+                                    (RESULT reference.fem_stability lines); leaves the other
+                                    outputs alone
 
 Pinned versions (installed by scripts/fem-reference): scikit-fem==12.0.2, numpy==2.4.6,
 scipy==1.17.1 (Python 3.11). Units: SI inside (m, Pa, N, kg); reported in mm and N.
@@ -483,7 +492,8 @@ def analytic_rows():
 # dofs, K_ff (the Hessian of the energy there), is positive definite. --stability follows the
 # homogeneous path through STABILITY_STRAINS and reports at each strain K_ff's smallest
 # eigenvalue relative to its value at rest (1 at s = 0; negative: the homogeneous state is a
-# saddle and a lower-energy, non-homogeneous state exists nearby), the number of negative
+# saddle, the energy falls along a non-homogeneous mode, so a solver that is disturbed off it
+# need not come back), the number of negative
 # eigenvalues, where the unstable mode lives, and the strain where the smallest eigenvalue
 # crosses zero (the first bifurcation), refined by regula falsi along the path.
 #
@@ -547,7 +557,6 @@ def compress_stability(k, order, strains=STABILITY_STRAINS):
     surface_dofs of the free dofs), force_rel_err = the plate force against the closed form
     (shows the path is the homogeneous one), dense_err = |min_eig - dense eigensolver| /
     rest value where a dense check was made."""
-    t = time.time()
     disc, dirichlet, prescribed, top, _ = compress_problem(k, order)
     mat = snh_parameters(CUBE_E)
     free = np.setdiff1d(np.arange(disc.ndofs), dirichlet)
@@ -621,7 +630,7 @@ def compress_stability(k, order, strains=STABILITY_STRAINS):
                         note=f"bracket [{lo[0]:.6f}, {hi[0]:.6f}] after {trials} trial strains; "
                              f"eigen data at the trial nearest zero (s={near['strain']:.6f})")
     rows.append(critical)
-    note = f"path: {steps} steps, {iters} Newton its, {facts} LU; {time.time() - t:.1f} s"
+    note = f"path: {steps} steps, {iters} Newton its, {facts} LU"
     for r in rows:
         r.setdefault("note", note)
     return rows
@@ -648,11 +657,13 @@ def run_stability(fine):
     meshes = STABILITY_MESHES + (STABILITY_FINE_MESHES if fine else ())
     rows, lines = [], []
     for order, k in meshes:
+        t = time.time()
         for r in compress_stability(k, order):
             rows.append(r)
             lines.append(stability_line(r))
             print(lines[-1], flush=True)
-        print(f"# P{order} k={k}: {rows[-1]['note']}; {rows[-2]['note']}", flush=True)
+        print(f"# P{order} k={k}: {rows[-1]['note']}; {rows[-2]['note']}; "
+              f"{time.time() - t:.1f} s", flush=True)
     OUT_DIR.mkdir(parents=True, exist_ok=True)
     with open(OUT_DIR / "stability.csv", "w", newline="") as fh:
         w = csv.writer(fh, lineterminator="\n")
