@@ -110,8 +110,13 @@ fn run(args: &[String]) -> Result<ExitCode, Failure> {
             out,
             seconds,
             quick,
+            centre_only,
         } => {
-            bench::net_live(&out, seconds, quick).map_err(Failure::runtime)?;
+            if centre_only {
+                bench::centre_only_live(&out, seconds).map_err(Failure::runtime)?;
+            } else {
+                bench::net_live(&out, seconds, quick).map_err(Failure::runtime)?;
+            }
             Ok(ExitCode::SUCCESS)
         }
         Command::Token {

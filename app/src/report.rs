@@ -114,9 +114,16 @@ pub fn snapshot(now: Instant, peer: &mut Peer) -> DumpLine {
             }
         };
         let src_from = src.and(peer.session().state_source(id)).map(|p| p.0);
-        let Some(s) = state else {
+        let Some(mut s) = state else {
             continue;
         };
+        // A centre-only soft body (thesis §5.4.1) travels without its particles: this peer
+        // shows its own body's, simulated around the centre it receives.
+        if !mine && s.particles.is_empty() {
+            if let Some(local) = peer.local_state(id).filter(|l| !l.particles.is_empty()) {
+                s.particles = local.particles;
+            }
+        }
         objects.push(DumpObject {
             id: id.0,
             kind: peer.scene().name_of(kind).to_owned(),

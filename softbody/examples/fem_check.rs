@@ -153,7 +153,10 @@ fn main() {
                 println!("{line}");
                 lines.push(line.to_string());
                 csv.row([
-                    format!("compress {quantity} {case} s{substeps}i{}", solve.iterations),
+                    format!(
+                        "compress {quantity} {case} s{substeps}i{}",
+                        solve.iterations
+                    ),
                     k.to_string(),
                     c.solve.nodes.to_string(),
                     c.solve.steps.to_string(),

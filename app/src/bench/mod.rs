@@ -271,6 +271,7 @@ const AVATAR_SCRIPT: &str = "wave all 0.1 2.5 3; wait 0.7; loop";
 fn run_one(
     dir: &Path,
     n: usize,
+    scene: &str,
     scenario: &'static str,
     rate_hz: f32,
     threshold_m: f32,
@@ -304,7 +305,7 @@ fn run_one(
         "--bind",
         "127.0.0.1:0",
         "--scene",
-        "bench-ball",
+        scene,
     ]
     .iter()
     .map(|s| s.to_string())
@@ -457,6 +458,100 @@ fn chart(rows: &[Row], path: &Path, thresholds: &[f32]) -> Result<(), Box<dyn st
     Ok(())
 }
 
+/// Centre-only sync (thesis §5.4.1, `replication: (centre_only: true)`: only the centre
+/// travels, every other peer simulates the particles with the centre driven) against
+/// per-particle sync, live: the bot drags the 60-particle ball by one particle (deforming it)
+/// in the `bench-ball` room, and the room's ball class is per-particle in one run and
+/// centre-only in the other (the host loads the scene with that one change; the bot receives
+/// it). Bytes/s of the bot and the shape error the host shows (centre and every particle
+/// against the bot's own state), at 30 Hz and 5 mm. Writes `centre_only.csv` and
+/// `centre_only.txt` (the RESULT line) under `out`.
+pub fn centre_only_live(out: &Path, seconds: f64) -> Result<(), String> {
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let scratch = std::env::temp_dir().join(format!("softsync-centre-{}", std::process::id()));
+    std::fs::create_dir_all(&scratch).map_err(|e| e.to_string())?;
+    let assets = crate::assets_dir(None);
+    let text = std::fs::read_to_string(assets.join("bench-ball.ron"))
+        .map_err(|e| format!("{}: {e}", assets.display()))?;
+    let ball = "colour: (0.90, 0.25, 0.30),";
+    if !text.contains(ball) {
+        return Err("bench-ball.ron: the softball's colour line moved".into());
+    }
+    let centre = text.replacen(
+        ball,
+        &format!("{ball} replication: (centre_only: true),"),
+        1,
+    );
+    let centre_path = scratch.join("bench-ball-centre-only.ron");
+    std::fs::write(&centre_path, centre).map_err(|e| e.to_string())?;
+    // the mesh the scene names, beside it
+    let _ = std::fs::copy(assets.join("bunny.obj"), scratch.join("bunny.obj"));
+    let (rate, thr) = (30.0f32, 0.005f32);
+    let mut connects = Vec::new();
+    let mut rows = Vec::new();
+    for (n, (mode, scene)) in [
+        ("per_particle", "bench-ball".to_string()),
+        ("centre_only", centre_path.display().to_string()),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let r = run_one(
+            &scratch,
+            100 + n,
+            &scene,
+            "softbody60",
+            rate,
+            thr,
+            seconds,
+            &mut connects,
+        )?;
+        println!(
+            "{mode}: {:.0} B/s, shape error p50 {:.2} mm, p95 {:.2} mm, max {:.2} mm ({} samples)",
+            r.bytes_per_s, r.p50_mm, r.p95_mm, r.max_mm, r.samples
+        );
+        rows.push((mode, r));
+    }
+    let mut csv = Csv::new(&[
+        "mode",
+        "rate_hz",
+        "threshold_m",
+        "bytes_per_s",
+        "p50_mm",
+        "p95_mm",
+        "max_mm",
+        "samples",
+    ]);
+    for (mode, r) in &rows {
+        csv.row([
+            mode.to_string(),
+            r.rate_hz.to_string(),
+            r.threshold_m.to_string(),
+            format!("{:.1}", r.bytes_per_s),
+            format!("{:.3}", r.p50_mm),
+            format!("{:.3}", r.p95_mm),
+            format!("{:.3}", r.max_mm),
+            r.samples.to_string(),
+        ]);
+    }
+    csv.write(out.join("centre_only.csv"))
+        .map_err(|e| e.to_string())?;
+    let (pp, co) = (&rows[0].1, &rows[1].1);
+    let line = ResultLine::new("centre_only.live")
+        .fixed("rate_hz", rate, 0)
+        .fixed("threshold_mm", thr * 1000.0, 0)
+        .fixed("bytes_per_s", co.bytes_per_s, 0)
+        .fixed("shape_p95_mm", co.p95_mm, 2)
+        .fixed("per_particle_bytes_per_s", pp.bytes_per_s, 0)
+        .fixed("per_particle_p95_mm", pp.p95_mm, 2)
+        .fixed("bytes_ratio", co.bytes_per_s / pp.bytes_per_s.max(1.0), 3)
+        .field("seconds", seconds);
+    println!("{line}");
+    std::fs::write(out.join("centre_only.txt"), format!("{line}\n")).map_err(|e| e.to_string())?;
+    let _ = std::fs::remove_dir_all(&scratch);
+    Ok(())
+}
+
 /// Run the benchmark; write CSV, chart and tables under `out`.
 pub fn net_live(out: &Path, seconds: f64, quick: bool) -> Result<(), String> {
     let (rates, thresholds): (&[f32], &[f32]) = if quick {
@@ -477,7 +572,16 @@ pub fn net_live(out: &Path, seconds: f64, quick: bool) -> Result<(), String> {
             for &thr in thresholds {
                 n += 1;
                 progress.set_message(format!("{scenario} {hz} Hz, threshold {thr} m"));
-                let r = run_one(&scratch, n, scenario, hz, thr, seconds, &mut connects)?;
+                let r = run_one(
+                    &scratch,
+                    n,
+                    "bench-ball",
+                    scenario,
+                    hz,
+                    thr,
+                    seconds,
+                    &mut connects,
+                )?;
                 progress.line(format!(
                     "{scenario} {hz} Hz thr {thr} m: {:.0} B/s, p50 {:.2} mm, p95 {:.2} mm, max {:.2} mm ({} samples)",
                     r.bytes_per_s, r.p50_mm, r.p95_mm, r.max_mm, r.samples

@@ -20,6 +20,10 @@ pub(super) enum BenchSub {
         /// Fewer configurations.
         #[arg(long)]
         quick: bool,
+        /// Only centre-only sync against per-particle sync (thesis §5.4.1): the 60-particle
+        /// ball dragged by a bot, both modes, `RESULT centre_only.live`.
+        #[arg(long)]
+        centre_only: bool,
     },
     /// `method: auto` against every soft body at its finest and at its 1x level: the
     /// thesis room (assets/thesis-room-auto.ron) in-process, one bot script, step cost and

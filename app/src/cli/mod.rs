@@ -277,6 +277,8 @@ pub enum Command {
         seconds: f64,
         /// Fewer configurations.
         quick: bool,
+        /// Only centre-only against per-particle sync.
+        centre_only: bool,
     },
     /// `method: auto` against fixed resolutions.
     BenchAuto {
@@ -549,11 +551,13 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
                     out,
                     seconds,
                     quick,
+                    centre_only,
                 },
         } => Command::BenchNetLive {
             out,
             seconds,
             quick,
+            centre_only,
         },
         Sub::Bench {
             which:
