@@ -24,6 +24,7 @@
 )]
 
 mod changes;
+mod checked;
 mod stability;
 
 use std::collections::BTreeMap;
@@ -855,8 +856,9 @@ fn main() {
         std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
         t_start.elapsed().as_secs_f64()
     );
+    checked::section(&mut md, &out, &out.join("../live"));
     let results: Vec<String> = results.iter().map(ResultLine::to_string).collect();
-    writeln!(md, "## RESULT lines\n\n```\n{}\n```", results.join("\n")).unwrap();
+    writeln!(md, "\n## RESULT lines\n\n```\n{}\n```", results.join("\n")).unwrap();
     std::fs::write(out.join("README.md"), header + &md).unwrap();
     for r in &results {
         println!("{r}");

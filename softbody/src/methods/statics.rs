@@ -15,6 +15,13 @@
 //!   reaction force and the bulge (the mean x-displacement of the face x = side). The
 //!   deformation is homogeneous, so every mesh has the exact answer: this checks the material
 //!   and the solver, not the discretization.
+//! - **bunny**: the Stanford bunny ([`BUNNY_SIZE_M`]) as our reference meshes it — a Kuhn
+//!   lattice of cells `cell_frac` × its size, each tet weighted by the fraction of it inside
+//!   the surface (stiffness and mass alike) — its base (the nodes within [`BUNNY_BASE_FRAC`]
+//!   of its height from the bottom) fixed, sagging under gravity. The answer is the
+//!   displacement of every node. The FEM solves the same weighted tets (`bunny_mesh` writes
+//!   them), so the comparison is of solvers on one discretization; the FEM's refinement
+//!   (quadratic elements, split tets) says how far that discretization is from its continuum.
 
 use glam::Vec3;
 use rapier3d::prelude::PhysicsWorld;
@@ -34,6 +41,11 @@ pub const BEAM_M: Vec3 = Vec3::new(0.16, 0.04, 0.04);
 pub const CUBE_M: f32 = 0.04;
 /// The compression's Young's modulus, Pa.
 pub const CUBE_YOUNG_PA: f32 = 2e5;
+
+/// The bunny's size (largest extent), metres.
+pub const BUNNY_SIZE_M: f32 = 0.2;
+/// The bunny's fixed base: nodes within this fraction of its height from its lowest node.
+pub const BUNNY_BASE_FRAC: f32 = 0.08;
 
 /// Bulk modulus for Young's modulus `young_pa` and Poisson's ratio `nu`.
 pub fn bulk_pa(young_pa: f32, nu: f32) -> f32 {
@@ -301,6 +313,120 @@ pub fn compress_cube(k: usize, strains: &[f32], solve: StaticSolve) -> Vec<Compr
         });
     }
     out
+}
+
+/// The bunny problem's mesh: nodes (m), tets, each tet's material fraction, and which nodes
+/// are fixed (the base), for `mesh` (the bunny, any size: it is fitted to [`BUNNY_SIZE_M`]
+/// here) at cells of `cell_frac` × that size.
+pub struct BunnyMesh {
+    /// Nodes, metres.
+    pub nodes: Vec<Vec3>,
+    /// Positively oriented tets.
+    pub tets: Vec<[u32; 4]>,
+    /// Fraction of each tet inside the surface (its stiffness and mass are scaled by it).
+    pub weight: Vec<f32>,
+    /// The fixed nodes.
+    pub fixed: Vec<u32>,
+}
+
+/// Meshes `mesh` for the bunny problem (see [`BunnyMesh`]).
+pub fn bunny_mesh(mesh: &crate::Mesh, cell_frac: f32) -> Result<BunnyMesh, crate::SoftBodyError> {
+    let m = mesh.clone().fit_size(BUNNY_SIZE_M);
+    let w = m.weld(1e-6);
+    let lt = crate::methods::lattice::lattice_tets(
+        &w.positions,
+        &w.triangles,
+        cell_frac * BUNNY_SIZE_M,
+    )?;
+    let nodes = lt.mesh.nodes;
+    let (lo, hi) = crate::mesh::bounds(&nodes);
+    let cut = lo.y + BUNNY_BASE_FRAC * (hi.y - lo.y);
+    let fixed = (0..nodes.len() as u32)
+        .filter(|&i| nodes[i as usize].y <= cut)
+        .collect();
+    Ok(BunnyMesh {
+        nodes,
+        tets: lt.mesh.tets,
+        weight: lt.inside_fraction,
+        fixed,
+    })
+}
+
+/// The bunny problem of Young's modulus `young_pa` on `mesh` (from [`bunny_mesh`]), brought
+/// to rest under gravity: every node's displacement, metres, and the solve (its `value` is
+/// the largest displacement, mm).
+pub fn bunny_sag(mesh: &BunnyMesh, young_pa: f32, solve: StaticSolve) -> (Vec<Vec3>, StaticAnswer) {
+    let mut mass = vec![0.0f32; mesh.nodes.len()];
+    for (t, w) in mesh.tets.iter().zip(&mesh.weight) {
+        let v = tet_volume(t.map(|q| mesh.nodes[q as usize])).abs();
+        for q in t {
+            mass[*q as usize] += DENSITY_KG_M3 * v * w / 4.0;
+        }
+    }
+    for &i in &mesh.fixed {
+        mass[i as usize] = 0.0;
+    }
+    let params = PbdParams {
+        solver: SolverKind::Xpbd,
+        substeps: solve.substeps,
+        iterations: solve.iterations,
+        damping_per_s: solve.damping_per_s,
+        contact_radius_m: 0.0,
+        sleep_after_s: 0.0,
+        two_way: false,
+        ..Default::default()
+    };
+    let mut b = PbdBody::new(
+        "bunny",
+        params,
+        mesh.nodes.clone(),
+        &mass,
+        SurfaceMap::Direct,
+        Vec::new(),
+    );
+    b.neo_hookean = Some(NeoHookeanGroup::new(
+        mesh.tets.clone(),
+        &mesh.nodes,
+        &mesh.weight,
+        young_pa,
+        bulk_pa(young_pa, NU),
+    ));
+    let world = PhysicsWorld::new();
+    let rest = mesh.nodes.clone();
+    let largest_mm = |b: &PbdBody| {
+        1000.0
+            * b.positions()
+                .iter()
+                .zip(&rest)
+                .map(|(p, q)| p.distance(*q))
+                .fold(0.0f32, f32::max)
+    };
+    // Settled on the mean displacement: the largest is a fringe node's (tets almost all
+    // outside the surface, light and soft alike), whose residual jitter would hold it back.
+    let mean_mm = |b: &PbdBody| {
+        1000.0
+            * b.positions()
+                .iter()
+                .zip(&rest)
+                .map(|(p, q)| p.distance(*q))
+                .sum::<f32>()
+            / rest.len().max(1) as f32
+    };
+    let (steps, max_speed) = settle(&mut b, &world, solve, mean_mm);
+    let u: Vec<Vec3> = b
+        .positions()
+        .iter()
+        .zip(&rest)
+        .map(|(p, q)| *p - *q)
+        .collect();
+    let answer = StaticAnswer {
+        value: largest_mm(&b),
+        steps,
+        max_speed_mps: max_speed,
+        nodes: mesh.nodes.len(),
+        tets: mesh.tets.len(),
+    };
+    (u, answer)
 }
 
 /// Moves the compression's top plate (the slides on y that are not at 0) to `y`.

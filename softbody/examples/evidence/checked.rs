@@ -1,0 +1,120 @@
+//! Section 8 of the evidence: what the independent FEM check and the measurements of issue 33
+//! say, read from their committed results (each names the command that writes it), and which
+//! conclusions of this page they change. Every figure here is parsed from those files, so the
+//! section stays true when they are regenerated; a missing file is said to be missing.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// The `RESULT` lines of `file` (under `out`), or none.
+fn results(out: &Path, file: &str) -> Vec<String> {
+    std::fs::read_to_string(out.join(file))
+        .map(|t| {
+            t.lines()
+                .filter(|l| l.starts_with("RESULT "))
+                .map(str::to_owned)
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+fn field(line: &str, key: &str) -> Option<String> {
+    line.split_whitespace()
+        .find_map(|w| w.strip_prefix(&format!("{key}=")))
+        .map(str::to_owned)
+}
+
+fn num(line: &str, key: &str) -> f64 {
+    field(line, key)
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(f64::NAN)
+}
+
+/// The line of `lines` whose fields include every `key=value` of `want`.
+fn find<'a>(lines: &'a [String], want: &[(&str, &str)]) -> Option<&'a String> {
+    lines
+        .iter()
+        .find(|l| want.iter().all(|(k, v)| field(l, k).as_deref() == Some(*v)))
+}
+
+/// Writes section 8 into `md`; `live` is `docs/results/live` (the centre-only figures).
+pub fn section(md: &mut String, out: &Path, live: &Path) {
+    let fem = results(out, "fem/results.txt");
+    let stability = results(out, "fem/stability.txt");
+    let volume = results(out, "volume.txt");
+    let material = results(out, "material.txt");
+    let centre = results(live, "centre_only.txt");
+    writeln!(md, "\n## 8. Checked by an independent FEM code, and what it changes\n\nThe reference's material and solver (stable Neo-Hookean XPBD tets, `methods::statics`) against scikit-fem on static problems whose answer is unique — details, convergence tables and the commands in [fem/README.md](fem/README.md) (`scripts/fem-reference --all`, `cargo run --release -p softsync-softbody --example fem_check`).\n").unwrap();
+    let tip = |case: &str, level: &str| {
+        find(
+            &fem,
+            &[("problem", "cantilever"), ("case", case), ("level", level)],
+        )
+    };
+    if let (Some(a), Some(b), Some(c), Some(s2), Some(s8)) = (
+        tip("E=1e5_snh", "4"),
+        tip("E=1e6_snh", "2"),
+        tip("E=1e6_snh", "8"),
+        tip("E=1e5_snh", "2"),
+        tip("E=1e5_snh", "8"),
+    ) {
+        writeln!(md, "- **Cantilever** (tip sag under gravity): on the same linear tets ours is within {:+.1} % (soft, 4 cells across) and {:+.1} % (stiff, 2 cells) of the FEM; the stiff beam on 8 cells is {:+.1} % off — 80 substeps × 2 iterations do not converge it. Against the converged (quadratic-tet) answer, linear tets lock in bending: the soft beam sags {:+.1} % at 2 cells, {:+.1} % at 8.", num(a, "diff_p1_pct"), num(b, "diff_p1_pct"), num(c, "diff_p1_pct"), num(s2, "diff_pct"), num(s8, "diff_pct")).unwrap();
+    } else {
+        writeln!(md, "- **Cantilever**: `fem/results.txt` is missing.").unwrap();
+    }
+    let cube = |q: &str, s: &str, level: &str, budget: &str| {
+        find(
+            &fem,
+            &[
+                ("problem", "compress"),
+                ("quantity", q),
+                ("case", s),
+                ("level", level),
+                ("budget", budget),
+            ],
+        )
+    };
+    if let (Some(f2), Some(b2), Some(f4), Some(f4f), Some(b4f), Some(b7)) = (
+        cube("force_n", "s=0.4", "2", "s80i2"),
+        cube("bulge_mm", "s=0.4", "2", "s80i2"),
+        cube("force_n", "s=0.4", "4", "s80i2"),
+        cube("force_n", "s=0.4", "4", "s320i2"),
+        cube("bulge_mm", "s=0.4", "4", "s320i2"),
+        cube("bulge_mm", "s=0.7", "4", "s320i2"),
+    ) {
+        let critical = stability
+            .iter()
+            .find(|l| {
+                field(l, "element").as_deref() == Some("P1")
+                    && field(l, "level").as_deref() == Some("4")
+                    && l.contains("critical_strain=")
+            })
+            .map_or(f64::NAN, |l| num(l, "critical_strain"));
+        writeln!(md, "- **Compression** between frictionless plates (homogeneous: every mesh has the exact answer, so this checks the material law and the solver): at 40 % ours is within {:+.2} % on force and {:+.2} % on bulge at 2 cells; at 4 cells (1 cm) the reference's budget is {:+.1} % stiff, four times the substeps brings it to {:+.2} % / {:+.2} %. At 70 % the 4-cell answer differs ({:+.0} % bulge) because the problem stops having one: the FEM's own stability analysis finds the homogeneous state unstable past s = {critical:.3} on that mesh (`scripts/fem-reference --stability`), and ours settles in a buckled state.", num(f2, "diff_pct"), num(b2, "diff_pct"), num(f4, "diff_pct"), num(f4f, "diff_pct"), num(b4f, "diff_pct"), num(b7, "diff_pct")).unwrap();
+    } else {
+        writeln!(
+            md,
+            "- **Compression**: `fem/results.txt` has no compression rows."
+        )
+        .unwrap();
+    }
+    writeln!(md, "\n**Conclusions this changes:**\n").unwrap();
+    writeln!(md, "- *\"The reference is checked only against itself\"* — no longer: its material law is exact where the answer is homogeneous, and its two error sources are measured apart — linear tets lock in bending (the reference's 5 % cell leaves a bending-dominated body 10–28 % stiffer than the continuum), and at a fixed budget XPBD under-converges stiff fine meshes. Its figures in sections 1–3 are answers of *that* discretization, not of the continuum.").unwrap();
+    let vol = |c: &str| find(&volume, &[("config", c)]);
+    if let (Some(a), Some(b)) = (vol("c0.060"), vol("c0.100")) {
+        writeln!(md, "- *\"The room's soft body loses volume\"* (the particle method kept 0.43–0.45 in the squeeze) — it now has a volume term (`SoftBodyConfig::volume_stiffness`, default 90/s, on in every room): the squeeze keeps {:.3} (c0.060) and {:.3} (c0.100) where it kept {:.3} and {:.3}; the reference keeps {:.3}. Step time ×{:.2} and ×{:.2} (`cargo run --release -p softsync-softbody --example volume_squeeze`, [volume.svg](volume.svg)). The particle rows of section 1 were measured with the term if this page was generated after it landed (compare their `min vol` with these).", num(a, "min_vol"), num(b, "min_vol"), num(a, "min_vol_without"), num(b, "min_vol_without"), num(a, "reference_min_vol"), num(a, "step_ratio"), num(b, "step_ratio")).unwrap();
+    }
+    let mat = |c: &str| find(&material, &[("config", c)]);
+    if let (Some(a), Some(b), Some(c), Some(d)) = (
+        mat("k20_vol90_60hz"),
+        mat("k20_vol90_90hz"),
+        mat("k20_vol90_144hz"),
+        mat("k20_vol0_60hz"),
+    ) {
+        writeln!(md, "- *The particle method has no material* — it has an effective one, and it depends on the step rate: at its defaults it measures E = {:.2} kPa at 60 Hz, {:.2} at 90 Hz, {:.2} at 144 Hz (ν {:.2}; {:.2} without the volume term), fitted on the compression with {:.1}–{:.1} % left unexplained. A scene class can name a material (`Soft(material: (young_kpa: …, poisson: …, rate_hz: …))`) and gets the nearest setting with its error printed (`cargo run --release -p softsync-softbody --example material_fit`, `material.txt`).", num(a, "young_kpa"), num(b, "young_kpa"), num(c, "young_kpa"), num(a, "poisson"), num(d, "poisson"), num(a, "fit_err_pct").min(num(c, "fit_err_pct")), num(a, "fit_err_pct").max(num(c, "fit_err_pct"))).unwrap();
+    }
+    if let Some(c) = centre.first() {
+        writeln!(md, "- *Centre-only sync* (thesis §5.4.1), live over WebRTC at {} Hz: {:.0} B/s against {:.0} B/s per-particle (×{:.2}), shape error p95 {:.2} mm against {:.2} mm (`scripts/bench-net-live --centre-only`).", field(c, "rate_hz").unwrap_or_default(), num(c, "bytes_per_s"), num(c, "per_particle_bytes_per_s"), num(c, "bytes_ratio"), num(c, "shape_p95_mm"), num(c, "per_particle_p95_mm")).unwrap();
+    }
+    writeln!(md, "\nNot yet done: the methods re-scored on the static problems and inside each scenario's predictable window (the scores above are over whole scenarios, where differences under the yardstick are not resolved); the indentation (Hertz) and the bunny's sag field against the FEM.").unwrap();
+}
