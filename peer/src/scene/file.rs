@@ -596,7 +596,8 @@ fn class(c: ClassFile, dir: &Path, meshes: MeshPaths) -> Result<Class, String> {
     let mut material = None;
     if let (BodyClass::Soft(cfg), Some(m)) = (&mut body, &mesh) {
         if let Some(named) = cfg.material {
-            // The class's own body, measured: the nearest setting to the named material.
+            // A cube of the class's size and clustering, measured: the nearest setting to the
+            // named material (`softbody::methods::material`).
             let (lo, hi) = softsync_softbody::mesh::bounds(&m.positions);
             let size = (hi - lo).max_element();
             let setting = softsync_softbody::methods::material::particle_setting(cfg, size, &named)
@@ -717,9 +718,9 @@ mod tests {
         assert!(n >= 2, "{n} scenes shipped");
     }
 
-    /// A class that names a material loads with the setting found for it (measured on its own
-    /// body, within 2 % of the modulus and 0.03 of the ratio asked for); an out-of-range
-    /// material is refused with the field named.
+    /// A class that names a material loads with the setting found for it (measured on a cube
+    /// of its size and clustering, within 2 % of the modulus and 0.03 of the ratio asked for);
+    /// an out-of-range material is refused with the field named.
     #[test]
     fn a_material_class_loads_and_a_wrong_material_is_refused() {
         let text = swap(
