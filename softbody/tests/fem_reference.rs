@@ -8,32 +8,39 @@
 
 use softsync_softbody::methods::statics::{cantilever_tip_mm, compress_cube, StaticSolve};
 
-fn fem_p1(case: &str, level: u32) -> f64 {
+/// The rows of the FEM's committed answers (`fem.csv`), split into fields.
+fn fem_rows() -> Vec<Vec<String>> {
     let path = concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../docs/results/methods/fem/fem.csv"
     );
-    let text = std::fs::read_to_string(path).unwrap();
-    text.lines()
-        .map(|l| l.split(',').collect::<Vec<_>>())
-        .find(|c| {
-            c.len() >= 8
-                && c[0] == "cantilever"
-                && c[1] == "tip_mm"
-                && c[2] == case
-                && c[3] == "P1"
-                && c[4] == level.to_string()
-        })
-        .unwrap_or_else(|| panic!("no P1 k={level} {case} in {path}"))[6]
-        .parse()
+    std::fs::read_to_string(path)
         .unwrap()
+        .lines()
+        .map(|l| l.split(',').map(str::to_owned).collect::<Vec<_>>())
+        .filter(|c| c.len() >= 8)
+        .collect()
+}
+
+/// The value of the row of `problem`, `quantity`, `case` and `element` at `level` (the
+/// finest if `None`).
+fn fem(problem: &str, quantity: &str, case: &str, element: &str, level: Option<u32>) -> f64 {
+    fem_rows()
+        .into_iter()
+        .filter(|c| c[0] == problem && c[1] == quantity && c[2] == case && c[3] == element)
+        .filter(|c| level.is_none_or(|l| c[4] == l.to_string()))
+        .max_by_key(|c| c[4].parse::<u32>().unwrap_or(0))
+        .unwrap_or_else(|| panic!("no {problem} {quantity} {case} {element} {level:?} in fem.csv"))
+        [6]
+    .parse()
+    .unwrap()
 }
 
 #[test]
 fn the_reference_sags_the_coarse_cantilever_as_the_fem_does_on_linear_tets() {
     for (young, case) in [(1e6f32, "E=1e6 snh"), (1e5, "E=1e5 snh")] {
         let ours = cantilever_tip_mm(young, 2, StaticSolve::default());
-        let fem = fem_p1(case, 2);
+        let fem = fem("cantilever", "tip_mm", case, "P1", Some(2));
         let diff = (f64::from(ours.value) - fem) / fem;
         println!(
             "{case}: ours {:.4} mm after {} steps, FEM (P1, k = 2) {fem:.4} mm: {:+.2} %",
@@ -49,25 +56,6 @@ fn the_reference_sags_the_coarse_cantilever_as_the_fem_does_on_linear_tets() {
     }
 }
 
-/// The FEM's converged compression answer (quadratic tets, its finest level: the closed form to
-/// 1e-11) for `quantity` at strain `s`.
-fn fem_compress(quantity: &str, s: &str) -> f64 {
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../docs/results/methods/fem/fem.csv"
-    );
-    let text = std::fs::read_to_string(path).unwrap();
-    text.lines()
-        .map(|l| l.split(',').collect::<Vec<_>>())
-        .filter(|c| {
-            c.len() >= 8 && c[0] == "compress" && c[1] == quantity && c[2] == s && c[3] == "P2"
-        })
-        .max_by_key(|c| c[4].parse::<u32>().unwrap_or(0))
-        .unwrap_or_else(|| panic!("no P2 compress {quantity} {s} in {path}"))[6]
-        .parse()
-        .unwrap()
-}
-
 /// The compression between frictionless plates is homogeneous, so every mesh has the exact
 /// answer: on 2 cells per side, at the reference's budget, ours finds the FEM's force and
 /// bulge within 1 % at 10, 20 and 40 % strain (measured: 0.03–0.58 %).
@@ -78,7 +66,8 @@ fn the_reference_compresses_the_cube_as_the_fem_does() {
     for c in &ours {
         let s = format!("s={}", c.strain);
         for (quantity, value) in [("force_n", c.force_n), ("bulge_mm", c.bulge_mm)] {
-            let fem = fem_compress(quantity, &s);
+            // the FEM's converged answer: quadratic tets, its finest level
+            let fem = fem("compress", quantity, &s, "P2", None);
             let diff = (f64::from(value) - fem) / fem;
             println!(
                 "{s} {quantity}: ours {value:.4}, FEM {fem:.4}: {:+.3} %",

@@ -100,16 +100,56 @@ pub fn box_tets(size: Vec3, cells: [usize; 3]) -> (Vec<Vec3>, Vec<[u32; 4]>) {
     (x, tets)
 }
 
-/// Lumped masses: each tet's mass shared by its four nodes.
-fn lumped_masses(x: &[Vec3], tets: &[[u32; 4]], density: f32) -> Vec<f32> {
+/// Lumped masses: each tet's mass (times its material fraction) shared by its four nodes.
+fn lumped_masses(x: &[Vec3], tets: &[[u32; 4]], weight: &[f32], density: f32) -> Vec<f32> {
     let mut m = vec![0.0f32; x.len()];
-    for t in tets {
+    for (t, w) in tets.iter().zip(weight) {
         let v = tet_volume(t.map(|q| x[q as usize])).abs();
         for q in t {
-            m[*q as usize] += density * v / 4.0;
+            m[*q as usize] += density * v * w / 4.0;
         }
     }
     m
+}
+
+/// The body every static problem solves: stable Neo-Hookean XPBD tets (each tet's stiffness
+/// and mass scaled by its `weight`), lumped masses of [`DENSITY_KG_M3`], no contacts, no
+/// sleep, `solve`'s budget and damping.
+fn static_body(
+    name: &str,
+    x: &[Vec3],
+    tets: Vec<[u32; 4]>,
+    weight: &[f32],
+    young_pa: f32,
+    solve: StaticSolve,
+) -> PbdBody {
+    let mass = lumped_masses(x, &tets, weight, DENSITY_KG_M3);
+    let params = PbdParams {
+        solver: SolverKind::Xpbd,
+        substeps: solve.substeps,
+        iterations: solve.iterations,
+        damping_per_s: solve.damping_per_s,
+        contact_radius_m: 0.0,
+        sleep_after_s: 0.0,
+        two_way: false,
+        ..Default::default()
+    };
+    let mut b = PbdBody::new(
+        name,
+        params,
+        x.to_vec(),
+        &mass,
+        SurfaceMap::Direct,
+        Vec::new(),
+    );
+    b.neo_hookean = Some(NeoHookeanGroup::new(
+        tets,
+        x,
+        weight,
+        young_pa,
+        bulk_pa(young_pa, NU),
+    ));
+    b
 }
 
 /// How a static solve by damped steps went.
@@ -158,29 +198,8 @@ impl Default for StaticSolve {
 /// across its 0.04 m section (4k along it), sagging under gravity: the tip's sag, mm.
 pub fn cantilever_tip_mm(young_pa: f32, k: usize, solve: StaticSolve) -> StaticAnswer {
     let (x, tets) = box_tets(BEAM_M, [4 * k, k, k]);
-    let mass = lumped_masses(&x, &tets, DENSITY_KG_M3);
-    let params = PbdParams {
-        solver: SolverKind::Xpbd,
-        substeps: solve.substeps,
-        iterations: solve.iterations,
-        damping_per_s: solve.damping_per_s,
-        contact_radius_m: 0.0,
-        sleep_after_s: 0.0,
-        two_way: false,
-        ..Default::default()
-    };
     let n_tets = tets.len();
-    let weight = vec![1.0; n_tets];
-    let group = NeoHookeanGroup::new(tets, &x, &weight, young_pa, bulk_pa(young_pa, NU));
-    let mut b = PbdBody::new(
-        "cantilever",
-        params,
-        x.clone(),
-        &mass,
-        SurfaceMap::Direct,
-        Vec::new(),
-    );
-    b.neo_hookean = Some(group);
+    let mut b = static_body("cantilever", &x, tets, &vec![1.0; n_tets], young_pa, solve);
     b.pin_box(Vec3::splat(-1.0), Vec3::new(1e-6, 1.0, 1.0));
     let tip: Vec<usize> = (0..x.len())
         .filter(|i| (x[*i].x - BEAM_M.x).abs() < 1e-6)
@@ -225,34 +244,8 @@ pub struct Compression {
 /// sum of the elastic forces on the top face's particles ([`NeoHookeanGroup::elastic_forces`]).
 pub fn compress_cube(k: usize, strains: &[f32], solve: StaticSolve) -> Vec<Compression> {
     let (x, tets) = box_tets(Vec3::splat(CUBE_M), [k, k, k]);
-    let mass = lumped_masses(&x, &tets, DENSITY_KG_M3);
-    let params = PbdParams {
-        solver: SolverKind::Xpbd,
-        substeps: solve.substeps,
-        iterations: solve.iterations,
-        damping_per_s: solve.damping_per_s,
-        contact_radius_m: 0.0,
-        sleep_after_s: 0.0,
-        two_way: false,
-        ..Default::default()
-    };
     let n_tets = tets.len();
-    let group = NeoHookeanGroup::new(
-        tets,
-        &x,
-        &vec![1.0; n_tets],
-        CUBE_YOUNG_PA,
-        bulk_pa(CUBE_YOUNG_PA, NU),
-    );
-    let mut b = PbdBody::new(
-        "cube",
-        params,
-        x.clone(),
-        &mass,
-        SurfaceMap::Direct,
-        Vec::new(),
-    );
-    b.neo_hookean = Some(group);
+    let mut b = static_body("cube", &x, tets, &vec![1.0; n_tets], CUBE_YOUNG_PA, solve);
     let on = |i: usize, axis: usize, at: f32| (x[i][axis] - at).abs() < 1e-7;
     let top: Vec<usize> = (0..x.len()).filter(|&i| on(i, 1, CUBE_M)).collect();
     let side: Vec<usize> = (0..x.len()).filter(|&i| on(i, 0, CUBE_M)).collect();
@@ -356,41 +349,15 @@ pub fn bunny_mesh(mesh: &crate::Mesh, cell_frac: f32) -> Result<BunnyMesh, crate
 /// to rest under gravity: every node's displacement, metres, and the solve (its `value` is
 /// the largest displacement, mm).
 pub fn bunny_sag(mesh: &BunnyMesh, young_pa: f32, solve: StaticSolve) -> (Vec<Vec3>, StaticAnswer) {
-    let mut mass = vec![0.0f32; mesh.nodes.len()];
-    for (t, w) in mesh.tets.iter().zip(&mesh.weight) {
-        let v = tet_volume(t.map(|q| mesh.nodes[q as usize])).abs();
-        for q in t {
-            mass[*q as usize] += DENSITY_KG_M3 * v * w / 4.0;
-        }
-    }
-    for &i in &mesh.fixed {
-        mass[i as usize] = 0.0;
-    }
-    let params = PbdParams {
-        solver: SolverKind::Xpbd,
-        substeps: solve.substeps,
-        iterations: solve.iterations,
-        damping_per_s: solve.damping_per_s,
-        contact_radius_m: 0.0,
-        sleep_after_s: 0.0,
-        two_way: false,
-        ..Default::default()
-    };
-    let mut b = PbdBody::new(
+    let mut b = static_body(
         "bunny",
-        params,
-        mesh.nodes.clone(),
-        &mass,
-        SurfaceMap::Direct,
-        Vec::new(),
-    );
-    b.neo_hookean = Some(NeoHookeanGroup::new(
-        mesh.tets.clone(),
         &mesh.nodes,
+        mesh.tets.clone(),
         &mesh.weight,
         young_pa,
-        bulk_pa(young_pa, NU),
-    ));
+        solve,
+    );
+    b.pin_nodes(&mesh.fixed);
     let world = PhysicsWorld::new();
     let rest = mesh.nodes.clone();
     let largest_mm = |b: &PbdBody| {
@@ -508,7 +475,9 @@ mod tests {
             .inspect(|v| assert!(*v > 0.0))
             .sum();
         assert!((vol - size.x * size.y * size.z).abs() < 1e-9);
-        let m: f32 = lumped_masses(&x, &tets, DENSITY_KG_M3).iter().sum();
+        let m: f32 = lumped_masses(&x, &tets, &vec![1.0; tets.len()], DENSITY_KG_M3)
+            .iter()
+            .sum();
         assert!((m - 1000.0 * size.x * size.y * size.z).abs() < 1e-5);
     }
 }

@@ -535,6 +535,17 @@ impl PbdBody {
                 .map_or(0, |g| g.count_inverted(&self.x))
     }
 
+    /// Pins the particles `nodes` where they are (inverse mass 0, at rest); unknown indices
+    /// are ignored.
+    pub fn pin_nodes(&mut self, nodes: &[u32]) {
+        for &i in nodes {
+            if let Some(w) = self.inv_mass.get_mut(i as usize) {
+                *w = 0.0;
+                self.v[i as usize] = Vec3::ZERO;
+            }
+        }
+    }
+
     /// Kinetic, gravitational (height above y = 0 under `gravity`) and elastic energy of
     /// the body now, J. The elastic part is the stable Neo-Hookean energy (0 for bodies
     /// without those tets: their constraints are not an energy of a material).
