@@ -606,8 +606,11 @@ impl SoftBody {
         if len <= 0.0 {
             return 0.0;
         }
+        let r = self.particle_radius_m[j].max(1e-6);
         let inward = -self.scratch[j].dot(g) / len;
-        (1.0 - inward / (0.5 * self.particle_radius_m[j]).max(1e-9)).clamp(0.0, 1.0)
+        let pressed = (1.0 - inward / (0.5 * r)).clamp(0.0, 1.0);
+        let out = ((4.0 * r + inward) / (2.0 * r)).clamp(0.0, 1.0);
+        pressed * out
     }
 
     /// The volume term (`SoftBodyConfig::volume_stiffness`): a global pressure. With `V` the
