@@ -23,9 +23,9 @@ fn main() {
     let rates: &[f32] = if quick { &[60.0] } else { &[60.0, 90.0, 144.0] };
     let stiffnesses: &[f32] = if quick { &[20.0] } else { &[5.0, 20.0, 80.0] };
     let volumes: &[f32] = if quick {
-        &[0.0, 90.0]
+        &[0.0, 250.0]
     } else {
-        &[0.0, 30.0, 90.0, 300.0, 1000.0]
+        &[0.0, 30.0, 90.0, 250.0, 1000.0]
     };
     let mut lines = Vec::new();
     let mut csv = Csv::new(&[

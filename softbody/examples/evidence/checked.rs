@@ -106,9 +106,9 @@ pub fn section(md: &mut String, out: &Path, live: &Path) {
     }
     let mat = |c: &str| find(&material, &[("config", c)]);
     if let (Some(a), Some(b), Some(c), Some(d)) = (
-        mat("k20_vol90_60hz"),
-        mat("k20_vol90_90hz"),
-        mat("k20_vol90_144hz"),
+        mat("k20_vol250_60hz"),
+        mat("k20_vol250_90hz"),
+        mat("k20_vol250_144hz"),
         mat("k20_vol0_60hz"),
     ) {
         writeln!(md, "- *The particle method has no material* — it has an effective one, and it depends on the step rate: at its defaults it measures E = {:.2} kPa at 60 Hz, {:.2} at 90 Hz, {:.2} at 144 Hz (ν {:.2}; {:.2} without the volume term), fitted on the compression with {:.1}–{:.1} % left unexplained. A scene class can name a material (`Soft(material: (young_kpa: …, poisson: …, rate_hz: …))`) and gets the nearest setting with its error printed (`cargo run --release -p softsync-softbody --example material_fit`, `material.txt`).", num(a, "young_kpa"), num(b, "young_kpa"), num(c, "young_kpa"), num(a, "poisson"), num(d, "poisson"), num(a, "fit_err_pct").min(num(c, "fit_err_pct")), num(a, "fit_err_pct").max(num(c, "fit_err_pct"))).unwrap();
