@@ -43,6 +43,9 @@ use crate::cut::{TearBoxPlanes, TearMesh};
 use crate::mesh::{enclosed_volume, Mesh, WeldedMesh};
 use crate::SoftBodyError;
 
+/// The volume term leaves a volume error smaller than this fraction of the rest volume alone.
+const VOLUME_TOLERANCE: f32 = 2e-3;
+
 /// One particle soft body: its rapier bodies, its particle map and its deformed mesh.
 #[derive(Clone, Debug)]
 pub struct SoftBody {
@@ -669,7 +672,11 @@ impl SoftBody {
             norm += free * g.length_squared();
         }
         let error = volume + change - self.rest_volume_m3;
-        if norm <= 0.0 || !error.is_finite() {
+        // Within the tolerance the term does nothing: a body at rest is a little deformed
+        // (its own weight), and a push every step would keep its particles from sleeping
+        // (an untouched resting body must cost one bounds query).
+        if norm <= 0.0 || !error.is_finite() || error.abs() < VOLUME_TOLERANCE * self.rest_volume_m3
+        {
             return;
         }
         let beta = 1.0 - (-rate * dt).exp();
