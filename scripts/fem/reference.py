@@ -2,12 +2,14 @@
 """Independent finite-element reference for the soft-body solver (static hyperelasticity).
 
 What: static solutions of two small problems -- a cantilever sagging under its own weight and
-a block squeezed between frictionless plates -- computed with scikit-fem (a finite-element
+a block squeezed between frictionless plates -- and of our bunny lattice under its own weight
+(--bunny), computed with scikit-fem (a finite-element
 library nobody in this project wrote) for the *same* material model our own solver uses: the
 stable Neo-Hookean energy of Smith et al. 2018 in the form of Macklin & Mueller 2021 (see
 softbody/src/methods/pbd/neohookean.rs, energy_density, and softbody/src/methods/reference.rs,
 our XPBD accuracy reference). Our XPBD reference is compared with these numbers; this file
-never reads anything from our solver.
+never reads anything from our solver, except --bunny, which reads the problem and our answer
+from a file our side exports (the FEM solve itself uses only the problem).
 
     Psi(F) = mu/2 (I_C - 3) + lam'/2 (J - gamma)^2 - lam'/2 (1 - gamma)^2   [J / m^3 of rest volume]
     I_C = tr(F^T F),  J = det F,  lam' = lam + mu,  gamma = 1 + mu / lam',
@@ -45,6 +47,39 @@ Run (through the wrapper, which makes the pinned virtualenv):
                                     docs/results/methods/fem/{stability.csv,stability.txt}
                                     (RESULT reference.fem_stability lines); leaves the other
                                     outputs alone
+    scripts/fem-reference --bunny FILE [FILE...]
+                                    our bunny against the FEM (below); writes
+                                    docs/results/methods/fem/{bunny.csv,bunny.txt}
+                                    (RESULT reference.fem problem=bunny lines); leaves the
+                                    other outputs alone. The 10 % lattice takes ~3 min and
+                                    4.3 GB at its peak (P2_refined), the 5 % one ~?? min, ?? GB
+
+--bunny: a problem exported by our side (JSON, made by the Rust code, read as given): the
+bunny as our reference solves it -- a fictitious-domain tet lattice (`nodes` [[x, y, z]] m,
+`tets` [[a, b, c, d]] 0-based), each tet with a `weight` w in (0, 1], the fraction of it inside
+the bunny's surface, that scales both its stiffness (E w with the same nu: mu w, lam' w, gamma
+unchanged) and its density (rho w); the base (`fixed` nodes: y <= min y + 8 % of the height)
+held at u = 0; the full own weight (`young_pa`, `nu`, `density_kg_m3`, `gravity` from the
+file); and `ours` [[ux, uy, uz]], our static displacement of every node (m; `ours_steps`,
+`ours_budget`: how it was reached). The FEM solves the same static problem (stable
+Neo-Hookean, total Lagrangian, Newton with load stepping from the linear-elastic answer) at
+the levels, in order of accuracy: P1 on the mesh (our discretisation: the like-for-like
+comparison), P1 on the mesh refined once by scikit-fem (each tet into eight, each child
+keeping its parent's weight; parents found by locating each child's centroid, checked), P2 on
+the mesh, and P2 on the refined mesh -- a level with more than BUNNY_MAX_DOFS (150k) dofs is
+skipped (P2_refined of the 5 % lattice: 404k dofs). The refinements keep the weighted lattice
+as it is, so they measure how far the FEM on this lattice is from converged, not the
+geometry's error. Tets hanging from the rest by one edge or vertex (hinges: a mechanism, whose
+static answer is a rigid swing, not elasticity; the 5 % lattice has one, w = 0.02) are left
+out of the FEM and their free nodes out of every statistic, ours included (bunny_solid). Fixed: every dof located at y <= cut (cut = the largest y of the fixed
+nodes + 1e-9), the midside dofs on the base included. Per file and level, at the mesh's own
+nodes (vertex dofs): fem_max_mm / fem_mean_mm = largest / mean |u| over all nodes (fixed ones
+included); fem_change_pct / fem_mean_change_pct = their change from the previous level (%);
+ours_max_mm / ours_mean_mm the same of `ours`; field_rms_pct = 100 RMS over nodes of
+|u_ours - u_fem| / the FEM's largest |u|; material_field_rms_pct = the same over material nodes
+(a node of at least one tet with w >= 0.5; the others, fringe nodes, touch only tets mostly
+outside the surface: fictitious material); interior_field_rms_pct = over nodes all of whose
+tets have w >= 0.99; field_max_err_pct = the largest |u_ours - u_fem| / the FEM's largest |u|.
 
 Pinned versions (installed by scripts/fem-reference): scikit-fem==12.0.2, numpy==2.4.6,
 scipy==1.17.1 (Python 3.11). Units: SI inside (m, Pa, N, kg); reported in mm and N.
@@ -62,6 +97,8 @@ from pathlib import Path
 import numpy as np
 import scipy
 import scipy.sparse as sp
+import scipy.sparse.csgraph
+import scipy.spatial
 import scipy.sparse.linalg as sla
 import skfem
 from skfem import (Basis, BilinearForm, ElementTetP1, ElementTetP2, ElementVector,
@@ -479,6 +516,290 @@ def analytic_rows():
             yield dict(problem="compress", quantity=quantity, case=f"s={s:g}",
                        element="analytic", level="", dofs="", value=value, time_s=0.0,
                        note="closed form, uniaxial stress")
+
+
+# --------------------------------------------------------------------------------------
+# Bunny (--bunny): our fictitious-domain lattice under its own weight
+# --------------------------------------------------------------------------------------
+# Our side exports the bunny it solves (JSON, see run_bunny): a tet lattice covering the
+# bunny, each tet with a weight w in (0, 1] = the fraction of it inside the bunny's surface,
+# which scales both its stiffness (mu w, lam w: E w with the same nu) and its mass (rho w), the
+# base (nodes with y <= min y + 8 % of the height) fixed, and our static displacement of every
+# node under full gravity. Here the same discrete problem is solved by Newton on the same mesh
+# with P1 (our discretisation) and with finer spaces that keep the weights as they are: P1 on
+# the mesh refined once (each child tet inherits its parent's weight), P2 on the mesh and P2
+# on the refined mesh -- so what changes between these levels is the FEM's resolution of the
+# given weighted lattice, not the geometry.
+
+BUNNY_LEVELS = ("P1", "P1_refined", "P2", "P2_refined")  # in order of accuracy
+BUNNY_MAX_DOFS = 150_000   # a level with more dofs is skipped (P2_refined of the 5 % lattice:
+                           # 404k dofs, beyond a sparse LU in a few GB)
+MATERIAL_WEIGHT = 0.5      # material node: a node of at least one tet with w >= this
+INTERIOR_WEIGHT = 0.99     # interior node: every tet of the node has w >= this
+
+
+def refined_with_parents(mesh):
+    """scikit-fem's uniform refinement of `mesh` (every tet into eight) and the parent of
+    every child tet: the parent tet that contains the child's centroid (scikit-fem orders the
+    children in blocks that depend on its choice of inner diagonal, so the order is not relied
+    on). A child's centroid has barycentric coordinates >= 1/8 in its parent (1/8 is the least,
+    on both the corner and the inner children), so it lies in no other tet; candidates are the
+    tets with the nearest centroids. Checked: every parent has eight children and their volumes
+    add up to the parent's."""
+    fine = mesh.refined()
+    n_parents = mesh.t.shape[1]
+    cent = fine.p[:, fine.t].mean(axis=1).T                  # (n_children, 3)
+    v = np.moveaxis(mesh.p[:, mesh.t], 0, -1)                # (4, n_parents, 3)
+    to_bary = np.linalg.inv(np.stack([v[1] - v[0], v[2] - v[0], v[3] - v[0]], axis=-1))
+    tree = scipy.spatial.cKDTree(v.mean(axis=0))
+    parent = np.full(len(cent), -1)
+    for k in (8, 32, 128, 512):
+        todo = np.nonzero(parent < 0)[0]
+        if len(todo) == 0:
+            break
+        cand = tree.query(cent[todo], k=min(k, n_parents))[1].reshape(len(todo), -1)
+        lam = np.einsum("nkij,nkj->nki", to_bary[cand], cent[todo, None, :] - v[0][cand])
+        worst = np.minimum(lam.min(axis=2), 1.0 - lam.sum(axis=2))       # (n, k)
+        best = worst.argmax(axis=1)
+        found = worst[np.arange(len(todo)), best] >= 0.125 - 1e-9
+        parent[todo[found]] = cand[found, best[found]]
+    assert parent.min() >= 0, "a child tet's centroid lies in no parent (with >= 1/8 margins)"
+    assert np.array_equal(np.bincount(parent, minlength=n_parents), np.full(n_parents, 8))
+
+    def volumes(m):
+        q = m.p[:, m.t]
+        return np.abs(np.einsum("ie,ie->e", np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0],
+                                                      axis=0), q[:, 3] - q[:, 0])) / 6.0
+    child_sum = np.bincount(parent, volumes(fine), minlength=n_parents)
+    assert np.allclose(child_sum, volumes(mesh), rtol=1e-9, atol=0.0)
+    return fine, parent
+
+
+def bunny_solid(data):
+    """The tets the FEM keeps, and the nodes it solves for (boolean masks). A lattice of tets
+    cut by a surface can leave a tet (or a group) hanging from the rest by one edge or one
+    vertex: a hinge, a mechanism whose static answer is a rigid swing under gravity (a
+    pendulum hanging down), not elasticity, and which makes the stiffness singular. Kept: the
+    groups of face-connected tets anchored by >= 3 non-collinear fixed nodes, then, repeatedly,
+    every group whose vertices shared with the kept ones or fixed span a plane (>= 3
+    non-collinear). The rest are left out of the FEM, and their nodes not on a kept tet out of
+    every statistic (ours included)."""
+    tets = np.asarray(data["tets"])
+    nodes = np.asarray(data["nodes"], dtype=float)
+    n_tets, n_nodes = len(tets), len(nodes)
+    faces = np.sort(tets[:, [[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]]], axis=2).reshape(-1, 3)
+    _, face_id = np.unique(faces, axis=0, return_inverse=True)
+    owner = np.repeat(np.arange(n_tets), 4)
+    order = np.argsort(face_id.ravel(), kind="stable")
+    fid, own = face_id.ravel()[order], owner[order]
+    shared = fid[1:] == fid[:-1]                       # a face met twice: two tets share it
+    adj = sp.coo_matrix((np.ones(int(shared.sum())), (own[1:][shared], own[:-1][shared])),
+                        shape=(n_tets, n_tets))
+    n_groups, group = scipy.sparse.csgraph.connected_components(adj, directed=False)
+    pinned = np.zeros(n_nodes, bool)
+    pinned[np.asarray(data["fixed"])] = True
+    kept = np.zeros(n_groups, bool)
+
+    def spans_plane(vertices):
+        if len(vertices) < 3:
+            return False
+        x = nodes[vertices]
+        return np.linalg.matrix_rank(x[1:] - x[0], tol=1e-6 * np.ptp(nodes, axis=0).max()) >= 2
+
+    group_nodes = [np.unique(tets[group == c]) for c in range(n_groups)]
+    changed = True
+    while changed:
+        changed = False
+        for c in np.nonzero(~kept)[0]:
+            if spans_plane(group_nodes[c][pinned[group_nodes[c]]]):
+                kept[c] = changed = True
+                pinned[group_nodes[c]] = True
+    kept_tets = kept[group]
+    solved = np.zeros(n_nodes, bool)
+    solved[tets[kept_tets].ravel()] = True
+    return kept_tets, solved
+
+
+def bunny_level(data, element, kept_tets):
+    """One FEM level of an exported bunny (only the tets `kept_tets`, see bunny_solid): the
+    static displacement (m) at the mesh's own nodes that those tets use (vertex dofs), shape
+    (n_solved_nodes, 3), in node order, and a dict of solver facts; None if the level has more
+    than BUNNY_MAX_DOFS dofs."""
+    all_nodes = np.asarray(data["nodes"], dtype=float)
+    tets = np.asarray(data["tets"])[kept_tets]
+    used, local = np.unique(tets, return_inverse=True)
+    nodes = all_nodes[used]
+    weight = np.asarray(data["weight"], dtype=float)[kept_tets]
+    mesh = MeshTet(nodes.T.copy(), local.reshape(tets.shape).T.copy())
+    assert np.array_equal(mesh.p, nodes.T), "MeshTet moved the nodes"
+    if element.endswith("_refined"):
+        order = 1 if element.startswith("P1") else 2
+        mesh, parent = refined_with_parents(mesh)
+        weight = weight[parent]
+    else:
+        order = 1 if element == "P1" else 2
+    # the original nodes among the (refined) mesh's vertices, by position
+    near = scipy.spatial.cKDTree(mesh.p.T).query(nodes)
+    assert near[0].max() < 1e-12, "an original node is not a vertex of the refined mesh"
+    n_vertices, n_edges = mesh.p.shape[1], mesh.edges.shape[1]
+    ndofs = 3 * (n_vertices + (n_edges if order == 2 else 0))
+    facts = dict(element=element, tets=mesh.t.shape[1], dofs=ndofs)
+    if ndofs > BUNNY_MAX_DOFS:
+        return None, dict(facts, note=f"skipped: {ndofs} dofs > {BUNNY_MAX_DOFS}")
+    t = time.time()
+    disc = Discretisation(mesh, order)
+    assert disc.ndofs == ndofs
+    # material: stiffness and density scaled per tet by its weight (E w, same nu: mu w, lam' w,
+    # gamma unchanged); mu and lam' broadcast over the quadrature points
+    if abs(float(data["nu"]) - NU) > 1e-12:
+        raise ValueError(f"nu = {data['nu']}, this script's material has nu = {NU}")
+    mu, lam_p, gamma = snh_parameters(float(data["young_pa"]))
+    w = weight[:, None]
+    mat = (mu * w, lam_p * w, gamma)
+    rho, g = float(data["density_kg_m3"]), np.asarray(data["gravity"], dtype=float)
+    wq = np.broadcast_to(w, disc.dx.shape)
+    fg = asm(LinearForm(lambda v, p: rho * p["wt"] * (g[0] * v[0] + g[1] * v[1] + g[2] * v[2])),
+             disc.vb, wt=wq)
+    mass = rho * float(np.sum(wq * disc.dx))
+    assert abs(np.linalg.norm(fg.reshape(-1, 3).sum(axis=0)) / (mass * np.linalg.norm(g)) - 1) < 1e-9
+    # fixed: every dof located in the base, y <= cut (vertex, and for P2 midside, dofs)
+    fixed_nodes = np.asarray(data["fixed"])
+    cut = all_nodes[fixed_nodes, 1].max() + 1e-9
+    assert set(np.nonzero(all_nodes[:, 1] <= cut)[0]) == set(fixed_nodes.tolist())
+    fixed = np.nonzero(disc.vb.doflocs[1] <= cut)[0]
+    # linear-elastic predictor (the tangent at rest), whose LU also seeds the Newton solves
+    k0 = disc.tangent(np.zeros(disc.ndofs), mat)
+    u_lin, lu_lin = solve_linear(disc, k0, fixed, 0.0, fg)
+    del k0
+    if not np.abs(u_lin).max() < np.ptp(all_nodes, axis=0).max():
+        raise RuntimeError(f"{element}: linear answer of {np.abs(u_lin).max():.3g} m: singular "
+                           "stiffness (a mechanism that bunny_solid did not remove?)")
+    sol, steps, iters, facts_lu = load_path(disc, mat, fixed, 0.0, fg, [1.0], 1.0, u_lin,
+                                            lu=lu_lin)
+    u = sol[1.0]
+    fint = disc.forces(u, mat)[0]
+    free = np.setdiff1d(np.arange(disc.ndofs), fixed)
+    residual = np.linalg.norm((fg - fint)[free]) / np.linalg.norm(fg)
+    vdofs = disc.vb.nodal_dofs[:, near[1]]                  # (3, n_nodes)
+    return u[vdofs].T.copy(), dict(
+        facts, fixed_dofs=len(fixed), mass_kg=mass, min_det_f=disc.min_volume_ratio(u),
+        residual=residual, time_s=time.time() - t, linear_max_mm=1e3 * np.linalg.norm(
+            u_lin[vdofs].T, axis=1).max(),
+        note=f"{steps} steps, {iters} Newton its, {facts_lu} LU")
+
+
+def bunny_node_sets(data):
+    """(material, interior) boolean masks over the nodes: material = a node of at least one
+    tet with w >= MATERIAL_WEIGHT (the rest, fringe nodes, touch only tets mostly outside the
+    surface: fictitious material); interior = all of the node's tets have w >= INTERIOR_WEIGHT."""
+    tets = np.asarray(data["tets"])
+    w = np.repeat(np.asarray(data["weight"], dtype=float), 4)
+    n = len(data["nodes"])
+    wmax, wmin = np.zeros(n), np.full(n, np.inf)
+    np.maximum.at(wmax, tets.ravel(), w)
+    np.minimum.at(wmin, tets.ravel(), w)
+    return wmax >= MATERIAL_WEIGHT, wmin >= INTERIOR_WEIGHT
+
+
+def peak_rss_mb(reset=False):
+    """Peak resident memory of this process (VmHWM, MB); reset=True restarts the peak (Linux
+    /proc/self/clear_refs), so that it covers one level. None where /proc lacks it."""
+    try:
+        if reset:
+            Path("/proc/self/clear_refs").write_text("5")
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return None
+
+
+BUNNY_COLS = ["file", "cell_frac", "level", "element", "nodes", "left_out_tets",
+              "left_out_nodes", "tets", "dofs", "material_nodes", "interior_nodes", "fem_max_mm", "fem_mean_mm",
+              "fem_change_pct", "fem_mean_change_pct", "ours_max_mm", "ours_mean_mm",
+              "field_rms_pct", "material_field_rms_pct", "interior_field_rms_pct",
+              "field_max_err_pct", "ours_file_max_mm", "ours_steps", "ours_budget", "newton", "residual",
+              "min_det_f", "time_s", "peak_mb"]
+
+
+def bunny_line(r):
+    keys = ["level", "element", "fem_max_mm", "fem_mean_mm", "fem_change_pct", "ours_max_mm",
+            "ours_mean_mm", "field_rms_pct", "material_field_rms_pct", "fem_mean_change_pct",
+            "interior_field_rms_pct", "field_max_err_pct", "dofs", "left_out_nodes"]
+    return "RESULT reference.fem problem=bunny quantity=field_rms_pct " + " ".join(
+        f"{k}={fmt(r[k], 5) if r[k] != '' else 'nan'}" for k in keys)
+
+
+def run_bunny(files):
+    """--bunny FILE...: for each exported bunny, the FEM levels of BUNNY_LEVELS that fit, and
+    our displacement field against each (module comment above; the fields in the docstring)."""
+    t_all = time.time()
+    rows = []
+    for path in files:
+        data = json.loads(Path(path).read_text())
+        kept_tets, solved = bunny_solid(data)
+        ours_all = np.asarray(data["ours"], dtype=float)
+        left_out = np.nonzero(~kept_tets)[0]
+        if len(left_out):
+            free_nodes = np.nonzero(~solved)[0]
+            print(f"# {Path(path).name}: left out {len(left_out)} hinged tet(s) {left_out.tolist()} "
+                  f"(weights {np.asarray(data['weight'])[left_out].tolist()}) and their "
+                  f"{len(free_nodes)} free node(s) {free_nodes.tolist()}, where ours moved "
+                  f"{(1e3 * np.linalg.norm(ours_all[free_nodes], axis=1)).round(2).tolist()} mm",
+                  flush=True)
+        ours = ours_all[solved]
+        n_nodes = len(ours)
+        material, interior = (m[solved] for m in bunny_node_sets(data))
+        ours_norm = np.linalg.norm(ours, axis=1)
+        prev = None
+        for element in BUNNY_LEVELS:
+            peak_rss_mb(reset=True)
+            u, facts = bunny_level(data, element, kept_tets)
+            if u is None:
+                print(f"# {Path(path).name} {element}: {facts['note']}", flush=True)
+                continue
+            norm = np.linalg.norm(u, axis=1)
+            fem_max, fem_mean = 1e3 * norm.max(), 1e3 * norm.mean()
+            err2 = np.sum((ours - u) ** 2, axis=1)
+
+            def rms_pct(mask):
+                return 100.0 * math.sqrt(err2[mask].mean()) / norm.max()
+
+            r = dict(file=Path(path).name, cell_frac=float(data["cell_frac"]),
+                     level=f"c{float(data['cell_frac']):.3f}", element=element, nodes=n_nodes,
+                     left_out_tets=len(left_out), left_out_nodes=int((~solved).sum()),
+                     ours_file_max_mm=1e3 * np.linalg.norm(ours_all, axis=1).max(),
+                     tets=facts["tets"], dofs=facts["dofs"], material_nodes=int(material.sum()),
+                     interior_nodes=int(interior.sum()), fem_max_mm=fem_max, fem_mean_mm=fem_mean,
+                     fem_change_pct=100.0 * (fem_max / prev[0] - 1) if prev else "",
+                     fem_mean_change_pct=100.0 * (fem_mean / prev[1] - 1) if prev else "",
+                     ours_max_mm=1e3 * ours_norm.max(), ours_mean_mm=1e3 * ours_norm.mean(),
+                     field_rms_pct=rms_pct(np.ones(n_nodes, bool)),
+                     material_field_rms_pct=rms_pct(material),
+                     interior_field_rms_pct=rms_pct(interior),
+                     field_max_err_pct=100.0 * math.sqrt(err2.max()) / norm.max(),
+                     ours_steps=data.get("ours_steps", ""), ours_budget=data.get("ours_budget", ""),
+                     newton=facts["note"], residual=facts["residual"],
+                     min_det_f=facts["min_det_f"], time_s=facts["time_s"],
+                     peak_mb=peak_rss_mb() or "")
+            prev = (fem_max, fem_mean)
+            rows.append(r)
+            print(bunny_line(r), flush=True)
+            print(f"#   {facts['dofs']} dofs, {facts['tets']} tets, {facts['fixed_dofs']} fixed "
+                  f"dofs, mass {facts['mass_kg']:.4f} kg, linear max {facts['linear_max_mm']:.3f} "
+                  f"mm, {facts['note']}, residual {facts['residual']:.1e}, min det F "
+                  f"{facts['min_det_f']:.3f}, {facts['time_s']:.1f} s, peak "
+                  f"{fmt(r['peak_mb'], 4)} MB", flush=True)
+    OUT_DIR.mkdir(parents=True, exist_ok=True)
+    with open(OUT_DIR / "bunny.csv", "w", newline="") as fh:
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(BUNNY_COLS)
+        for r in rows:
+            w.writerow([fmt(r[c], 7) for c in BUNNY_COLS])
+    (OUT_DIR / "bunny.txt").write_text("".join(bunny_line(r) + "\n" for r in rows))
+    print(f"wrote {OUT_DIR.relative_to(ROOT)}/bunny.csv, bunny.txt in {time.time() - t_all:.0f} s")
+    return 0 if rows and all(math.isfinite(r["fem_max_mm"]) for r in rows) else 1
 
 
 # --------------------------------------------------------------------------------------
@@ -990,6 +1311,8 @@ def main():
     mode.add_argument("--bless", action="store_true", help="rewrite check.json")
     mode.add_argument("--stability", action="store_true",
                       help="smallest tangent eigenvalue along the compression's homogeneous path")
+    mode.add_argument("--bunny", nargs="+", metavar="FILE",
+                      help="exported bunnies (JSON): FEM levels and our field against them")
     ap.add_argument("--fine", action="store_true",
                     help="with --stability: also P2 at level 8 (a few minutes more)")
     args = ap.parse_args()
@@ -1003,6 +1326,8 @@ def main():
         return run_all()
     if args.stability:
         return run_stability(args.fine)
+    if args.bunny:
+        return run_bunny(args.bunny)
     return run_check(bless=args.bless)
 
 
