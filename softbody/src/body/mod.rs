@@ -632,18 +632,29 @@ impl SoftBody {
             return;
         }
         let tris = &self.welded.triangles;
+        let volume: f32 = tris
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| self.vertices[i as usize]);
+                a.dot(b.cross(c)) / 6.0
+            })
+            .sum();
+        if !volume.is_finite() || volume <= 0.0 {
+            return;
+        }
+        // A body near its own volume (a flight, a rest, a light touch) costs this one pass:
+        // the gradients are made only when there is volume to restore. What this step's
+        // motion will change, the next step measures.
+        if (volume - self.rest_volume_m3).abs() < 0.5 * VOLUME_TOLERANCE * self.rest_volume_m3 {
+            return;
+        }
         self.vertex_grad.clear();
         self.vertex_grad.resize(self.vertices.len(), Vec3::ZERO);
-        let mut volume = 0.0f32;
         for t in tris {
             let [a, b, c] = t.map(|i| self.vertices[i as usize]);
-            volume += a.dot(b.cross(c)) / 6.0;
             self.vertex_grad[t[0] as usize] += b.cross(c) / 6.0;
             self.vertex_grad[t[1] as usize] += c.cross(a) / 6.0;
             self.vertex_grad[t[2] as usize] += a.cross(b) / 6.0;
-        }
-        if !volume.is_finite() || volume <= 0.0 {
-            return;
         }
         self.particle_grad.clear();
         self.particle_grad.resize(self.particles.len(), Vec3::ZERO);
