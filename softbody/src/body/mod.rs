@@ -505,6 +505,7 @@ impl SoftBody {
         let alpha = 1.0 - (-self.config.stiffness * dt).exp();
         // u_i = x_i − dest_i (Appendix A.6: dest = center + rotation · rest offset).
         let mut sleeping = 0usize;
+        let mut most_displaced = 0.0f32;
         let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
         for (i, &h) in self.particles.iter().enumerate() {
             let (x, asleep) = world
@@ -516,6 +517,7 @@ impl SoftBody {
             let dest = c + r * (self.rest_offsets[i] + self.anchor_shift[i]);
             let u = x - dest;
             self.scratch[i] = if u.is_finite() { u } else { Vec3::ZERO };
+            most_displaced = most_displaced.max(self.scratch[i].length_squared());
             if x.is_finite() {
                 lo = lo.min(x);
                 hi = hi.max(x);
@@ -586,7 +588,11 @@ impl SoftBody {
             }
             self.planned_v[j] = Some(new_v);
         }
-        self.keep_volume(dt, r, vc, wc);
+        // Every particle within 0.1 % of the body's size of its place: its shape, and so its
+        // volume, is its own (a flight, a rest) — not even the volume pass.
+        if most_displaced.sqrt() > 1e-3 * self.size_m {
+            self.keep_volume(dt, r, vc, wc);
+        }
         for (j, &h) in self.particles.iter().enumerate() {
             if let (Some(v), Some(body)) = (self.planned_v[j], world.bodies.get_mut(h)) {
                 body.set_linvel(v, true);
