@@ -323,6 +323,7 @@ class TangentSolver:
             x, _ = sla.gmres(k, r, M=prec, rtol=1e-9, atol=0.0, restart=12, maxiter=1)
             if np.linalg.norm(k @ x - r) <= GMRES_FORCING * np.linalg.norm(r):
                 return x
+        self.lu = None        # free the old factorisation before making the new one (peak memory)
         self.lu = factor(k)
         self.factorisations += 1
         return self.lu.solve(r)
@@ -378,6 +379,7 @@ def load_path(disc, mat, dirichlet, prescribed, fext_unit, targets, dt0, u_guess
     `lu` may seed the linear solver's preconditioner. Returns ({target: u}, steps, newton iterations, factorisations)."""
     free = np.setdiff1d(np.arange(disc.ndofs), dirichlet)
     solver = TangentSolver(lu=lu)
+    lu = None                 # the solver holds it, and drops it when it refactors
     hist = [(0.0, np.zeros(disc.ndofs))]
     out, steps, iters, dt = {}, 0, 0, dt0
     for target in targets:
@@ -674,8 +676,10 @@ def bunny_level(data, element, kept_tets):
     if not np.abs(u_lin).max() < np.ptp(all_nodes, axis=0).max():
         raise RuntimeError(f"{element}: linear answer of {np.abs(u_lin).max():.3g} m: singular "
                            "stiffness (a mechanism that bunny_solid did not remove?)")
+    seed = [lu_lin]           # handed over without a reference left here (peak memory)
+    del lu_lin
     sol, steps, iters, facts_lu = load_path(disc, mat, fixed, 0.0, fg, [1.0], 1.0, u_lin,
-                                            lu=lu_lin)
+                                            lu=seed.pop())
     u = sol[1.0]
     fint = disc.forces(u, mat)[0]
     free = np.setdiff1d(np.arange(disc.ndofs), fixed)
