@@ -52,7 +52,8 @@ Run (through the wrapper, which makes the pinned virtualenv):
                                     docs/results/methods/fem/{bunny.csv,bunny.txt}
                                     (RESULT reference.fem problem=bunny lines); leaves the
                                     other outputs alone. The 10 % lattice takes ~3 min and
-                                    4.3 GB at its peak (P2_refined), the 5 % one ~?? min, ?? GB
+                                    3-4 GB at its peak (P2_refined, 67k dofs); on the 5 %
+                                    one P1_refined takes ~70 s and P2 (55k dofs) over 5 min
 
 --bunny: a problem exported by our side (JSON, made by the Rust code, read as given): the
 bunny as our reference solves it -- a fictitious-domain tet lattice (`nodes` [[x, y, z]] m,
