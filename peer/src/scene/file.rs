@@ -27,6 +27,9 @@
 //! and syntax errors come back with their line and column), then [`parse`] checks every value
 //! and loads every mesh, naming the field (`classes[4] "bunny": shape.size_m: …`). A scene
 //! either loads whole or not at all.
+//!
+//! Over 800 lines with its tests (140 of them): the file types and the checks that read them
+//! are one owned part — a field's type and the check that names it change together.
 
 use std::path::Path;
 

@@ -13,8 +13,8 @@
 //! deformation) read each other's invariants and are one owned part; the parts that stand
 //! alone live in `set`, `handle`, `topology`, `access` (getters, `apply_state`), `level`
 //! (a resolution change while running, and the blend that hides it), `center` (rolling
-//! resistance, and the orientation hands hold) and `build` (a body's history replayed off
-//! the frame).
+//! resistance, and the orientation hands hold), `volume` (the volume term, a global
+//! pressure) and `build` (a body's history replayed off the frame).
 
 mod access;
 pub(crate) mod build;
@@ -23,6 +23,7 @@ pub(crate) mod handle;
 mod level;
 pub(crate) mod set;
 mod topology;
+mod volume;
 
 pub use level::Activity;
 pub use topology::{StageClock, TearTimings};
@@ -42,9 +43,6 @@ use crate::cut::particles::ParticleUpdateStats;
 use crate::cut::{TearBoxPlanes, TearMesh};
 use crate::mesh::{enclosed_volume, Mesh, WeldedMesh};
 use crate::SoftBodyError;
-
-/// The volume term leaves a volume error smaller than this fraction of the rest volume alone.
-const VOLUME_TOLERANCE: f32 = 2e-3;
 
 /// One particle soft body: its rapier bodies, its particle map and its deformed mesh.
 #[derive(Clone, Debug)]
@@ -596,123 +594,6 @@ impl SoftBody {
         for (j, &h) in self.particles.iter().enumerate() {
             if let (Some(v), Some(body)) = (self.planned_v[j], world.bodies.get_mut(h)) {
                 body.set_linvel(v, true);
-            }
-        }
-    }
-
-    /// How freely the volume term moves particle `j`, in [0, 1]: 0 if grabbed or pressed in
-    /// (its displacement from its target, `self.scratch`, is inward along the volume gradient
-    /// by half its radius or more), 1 if not pressed in at all, linear between (no switch
-    /// that flips from one step to the next). A particle a plate or a hand presses in cannot
-    /// move out: what it was given would be taken back by the contact, and the volume never
-    /// restored. The free particles take it all and the body bulges.
-    fn freedom(&self, j: usize) -> f32 {
-        if self.drives[j].is_some() {
-            return 0.0;
-        }
-        let g = self.particle_grad[j];
-        let len = g.length();
-        if len <= 0.0 {
-            return 0.0;
-        }
-        let r = self.particle_radius_m[j].max(1e-6);
-        let inward = -self.scratch[j].dot(g) / len;
-        let pressed = (1.0 - inward / (0.5 * r)).clamp(0.0, 1.0);
-        let out = ((4.0 * r + inward) / (2.0 * r)).clamp(0.0, 1.0);
-        pressed * out
-    }
-
-    /// The volume term (`SoftBodyConfig::volume_stiffness`): a global pressure. With `V` the
-    /// enclosed volume of the deformed surface (as the last step left it), `gₚ = ∂V/∂xₚ`
-    /// through the skinning (each vertex is its rest place plus the weighted displacement of
-    /// its particles, so `gₚ = Σᵥ wᵥₚ ∂V/∂xᵥ`), and `V'` the volume the planned velocities
-    /// of the free particles ([`freedom`](Self::freedom) `f`, weighting each) would give after the step
-    /// (`V + dt Σ fₚ gₚ·(vₚ − rigid)`, first order: rigid motion changes no volume), the free
-    /// particles' velocities change by `−β (V' − V₀) fₚ gₚ / (dt Σ fₚ|g|²)`, `β = 1 − exp(−rate·dt)`:
-    /// the smallest change (least squares) that corrects the fraction β of the volume error.
-    /// Grabbed and pressed-in particles keep their velocity and are not counted in `V'`:
-    /// what presses them decides where they go, and the next step measures it.
-    fn keep_volume(&mut self, dt: f32, r: Quat, vc: Vec3, wc: Vec3) {
-        let rate = self.config.volume_stiffness;
-        if rate <= 0.0 || self.tear.is_some() || self.rest_volume_m3 <= 0.0 {
-            return;
-        }
-        let tris = &self.welded.triangles;
-        let volume: f32 = tris
-            .iter()
-            .map(|t| {
-                let [a, b, c] = t.map(|i| self.vertices[i as usize]);
-                a.dot(b.cross(c)) / 6.0
-            })
-            .sum();
-        if !volume.is_finite() || volume <= 0.0 {
-            return;
-        }
-        // A body near its own volume (a flight, a rest, a light touch) costs this one pass:
-        // the gradients are made only when there is volume to restore. What this step's
-        // motion will change, the next step measures.
-        if (volume - self.rest_volume_m3).abs() < 0.5 * VOLUME_TOLERANCE * self.rest_volume_m3 {
-            return;
-        }
-        self.vertex_grad.clear();
-        self.vertex_grad.resize(self.vertices.len(), Vec3::ZERO);
-        for t in tris {
-            let [a, b, c] = t.map(|i| self.vertices[i as usize]);
-            self.vertex_grad[t[0] as usize] += b.cross(c) / 6.0;
-            self.vertex_grad[t[1] as usize] += c.cross(a) / 6.0;
-            self.vertex_grad[t[2] as usize] += a.cross(b) / 6.0;
-        }
-        self.particle_grad.clear();
-        self.particle_grad.resize(self.particles.len(), Vec3::ZERO);
-        for (v, g) in self.vertex_grad.iter().enumerate() {
-            if !self.map.soft_vertex[v] {
-                continue;
-            }
-            let (ids, ws) = self.map.vertex_particles.row(v);
-            for (&p, &w) in ids.iter().zip(ws) {
-                self.particle_grad[p as usize] += *g * w;
-            }
-        }
-        let mut change = 0.0f32;
-        let mut norm = 0.0f32;
-        for (j, g) in self.particle_grad.iter().enumerate() {
-            // Pressed in: its restoring pushes it out into what presses it, which takes that
-            // back; counting it in full would promise volume that never comes.
-            let free = self.freedom(j);
-            if free <= 0.0 {
-                continue;
-            }
-            if let Some(v) = self.planned_v[j] {
-                let rigid = vc + wc.cross(r * (self.rest_offsets[j] + self.anchor_shift[j]));
-                change += free * g.dot(v - rigid) * dt;
-            }
-            norm += free * g.length_squared();
-        }
-        let error = volume + change - self.rest_volume_m3;
-        // Within the tolerance the term does nothing: a body at rest is a little deformed
-        // (its own weight), and a push every step would keep its particles from sleeping
-        // (an untouched resting body must cost one bounds query).
-        if norm <= 0.0 || !error.is_finite() || error.abs() < VOLUME_TOLERANCE * self.rest_volume_m3
-        {
-            return;
-        }
-        let beta = 1.0 - (-rate * dt).exp();
-        let scale = -beta * error / (dt * norm);
-        let max_dv = self.config.max_velocity_change_mps;
-        for (j, g) in self.particle_grad.iter().enumerate() {
-            let free = self.freedom(j);
-            if free <= 0.0 {
-                continue;
-            }
-            let mut dv = *g * (scale * free);
-            let len = dv.length();
-            if len > max_dv {
-                dv *= max_dv / len;
-            }
-            if let Some(v) = &mut self.planned_v[j] {
-                *v += dv;
-            } else if len > 1e-6 {
-                self.planned_v[j] = Some(dv);
             }
         }
     }
