@@ -185,9 +185,11 @@ pub struct SoftBodyConfig {
     /// tissue does. Each step it corrects the fraction `1 − exp(−rate·dt)` of the volume the
     /// step would otherwise end with missing (or in excess), the restoring's own motion
     /// included. It reads only the current shape: nothing more travels in a room. Off for a
-    /// torn body (its surface is open). 0 turns it off; in [0, 1e4]; default 250: the bunny
-    /// squeezed to 30 % of its height then keeps about 0.87 of its volume (the Neo-Hookean
-    /// reference 0.88; without the term 0.44).
+    /// torn body (its surface is open). 0 turns it off; in [0, 1e4]; default 0 (off): at 250
+    /// the bunny squeezed to 30 % of its height keeps about 0.86–0.90 of its volume (the
+    /// Neo-Hookean reference 0.88; without the term 0.44), but a cut piece held stretched
+    /// between two hands collapsed under it in the room's build of rapier, so it is opt-in
+    /// until that is understood.
     pub volume_stiffness: f32,
     /// A named material (Young's modulus, Poisson's ratio, the room's step rate) this body
     /// should behave as. The config does not apply it by itself: a scene's loader
@@ -241,7 +243,7 @@ impl Default for SoftBodyConfig {
             weld_epsilon_m: 1e-6,
             tear_width_m: 0.003,
             slit_open_m: 0.0,
-            volume_stiffness: 250.0,
+            volume_stiffness: 0.0,
             material: None,
         }
     }
