@@ -84,8 +84,15 @@ impl SoftBody {
                 self.particle_grad[p as usize] += *g * w;
             }
         }
+        // The push is an internal pressure: it must not move the body as a whole. The free
+        // particles' push `fₚ gₚ` is made free of net force and torque (the rigid part of it,
+        // weighted by the freedom, taken out about their weighted centroid); left in, it is a
+        // steady force wherever the body is pressed or held on one side only — a hand holding
+        // a stretched piece was pushed away, piece and center apart, a little more each step.
         let mut change = 0.0f32;
-        let mut norm = 0.0f32;
+        let mut weight = 0.0f32;
+        let mut push = Vec3::ZERO;
+        let mut centroid = Vec3::ZERO;
         for (j, g) in self.particle_grad.iter().enumerate() {
             // Pressed in: its restoring pushes it out into what presses it, which takes that
             // back; counting it in full would promise volume that never comes.
@@ -97,25 +104,68 @@ impl SoftBody {
                 let rigid = vc + wc.cross(r * (self.rest_offsets[j] + self.anchor_shift[j]));
                 change += free * g.dot(v - rigid) * dt;
             }
-            norm += free * g.length_squared();
+            weight += free;
+            push += free * *g;
+            centroid += free * (r * (self.rest_offsets[j] + self.anchor_shift[j]));
+        }
+        if weight <= 0.0 {
+            return;
+        }
+        let shift = push / weight;
+        centroid /= weight;
+        let mut torque = Vec3::ZERO;
+        let mut inertia = glam::Mat3::ZERO;
+        for (j, g) in self.particle_grad.iter().enumerate() {
+            let free = self.freedom(j);
+            if free <= 0.0 {
+                continue;
+            }
+            let q = r * (self.rest_offsets[j] + self.anchor_shift[j]) - centroid;
+            torque += free * q.cross(*g - shift);
+            inertia += free
+                * (glam::Mat3::from_diagonal(Vec3::splat(q.length_squared()))
+                    - glam::Mat3::from_cols(q * q.x, q * q.y, q * q.z));
+        }
+        // Fewer than three particles free, or all on a line: no torque to take out that way.
+        let spin =
+            if inertia.determinant().abs() > 1e-12 * inertia.col(0).length().powi(3).max(1e-30) {
+                inertia.inverse() * torque
+            } else {
+                Vec3::ZERO
+            };
+        let direction = |j: usize, g: Vec3, free: f32| {
+            let q = r * (self.rest_offsets[j] + self.anchor_shift[j]) - centroid;
+            free * (g - shift - spin.cross(q))
+        };
+        // The volume gained per unit of push: the push is no longer along the gradient alone.
+        let mut norm = 0.0f32;
+        for (j, g) in self.particle_grad.iter().enumerate() {
+            let free = self.freedom(j);
+            if free > 0.0 {
+                norm += g.dot(direction(j, *g, free));
+            }
         }
         let error = volume + change - self.rest_volume_m3;
         // Within the tolerance the term does nothing: a body at rest is a little deformed
         // (its own weight), and a push every step would keep its particles from sleeping
-        // (an untouched resting body must cost one bounds query).
-        if norm <= 0.0 || !error.is_finite() || error.abs() < VOLUME_TOLERANCE * self.rest_volume_m3
+        // (an untouched resting body must cost one bounds query). A push that gains no
+        // volume once its rigid part is out (a piece held all round) is not made.
+        if norm <= 0.0
+            || !norm.is_finite()
+            || !error.is_finite()
+            || error.abs() < VOLUME_TOLERANCE * self.rest_volume_m3
         {
             return;
         }
         let beta = 1.0 - (-rate * dt).exp();
         let scale = -beta * error / (dt * norm);
         let max_dv = self.config.max_velocity_change_mps;
-        for (j, g) in self.particle_grad.iter().enumerate() {
+        for j in 0..self.particle_grad.len() {
             let free = self.freedom(j);
             if free <= 0.0 {
                 continue;
             }
-            let mut dv = *g * (scale * free);
+            let mut dv = direction(j, self.particle_grad[j], free) * scale;
             let len = dv.length();
             if len > max_dv {
                 dv *= max_dv / len;
