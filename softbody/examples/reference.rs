@@ -21,9 +21,9 @@ use std::time::Instant;
 use softsync_benchkit::plotters::style::RGBColor;
 use softsync_benchkit::{write_svg, ChartStyle, Csv, LineChart, ResultLine, Series};
 use softsync_softbody::methods::reference::{
-    energy_summary, record, reference_spec, shape_change, shape_change_profile, Recording,
-    ShapeChange, REFERENCE_CELL, REFERENCE_ITERATIONS, REFERENCE_SUBSTEPS, SAMPLE_EVERY,
-    TOLERANCE_MM,
+    energy_summary, record, reference_spec, shape_change, shape_change_profile,
+    within_tolerance_until_s, Recording, ShapeChange, REFERENCE_CELL, REFERENCE_ITERATIONS,
+    REFERENCE_SUBSTEPS, SAMPLE_EVERY, TOLERANCE_MM,
 };
 use softsync_softbody::scenario::ScenarioKind;
 use softsync_softbody::Mesh;
@@ -346,17 +346,7 @@ fn main() {
         // How long the answer stays within the tolerance sample by sample: the reference
         // against both finer rungs, and against itself nudged (the scenario's own horizon of
         // predictability: past it no refinement can pin the answer down).
-        let horizon = |profiles: &[&[f32]]| -> f64 {
-            let n = profiles.iter().map(|p| p.len()).min().unwrap_or(0);
-            let mut last = 0.0;
-            for i in 0..n {
-                if profiles.iter().any(|p| p[i] >= TOLERANCE_MM) {
-                    break;
-                }
-                last = sample_s(i);
-            }
-            last
-        };
+        let horizon = |profiles: &[&[f32]]| within_tolerance_until_s(profiles, DT);
         let converged_until = horizon(&[&t_prof, &s_prof]);
         let nudge_until = horizon(&[&n_prof]);
         let doubling = doubling_time_s(&n_prof, sample_s);

@@ -7,7 +7,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 /// The `RESULT` lines of `file` (under `out`), or none.
-fn results(out: &Path, file: &str) -> Vec<String> {
+pub(crate) fn results(out: &Path, file: &str) -> Vec<String> {
     std::fs::read_to_string(out.join(file))
         .map(|t| {
             t.lines()
@@ -24,14 +24,14 @@ fn field(line: &str, key: &str) -> Option<String> {
         .map(str::to_owned)
 }
 
-fn num(line: &str, key: &str) -> f64 {
+pub(crate) fn num(line: &str, key: &str) -> f64 {
     field(line, key)
         .and_then(|v| v.parse().ok())
         .unwrap_or(f64::NAN)
 }
 
 /// The line of `lines` whose fields include every `key=value` of `want`.
-fn find<'a>(lines: &'a [String], want: &[(&str, &str)]) -> Option<&'a String> {
+pub(crate) fn find<'a>(lines: &'a [String], want: &[(&str, &str)]) -> Option<&'a String> {
     lines
         .iter()
         .find(|l| want.iter().all(|(k, v)| field(l, k).as_deref() == Some(*v)))

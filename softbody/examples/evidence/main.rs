@@ -26,6 +26,7 @@
 mod changes;
 mod checked;
 mod stability;
+mod windows;
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -39,8 +40,8 @@ use softsync_softbody::methods::choice::{choose, pareto_front, Candidate, Object
 use softsync_softbody::methods::ispc::{ispc_links, punch_holes};
 use softsync_softbody::methods::pbd::SolverKind;
 use softsync_softbody::methods::reference::{
-    reference_spec as neo_hookean_spec, shape_change, verified_reference, REFERENCE_CELL,
-    REFERENCE_SUBSTEPS,
+    nudged, reference_spec as neo_hookean_spec, shape_change, shape_change_profile,
+    verified_reference, within_tolerance_until_s, REFERENCE_CELL, REFERENCE_SUBSTEPS,
 };
 use softsync_softbody::methods::scene::{cantilever_sag_m, ModelScene};
 use softsync_softbody::methods::{build_model, step_models, DeformableModel};
@@ -69,6 +70,39 @@ struct Point {
     verdict: &'static str,
     /// Shape RMS against the former reference (`tet c0.050 s10i10`), full runs only.
     old_rms_mm: Option<f32>,
+    /// Shape RMS and max within the scenario's predictable window (`windows.rs`), where it
+    /// was measured.
+    window: Option<(f32, f32)>,
+}
+
+/// A scenario as run: its kind, how many times slower its props move and how much of their
+/// action they do (`ModelScene::paced`), and how long it runs.
+#[derive(Clone, Copy, Debug)]
+struct Case {
+    kind: ScenarioKind,
+    pace: f32,
+    amount: f32,
+    duration_s: f32,
+}
+
+impl Case {
+    fn of(kind: ScenarioKind) -> Self {
+        Case {
+            kind,
+            pace: 1.0,
+            amount: 1.0,
+            duration_s: kind.duration_s(),
+        }
+    }
+
+    /// The scenario's own, or a variant's name (`squeeze slow`).
+    fn name(&self) -> String {
+        if self.pace == 1.0 && self.amount == 1.0 {
+            self.kind.name().to_string()
+        } else {
+            format!("{} slow", self.kind.name())
+        }
+    }
 }
 
 struct Trace {
@@ -94,15 +128,15 @@ fn cost_ms(v: &[f64]) -> f64 {
     percentile(v, 0.25)
 }
 
-fn run(kind: ScenarioKind, mesh: &Mesh, spec: &MethodSpec) -> Option<Trace> {
-    let mut s = match ModelScene::new(kind, mesh, spec, DT) {
+fn run(case: Case, mesh: &Mesh, spec: &MethodSpec) -> Option<Trace> {
+    let mut s = match ModelScene::paced(case.kind, mesh, spec, DT, case.pace, case.amount) {
         Ok(s) => s,
         Err(e) => {
             println!("  skip {}: {e}", spec.label());
             return None;
         }
     };
-    let steps = (kind.duration_s() / DT).round() as usize;
+    let steps = (case.duration_s / DT).round() as usize;
     let mut t = Trace {
         samples: Vec::new(),
         step_ms: Vec::with_capacity(steps),
@@ -200,17 +234,34 @@ struct ReferenceRow {
     label: String,
     trace: Trace,
     ms: f64,
+    /// The scenario's predictable window, seconds: how long the reference nudged (5 % more
+    /// substeps) stays within the tolerance of itself, where it was measured.
+    window_s: Option<f64>,
 }
 
+/// Every method of `specs` in `case`, scored against the reference over the whole run and,
+/// with `window`, also within the scenario's predictable window (the reference run again
+/// nudged, in the same run of the evidence).
 fn measure_curves(
-    kind: ScenarioKind,
+    case: Case,
     mesh: &Mesh,
     specs: &[MethodSpec],
     quick: bool,
+    window: bool,
 ) -> (Vec<Point>, ReferenceRow) {
+    let kind = case.kind;
     let rs = reference_spec(quick);
-    let reference = run(kind, mesh, &rs).unwrap();
+    let reference = run(case, mesh, &rs).unwrap();
     let ref_ms = cost_ms(&reference.step_ms);
+    let window_s = window.then(|| {
+        let nudge = run(case, mesh, &nudged(&rs)).unwrap();
+        let profile = shape_change_profile(&reference.samples, &nudge.samples);
+        within_tolerance_until_s(&[&profile], DT)
+    });
+    // The samples within the window (sample i is at (i + 1)·SAMPLE_EVERY·DT).
+    let window_samples = window_s.map(|w| {
+        ((w / (SAMPLE_EVERY as f64 * f64::from(DT))).round() as usize).min(reference.samples.len())
+    });
     println!(
         "  reference {} {:.1} ms/step, inverted {}, floor {:?}, {}",
         rs.label(),
@@ -219,12 +270,16 @@ fn measure_curves(
         reference.floor_hits,
         reference.verdict
     );
-    let former = (!quick).then(|| run(kind, mesh, &former_reference()).unwrap());
+    if let Some(w) = window_s {
+        println!("  predictable window (nudged reference within 0.5 mm): {w:.1} s");
+    }
+    let former = (!quick && case.pace == 1.0 && case.amount == 1.0)
+        .then(|| run(case, mesh, &former_reference()).unwrap());
     let mut out = Vec::new();
     let progress = softsync_benchkit::Progress::new(specs.len() as u64, kind.name());
     for spec in specs {
         progress.set_message(spec.label());
-        let t = run(kind, mesh, spec);
+        let t = run(case, mesh, spec);
         progress.inc();
         let Some(t) = t else {
             continue;
@@ -234,6 +289,10 @@ fn measure_curves(
         let old_rms_mm = former
             .as_ref()
             .map(|f| shape_change(&t.samples, &f.samples).rms_mm);
+        let window = window_samples.filter(|&n| n > 0).map(|n| {
+            let c = shape_change(&t.samples[..n], &reference.samples[..n]);
+            (c.rms_mm, c.max_mm)
+        });
         let label = spec.label().replace(' ', "_");
         let p = Point {
             spec: *spec,
@@ -250,6 +309,7 @@ fn measure_curves(
             max_inverted: t.max_inverted,
             verdict: t.verdict,
             old_rms_mm,
+            window,
         };
         progress.result(format_args!(
             "  {:<32} {:>6} particles {:>8.3} ms  shape rms {:>6.2} mm  max {:>6.1} mm  raw {:>6.1} mm  vol {:.3} rest {:.2} mm {}",
@@ -264,6 +324,7 @@ fn measure_curves(
             label: rs.label().replace(' ', "_"),
             trace: reference,
             ms: ref_ms,
+            window_s,
         },
     )
 }
@@ -385,6 +446,7 @@ fn main() {
         "old_reference_rms_mm",
     ]);
     let mut all: BTreeMap<&str, Vec<Point>> = BTreeMap::new();
+    let mut windowed: Vec<windows::Scored> = Vec::new();
     // The restricted soft region (thesis 3.5.2) where only one side is touched: the poke.
     let poke_region = {
         let mut m = bunny.clone();
@@ -409,7 +471,14 @@ fn main() {
                     .region(Some(poke_region)),
             );
         }
-        let (points, reference) = measure_curves(kind, &bunny, &specs, quick);
+        let (points, reference) = measure_curves(Case::of(kind), &bunny, &specs, quick, true);
+        windowed.push(windows::Scored {
+            case: Case::of(kind).name(),
+            window_s: reference.window_s.unwrap_or(0.0),
+            action_s: windows::action_s(kind, 1.0),
+            duration_s: kind.duration_s(),
+            points: points.clone(),
+        });
         let case = format!("bunny {}", kind.name());
         writeln!(md, "### {}\n\n{}\n\n![{}]({}.svg)\n\n| method | particles | ms/step | shape RMS mm | shape max mm | raw RMS mm | min vol | end vol | rest mm | max inverted tets | sane | old ref mm |\n|---|---|---|---|---|---|---|---|---|---|---|---|", kind.name(), changes::reference_note(&reference, uncertainty.get(&case), quick), kind.name(), kind.name()).unwrap();
         writeln!(md, "{}", changes::reference_row(&reference)).unwrap();
@@ -489,6 +558,23 @@ fn main() {
         all.insert(kind.name(), points);
     }
     csv.write(out.join("speed_accuracy.csv")).unwrap();
+    // The squeeze and the poke again, their props slower, so that their action fits in
+    // their predictable window (issue 33 point 2).
+    for kind in [ScenarioKind::Squeeze, ScenarioKind::Poke] {
+        let case = windows::slow(kind);
+        println!("{}:", case.name());
+        let (points, reference) = measure_curves(case, &bunny, &specs, quick, true);
+        windowed.push(windows::Scored {
+            case: case.name(),
+            window_s: reference.window_s.unwrap_or(0.0),
+            action_s: windows::action_s(kind, case.pace),
+            duration_s: case.duration_s,
+            points,
+        });
+    }
+    println!("how the windows move with the pace:");
+    let paces = windows::pace_study(&bunny, quick);
+    windows::section(&mut md, &mut results, &out, &windowed, &paces, quick);
 
     // ---- 2. The ISPC paper's FPS comparison: ISPC vs tets on the same bunny, same budget.
     writeln!(md, "## 2. ISPC against the tetrahedral model on the same bunny (the paper: 2.15× the frame rate)\n").unwrap();
@@ -513,7 +599,7 @@ fn main() {
         fine.push(MethodSpec::new(MethodKind::StrainTet).cell(c).budget(s, i));
     }
     let mut drop = all["drop"].clone();
-    drop.extend(measure_curves(ScenarioKind::Drop, &bunny, &fine, quick).0);
+    drop.extend(measure_curves(Case::of(ScenarioKind::Drop), &bunny, &fine, quick, false).0);
     for p in drop.iter().filter(|p| p.spec.kind == MethodKind::Ispc) {
         for q in drop.iter().filter(|q| {
             matches!(q.spec.kind, MethodKind::Tet | MethodKind::StrainTet)
@@ -685,7 +771,13 @@ fn main() {
         .filter(|s| s.kind != MethodKind::RapierNative)
         .collect();
     println!("drop (icosphere) for the choice:");
-    let (ico_points, _) = measure_curves(ScenarioKind::Drop, &ico, &choice_specs, quick);
+    let (ico_points, _) = measure_curves(
+        Case::of(ScenarioKind::Drop),
+        &ico,
+        &choice_specs,
+        quick,
+        false,
+    );
     let ico_drop_points = ico_points.clone();
     let drop_ico = candidates(&ico_points);
     let objects = vec![

@@ -73,8 +73,21 @@ pub fn record(
     spec: &MethodSpec,
     dt_s: f32,
 ) -> Result<Recording, SoftBodyError> {
-    let mut s = ModelScene::new(kind, mesh, spec, dt_s)?;
-    let steps = (kind.duration_s() / dt_s).round() as usize;
+    record_paced(kind, mesh, spec, dt_s, (1.0, 1.0), kind.duration_s())
+}
+
+/// [`record`] of the scenario with its props `pace` times slower doing `amount` of their
+/// action (`(pace, amount)`, [`ModelScene::paced`]), for `duration_s` seconds.
+pub fn record_paced(
+    kind: ScenarioKind,
+    mesh: &Mesh,
+    spec: &MethodSpec,
+    dt_s: f32,
+    (pace, amount): (f32, f32),
+    duration_s: f32,
+) -> Result<Recording, SoftBodyError> {
+    let mut s = ModelScene::paced(kind, mesh, spec, dt_s, pace, amount)?;
+    let steps = (duration_s / dt_s).round() as usize;
     let mut r = Recording {
         min_volume: f32::MAX,
         max_volume: f32::MIN,
@@ -101,6 +114,31 @@ pub fn record(
     }
     r.floor_hits = s.model.volume_floor_hits();
     Ok(r)
+}
+
+/// The last sample time, seconds, up to which every profile (a shape change per sample,
+/// [`shape_change_profile`], samples every [`SAMPLE_EVERY`] steps of `dt_s`) stays below
+/// [`TOLERANCE_MM`]: 0 if the first sample already does not. Of the reference against itself
+/// with the step changed by 5 %, it is the scenario's predictable window: past it no
+/// refinement pins the answer down.
+pub fn within_tolerance_until_s(profiles: &[&[f32]], dt_s: f32) -> f64 {
+    let n = profiles.iter().map(|p| p.len()).min().unwrap_or(0);
+    let mut last = 0.0;
+    for i in 0..n {
+        if profiles.iter().any(|p| p[i] >= TOLERANCE_MM) {
+            break;
+        }
+        last = (i + 1) as f64 * SAMPLE_EVERY as f64 * f64::from(dt_s);
+    }
+    last
+}
+
+/// The reference nudged: the same spec with 5 % more substeps (84 for 80), the change of the
+/// step whose effect [`within_tolerance_until_s`] measures.
+pub fn nudged(spec: &MethodSpec) -> MethodSpec {
+    let mut s = *spec;
+    s.params.substeps += (s.params.substeps / 20).max(1);
+    s
 }
 
 /// How far apart two recordings of the same surface are, millimetres.

@@ -15,6 +15,13 @@
 //!   reaction force and the bulge (the mean x-displacement of the face x = side). The
 //!   deformation is homogeneous, so every mesh has the exact answer: this checks the material
 //!   and the solver, not the discretization.
+//! - **indent**: a slab [`SLAB_M`] thick (E = [`SLAB_YOUNG_PA`], no gravity), a quarter of a
+//!   wider one (symmetry planes x = 0 and z = 0, its base y = 0 clamped), indented by a rigid
+//!   frictionless sphere of radius [`INDENTER_R_M`] centred above the origin, by a depth d.
+//!   Contact is nodal (no node inside the sphere). The answer: the sphere's reaction, N (× 4:
+//!   the whole sphere), against d; at small depth Hertz's `F = 4/3 · E/(1 − ν²) · √R · d^{3/2}`
+//!   holds for a half-space, which the slab (contact radius up to a fifth of its thickness,
+//!   clamped base) only approaches.
 //! - **bunny**: the Stanford bunny ([`BUNNY_SIZE_M`]) as our reference meshes it — a Kuhn
 //!   lattice of cells `cell_frac` × its size, each tet weighted by the fraction of it inside
 //!   the surface (stiffness and mass alike) — its base (the nodes within [`BUNNY_BASE_FRAC`]
@@ -27,7 +34,7 @@ use glam::Vec3;
 use rapier3d::prelude::PhysicsWorld;
 
 use crate::methods::pbd::{
-    tet_volume, NeoHookeanGroup, PbdBody, PbdParams, Slide, SolverKind, SurfaceMap,
+    tet_volume, NeoHookeanGroup, PbdBody, PbdParams, Slide, SolverKind, SphereObstacle, SurfaceMap,
 };
 
 /// Poisson's ratio of every static problem (the FEM script's too).
@@ -41,6 +48,19 @@ pub const BEAM_M: Vec3 = Vec3::new(0.16, 0.04, 0.04);
 pub const CUBE_M: f32 = 0.04;
 /// The compression's Young's modulus, Pa.
 pub const CUBE_YOUNG_PA: f32 = 2e5;
+
+/// The indented slab's side (a quarter block: x, y, z in [0, side]), metres.
+pub const SLAB_M: f32 = 0.03;
+/// The indented slab's Young's modulus, Pa.
+pub const SLAB_YOUNG_PA: f32 = 1e5;
+/// The indenter's radius, metres.
+pub const INDENTER_R_M: f32 = 0.01;
+
+/// Hertz's force, N, of a rigid sphere of radius `r_m` pressed `depth_m` into an elastic
+/// half-space of Young's modulus `young_pa` and Poisson's ratio `nu`.
+pub fn hertz_force_n(young_pa: f32, nu: f32, r_m: f32, depth_m: f32) -> f32 {
+    4.0 / 3.0 * young_pa / (1.0 - nu * nu) * r_m.sqrt() * depth_m.max(0.0).powf(1.5)
+}
 
 /// The bunny's size (largest extent), metres.
 pub const BUNNY_SIZE_M: f32 = 0.2;
@@ -295,6 +315,106 @@ pub fn compress_cube(k: usize, strains: &[f32], solve: StaticSolve) -> Vec<Compr
             strain: s,
             force_n: force,
             bulge_mm: bulge_mm(&b),
+            inverted: b.count_inverted(),
+            solve: StaticAnswer {
+                value: force,
+                steps: steps + RAMP_STEPS,
+                max_speed_mps: max_speed,
+                nodes: x.len(),
+                tets: n_tets,
+            },
+        });
+    }
+    out
+}
+
+/// The indentation's answer at one depth.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Indentation {
+    /// The depth d, mm.
+    pub depth_mm: f32,
+    /// The sphere's reaction, N, for the whole sphere (4 × the quarter model's).
+    pub force_n: f32,
+    /// Hertz's force at this depth, N.
+    pub hertz_n: f32,
+    /// The largest distance from the axis of a node touching the sphere, mm.
+    pub contact_radius_mm: f32,
+    /// Tets turned inside out at the end.
+    pub inverted: usize,
+    /// The solve at this depth (its `value` is the force).
+    pub solve: StaticAnswer,
+}
+
+/// The indentation ([`SLAB_M`], E = [`SLAB_YOUNG_PA`], `k`³ cells) at each of `depths_mm`,
+/// in order: the sphere moves to the next depth over a quarter second, then the body settles
+/// (on the force). The base is pinned, the symmetry planes are [`Slide`]s, the sphere a
+/// [`SphereObstacle`]; the force is the sum of the elastic forces' y over the nodes touching
+/// it ([`NeoHookeanGroup::elastic_forces`]: at rest each is what the sphere holds back).
+pub fn indent_slab(k: usize, depths_mm: &[f32], solve: StaticSolve) -> Vec<Indentation> {
+    let (x, tets) = box_tets(Vec3::splat(SLAB_M), [k, k, k]);
+    let n_tets = tets.len();
+    let mut b = static_body("slab", &x, tets, &vec![1.0; n_tets], SLAB_YOUNG_PA, solve);
+    let on = |i: usize, axis: usize, at: f32| (x[i][axis] - at).abs() < 1e-7;
+    let base: Vec<u32> = (0..x.len() as u32)
+        .filter(|&i| on(i as usize, 1, 0.0))
+        .collect();
+    b.pin_nodes(&base);
+    for i in 0..x.len() {
+        for axis in [0u8, 2] {
+            if on(i, usize::from(axis), 0.0) {
+                b.slides.push(Slide {
+                    node: i as u32,
+                    axis,
+                    at_m: 0.0,
+                });
+            }
+        }
+    }
+    let centre = |depth_m: f32| Vec3::new(0.0, SLAB_M + INDENTER_R_M - depth_m, 0.0);
+    b.spheres.push(SphereObstacle {
+        center_m: centre(0.0),
+        radius_m: INDENTER_R_M,
+    });
+    let touching = |b: &PbdBody| -> Vec<usize> {
+        let c = b.spheres[0].center_m;
+        (0..x.len())
+            .filter(|&i| b.positions()[i].distance(c) < INDENTER_R_M * (1.0 + 1e-4))
+            .collect()
+    };
+    let mut forces = Vec::new();
+    let mut force_n = move |b: &PbdBody| {
+        let Some(g) = &b.neo_hookean else {
+            return f32::NAN;
+        };
+        g.elastic_forces(b.positions(), &mut forces);
+        4.0 * touching(b).iter().map(|&i| forces[i].y).sum::<f32>()
+    };
+    let world = PhysicsWorld::new();
+    let mut out = Vec::with_capacity(depths_mm.len());
+    let mut at = 0.0f32;
+    const RAMP_STEPS: usize = 15;
+    for &d in depths_mm {
+        let goal = d * 1e-3;
+        for r in 1..=RAMP_STEPS {
+            b.spheres[0].center_m = centre(at + (goal - at) * r as f32 / RAMP_STEPS as f32);
+            b.step(&world, 1.0 / 60.0);
+        }
+        at = goal;
+        let (steps, max_speed) = settle(&mut b, &world, solve, &mut force_n);
+        let force = force_n(&b);
+        let contact_radius_mm = 1000.0
+            * touching(&b)
+                .iter()
+                .map(|&i| {
+                    let p = b.positions()[i];
+                    (p.x * p.x + p.z * p.z).sqrt()
+                })
+                .fold(0.0f32, f32::max);
+        out.push(Indentation {
+            depth_mm: d,
+            force_n: force,
+            hertz_n: hertz_force_n(SLAB_YOUNG_PA, NU, INDENTER_R_M, goal),
+            contact_radius_mm,
             inverted: b.count_inverted(),
             solve: StaticAnswer {
                 value: force,

@@ -121,6 +121,17 @@ pub struct Slide {
     pub at_m: f32,
 }
 
+/// A rigid frictionless sphere no particle may enter: each one inside is moved out along the
+/// radius, projected with the other constraints at every iteration. An indenter; move
+/// `center_m` to move it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SphereObstacle {
+    /// Its centre, metres.
+    pub center_m: Vec3,
+    /// Its radius, metres.
+    pub radius_m: f32,
+}
+
 /// A position-based body: particles, constraint groups, a surface, contacts with the world.
 #[derive(Clone, Debug)]
 pub struct PbdBody {
@@ -166,6 +177,9 @@ pub struct PbdBody {
     /// Particles held on frictionless planes (a plate, a symmetry plane), projected with the
     /// other constraints at every iteration.
     pub slides: Vec<Slide>,
+    /// Rigid frictionless spheres the particles stay out of, projected with the other
+    /// constraints at every iteration (an indenter).
+    pub spheres: Vec<SphereObstacle>,
     /// What the last step's contacts did to each near collider, and which they were.
     reactions: Vec<Reaction>,
     reaction_targets: Vec<(ColliderHandle, Option<RigidBodyHandle>)>,
@@ -217,6 +231,7 @@ impl PbdBody {
             pin_surface: false,
             held: Vec::new(),
             slides: Vec::new(),
+            spheres: Vec::new(),
             reactions: Vec::new(),
             reaction_targets: Vec::new(),
             collider_inv_mass: Vec::new(),
@@ -459,6 +474,18 @@ impl PbdBody {
             let i = s.node as usize;
             if self.inv_mass.get(i).is_some_and(|w| *w > 0.0) && s.at_m.is_finite() {
                 self.x[i][usize::from(s.axis.min(2))] = s.at_m;
+            }
+        }
+        for o in &self.spheres {
+            if !(o.center_m.is_finite() && o.radius_m.is_finite() && o.radius_m > 0.0) {
+                continue;
+            }
+            for (x, w) in self.x.iter_mut().zip(&self.inv_mass) {
+                let d = *x - o.center_m;
+                let len = d.length();
+                if *w > 0.0 && len < o.radius_m && len > 0.0 {
+                    *x = o.center_m + d * (o.radius_m / len);
+                }
             }
         }
     }
