@@ -126,7 +126,7 @@ fn main() {
                 .fixed("cost_ratio", c / o, 2),
         );
     }
-    writeln!(md, "\nThe coupling gives back linear momentum only: given back after the step, the contacts' torque (the box's rotation not followed within the step, as its translation is) gained energy with every substep and threw a resting box off at 8 substeps and more, so it is left out — a box on a slope is not tipped by the body it rests on. On the surface-only model the box dents the hollow shell but rests; at 2 substeps the shell collapses under it.\n").unwrap();
+    writeln!(md, "\nThe coupling gives back momentum and angular momentum: each contact push moves and turns the box by its inverse mass and inertia at the contact point, within the step, so later substeps see it moved and turned (given back only after the step, the torque gained energy with every substep and threw a resting box off at 8 substeps and more — the reason an earlier version left it out). A soft cube dropped on a hinged lever turns it as a rigid cube of its mass does (`tests/coupling.rs`). On the surface-only model the box dents the hollow shell but rests; at 2 substeps the shell collapses under it.\n").unwrap();
     let lines: Vec<String> = results.iter().map(ResultLine::to_string).collect();
     writeln!(md, "```\n{}\n```", lines.join("\n")).unwrap();
     std::fs::write(out.join("coupling.md"), md).unwrap();

@@ -2,7 +2,7 @@
 //! collide (surface points, and an embedded surface's tet nodes), and pushing them out of the
 //! colliders with a swept ray (no wall is crossed within a substep) and Coulomb friction.
 
-use glam::Vec3;
+use glam::{Mat3, Quat, Vec3};
 use parry3d::math::Pose;
 use parry3d::query::Ray;
 use parry3d::shape::Shape;
@@ -18,6 +18,10 @@ pub(super) struct NearCollider<'a> {
     pub(super) dynamic_body: Option<RigidBodyHandle>,
     /// Its inverse mass in the contacts (0: immovable).
     pub(super) inv_mass: f32,
+    /// Its world inverse inertia in the contacts (zero: it does not turn).
+    pub(super) inv_inertia: Mat3,
+    /// Its centre of mass now, world.
+    pub(super) com: Vec3,
     pose: Pose,
     /// How far a moving (dynamic or kinematic) body's collider moved in the rapier step just taken: the substeps
     /// see it move there gradually (at the start of the step it was `lag` behind), so a body
@@ -54,6 +58,22 @@ pub(super) fn near_colliders(
                 Some((_, b)) if sweep_dynamic && b.mass() > 0.0 => 1.0 / b.mass(),
                 _ => 0.0,
             };
+            // A coupled body turns under the contacts as it moves under them: its world
+            // inverse inertia (zero for a body that may not rotate, or is not coupled).
+            let inv_inertia = match dynamic {
+                Some((_, b)) if inv_mass > 0.0 && !b.is_rotation_locked().iter().any(|l| *l) => {
+                    let mp = &b.mass_properties().local_mprops;
+                    let r = Mat3::from_quat(*b.rotation());
+                    let m = r * mp.reconstruct_inverse_inertia_matrix() * r.transpose();
+                    if m.is_finite() {
+                        m
+                    } else {
+                        Mat3::ZERO
+                    }
+                }
+                _ => Mat3::ZERO,
+            };
+            let com = parent.map_or(co.position().translation, |(_, b)| b.center_of_mass());
             // A moving prop (kinematic) is swept too: seen at its end-of-step pose by every
             // substep it would jump its whole step's travel at the first one and the body
             // would take that jump as a velocity of travel / h — energy that grew with the
@@ -68,6 +88,8 @@ pub(super) fn near_colliders(
                 handle,
                 dynamic_body,
                 inv_mass,
+                inv_inertia,
+                com,
                 lag,
                 pose: *co.position(),
                 shape: co.shape(),
@@ -87,8 +109,8 @@ pub(super) struct Contact {
     point: u32,
     /// The near collider that pushed it most.
     collider: u32,
-    /// Where that collider had been moved by the contacts when the half-space was made: the
-    /// half-space moves on with it.
+    /// Where that collider had moved the plane's point by the contacts when the half-space
+    /// was made: the half-space moves on with it.
     moved_at: Vec3,
     /// Outward normal of the half-space.
     normal: Vec3,
@@ -114,9 +136,29 @@ pub(super) struct ContactPoints<'a> {
     pub(super) nodes: Option<&'a [u32]>,
     /// What the contacts did to each near collider this step.
     pub(super) reactions: &'a mut [Reaction],
-    /// Each near collider's inverse mass in the contacts (a dynamic body's when coupled, else 0:
-    /// immovable).
-    pub(super) collider_inv_mass: &'a [f32],
+    /// Each near collider's inertia in the contacts (a dynamic body's when coupled, else
+    /// zero: immovable).
+    pub(super) collider_inertia: &'a [ColliderInertia],
+}
+
+/// A near collider's inertia in the contacts: its inverse mass and world inverse inertia
+/// (zero: immovable, or it does not turn) and its centre of mass at the end of the rapier
+/// step, world.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct ColliderInertia {
+    pub(super) inv_mass: f32,
+    pub(super) inv_inertia: Mat3,
+    pub(super) com: Vec3,
+}
+
+impl ColliderInertia {
+    pub(super) fn of(c: &NearCollider<'_>) -> Self {
+        ColliderInertia {
+            inv_mass: c.inv_mass,
+            inv_inertia: c.inv_inertia,
+            com: c.com,
+        }
+    }
 }
 
 /// What the body's contacts did to one near collider over a step: the impulse they gave it
@@ -133,22 +175,49 @@ pub struct Reaction {
     pub shift: Vec3,
     /// How far it travelled within the step at the velocity those pushes gave it.
     pub drift: Vec3,
+    /// How far the contacts turned a coupled collider during the step (a rotation vector,
+    /// about its centre of mass), and how far it turned within the step at the spin they gave
+    /// it: `shift` and `drift`'s angular twins.
+    pub turn: Vec3,
+    /// See `turn`.
+    pub turn_drift: Vec3,
     /// Its velocity change so far (the pushes of earlier substeps over their substep).
     dv: Vec3,
+    /// Its angular velocity change so far.
+    dw: Vec3,
     /// `shift` at the start of the substep.
     shift_before: Vec3,
+    /// `turn` at the start of the substep.
+    turn_before: Vec3,
 }
 
 impl Reaction {
     /// Start of a substep of `h`: the collider moves on at its changed velocity.
     pub(super) fn advance(&mut self, h: f32) {
         self.drift += self.dv * h;
+        self.turn_drift += self.dw * h;
         self.shift_before = self.shift;
+        self.turn_before = self.turn;
     }
 
     /// End of a substep of `h`: this substep's pushes become velocity (XPBD's `v = Δx / h`).
     pub(super) fn close_substep(&mut self, h: f32) {
         self.dv += (self.shift - self.shift_before) / h;
+        self.dw += (self.turn - self.turn_before) / h;
+    }
+
+    /// The whole rotation the contacts gave the collider so far this step.
+    pub fn rotation(&self) -> Quat {
+        Quat::from_scaled_axis(self.turn + self.turn_drift)
+    }
+
+    /// How far the contacts moved the collider's point that was at `p` (world, as the collider
+    /// is at the end of the rapier step; `com` its centre of mass there): its shift and drift,
+    /// and its turn about its centre of mass.
+    pub(super) fn moved(&self, p: Vec3, com: Vec3) -> Vec3 {
+        let c = com + self.shift + self.drift;
+        let arm = p + self.shift + self.drift - c;
+        self.shift + self.drift + (self.rotation() * arm - arm)
     }
 }
 
@@ -207,11 +276,12 @@ impl ContactPoints<'_> {
         }
     }
 
-    /// How far the contacts have moved near collider `k` so far this step.
-    fn collider_moved(&self, k: usize) -> Vec3 {
+    /// How far the contacts have moved near collider `k`'s point at `p` so far this step.
+    fn collider_moved(&self, k: usize, p: Vec3) -> Vec3 {
+        let com = self.collider_inertia.get(k).map_or(p, |i| i.com);
         self.reactions
             .get(k)
-            .map_or(Vec3::ZERO, |r| r.shift + r.drift)
+            .map_or(Vec3::ZERO, |r| r.moved(p, com))
     }
 
     /// Splits a push `d` of contact point `c` (at `at`) out of near collider `k` by inverse
@@ -220,9 +290,25 @@ impl ContactPoints<'_> {
     /// Returns the point's move.
     fn split(&mut self, k: usize, c: usize, at: Vec3, d: Vec3, h: f32) -> Vec3 {
         let wp = self.inverse_mass(c);
-        let wb = self.collider_inv_mass.get(k).copied().unwrap_or(0.0);
+        let inertia = self.collider_inertia.get(k).copied();
         let Some(r) = self.reactions.get_mut(k) else {
             return d;
+        };
+        // The collider's inverse mass at `at` along the push: translation and turn (its arm
+        // from the centre of mass as the contacts have moved it so far).
+        let n = d.normalize_or_zero();
+        let (wb, arm, inv_inertia, inv_mass) = match inertia {
+            Some(i) if i.inv_mass > 0.0 => {
+                let arm = at - (i.com + r.shift + r.drift);
+                let rn = arm.cross(n);
+                (
+                    i.inv_mass + rn.dot(i.inv_inertia * rn),
+                    arm,
+                    i.inv_inertia,
+                    i.inv_mass,
+                )
+            }
+            _ => (0.0, Vec3::ZERO, Mat3::ZERO, 0.0),
         };
         let share = if wb > 0.0 && wp > 0.0 {
             wp / (wp + wb)
@@ -230,7 +316,12 @@ impl ContactPoints<'_> {
             1.0
         };
         let moved = d * share;
-        r.shift -= d - moved;
+        if wb > 0.0 {
+            // The positional impulse that moves the collider's point by `−(d − moved)`.
+            let p = -(d - moved) / wb;
+            r.shift += p * inv_mass;
+            r.turn += inv_inertia * arm.cross(p);
+        }
         if wp > 0.0 {
             let j = -moved / (wp * h);
             r.impulse += j;
@@ -267,7 +358,7 @@ impl ContactPoints<'_> {
                     contacts.push(Contact {
                         point: c as u32,
                         collider,
-                        moved_at: self.collider_moved(collider as usize),
+                        moved_at: self.collider_moved(collider as usize, target),
                         normal: n,
                         on_plane: target,
                     });
@@ -286,7 +377,7 @@ impl ContactPoints<'_> {
             on_plane: q,
         } in contacts
         {
-            let q = q + self.collider_moved(collider as usize) - moved_at;
+            let q = q + self.collider_moved(collider as usize, q) - moved_at;
             let (p, _, _) = self.point(i as usize);
             let c = n.dot(p - q);
             if c < 0.0 {
@@ -337,8 +428,13 @@ fn resolve_point(
     let mut moved = false;
     for (k, c) in near.iter().enumerate() {
         let back = c.lag * (1.0 - at) - reactions.get(k).map_or(Vec3::ZERO, |r| r.shift + r.drift);
-        let lo = q.min(p0) - Vec3::splat(r);
-        let hi = q.max(p0) + Vec3::splat(r);
+        // A turned collider sweeps further than its bounds: grow them by its turn's reach.
+        let reach = reactions.get(k).map_or(0.0, |r| {
+            (r.turn + r.turn_drift).length()
+                * ((c.aabb_hi - c.aabb_lo).length() + c.com.distance(c.pose.translation))
+        });
+        let lo = q.min(p0) - Vec3::splat(r + reach);
+        let hi = q.max(p0) + Vec3::splat(r + reach);
         if lo.cmpgt(c.aabb_hi - back.min(Vec3::ZERO)).any()
             || hi.cmplt(c.aabb_lo - back.max(Vec3::ZERO)).any()
         {
@@ -346,6 +442,15 @@ fn resolve_point(
         }
         let mut pose = c.pose;
         pose.translation -= back;
+        if let Some(r) = reactions.get(k) {
+            let turn = r.rotation();
+            if turn != Quat::IDENTITY {
+                // Turned about its centre of mass, moved as the pose is.
+                let com = c.com - back;
+                pose.rotation = turn * pose.rotation;
+                pose.translation = com + turn * (pose.translation - com);
+            }
+        }
         let c = NearCollider { pose, ..*c };
         let before = q;
         // Sweep: a point that was outside and is now past the surface stops at the entry.

@@ -19,12 +19,13 @@ mod neohookean;
 mod strain;
 mod surface;
 
-use glam::Vec3;
+use glam::{Quat, Vec3};
 use rapier3d::prelude::{Aabb, ColliderHandle, PhysicsWorld, QueryFilter, RigidBodyHandle};
 
 use crate::methods::model::DeformableModel;
 use constraints::{inverse_or_zero, Sweep};
 pub use constraints::{tet_volume, BendingGroup, DistanceGroup, ShapeClusters, VolumeGroup};
+use contacts::ColliderInertia;
 pub use contacts::Reaction;
 use contacts::{near_colliders, Contact, ContactPoints};
 pub use neohookean::NeoHookeanGroup;
@@ -64,7 +65,8 @@ pub struct PbdParams {
     pub sleep_after_s: f32,
     /// Two-way coupling: the momentum the body's contacts take from a dynamic rapier body's
     /// collider is given back to that body after the step (a box dropped on the body rests on
-    /// it; linear momentum only, see [`PbdBody::push_back`]). Fixed and kinematic colliders are not moved either way. Default on; the
+    /// it, a lever it falls on turns; its momentum and angular momentum, see
+    /// [`PbdBody::push_back`]). Fixed and kinematic colliders are not moved either way. Default on; the
     /// scenarios' props are all fixed or kinematic, so no figure changes with it.
     #[serde(default = "two_way_default")]
     pub two_way: bool,
@@ -183,7 +185,7 @@ pub struct PbdBody {
     /// What the last step's contacts did to each near collider, and which they were.
     reactions: Vec<Reaction>,
     reaction_targets: Vec<(ColliderHandle, Option<RigidBodyHandle>)>,
-    collider_inv_mass: Vec<f32>,
+    collider_inertia: Vec<ColliderInertia>,
     last_dt_s: f32,
     surface_map: SurfaceMap,
     surface: Vec<Vec3>,
@@ -234,7 +236,7 @@ impl PbdBody {
             spheres: Vec::new(),
             reactions: Vec::new(),
             reaction_targets: Vec::new(),
-            collider_inv_mass: Vec::new(),
+            collider_inertia: Vec::new(),
             last_dt_s: 0.0,
             surface_map,
             surface: Vec::new(),
@@ -321,7 +323,7 @@ impl PbdBody {
         };
         self.reactions.clear();
         self.reaction_targets.clear();
-        self.collider_inv_mass.clear();
+        self.collider_inertia.clear();
         self.last_dt_s = dt;
         if self.sleeping {
             if self.intruder(world) {
@@ -342,8 +344,8 @@ impl PbdBody {
         self.reactions.resize(near.len(), Reaction::default());
         self.reaction_targets
             .extend(near.iter().map(|c| (c.handle, c.dynamic_body)));
-        self.collider_inv_mass
-            .extend(near.iter().map(|c| c.inv_mass));
+        self.collider_inertia
+            .extend(near.iter().map(ColliderInertia::of));
         let damp = (-self.params.damping_per_s.max(0.0) * h).exp();
         for sub in 0..substeps {
             let at = (sub + 1) as f32 / substeps as f32;
@@ -501,7 +503,7 @@ impl PbdBody {
                 radius_m: self.params.contact_radius_m,
                 nodes: self.colliding_nodes.as_deref(),
                 reactions: &mut self.reactions,
-                collider_inv_mass: &self.collider_inv_mass,
+                collider_inertia: &self.collider_inertia,
             },
             &mut self.contacts,
         )
@@ -519,8 +521,12 @@ impl PbdBody {
     }
 
     /// Gives the last step's contact momentum back to the dynamic bodies it came from (the
-    /// other half of two-way coupling; see [`PbdParams::two_way`]): its linear impulse and
-    /// displacement, not its torque.
+    /// other half of two-way coupling; see [`PbdParams::two_way`]): its impulse and the
+    /// impulse's moment about the body's centre of mass, and the motion and turn the contacts
+    /// gave it within the step, so it ends the step where they left it. The turn is followed
+    /// within the step as the motion is (each push moves and turns the collider by its
+    /// inverse mass and inertia at the contact point): given back only after the step, it
+    /// gained energy with every substep and threw a resting box off (measured, before).
     pub fn push_back(&self, world: &mut PhysicsWorld) {
         if !self.params.two_way {
             return;
@@ -532,17 +538,25 @@ impl PbdBody {
             if r.impulse == Vec3::ZERO || !r.impulse.is_finite() || !r.moment.is_finite() {
                 continue;
             }
-            // Linear only: the contacts' torque is not given back. Given back after the step
-            // without the rotation it causes being followed within the step (as the
-            // translation is), it gained energy with every substep and threw a resting box off
-            // at 8 substeps and more (measured).
+            let com = b.center_of_mass();
             b.apply_impulse(r.impulse, true);
+            let torque = r.moment - com.cross(r.impulse);
+            if torque.is_finite() && !b.is_rotation_locked().iter().any(|l| *l) {
+                b.apply_torque_impulse(torque, true);
+            }
             // Its share of the pushes and the motion they gave it within the step, so it ends
-            // the step where the contacts left it.
+            // the step where the contacts left it: moved, and turned about its centre of mass.
             let moved = r.shift + r.drift;
-            if moved.is_finite() && moved != Vec3::ZERO {
-                let at = b.translation() + moved;
-                b.set_translation(at, true);
+            let turn = r.rotation();
+            if moved.is_finite()
+                && turn.is_finite()
+                && (moved != Vec3::ZERO || turn != Quat::IDENTITY)
+            {
+                let mut pose = *b.position();
+                let c = com + moved;
+                pose.translation = c + turn * (pose.translation + moved - c);
+                pose.rotation = (turn * pose.rotation).normalize();
+                b.set_position(pose, true);
             }
         }
     }
