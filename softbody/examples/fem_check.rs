@@ -1,5 +1,8 @@
-//! Our reference against an independent FEM code (scikit-fem, `scripts/fem-reference`) on the
-//! static cantilever, whose answer is unique: see `softsync_softbody::methods::statics`.
+//! Our reference against an independent FEM code (scikit-fem, `scripts/fem-reference`) on
+//! static problems whose answer is unique — the cantilever, the compression, the indentation
+//! (and, with `--bunny-export`, the bunny): see `softsync_softbody::methods::statics`.
+//! `-- --indent K SUBSTEPS [K SUBSTEPS …]` runs only the indentation at those levels and
+//! prints its lines (it reads `indent.csv`, written by `scripts/fem-reference --indent`).
 //!
 //! `cargo run --release -p softsync-softbody --example fem_check [-- --quick]`
 //!
@@ -16,7 +19,7 @@ use std::collections::BTreeMap;
 
 use softsync_benchkit::{Csv, ResultLine};
 use softsync_softbody::methods::statics::{
-    self, bunny_mesh, bunny_sag, cantilever_tip_mm, compress_cube, StaticSolve,
+    self, bunny_mesh, bunny_sag, cantilever_tip_mm, compress_cube, indent_slab, StaticSolve,
 };
 
 /// (problem, quantity, case, element, level) → (value, change_pct)
@@ -91,17 +94,120 @@ fn bunny_export(args: &[String]) {
     );
 }
 
-fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    if args.first().map(String::as_str) == Some("--bunny-export") {
-        bunny_export(&args[1..]);
-        return;
+/// The FEM's indentation answers (`indent.csv`, written by `scripts/fem-reference --indent`):
+/// (law, element, k, depth mm) → force N. Columns are found by their names.
+fn read_indent(path: &str) -> BTreeMap<(String, String, u32, String), f64> {
+    let text = std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("{path}: {e} (run scripts/fem-reference --indent)"));
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+    let col = |name: &str| {
+        header
+            .iter()
+            .position(|h| *h == name)
+            .unwrap_or_else(|| panic!("{path}: no column {name}"))
+    };
+    let (law, element, k, d, f) = (
+        col("law"),
+        col("element"),
+        col("k"),
+        col("d_mm"),
+        col("force_n"),
+    );
+    let mut t = BTreeMap::new();
+    for line in lines {
+        let c: Vec<&str> = line.split(',').collect();
+        let (Some(Ok(level)), Some(Ok(depth)), Some(Ok(force))) = (
+            c.get(k).map(|v| v.parse::<u32>()),
+            c.get(d).map(|v| v.parse::<f64>()),
+            c.get(f).map(|v| v.parse::<f64>()),
+        ) else {
+            continue;
+        };
+        t.insert(
+            (
+                c[law].to_string(),
+                c[element].to_string(),
+                level,
+                format!("{depth}"),
+            ),
+            force,
+        );
     }
-    let quick = std::env::args().any(|a| a == "--quick");
-    let dir = "docs/results/methods/fem";
-    let fem = read_fem(&format!("{dir}/fem.csv"));
-    let levels: &[usize] = if quick { &[2, 4] } else { &[2, 4, 8] };
-    let mut csv = Csv::new(&[
+    t
+}
+
+/// The indentation: ours at `levels` (k, substeps) against the FEM's finest quadratic level
+/// (the converged answer, with its change from the level before) and its linear tets at the
+/// same level (the same discretization), and Hertz's half-space answer.
+fn indentation(dir: &str, levels: &[(usize, u32)], lines: &mut Vec<String>, csv: &mut Csv) {
+    let fem = read_indent(&format!("{dir}/indent.csv"));
+    let depths = [0.25f32, 0.5, 1.0, 2.0, 4.0];
+    for &(k, substeps) in levels {
+        let solve = StaticSolve {
+            substeps,
+            ..StaticSolve::default()
+        };
+        for a in indent_slab(k, &depths, solve) {
+            let d = format!("{}", f64::from(a.depth_mm));
+            let at = |element: &str, level: u32| {
+                fem.get(&("snh".to_string(), element.to_string(), level, d.clone()))
+                    .copied()
+            };
+            let mut p2: Vec<u32> = fem
+                .keys()
+                .filter(|key| key.0 == "snh" && key.1 == "P2" && key.3 == d)
+                .map(|key| key.2)
+                .collect();
+            p2.sort_unstable();
+            let (Some(&finest), prev) = (p2.last(), p2.iter().rev().nth(1)) else {
+                panic!("no P2 indentation answer at d = {d} mm in {dir}/indent.csv");
+            };
+            let converged = at("P2", finest).unwrap_or(f64::NAN);
+            let change = prev
+                .and_then(|&l| at("P2", l))
+                .map_or(f64::NAN, |p| 100.0 * (converged - p) / p);
+            let p1 = at("P1", k as u32);
+            let ours = f64::from(a.force_n);
+            let diff = 100.0 * (ours - converged) / converged;
+            let diff_p1 = p1.map_or(f64::NAN, |p| 100.0 * (ours - p) / p);
+            let line = ResultLine::new("reference.fem")
+                .field("problem", "indent")
+                .field("quantity", "force_n")
+                .field("case", format!("d={d}mm"))
+                .field("level", k)
+                .fixed("fem", converged, 4)
+                .fixed("fem_change_pct", change, 2)
+                .field("fem_level", finest)
+                .fixed("ours", ours, 4)
+                .fixed("diff_pct", diff, 1)
+                .fixed("fem_p1", p1.unwrap_or(f64::NAN), 4)
+                .fixed("diff_p1_pct", diff_p1, 1)
+                .fixed("hertz", f64::from(a.hertz_n), 4)
+                .field("budget", format!("s{substeps}i{}", solve.iterations))
+                .field("steps", a.solve.steps)
+                .fixed("contact_radius_mm", f64::from(a.contact_radius_mm), 2)
+                .field("inverted", a.inverted);
+            println!("{line}");
+            lines.push(line.to_string());
+            csv.row([
+                format!("indent force_n d={d}mm s{substeps}i{}", solve.iterations),
+                k.to_string(),
+                a.solve.nodes.to_string(),
+                a.solve.steps.to_string(),
+                format!("{ours:.5}"),
+                p1.map_or(String::new(), |p| format!("{p:.5}")),
+                format!("{converged:.5}"),
+                format!("{diff_p1:.2}"),
+                format!("{diff:.2}"),
+            ]);
+        }
+    }
+}
+
+/// `ours.csv`: one row per problem, case and level.
+fn ours_csv() -> Csv {
+    Csv::new(&[
         "case",
         "level",
         "nodes",
@@ -111,7 +217,31 @@ fn main() {
         "fem",
         "diff_p1_pct",
         "diff_pct",
-    ]);
+    ])
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.first().map(String::as_str) == Some("--bunny-export") {
+        bunny_export(&args[1..]);
+        return;
+    }
+    let quick = std::env::args().any(|a| a == "--quick");
+    let dir = "docs/results/methods/fem";
+    if args.first().map(String::as_str) == Some("--indent") {
+        // the indentation alone, printed (nothing written)
+        let mut csv = ours_csv();
+        let mut lines = Vec::new();
+        let levels: Vec<(usize, u32)> = args[1..]
+            .chunks(2)
+            .filter_map(|c| Some((c.first()?.parse().ok()?, c.get(1)?.parse().ok()?)))
+            .collect();
+        indentation(dir, &levels, &mut lines, &mut csv);
+        return;
+    }
+    let fem = read_fem(&format!("{dir}/fem.csv"));
+    let levels: &[usize] = if quick { &[2, 4] } else { &[2, 4, 8] };
+    let mut csv = ours_csv();
     let mut lines = Vec::new();
     for (young, case) in [(1e6f32, "E=1e6 snh"), (1e5, "E=1e5 snh")] {
         // the converged answer: the finest quadratic level
@@ -225,6 +355,14 @@ fn main() {
             }
         }
     }
+    // The indentation: the same discretization as the FEM's P1 at k = 6 and 12 (5 and 2.5 mm
+    // cells), at the reference's budget, and at k = 12 also four times the substeps.
+    let indent_levels: &[(usize, u32)] = if quick {
+        &[(6, 80)]
+    } else {
+        &[(6, 80), (12, 80), (12, 320)]
+    };
+    indentation(dir, indent_levels, &mut lines, &mut csv);
     if !quick {
         csv.write(format!("{dir}/ours.csv"))
             .expect("write ours.csv");

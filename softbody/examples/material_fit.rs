@@ -1,6 +1,8 @@
-//! The particle method's knobs as a material (issue 33 point 3): the effective Young's modulus
-//! and Poisson's ratio of each setting, per step rate, fitted on the static compression
-//! (`softsync_softbody::methods::material`), and named materials turned into settings.
+//! Each method's knobs as a material (issue 33 point 3): the effective Young's modulus and
+//! Poisson's ratio of each particle-method setting, per step rate, and of each position-based
+//! method at the evidence's settings (60 Hz; against the material it is given), fitted on the
+//! static compression (`softsync_softbody::methods::material`), and named materials turned
+//! into particle settings.
 //!
 //! `cargo run --release -p softsync-softbody --example material_fit [-- --quick]`
 //!
@@ -12,8 +14,10 @@
 
 use softsync_benchkit::{Csv, ResultLine};
 use softsync_softbody::methods::material::{
-    fit_material, measure_particle_compression, particle_setting, NamedMaterial,
+    fit_material, measure_particle_compression, measure_pbd_compression, particle_setting,
+    NamedMaterial,
 };
+use softsync_softbody::methods::{MethodKind, MethodSpec};
 use softsync_softbody::SoftBodyConfig;
 
 const SIZE_M: f32 = 0.2;
@@ -30,7 +34,7 @@ fn main() {
     let mut lines = Vec::new();
     let mut csv = Csv::new(&[
         "rate_hz",
-        "stiffness",
+        "setting",
         "volume_stiffness",
         "young_kpa",
         "poisson",
@@ -60,7 +64,7 @@ fn main() {
                 lines.push(line.to_string());
                 csv.row([
                     rate.to_string(),
-                    k.to_string(),
+                    format!("particle stiffness {k}"),
                     vol.to_string(),
                     format!("{:.4}", fit.young_pa / 1e3),
                     format!("{:.4}", fit.poisson),
@@ -72,6 +76,72 @@ fn main() {
                 ]);
             }
         }
+    }
+    // The position-based methods at the evidence's settings, 60 Hz: what their knobs measure as
+    // against the material they are given (`spec.material`: E 200 kPa, K 400 kPa, ν ≈ 0.42).
+    let mut pbd = vec![
+        MethodSpec::new(MethodKind::Surface).budget(4, 8),
+        MethodSpec::new(MethodKind::Ispc).budget(2, 4),
+        MethodSpec::new(MethodKind::Tet).cell(0.2).budget(2, 4),
+        MethodSpec::new(MethodKind::ShapeMatching)
+            .cell(0.1)
+            .budget(1, 1),
+        MethodSpec::new(MethodKind::NeoHookean)
+            .cell(0.1)
+            .budget(80, 2),
+    ];
+    if !quick {
+        pbd.extend([
+            MethodSpec::new(MethodKind::Surface).budget(1, 4),
+            MethodSpec::new(MethodKind::Ispc).budget(1, 4),
+            MethodSpec::new(MethodKind::Ispc).budget(4, 8),
+            MethodSpec::new(MethodKind::Tet).cell(0.12).budget(4, 8),
+            MethodSpec::new(MethodKind::ShapeMatching)
+                .cell(0.06)
+                .budget(2, 1),
+        ]);
+    }
+    for spec in &pbd {
+        let rate = 60.0;
+        let (e0, k0) = (spec.material.young_pa, spec.material.bulk_pa);
+        let nu0 = (3.0 * k0 - e0) / (6.0 * k0);
+        let line = match measure_pbd_compression(spec, SIZE_M, rate) {
+            Ok(m) => {
+                let fit = fit_material(&m);
+                csv.row([
+                    rate.to_string(),
+                    spec.label(),
+                    String::new(),
+                    format!("{:.4}", fit.young_pa / 1e3),
+                    format!("{:.4}", fit.poisson),
+                    format!("{:.2}", fit.fit_err_pct),
+                    format!("{:.4}", m[0].1 / 1e3),
+                    format!("{:.5}", m[0].2),
+                    format!("{:.4}", m[1].1 / 1e3),
+                    format!("{:.5}", m[1].2),
+                ]);
+                ResultLine::new("material.fit")
+                    .field("method", spec.kind.name())
+                    .field(
+                        "config",
+                        format!("{}_{rate}hz", spec.label().replace(' ', "_")),
+                    )
+                    .fixed("young_kpa", fit.young_pa / 1e3, 3)
+                    .fixed("poisson", fit.poisson, 3)
+                    .fixed("fit_err_pct", fit.fit_err_pct, 1)
+                    .fixed("given_young_kpa", e0 / 1e3, 1)
+                    .fixed("given_poisson", nu0, 3)
+            }
+            Err(e) => ResultLine::new("material.fit")
+                .field("method", spec.kind.name())
+                .field(
+                    "config",
+                    format!("{}_{rate}hz", spec.label().replace(' ', "_")),
+                )
+                .field("error", format!("{e}").replace(' ', "_")),
+        };
+        println!("{line}");
+        lines.push(line.to_string());
     }
     let named: &[(f32, f32)] = if quick {
         &[(5.0, 0.45)]

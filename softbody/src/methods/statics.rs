@@ -300,16 +300,16 @@ pub fn compress_cube(k: usize, strains: &[f32], solve: StaticSolve) -> Vec<Compr
     };
     let mut out = Vec::with_capacity(strains.len());
     let mut at = CUBE_M;
-    const RAMP_STEPS: usize = 15;
     for &s in strains {
         let goal = CUBE_M * (1.0 - s);
-        for r in 1..=RAMP_STEPS {
-            let y = at + (goal - at) * r as f32 / RAMP_STEPS as f32;
-            move_top(&mut b, y);
-            b.step(&world, 1.0 / 60.0);
-        }
+        let (steps, max_speed) = ramp_then_settle(
+            &mut b,
+            &world,
+            solve,
+            |b, f| move_top(b, at + (goal - at) * f),
+            &mut force_n,
+        );
         at = goal;
-        let (steps, max_speed) = settle(&mut b, &world, solve, &mut force_n);
         let force = force_n(&b);
         out.push(Compression {
             strain: s,
@@ -318,7 +318,7 @@ pub fn compress_cube(k: usize, strains: &[f32], solve: StaticSolve) -> Vec<Compr
             inverted: b.count_inverted(),
             solve: StaticAnswer {
                 value: force,
-                steps: steps + RAMP_STEPS,
+                steps,
                 max_speed_mps: max_speed,
                 nodes: x.len(),
                 tets: n_tets,
@@ -392,15 +392,16 @@ pub fn indent_slab(k: usize, depths_mm: &[f32], solve: StaticSolve) -> Vec<Inden
     let world = PhysicsWorld::new();
     let mut out = Vec::with_capacity(depths_mm.len());
     let mut at = 0.0f32;
-    const RAMP_STEPS: usize = 15;
     for &d in depths_mm {
         let goal = d * 1e-3;
-        for r in 1..=RAMP_STEPS {
-            b.spheres[0].center_m = centre(at + (goal - at) * r as f32 / RAMP_STEPS as f32);
-            b.step(&world, 1.0 / 60.0);
-        }
+        let (steps, max_speed) = ramp_then_settle(
+            &mut b,
+            &world,
+            solve,
+            |b, f| b.spheres[0].center_m = centre(at + (goal - at) * f),
+            &mut force_n,
+        );
         at = goal;
-        let (steps, max_speed) = settle(&mut b, &world, solve, &mut force_n);
         let force = force_n(&b);
         let contact_radius_mm = 1000.0
             * touching(&b)
@@ -418,7 +419,7 @@ pub fn indent_slab(k: usize, depths_mm: &[f32], solve: StaticSolve) -> Vec<Inden
             inverted: b.count_inverted(),
             solve: StaticAnswer {
                 value: force,
-                steps: steps + RAMP_STEPS,
+                steps,
                 max_speed_mps: max_speed,
                 nodes: x.len(),
                 tets: n_tets,
@@ -523,6 +524,25 @@ fn move_top(b: &mut PbdBody, y: f32) {
             s.at_m = y;
         }
     }
+}
+
+/// A load step of a static problem: `set(b, f)` moves the load a fraction `f` of the way to
+/// its next value, over a quarter second (15 steps at 60 Hz, `f` = 1/15 … 1), then the body
+/// settles on `answer` ([`settle`]): the steps taken in all and the fastest particle speed.
+fn ramp_then_settle(
+    b: &mut PbdBody,
+    world: &PhysicsWorld,
+    solve: StaticSolve,
+    mut set: impl FnMut(&mut PbdBody, f32),
+    answer: impl FnMut(&PbdBody) -> f32,
+) -> (usize, f32) {
+    const RAMP_STEPS: usize = 15;
+    for r in 1..=RAMP_STEPS {
+        set(b, r as f32 / RAMP_STEPS as f32);
+        b.step(world, 1.0 / 60.0);
+    }
+    let (steps, speed) = settle(b, world, solve, answer);
+    (steps + RAMP_STEPS, speed)
 }
 
 /// Steps `b` at 60 Hz until `answer` changes by less than `solve.rest_rel` (relative) over
