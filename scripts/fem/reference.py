@@ -219,12 +219,14 @@ class Discretisation:
     internal nodal forces, elastic energy and tangent stiffness of the Neo-Hookean material,
     assembled from scikit-fem's basis-function gradients and quadrature."""
 
-    def __init__(self, mesh, order):
+    def __init__(self, mesh, order, intorder=None):
         self.mesh = mesh
         self.order = order
         elem = ElementTetP1() if order == 1 else ElementTetP2()
-        # default quadrature: degree 2 for P1 (F constant per tet), degree 4 (11 points) for P2
-        self.vb = Basis(mesh, ElementVector(elem))
+        # default quadrature: degree 2 for P1 (F constant per tet), degree 4 (11 points) for P2;
+        # `intorder` another degree (1 for P1: one point, exact, as F is constant per tet)
+        self.vb = Basis(mesh, ElementVector(elem),
+                        **({} if intorder is None else dict(intorder=intorder)))
         sb = Basis(mesh, elem, quadrature=self.vb.quadrature)
         self.nloc = sb.Nbfun                               # scalar functions per tet
         # dN[a, J, e, q]: gradient of scalar basis function a (reference coordinates, 1/m)
@@ -334,9 +336,72 @@ class NotConverged(RuntimeError):
     pass
 
 
-def newton(disc, mat, u, free, fext, solver, log):
+def line_minimum(disc, mat, u, du, free, fext, slope0, bound):
+    """The line search of a contact problem (newton(..., line_min=True)): the step alpha along
+    du (Newton's direction from u; slope0 = phi'(0) < 0): 1 if the potential falls there (to at
+    most `bound`, the potential at u plus roundoff) or still falls at 1 (phi'(1) <= 0), else an
+    approximate minimum of the potential
+    phi(alpha) on [0, 1] -- Illinois regula falsi on phi'(alpha) = (f_int - fext) . du until
+    |phi'| <= 0.1 |phi'(0)|. Plain backtracking stalls when the step pushes a node that is not
+    yet in contact (so the tangent does not know it) deep into the obstacle: the potential then
+    falls only for alpha below about the node's clearance over its step, tiny for a node about
+    to touch; the minimum along the line lets it in with about the right force, and the next
+    tangent has it. Returns (alpha, u + alpha du, its f_int, its energy); raises NotConverged."""
+
+    def at(alpha):
+        trial = u.copy()
+        trial[free] += alpha * du
+        if disc.min_volume_ratio(trial) <= 0.0:
+            return None
+        fint, energy = disc.forces(trial, mat)
+        return (alpha, trial, fint, energy), energy - fext @ trial, (fint - fext)[free] @ du
+
+    hi = 1.0
+    for _ in range(40):
+        end = at(hi)
+        if end is not None:
+            break
+        hi *= 0.5
+    else:
+        raise NotConverged("line search: inverted along the whole step")
+    if end[1] <= bound or end[2] <= 0.0:
+        # the potential fell, or still falls at the end of the step (then it fell all along:
+        # near convergence the fall is below the potential's rounding)
+        return end[0]
+    lo, slope_lo, slope_hi = 0.0, slope0, end[2]
+    if not (slope0 < 0.0 < slope_hi):
+        raise NotConverged(f"line search: no bracket (slopes {slope0:.1e}, {slope_hi:.1e})")
+    best, side = None, 0
+    for _ in range(60):
+        alpha = hi - slope_hi * (hi - lo) / (slope_hi - slope_lo)
+        alpha = min(max(alpha, lo + 1e-6 * (hi - lo)), hi - 1e-6 * (hi - lo))
+        point = at(alpha)
+        if point is None:                     # inverted inside the bracket: bisect below it
+            hi, slope_hi, side = 0.5 * (lo + alpha), slope_hi, 0
+            continue
+        if point[1] <= bound and (best is None or point[1] < best[1]):
+            best = point
+        if best is not None and abs(point[2]) <= 0.1 * abs(slope0):
+            return best[0]
+        if point[2] < 0.0:
+            lo, slope_lo = alpha, point[2]
+            slope_hi = slope_hi / 2 if side == -1 else slope_hi
+            side = -1
+        else:
+            hi, slope_hi = alpha, point[2]
+            slope_lo = slope_lo / 2 if side == +1 else slope_lo
+            side = +1
+        if hi - lo <= 1e-12:
+            break
+    if best is None:
+        raise NotConverged("line search failed")
+    return best[0]
+
+
+def newton(disc, mat, u, free, fext, solver, log, line_min=False):
     """Newton's method from `u` (prescribed dofs already set) for f_int(u) = fext on the free
-    dofs, with a backtracking line search on the potential energy. Returns (u, iterations).
+    dofs, with a backtracking line search on the potential energy (line_min: line_minimum's
+    search instead, for contact). Returns (u, iterations).
     Raises NotConverged on divergence, inversion (det F <= 0) or too many iterations."""
     if disc.min_volume_ratio(u) <= 0.0:
         raise NotConverged("inverted predictor")
@@ -354,6 +419,13 @@ def newton(disc, mat, u, free, fext, solver, log):
         k = disc.tangent(u, mat)[free][:, free]
         du = solver.solve(k, r)
         potential = energy - fext @ u
+        if line_min:
+            alpha, trial, t_fint, t_energy = line_minimum(
+                disc, mat, u, du, free, fext, -(r @ du),
+                potential + 1e-12 * (abs(potential) + abs(energy)))
+            u, fint, energy = trial, t_fint, t_energy
+            log.append((it, rel, alpha))
+            continue
         alpha = 1.0
         for _ in range(12):
             trial = u.copy()
@@ -519,6 +591,563 @@ def analytic_rows():
             yield dict(problem="compress", quantity=quantity, case=f"s={s:g}",
                        element="analytic", level="", dofs="", value=value, time_s=0.0,
                        note="closed form, uniaxial stress")
+
+
+# --------------------------------------------------------------------------------------
+# Indentation (--indent): a slab pressed by a rigid frictionless sphere, against Hertz
+# --------------------------------------------------------------------------------------
+# A quarter of a block (symmetry planes x = 0 and z = 0: the block is 2 SLAB wide and SLAB
+# thick), its base y = 0 clamped, no gravity, indented at the corner x = z = 0 of its top face
+# by a rigid frictionless sphere of radius R whose centre moves down the y axis,
+# c = (0, SLAB + R - d, 0), through the depths d (displacement control). Contact is nodal: no
+# node (every vertex, and for P2 every edge midpoint) may be inside the sphere, frictionless.
+#
+# Enforced by an augmented Lagrangian: per node the energy max(0, lambda + k_c g)^2 / (2 k_c),
+# g = R - |x - c| the penetration, lambda >= 0 the node's contact force from the last update
+# (a penalty of stiffness k_c = CONTACT_STIFFNESS when lambda = 0), with its exact gradient and
+# Hessian, so Newton settles the active set itself (the energy is C1 and piecewise smooth; the
+# line search, line_minimum, lets a node that the step pushes into the sphere in with about the
+# right force). At each depth the sphere is moved there in one load step (halved if Newton
+# fails), then lambda <- max(0, lambda + k_c g) and Newton again, until no node is more than
+# CONTACT_TOL d inside or outside the sphere while pushed by it: the exact nodal constraint,
+# to that tolerance (the largest |g| / d is reported per row). The sphere's reaction is the sum
+# of the contact forces' y components, times 4 (the whole sphere), checked against the
+# clamped base's reaction (the body's equilibrium).
+#
+# Hertz (a rigid paraboloid on an elastic half-space): F = 4/3 E/(1 - nu^2) sqrt(R) d^(3/2),
+# a = sqrt(R d). What separates the slab from it, estimated in closed form per row:
+#   - the sphere is not a paraboloid (Sneddon's rigid sphere on a half-space, exact in linear
+#     elasticity: d = a/2 ln((R + a)/(R - a)), F = E/(1 - nu^2)/2 ((a^2 + R^2) ln((R + a)/(R - a))
+#     - 2 a R): 0.25 % under Hertz at d = 0.25 mm, 4 % at 4 mm;
+#   - the slab is SLAB thick on a clamped base, not a half-space: Dimitriadis et al. 2002
+#     (Biophys. J. 82, 2798, eq. 13: a layer of thickness h bonded to a rigid base,
+#     chi = sqrt(R d)/h) multiply Hertz by 1 - 2 alpha0/pi chi + 4 alpha0^2/pi^2 chi^2
+#     - 8/pi^3 (alpha0^3 + 4 pi^2/15 beta0) chi^3 + O(chi^4),
+#     alpha0 = -(1.2876 - 1.4678 nu + 1.3442 nu^2)/(1 - nu),
+#     beta0 = (0.6387 - 1.0277 nu + 1.5164 nu^2)/(1 - nu): +5.4 % at d = 0.25 mm, +25 % at 4 mm
+#     (for a laterally infinite layer; this block's free sides, SLAB from the axis, soften it);
+#   - finite strain (snh against linear), and on coarse meshes the nodal contact itself (the
+#     contact patch is a few nodes wide: a discretisation error that refinement removes).
+
+SLAB = 0.03                 # the quarter block's side, m (x, y, z in [0, SLAB])
+SLAB_E = 1e5                # Young's modulus, Pa
+INDENTER_R = 0.01           # the sphere's radius, m
+INDENT_DEPTHS_MM = (0.25, 0.5, 1.0, 2.0, 4.0)
+# (element order, cells per SLAB edge), in order of accuracy within each element; P1 k = 6 and
+# 12 are our side's meshes
+INDENT_LEVELS = ((1, 6), (1, 12), (1, 24), (2, 6), (2, 12))
+INDENT_LAWS = ("snh", "linear")
+# Penalty stiffness per node, N/m (~1000 x a node's elastic stiffness E h at k = 6 .. 24: each
+# multiplier update cuts the penetration ~1000-fold). Much stiffer is worse, not better: the
+# residual's rounding floor is k_c times the rounding of |x - c| (~1e-18 m), and Newton's
+# tolerance (NEWTON_RTOL of the force scale, ~1e-12 N at d = 0.25 mm) is below it at k_c = 1e7.
+CONTACT_STIFFNESS = 1e5
+CONTACT_TOL = 1e-6          # multiplier updates until every contact node's |g| <= this x d
+CONTACT_UPDATES = 10        # at most this many updates per depth
+INDENT_CHECK = ((1, 4), (2, 4))     # --check: these levels, snh, straight to d = 1 mm
+INDENT_CHECK_DEPTH_MM = 1.0
+CONTACT_GMRES_RTOL = 1e-7  # ContactSolver's GMRES stops at this preconditioned residual
+TANGENT_REUSE = 0.01        # SphereContact reuses the body's tangent within this (see there)
+
+
+class LinearBody:
+    """Linear elasticity on a Discretisation (scikit-fem's linear_elasticity stiffness K for
+    (E, nu)) with the interface newton() uses: internal forces K u, energy u.K u / 2, tangent
+    K, and no inversion test (a linear material has none)."""
+
+    def __init__(self, disc, young_pa):
+        self.vb, self.order, self.ndofs = disc.vb, disc.order, disc.ndofs
+        self.k = disc.linear_stiffness(young_pa).tocsr()
+
+    def forces(self, u, mat):
+        f = self.k @ u
+        return f, 0.5 * float(u @ f)
+
+    def tangent(self, u, mat):
+        return self.k
+
+    def min_volume_ratio(self, u):
+        return 1.0
+
+
+class SphereContact:
+    """A body (Discretisation or LinearBody) whose nodes are kept out of a rigid frictionless
+    sphere of `radius` (augmented Lagrangian, module comment above): the body's interface for
+    newton() (forces, tangent, min_volume_ratio, ndofs) with the contact energy
+    max(0, lambda + k g)^2 / (2 k) per node added, g = radius - |x - c|, x = rest + u,
+    k = `stiffness`, lambda = `multiplier` (N, per node; zero: a plain penalty). The nodes are
+    every vertex and, for P2, every edge midpoint (every dof of the space is nodal)."""
+
+    def __init__(self, body, radius, stiffness):
+        self.body, self.radius, self.stiffness = body, radius, stiffness
+        self.ndofs = body.ndofs
+        vb = body.vb
+        self.node_dofs = np.hstack([vb.nodal_dofs] + ([vb.edge_dofs] if body.order == 2 else []))
+        assert self.node_dofs.shape[0] == 3 and len(np.unique(self.node_dofs)) == self.ndofs
+        self.rest = vb.doflocs[:, self.node_dofs[0]].T.copy()      # (n_nodes, 3), m
+        for i in (1, 2):
+            assert np.array_equal(vb.doflocs[:, self.node_dofs[i]].T, self.rest)
+        self.multiplier = np.zeros(len(self.rest))
+        self._body_tangent = None
+        self.set_centre(np.zeros(3))
+
+    def set_centre(self, centre):
+        """Moves the sphere's centre to `centre` (m)."""
+        self.centre = np.asarray(centre, dtype=float)
+        self._offset = self.rest - self.centre
+
+    def contact(self, u):
+        """The nodes the sphere pushes at displacement u: (their indices, contact forces
+        p = lambda + k g > 0 (N), unit outward normals (x - c)/|x - c|, distances |x - c|,
+        penetrations g = radius - |x - c| (m))."""
+        v = self._offset + u[self.node_dofs].T
+        r = np.linalg.norm(v, axis=1)
+        g = self.radius - r
+        p = self.multiplier + self.stiffness * g
+        active = np.nonzero(p > 0.0)[0]
+        return active, p[active], v[active] / r[active, None], r[active], g[active]
+
+    def forces(self, u, mat):
+        fint, energy = self.body.forces(u, mat)
+        active, p, n, _, _ = self.contact(u)
+        # the contact energy's gradient -p n (the sphere pushes the node along +n); dofs unique
+        fint[self.node_dofs[:, active].T] -= p[:, None] * n
+        return fint, energy + float(p @ p) / (2.0 * self.stiffness)
+
+    def tangent(self, u, mat):
+        # the body's tangent is reused while u stays within TANGENT_REUSE of where it was
+        # assembled (relative to its largest displacement): an inexact Newton, whose steps
+        # that only let a node into contact (tiny alpha) then cost no assembly
+        if (self._body_tangent is None or np.abs(u - self._body_tangent[0]).max()
+                > TANGENT_REUSE * np.abs(self._body_tangent[0]).max()):
+            self._body_tangent = (u.copy(), self.body.tangent(u, mat))
+        k = self._body_tangent[1]
+        active, p, n, r, _ = self.contact(u)
+        # Hessian of max(0, lambda + k g)^2 / (2 k), g = R - r: k n n^T - p (I - n n^T) / r
+        nn = n[:, :, None] * n[:, None, :]
+        h = self.stiffness * nn - (p / r)[:, None, None] * (np.eye(3) - nn)
+        d = self.node_dofs[:, active].T                                  # (n_active, 3)
+        rows = np.broadcast_to(d[:, :, None], h.shape).ravel()
+        cols = np.broadcast_to(d[:, None, :], h.shape).ravel()
+        self.last_tangent = (k, rows, cols, h.ravel())      # its parts, for ContactSolver
+        return (k + sp.coo_matrix((h.ravel(), (rows, cols)), shape=k.shape)).tocsr()
+
+    def min_volume_ratio(self, u):
+        return self.body.min_volume_ratio(u)
+
+    def largest_gap(self, u):
+        """The largest |g| of a node the sphere pushes, m (0 for the exact constraint)."""
+        g = self.contact(u)[4]
+        return float(np.abs(g).max()) if len(g) else 0.0
+
+    def update_multipliers(self, u):
+        """The augmented Lagrangian's update lambda <- max(0, lambda + k g)."""
+        v = self._offset + u[self.node_dofs].T
+        g = self.radius - np.linalg.norm(v, axis=1)
+        self.multiplier = np.maximum(0.0, self.multiplier + self.stiffness * g)
+
+    def reaction(self, u):
+        """The sphere's reaction on the quarter model (N, positive up: minus the sum of the y
+        components of its forces on the body), the largest distance from the y axis of a node
+        it pushes (m, deformed positions) and the number of those nodes."""
+        active, p, n, _, _ = self.contact(u)
+        if len(active) == 0:
+            return 0.0, 0.0, 0
+        x = self.rest[active] + u[self.node_dofs[:, active]].T
+        return float(p @ -n[:, 1]), float(np.hypot(x[:, 0], x[:, 2]).max()), len(active)
+
+
+def nested_dissection(points, planes, leaf=64):
+    """A fill-reducing elimination order of the dofs located at `points` (3, n) of a box mesh
+    whose cells' faces lie on the coordinate planes `planes` (one sorted array per axis):
+    recursively, the dofs on the middle cell-face plane across the side with the most such
+    planes inside (a separator: no element crosses a cell face) go after the dofs on either
+    side of it. Used with SuperLU's natural order (OrderedLU): on the 44k-dof cube it factors
+    ~4x faster than MMD with a third to a half of the fill."""
+    order = []
+
+    def split(idx):
+        if len(idx) <= leaf:
+            order.append(idx)
+            return
+        p = points[:, idx]
+        inner = [pl[(pl > p[a].min() + 1e-12) & (pl < p[a].max() - 1e-12)]
+                 for a, pl in enumerate(planes)]
+        axis = int(np.argmax([len(c) for c in inner]))
+        if len(inner[axis]) == 0:
+            order.append(idx)
+            return
+        cut = inner[axis][len(inner[axis]) // 2]
+        on = np.abs(p[axis] - cut) <= 1e-12
+        split(idx[(p[axis] < cut) & ~on])
+        split(idx[(p[axis] > cut) & ~on])
+        order.append(idx[on])
+
+    split(np.arange(points.shape[1]))
+    perm = np.concatenate(order)
+    assert np.array_equal(np.sort(perm), np.arange(points.shape[1]))
+    return perm
+
+
+class ContactSolver:
+    """Solves newton()'s systems K_ff du = r for a SphereContact, K = B + C: its body's tangent
+    B and the contact Hessian C (3x3 blocks on the nodes the sphere pushes, from the last
+    SphereContact.tangent), with an LU of the body's tangent alone and the Woodbury identity for
+    C: (B + E H E^T)^-1 r = y - Z (I + H E^T Z)^-1 H E^T y, y = B^-1 r, Z = B^-1 E, E the unit
+    columns of the contact's free dofs (Z's columns cached per dof while the LU is kept). While
+    the LU is of the current body tangent (always, for linear elasticity) that is a direct
+    solve; once the body's tangent has been reassembled, it preconditions GMRES on K (the
+    contact part exact, the body's stale), and the body's tangent is refactored when 12
+    iterations do not bring the true residual to GMRES_FORCING. So a change of the contact's
+    active set never costs a factorisation. `perm`: the LU's elimination order of the free dofs."""
+
+    def __init__(self, contact, free, perm):
+        self.contact, self.free, self.perm = contact, free, perm
+        self.position = np.full(contact.ndofs, -1)
+        self.position[free] = np.arange(len(free))        # global dof -> free index
+        self.body, self.lu, self.columns = None, None, {}
+        self.factorisations = 0
+
+    def _factorise(self, body):
+        self.lu, self.columns = None, {}                  # free the old one first (peak memory)
+        self.lu = OrderedLU(body[self.free][:, self.free], self.perm)
+        self.body = body
+        self.factorisations += 1
+
+    def _column(self, j):
+        """B^-1 e_j (cached)."""
+        if j not in self.columns:
+            e = np.zeros(len(self.free))
+            e[j] = 1.0
+            self.columns[j] = self.lu.solve(e)
+        return self.columns[j]
+
+    def _woodbury(self):
+        """x -> (B_LU + C_ff)^-1 x, for the contact Hessian of the last tangent."""
+        body, rows, cols, vals = self.contact.last_tangent
+        fr, fc = self.position[rows], self.position[cols]
+        keep = (fr >= 0) & (fc >= 0)
+        dofs = np.unique(fr[keep])
+        if len(dofs) == 0:
+            return self.lu.solve
+        h = np.zeros((len(dofs), len(dofs)))
+        np.add.at(h, (np.searchsorted(dofs, fr[keep]), np.searchsorted(dofs, fc[keep])),
+                  vals[keep])
+        z = np.column_stack([self._column(j) for j in dofs])
+        small = np.linalg.inv(np.eye(len(dofs)) + h @ z[dofs])
+
+        def apply(x):
+            y = self.lu.solve(x)
+            return y - z @ (small @ (h @ y[dofs]))
+        return apply
+
+    def solve(self, k, r):
+        body = self.contact.last_tangent[0]
+        if self.lu is None:
+            self._factorise(body)
+        if self.body is body:
+            return self._woodbury()(r)
+        prec = sla.LinearOperator(k.shape, self._woodbury())
+        x, _ = sla.gmres(k, r, M=prec, rtol=CONTACT_GMRES_RTOL, atol=0.0, restart=12,
+                         maxiter=1)
+        if np.linalg.norm(k @ x - r) <= GMRES_FORCING * np.linalg.norm(r):
+            return x
+        self._factorise(body)
+        return self._woodbury()(r)
+
+
+class OrderedLU:
+    """Sparse LU of the symmetric matrix `k` in the elimination order `perm` (SuperLU, natural
+    order on the permuted matrix); .solve(r) solves k x = r."""
+
+    def __init__(self, k, perm):
+        self.perm, self.inverse = perm, np.argsort(perm)
+        self.lu = sla.splu(k[perm][:, perm].tocsc(), permc_spec="NATURAL",
+                           options=dict(SymmetricMode=True))
+
+    def solve(self, r):
+        return self.lu.solve(r[self.perm])[self.inverse]
+
+
+def box_tets_ours(size, cells):
+    """Our side's box lattice (softbody/src/methods/statics.rs, box_tets, transcribed): nodes
+    (n, 3) m and tets (m, 4) of `size` split into `cells` cells of six tets each, around each
+    cell's main diagonal (cell corner q = bits x, y, z of q)."""
+    nx, ny, nz = cells
+    step = np.asarray(size, dtype=float) / np.asarray(cells)
+    # node i (ny + 1)(nz + 1) + j (nz + 1) + k at (i, j, k) * step
+    x = np.stack(np.meshgrid(np.arange(nx + 1), np.arange(ny + 1), np.arange(nz + 1),
+                             indexing="ij"), axis=-1).reshape(-1, 3) * step
+    i, j, k = (a.ravel() for a in np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz),
+                                               indexing="ij"))
+    corners = np.stack([(i + (q & 1)) * (ny + 1) * (nz + 1) + (j + ((q >> 1) & 1)) * (nz + 1)
+                        + (k + ((q >> 2) & 1)) for q in range(8)], axis=1)
+    split = np.array([[0, 1, 3, 7], [0, 1, 7, 5], [0, 5, 7, 4], [0, 3, 2, 7], [0, 2, 6, 7],
+                      [0, 6, 4, 7]])
+    return x, corners[:, split].reshape(-1, 4)
+
+
+def box_is_ours(size, cells):
+    """Whether box() (scikit-fem's MeshTet.init_tensor) has the same nodes and the same tets,
+    as sets of vertex positions, as our side's lattice (box_tets_ours): then P1 on it is our
+    discretisation node for node (the node numbering differs)."""
+    x, tets = box_tets_ours(size, cells)
+    mesh = box(*size, *cells)
+    key = lambda p: tuple(np.round(np.asarray(p) / 1e-9).astype(np.int64))
+    ours = {frozenset(key(x[q]) for q in t) for t in tets}
+    theirs = {frozenset(key(mesh.p[:, q]) for q in t) for t in mesh.t.T}
+    same_nodes = (len(x) == mesh.p.shape[1]
+                  and {key(p) for p in x} == {key(p) for p in mesh.p.T})
+    return same_nodes and len(ours) == len(tets) == mesh.t.shape[1] and ours == theirs
+
+
+def hertz_force(depth_m):
+    """Hertz's force, N, of a rigid sphere (a paraboloid) of radius INDENTER_R pressed depth_m
+    into a half-space of Young's modulus SLAB_E and Poisson's ratio NU."""
+    return 4.0 / 3.0 * SLAB_E / (1.0 - NU ** 2) * math.sqrt(INDENTER_R) * depth_m ** 1.5
+
+
+def sneddon_sphere_force(depth_m):
+    """Force, N, of a rigid *sphere* (not a paraboloid) of radius INDENTER_R pressed depth_m
+    into a linear-elastic half-space (Sneddon 1965): d = a/2 ln((R + a)/(R - a)),
+    F = E*/2 ((a^2 + R^2) ln((R + a)/(R - a)) - 2 a R), E* = E/(1 - nu^2); a by bisection."""
+    big_r = INDENTER_R
+    lo, hi = 0.0, big_r * (1.0 - 1e-12)
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if 0.5 * mid * math.log((big_r + mid) / (big_r - mid)) < depth_m:
+            lo = mid
+        else:
+            hi = mid
+    a = 0.5 * (lo + hi)
+    log = math.log((big_r + a) / (big_r - a))
+    return 0.5 * SLAB_E / (1.0 - NU ** 2) * ((a * a + big_r * big_r) * log - 2.0 * a * big_r)
+
+
+def layer_factor(depth_m):
+    """Dimitriadis et al. 2002 (eq. 13, to chi^3): the force of a paraboloid on an elastic
+    layer SLAB thick bonded to a rigid base over Hertz's, chi = sqrt(R d) / SLAB (a laterally
+    infinite layer, small chi)."""
+    chi = math.sqrt(INDENTER_R * depth_m) / SLAB
+    alpha0 = -(1.2876 - 1.4678 * NU + 1.3442 * NU ** 2) / (1.0 - NU)
+    beta0 = (0.6387 - 1.0277 * NU + 1.5164 * NU ** 2) / (1.0 - NU)
+    return (1.0 - 2.0 * alpha0 / math.pi * chi + 4.0 * alpha0 ** 2 / math.pi ** 2 * chi ** 2
+            - 8.0 / math.pi ** 3 * (alpha0 ** 3 + 4.0 * math.pi ** 2 / 15.0 * beta0) * chi ** 3)
+
+
+def indent_problem(k, order):
+    """The indentation's discretisation at k cells per SLAB edge (P1 with one quadrature point,
+    exact): (disc, dirichlet dofs (all held at 0), the base's y dofs)."""
+    disc = Discretisation(box(SLAB, SLAB, SLAB, k, k, k), order,
+                          intorder=1 if order == 1 else None)
+    dofs = disc.vb.get_dofs
+    base = dofs(lambda x: np.isclose(x[1], 0.0))
+    sym_x = dofs(lambda x: np.isclose(x[0], 0.0)).all("u^1")
+    sym_z = dofs(lambda x: np.isclose(x[2], 0.0)).all("u^3")
+    dirichlet = np.unique(np.concatenate([base.all(), sym_x, sym_z]))
+    return disc, dirichlet, base.all("u^2")
+
+
+def indent_path(contact, mat, free, depths_m, solver):
+    """Moves the sphere of `contact` down through depths_m (m, increasing) from rest: to each
+    depth in one load step from the last (halved while Newton fails; the predictor extrapolates
+    the last two states), then multiplier updates until every contact node's |g| <=
+    CONTACT_TOL d. Yields (depth, u, dict(newton iterations, steps, updates, wall_s)) per depth;
+    raises NotConverged."""
+    zero = np.zeros(contact.ndofs)
+    hist = [(0.0, zero)]
+    for depth in depths_m:
+        t_start, iters, steps = time.time(), 0, 0
+        dt = depth - hist[-1][0]
+        while hist[-1][0] < depth:
+            t0, u0 = hist[-1]
+            t1 = depth if t0 + dt >= depth * (1.0 - 1e-9) else t0 + dt
+            if len(hist) >= 2:
+                tp, up = hist[-2]
+                pred = u0 + (t1 - t0) / (t0 - tp) * (u0 - up)
+            else:
+                pred = u0.copy()
+            contact.set_centre([0.0, SLAB + INDENTER_R - t1, 0.0])
+            try:
+                u1, n = newton(contact, mat, pred, free, zero, solver, [], line_min=True)
+            except NotConverged:
+                dt /= 2
+                if dt < 1e-3 * depth:
+                    raise
+                continue
+            iters, steps = iters + n, steps + 1
+            hist = [hist[-1], (t1, u1)]
+        u, updates = hist[-1][1], 0
+        while contact.largest_gap(u) > CONTACT_TOL * depth:
+            if updates == CONTACT_UPDATES:
+                raise NotConverged(f"contact gap {contact.largest_gap(u) / depth:.1e} d after "
+                                   f"{updates} multiplier updates")
+            contact.update_multipliers(u)
+            u, n = newton(contact, mat, u, free, zero, solver, [], line_min=True)
+            iters, updates = iters + n, updates + 1
+        hist[-1] = (depth, u)
+        yield depth, u, dict(newton=iters, steps=steps, updates=updates,
+                             wall_s=time.time() - t_start)
+
+
+def indent(k, order, law, depths_mm=INDENT_DEPTHS_MM):
+    """The slab ([0, SLAB]^3, k^3 cells, P`order`, law "snh" or "linear") indented by the sphere
+    through each of depths_mm, in order. One row per depth: value = force_n = the whole
+    sphere's reaction (4 x the quarter's), N; contact_radius_mm = the largest distance from the
+    axis of a node in contact, mm (deformed); the Newton iterations, load steps, multiplier
+    updates and seconds from the previous depth (the first also counts the setup); gap_rel =
+    the largest |g| of a contact node / d; base_rel = |base reaction / sphere reaction - 1|
+    (the equilibrium's check); Hertz's force and contact radius, Sneddon's sphere and the
+    layer factor (module comment above)."""
+    t_start = time.time()
+    disc, dirichlet, base_y = indent_problem(k, order)
+    if law == "snh":
+        body, mat = disc, snh_parameters(SLAB_E)
+    else:
+        body, mat = LinearBody(disc, SLAB_E), None
+    contact = SphereContact(body, INDENTER_R, CONTACT_STIFFNESS)
+    free = np.setdiff1d(np.arange(disc.ndofs), dirichlet)
+    planes = [np.linspace(0.0, SLAB, k + 1)] * 3
+    perm = nested_dissection(disc.vb.doflocs[:, free], planes)
+    solver = ContactSolver(contact, free, perm)
+    setup_s = time.time() - t_start
+    rows, failure = {}, ""
+    try:
+        for depth, u, facts in indent_path(contact, mat, free, [d * 1e-3 for d in depths_mm],
+                                           solver):
+            force, radius, n_active = contact.reaction(u)
+            base = float(body.forces(u, mat)[0][base_y].sum())
+            rows[depth] = dict(value=4.0 * force, contact_radius_mm=1e3 * radius,
+                               active_nodes=n_active, gap_rel=contact.largest_gap(u) / depth,
+                               base_rel=abs(base / force - 1.0),
+                               min_det_f=disc.min_volume_ratio(u) if law == "snh" else "",
+                               **facts)
+    except NotConverged as e:
+        failure = f"did not converge: {e}"
+    peak = peak_rss_mb()
+    for i, d in enumerate(depths_mm):
+        depth = d * 1e-3
+        row = dict(problem="indent", quantity="force_n", case=f"d={d:g}mm", law=law,
+                   element=f"P{order}", level=k, dofs=disc.ndofs, d_mm=d,
+                   hertz_n=hertz_force(depth), hertz_radius_mm=1e3 * math.sqrt(INDENTER_R * depth),
+                   sphere_n=sneddon_sphere_force(depth), layer_factor=layer_factor(depth),
+                   peak_mb=peak or "", factorisations=solver.factorisations, note=failure)
+        if depth in rows:
+            row.update(rows[depth])
+            if i == 0:
+                row["wall_s"] += setup_s
+        else:
+            row["value"] = float("nan")
+        yield row
+
+
+INDENT_COLS = ["problem", "law", "element", "k", "d_mm", "force_n", "hertz_n", "fem_over_hertz",
+               "force_change_pct", "contact_radius_mm", "hertz_radius_mm", "active_nodes",
+               "newton", "steps", "updates", "wall_s", "dofs", "gap_rel", "base_rel",
+               "min_det_f", "sphere_n", "layer_factor", "factorisations", "peak_mb", "note"]
+
+
+def indent_csv_row(r):
+    """A row of indent.csv (INDENT_COLS) from an indent() row; a failed level's force is empty."""
+    ok = math.isfinite(r["value"])
+    out = dict(r, k=r["level"], force_n=r["value"] if ok else "",
+               fem_over_hertz=r["value"] / r["hertz_n"] if ok else "",
+               force_change_pct=r.get("change_pct", ""), d_mm=f"{r['d_mm']:g}")
+    return [fmt(out.get(c, ""), 10 if c in ("force_n", "hertz_n", "sphere_n") else 6)
+            for c in INDENT_COLS]
+
+
+def indent_line(r):
+    """The RESULT line of an indent() row: the key set of results.txt's FEM side (level = the
+    FEM level k, fem = its force N, fem_change_pct = its change from the previous level of the
+    same element and law, %), then what identifies and explains it."""
+    def num(x, digits):
+        return "nan" if x == "" or not math.isfinite(x) else f"{x:.{digits}f}"
+    return (f"RESULT reference.fem problem=indent quantity=force_n case={r['case']} "
+            f"level={r['level']} fem={num(r['value'], 6)} "
+            f"fem_change_pct={num(r.get('change_pct', ''), 2)} fem_level={r['level']} "
+            f"element={r['element']} law={r['law']} hertz={r['hertz_n']:.6f} "
+            f"fem_over_hertz={num(r['value'] / r['hertz_n'], 4)} "
+            f"contact_radius_mm={num(r.get('contact_radius_mm', ''), 3)} dofs={r['dofs']}")
+
+
+def merge_indent_answers(rows):
+    """Puts the indentation's answers into answers.json (written by --all, which keeps them):
+    per law and depth the finest P2 level, as for the other problems, with Hertz's force."""
+    path = OUT_DIR / "answers.json"
+    answers = json.loads(path.read_text()) if path.exists() else {"meta": {}}
+    out = {}
+    for r in rows:
+        if r["element"] != "P2":
+            continue
+        change = r.get("change_pct", "")
+        out[f"d={r['d_mm']:g}mm {r['law']}"] = {
+            "value": float(r["value"]), "level": int(r["level"]), "dofs": int(r["dofs"]),
+            "change_pct": float(change) if change != "" else None,
+            "converged": bool(change != "" and abs(change) <= CONVERGED_PCT),
+            "hertz": float(r["hertz_n"]), "fem_over_hertz": float(r["value"] / r["hertz_n"])}
+    answers["indent"] = {"force_n": out}
+    answers["meta"]["indent_generated_by"] = "scripts/fem-reference --indent"
+    with open(path, "w") as fh:
+        json.dump(answers, fh, indent=2)
+        fh.write("\n")
+
+
+def run_indent():
+    """--indent: every law at every level of INDENT_LEVELS; writes indent.csv and indent.txt,
+    merges the finest P2 answers into answers.json, prints the comparison with Hertz."""
+    t_all = time.time()
+    for k in sorted({k for _, k in INDENT_LEVELS}):
+        assert box_is_ours((SLAB,) * 3, (k, k, k)), f"box() is not our lattice at k = {k}"
+    print(f"# box() = our lattice (same nodes and tets) at k = "
+          f"{sorted({k for _, k in INDENT_LEVELS})}", flush=True)
+    rows, last, peaks = [], {}, []
+    for law in INDENT_LAWS:
+        for order, k in INDENT_LEVELS:
+            peak_rss_mb(reset=True)
+            t = time.time()
+            for r in indent(k, order, law):
+                key = (law, r["element"], r["d_mm"])
+                prev = last.get(key)
+                ok = prev is not None and math.isfinite(prev) and math.isfinite(r["value"])
+                r["change_pct"] = 100.0 * (r["value"] / prev - 1.0) if ok else ""
+                last[key] = r["value"]
+                rows.append(r)
+                print(indent_line(r), flush=True)
+            peaks.append(r["peak_mb"] or 0.0)
+            print(f"#   {law} P{order} k={k}: {r['dofs']} dofs, {time.time() - t:.1f} s, "
+                  f"{r['factorisations']} LU, peak {fmt(r['peak_mb'], 4)} MB{', ' + r['note'] if r['note'] else ''}",
+                  flush=True)
+    OUT_DIR.mkdir(parents=True, exist_ok=True)
+    with open(OUT_DIR / "indent.csv", "w", newline="") as fh:
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(INDENT_COLS)
+        for r in rows:
+            w.writerow(indent_csv_row(r))
+    (OUT_DIR / "indent.txt").write_text("".join(indent_line(r) + "\n" for r in rows))
+    merge_indent_answers(rows)
+    # FEM against Hertz: the finest level of each element and law per depth, and the closed-form
+    # estimate of a rigid sphere on a bonded layer (Sneddon's sphere x the layer factor)
+    finest = {}
+    for r in rows:
+        finest[(r["law"], r["element"], r["d_mm"])] = r
+    print("# d_mm  a_mm  hertz_N  sphere/hertz  layer  estimate/hertz | FEM/hertz: "
+          + "  ".join(f"{law} {el} k={finest[(law, el, INDENT_DEPTHS_MM[0])]['level']}"
+                      for law in INDENT_LAWS for el in ("P1", "P2")))
+    for d in INDENT_DEPTHS_MM:
+        r0 = finest[(INDENT_LAWS[0], "P2", d)]
+        sphere = r0["sphere_n"] / r0["hertz_n"]
+        print(f"# {d:5g} {r0['hertz_radius_mm']:5.2f} {r0['hertz_n']:8.5f} {sphere:8.4f} "
+              f"{r0['layer_factor']:8.4f} {sphere * r0['layer_factor']:8.4f}        | "
+              + "  ".join(f"{finest[(law, el, d)]['value'] / r0['hertz_n']:8.4f}"
+                          for law in INDENT_LAWS for el in ("P1", "P2")))
+    worst_gap = max((r["gap_rel"] for r in rows if "gap_rel" in r), default=float("nan"))
+    worst_base = max((r["base_rel"] for r in rows if "base_rel" in r), default=float("nan"))
+    print(f"# contact: largest |gap| of a contact node {worst_gap:.1e} d; base reaction vs sphere "
+          f"reaction {worst_base:.1e}; peak {max(peaks):.0f} MB")
+    print(f"wrote {OUT_DIR.relative_to(ROOT)}/indent.csv, indent.txt (and the indentation into "
+          f"answers.json) in {time.time() - t_all:.0f} s")
+    return 0 if all(math.isfinite(r["value"]) for r in rows) else 1
 
 
 # --------------------------------------------------------------------------------------
@@ -1138,6 +1767,13 @@ def write_outputs(rows, selftest, wall_s):
             "units": {"tip_mm": "mm", "force_n": "N", "bulge_mm": "mm"},
             "material": "stable Neo-Hookean (snh) / linear elasticity, nu = 0.4",
             "versions": versions()}
+    # the indentation's answers come from --indent (merge_indent_answers): kept as they are
+    old = (json.loads((OUT_DIR / "answers.json").read_text())
+           if (OUT_DIR / "answers.json").exists() else {})
+    if "indent" in old:
+        answers["indent"] = old["indent"]
+        meta["indent_generated_by"] = old.get("meta", {}).get("indent_generated_by",
+                                                              "scripts/fem-reference --indent")
     with open(OUT_DIR / "answers.json", "w") as fh:
         json.dump({"meta": meta, **answers}, fh, indent=2)
         fh.write("\n")
@@ -1254,10 +1890,16 @@ def run_all():
 
 
 def check_values():
-    """The --check set: cantilever k = 2 P2 (both moduli), compress k = 1 P2 (every strain)."""
+    """The --check set: cantilever k = 2 P2 (both moduli), compress k = 1 P2 (every strain),
+    indent at INDENT_CHECK (P1 and P2, k = 4; snh, straight to d = INDENT_CHECK_DEPTH_MM)."""
     rows = list(cantilever(2, 2)) + list(compress(1, 2))
-    return {f"{r['problem']} {r['quantity']} {r['case']} {r['element']} k={r['level']}": r
-            for r in rows}
+    values = {f"{r['problem']} {r['quantity']} {r['case']} {r['element']} k={r['level']}": r
+              for r in rows}
+    for order, k in INDENT_CHECK:
+        for r in indent(k, order, "snh", depths_mm=(INDENT_CHECK_DEPTH_MM,)):
+            values[f"{r['problem']} {r['quantity']} {r['case']} {r['law']} {r['element']} "
+                   f"k={r['level']}"] = r
+    return values
 
 
 def run_check(bless):
@@ -1267,6 +1909,9 @@ def run_check(bless):
     for name, err in selftest.items():
         if not err < 1e-6:
             failures.append(f"kernel self-test {name}: relative difference {err:.1e} > 1e-6")
+    lattice_ok = all(box_is_ours((SLAB,) * 3, (k, k, k)) for k in (4, 6))
+    if not lattice_ok:
+        failures.append("lattice: box() is not our box_tets lattice (indent, k = 4 and 6)")
     values = check_values()
     if bless:
         blessed = {"versions": versions(),
@@ -1304,6 +1949,7 @@ def run_check(bless):
         print(f"FEM CHECK {prob} values={n} max_rel_vs_committed={worst:.1e}{extra} "
               f"{'ok' if not any(f.startswith(prob) for f in failures) else 'FAILED'}")
     print(f"FEM CHECK selftest " + " ".join(f"{k}={e:.1e}" for k, e in selftest.items()))
+    print(f"FEM CHECK lattice box()=ours_box_tets {'ok' if lattice_ok else 'FAILED'}")
     print(f"FEM CHECK {'FAILED' if failures else 'ok'} in {time.time() - t0:.1f} s")
     return 1 if failures else 0
 
@@ -1318,6 +1964,8 @@ def main():
                       help="smallest tangent eigenvalue along the compression's homogeneous path")
     mode.add_argument("--bunny", nargs="+", metavar="FILE",
                       help="exported bunnies (JSON): FEM levels and our field against them")
+    mode.add_argument("--indent", action="store_true",
+                      help="the slab indented by a sphere: force against depth, and Hertz")
     ap.add_argument("--fine", action="store_true",
                     help="with --stability: also P2 at level 8 (a few minutes more)")
     args = ap.parse_args()
@@ -1333,6 +1981,8 @@ def main():
         return run_stability(args.fine)
     if args.bunny:
         return run_bunny(args.bunny)
+    if args.indent:
+        return run_indent()
     return run_check(bless=args.bless)
 
 

@@ -516,7 +516,8 @@ mod tests {
         let spec = MethodSpec::new(crate::methods::MethodKind::NeoHookean)
             .cell(0.2)
             .budget(80, 2);
-        let fit = fit_material(&measure_pbd_compression(&spec, 0.2, 60.0).unwrap());
+        let fit =
+            fit_material(&measure_pbd_compression(&spec, 0.2, 60.0).expect("the compression"));
         let (e0, k0) = (spec.material.young_pa, spec.material.bulk_pa);
         let nu0 = (3.0 * k0 - e0) / (6.0 * k0);
         assert!(
