@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """Independent finite-element reference for the soft-body solver (static hyperelasticity).
 
-What: static solutions of two small problems -- a cantilever sagging under its own weight and
-a block squeezed between frictionless plates -- and of our bunny lattice under its own weight
+What: static solutions of three small problems -- a cantilever sagging under its own weight,
+a block squeezed between frictionless plates and (--indent) a slab indented by a rigid
+frictionless sphere, against Hertz -- and of our bunny lattice under its own weight
 (--bunny), computed with scikit-fem (a finite-element
 library nobody in this project wrote) for the *same* material model our own solver uses: the
 stable Neo-Hookean energy of Smith et al. 2018 in the form of Macklin & Mueller 2021 (see
@@ -35,8 +36,10 @@ Run (through the wrapper, which makes the pinned virtualenv):
     scripts/fem-reference --all     every problem at every level; writes
                                     docs/results/methods/fem/{fem.csv,fem.md,answers.json}
     scripts/fem-reference --check   small levels only (seconds): compares with the committed
-                                    scripts/fem/check.json (relative 1e-6) and the compression
-                                    against its analytic answer; exit 1 on any mismatch
+                                    scripts/fem/check.json (relative 1e-6; the indentation at
+                                    P1 and P2 k = 4, d = 1 mm among them) and the compression
+                                    against its analytic answer, and checks that box() is our
+                                    side's lattice; exit 1 on any mismatch
     scripts/fem-reference --bless   recomputes the --check values and rewrites check.json
     scripts/fem-reference --stability [--fine]
                                     stability of the compression's homogeneous solution: the
@@ -54,6 +57,13 @@ Run (through the wrapper, which makes the pinned virtualenv):
                                     other outputs alone. The 10 % lattice takes ~3 min and
                                     3-4 GB at its peak (P2_refined, 67k dofs); on the 5 %
                                     one P1_refined takes ~70 s and P2 (55k dofs) over 5 min
+    scripts/fem-reference --indent  the slab indented by a sphere (section "Indentation"):
+                                    force against depth d = 0.25 ... 4 mm, stable Neo-Hookean
+                                    and linear, P1 k = 6, 12, 24 and P2 k = 6, 12 (~3 min, 2 GB);
+                                    writes docs/results/methods/fem/{indent.csv,indent.txt}
+                                    (RESULT reference.fem problem=indent lines) and puts the
+                                    finest P2 answers into answers.json (--all keeps them);
+                                    leaves the other outputs alone
 
 --bunny: a problem exported by our side (JSON, made by the Rust code, read as given): the
 bunny as our reference solves it -- a fictitious-domain tet lattice (`nodes` [[x, y, z]] m,
@@ -338,10 +348,12 @@ class NotConverged(RuntimeError):
 
 def line_minimum(disc, mat, u, du, free, fext, slope0, bound):
     """The line search of a contact problem (newton(..., line_min=True)): the step alpha along
-    du (Newton's direction from u; slope0 = phi'(0) < 0): 1 if the potential falls there (to at
-    most `bound`, the potential at u plus roundoff) or still falls at 1 (phi'(1) <= 0), else an
-    approximate minimum of the potential
-    phi(alpha) on [0, 1] -- Illinois regula falsi on phi'(alpha) = (f_int - fext) . du until
+    du (Newton's direction from u; slope0 = phi'(0) < 0, phi(alpha) the potential at
+    u + alpha du). The full step if the potential falls there (to at most `bound`, the
+    potential at u plus roundoff) or if phi'(1) <= |phi'(0)| / 2 (then it fell: for a quadratic
+    phi, phi(1) < phi(0) exactly when phi'(1) < |phi'(0)|; the test on forces still works near
+    convergence, where the fall is below the potential's rounding); else an approximate
+    minimum of phi on [0, 1]: Illinois regula falsi on phi'(alpha) = (f_int - fext) . du until
     |phi'| <= 0.1 |phi'(0)|. Plain backtracking stalls when the step pushes a node that is not
     yet in contact (so the tangent does not know it) deep into the obstacle: the potential then
     falls only for alpha below about the node's clearance over its step, tiny for a node about
@@ -364,27 +376,22 @@ def line_minimum(disc, mat, u, du, free, fext, slope0, bound):
         hi *= 0.5
     else:
         raise NotConverged("line search: inverted along the whole step")
-    if end[1] <= bound or end[2] <= 0.0:
-        # the potential fell, or still falls at the end of the step (then it fell all along:
-        # near convergence the fall is below the potential's rounding)
+    if end[1] <= bound or end[2] <= 0.5 * abs(slope0):
         return end[0]
-    lo, slope_lo, slope_hi = 0.0, slope0, end[2]
-    if not (slope0 < 0.0 < slope_hi):
-        raise NotConverged(f"line search: no bracket (slopes {slope0:.1e}, {slope_hi:.1e})")
-    best, side = None, 0
+    if not slope0 < 0.0:
+        raise NotConverged(f"line search: not a descent direction (slope {slope0:.1e})")
+    lo, slope_lo, slope_hi, side, below = 0.0, slope0, end[2], 0, None
     for _ in range(60):
         alpha = hi - slope_hi * (hi - lo) / (slope_hi - slope_lo)
         alpha = min(max(alpha, lo + 1e-6 * (hi - lo)), hi - 1e-6 * (hi - lo))
         point = at(alpha)
         if point is None:                     # inverted inside the bracket: bisect below it
-            hi, slope_hi, side = 0.5 * (lo + alpha), slope_hi, 0
+            hi, side = 0.5 * (lo + alpha), 0
             continue
-        if point[1] <= bound and (best is None or point[1] < best[1]):
-            best = point
-        if best is not None and abs(point[2]) <= 0.1 * abs(slope0):
-            return best[0]
+        if abs(point[2]) <= 0.1 * abs(slope0):
+            return point[0]
         if point[2] < 0.0:
-            lo, slope_lo = alpha, point[2]
+            lo, slope_lo, below = alpha, point[2], point
             slope_hi = slope_hi / 2 if side == -1 else slope_hi
             side = -1
         else:
@@ -393,9 +400,9 @@ def line_minimum(disc, mat, u, du, free, fext, slope0, bound):
             side = +1
         if hi - lo <= 1e-12:
             break
-    if best is None:
+    if below is None:
         raise NotConverged("line search failed")
-    return best[0]
+    return below[0]                           # the furthest point where phi still fell
 
 
 def newton(disc, mat, u, free, fext, solver, log, line_min=False):
@@ -601,8 +608,10 @@ def analytic_rows():
 # by a rigid frictionless sphere of radius R whose centre moves down the y axis,
 # c = (0, SLAB + R - d, 0), through the depths d (displacement control). Contact is nodal: no
 # node (every vertex, and for P2 every edge midpoint) may be inside the sphere, frictionless.
+# The mesh is box(), which is our side's lattice (box_is_ours, checked by --check and
+# --indent), so P1 here is our discretisation node for node.
 #
-# Enforced by an augmented Lagrangian: per node the energy max(0, lambda + k_c g)^2 / (2 k_c),
+# Contact by an augmented Lagrangian: per node the energy max(0, lambda + k_c g)^2 / (2 k_c),
 # g = R - |x - c| the penetration, lambda >= 0 the node's contact force from the last update
 # (a penalty of stiffness k_c = CONTACT_STIFFNESS when lambda = 0), with its exact gradient and
 # Hessian, so Newton settles the active set itself (the energy is C1 and piecewise smooth; the
@@ -610,12 +619,15 @@ def analytic_rows():
 # right force). At each depth the sphere is moved there in one load step (halved if Newton
 # fails), then lambda <- max(0, lambda + k_c g) and Newton again, until no node is more than
 # CONTACT_TOL d inside or outside the sphere while pushed by it: the exact nodal constraint,
-# to that tolerance (the largest |g| / d is reported per row). The sphere's reaction is the sum
-# of the contact forces' y components, times 4 (the whole sphere), checked against the
-# clamped base's reaction (the body's equilibrium).
+# to that tolerance (the largest |g| / d is reported per row: gap_rel). The sphere's reaction
+# is the sum of the contact forces' y components, times 4 (the whole sphere), checked against
+# the clamped base's reaction (the body's equilibrium: base_rel). Linear systems: one sparse LU
+# (SuperLU in a nested-dissection order, OrderedLU) serves many Newton steps (ContactSolver:
+# the contact's changes by the Woodbury identity, the rest by GMRES); P1 with one quadrature
+# point (exact: F is constant per tet), P2 with the default 11.
 #
 # Hertz (a rigid paraboloid on an elastic half-space): F = 4/3 E/(1 - nu^2) sqrt(R) d^(3/2),
-# a = sqrt(R d). What separates the slab from it, estimated in closed form per row:
+# a = sqrt(R d). What separates this slab from it, estimated in closed form per row:
 #   - the sphere is not a paraboloid (Sneddon's rigid sphere on a half-space, exact in linear
 #     elasticity: d = a/2 ln((R + a)/(R - a)), F = E/(1 - nu^2)/2 ((a^2 + R^2) ln((R + a)/(R - a))
 #     - 2 a R): 0.25 % under Hertz at d = 0.25 mm, 4 % at 4 mm;
@@ -626,8 +638,9 @@ def analytic_rows():
 #     alpha0 = -(1.2876 - 1.4678 nu + 1.3442 nu^2)/(1 - nu),
 #     beta0 = (0.6387 - 1.0277 nu + 1.5164 nu^2)/(1 - nu): +5.4 % at d = 0.25 mm, +25 % at 4 mm
 #     (for a laterally infinite layer; this block's free sides, SLAB from the axis, soften it);
-#   - finite strain (snh against linear), and on coarse meshes the nodal contact itself (the
-#     contact patch is a few nodes wide: a discretisation error that refinement removes).
+#   - finite strain (snh against linear), and the nodal contact itself: the contact patch is a
+#     few nodes wide (at d = 0.25 mm, a = 1.6 mm against a node spacing of 1.25 mm on the
+#     finest meshes here), a discretisation error that only refinement removes.
 
 SLAB = 0.03                 # the quarter block's side, m (x, y, z in [0, SLAB])
 SLAB_E = 1e5                # Young's modulus, Pa
@@ -637,17 +650,19 @@ INDENT_DEPTHS_MM = (0.25, 0.5, 1.0, 2.0, 4.0)
 # 12 are our side's meshes
 INDENT_LEVELS = ((1, 6), (1, 12), (1, 24), (2, 6), (2, 12))
 INDENT_LAWS = ("snh", "linear")
-# Penalty stiffness per node, N/m (~1000 x a node's elastic stiffness E h at k = 6 .. 24: each
-# multiplier update cuts the penetration ~1000-fold). Much stiffer is worse, not better: the
-# residual's rounding floor is k_c times the rounding of |x - c| (~1e-18 m), and Newton's
-# tolerance (NEWTON_RTOL of the force scale, ~1e-12 N at d = 0.25 mm) is below it at k_c = 1e7.
+# Penalty stiffness per node, N/m (200-800 x a node's elastic stiffness ~E h at k = 24 .. 6:
+# each multiplier update cuts the penetration that much). Much stiffer is worse, not better:
+# the residual's rounding floor is k_c times the rounding of |x - c| (~1e-18 m), and Newton's
+# tolerance (NEWTON_RTOL of the force scale, ~1e-12 N at d = 0.25 mm) is below it at 1e7.
 CONTACT_STIFFNESS = 1e5
 CONTACT_TOL = 1e-6          # multiplier updates until every contact node's |g| <= this x d
 CONTACT_UPDATES = 10        # at most this many updates per depth
 INDENT_CHECK = ((1, 4), (2, 4))     # --check: these levels, snh, straight to d = 1 mm
 INDENT_CHECK_DEPTH_MM = 1.0
-CONTACT_GMRES_RTOL = 1e-7  # ContactSolver's GMRES stops at this preconditioned residual
+CONTACT_GMRES_RTOL = 1e-7   # ContactSolver's GMRES stops at this preconditioned residual
 TANGENT_REUSE = 0.01        # SphereContact reuses the body's tangent within this (see there)
+CONTACT_CHANGE = 1e-2       # ContactSolver: a contact Hessian change this x k_c is "large"
+CONTACT_COLUMNS = 48        # ContactSolver: new Woodbury columns a direct solve may cost
 
 
 class LinearBody:
@@ -790,49 +805,54 @@ def nested_dissection(points, planes, leaf=64):
 
 
 class ContactSolver:
-    """Solves newton()'s systems K_ff du = r for a SphereContact, K = B + C: its body's tangent
-    B and the contact Hessian C (3x3 blocks on the nodes the sphere pushes, from the last
-    SphereContact.tangent), with an LU of the body's tangent alone and the Woodbury identity for
-    C: (B + E H E^T)^-1 r = y - Z (I + H E^T Z)^-1 H E^T y, y = B^-1 r, Z = B^-1 E, E the unit
-    columns of the contact's free dofs (Z's columns cached per dof while the LU is kept). While
-    the LU is of the current body tangent (always, for linear elasticity) that is a direct
-    solve; once the body's tangent has been reassembled, it preconditions GMRES on K (the
-    contact part exact, the body's stale), and the body's tangent is refactored when 12
-    iterations do not bring the true residual to GMRES_FORCING. So a change of the contact's
-    active set never costs a factorisation. `perm`: the LU's elimination order of the free dofs."""
+    """Solves newton()'s systems K_ff du = r for a SphereContact: K = its body's tangent B plus
+    the contact Hessian C (3x3 blocks on the nodes the sphere pushes). One LU, of the K_ff of
+    an earlier system (A = B0 + C0), serves many: C - C0 is low-rank (the contact nodes' dofs),
+    and the Woodbury identity corrects A for it, (A + E H E^T)^-1 r = y - Z (I + H E^T Z)^-1
+    H E^T y, y = A^-1 r, Z = A^-1 E, H = (C - C0) on the dofs E picks (Z's columns cached per
+    dof while the LU is kept). While B is still B0 (always, for linear elasticity; for snh while
+    SphereContact reuses it) and at most CONTACT_COLUMNS new columns are needed, that is a
+    direct solve with every changed dof. Otherwise it preconditions GMRES on K with only the
+    large changes (a node come into or out of contact, or a block changed by more than
+    CONTACT_CHANGE of the penalty stiffness) in E, the rest (B - B0, the normals' slow turning)
+    left to GMRES; when 12 iterations do not bring the true residual to GMRES_FORCING, K_ff is
+    factorised anew. So the contact's active set can change without a factorisation.
+    `perm`: the LU's elimination order of the free dofs."""
 
     def __init__(self, contact, free, perm):
         self.contact, self.free, self.perm = contact, free, perm
         self.position = np.full(contact.ndofs, -1)
         self.position[free] = np.arange(len(free))        # global dof -> free index
-        self.body, self.lu, self.columns = None, None, {}
+        self.lu, self.columns, self.body, self.reference = None, {}, None, None
         self.factorisations = 0
 
-    def _factorise(self, body):
+    def _contact_hessian(self):
+        """The last tangent's contact Hessian on the free dofs (CSR)."""
+        _, rows, cols, vals = self.contact.last_tangent
+        fr, fc = self.position[rows], self.position[cols]
+        keep = (fr >= 0) & (fc >= 0)
+        n = len(self.free)
+        return sp.coo_matrix((vals[keep], (fr[keep], fc[keep])), shape=(n, n)).tocsr()
+
+    def _factorise(self, k, body, hessian):
         self.lu, self.columns = None, {}                  # free the old one first (peak memory)
-        self.lu = OrderedLU(body[self.free][:, self.free], self.perm)
-        self.body = body
+        self.lu = OrderedLU(k, self.perm)
+        self.body, self.reference = body, hessian
         self.factorisations += 1
 
     def _column(self, j):
-        """B^-1 e_j (cached)."""
+        """A^-1 e_j (cached)."""
         if j not in self.columns:
             e = np.zeros(len(self.free))
             e[j] = 1.0
             self.columns[j] = self.lu.solve(e)
         return self.columns[j]
 
-    def _woodbury(self):
-        """x -> (B_LU + C_ff)^-1 x, for the contact Hessian of the last tangent."""
-        body, rows, cols, vals = self.contact.last_tangent
-        fr, fc = self.position[rows], self.position[cols]
-        keep = (fr >= 0) & (fc >= 0)
-        dofs = np.unique(fr[keep])
+    def _woodbury(self, change, dofs):
+        """x -> (A + E H E^T)^-1 x, H = `change` on `dofs` (free indices)."""
         if len(dofs) == 0:
             return self.lu.solve
-        h = np.zeros((len(dofs), len(dofs)))
-        np.add.at(h, (np.searchsorted(dofs, fr[keep]), np.searchsorted(dofs, fc[keep])),
-                  vals[keep])
+        h = change[dofs][:, dofs].toarray()
         z = np.column_stack([self._column(j) for j in dofs])
         small = np.linalg.inv(np.eye(len(dofs)) + h @ z[dofs])
 
@@ -842,18 +862,25 @@ class ContactSolver:
         return apply
 
     def solve(self, k, r):
-        body = self.contact.last_tangent[0]
+        body, hessian = self.contact.last_tangent[0], self._contact_hessian()
         if self.lu is None:
-            self._factorise(body)
-        if self.body is body:
-            return self._woodbury()(r)
-        prec = sla.LinearOperator(k.shape, self._woodbury())
+            self._factorise(k, body, hessian)
+            return self.lu.solve(r)
+        change = (hessian - self.reference).tocsr()
+        change.eliminate_zeros()
+        row_max = (abs(change).max(axis=1).toarray().ravel() if change.nnz
+                   else np.zeros(change.shape[0]))
+        changed = np.nonzero(row_max > 0.0)[0]
+        if body is self.body and sum(j not in self.columns for j in changed) <= CONTACT_COLUMNS:
+            return self._woodbury(change, changed)(r)
+        large = np.nonzero(row_max > CONTACT_CHANGE * self.contact.stiffness)[0]
+        prec = sla.LinearOperator(k.shape, self._woodbury(change, large))
         x, _ = sla.gmres(k, r, M=prec, rtol=CONTACT_GMRES_RTOL, atol=0.0, restart=12,
                          maxiter=1)
         if np.linalg.norm(k @ x - r) <= GMRES_FORCING * np.linalg.norm(r):
             return x
-        self._factorise(body)
-        return self._woodbury()(r)
+        self._factorise(k, body, hessian)
+        return self.lu.solve(r)
 
 
 class OrderedLU:

@@ -15,12 +15,34 @@
 use softsync_benchkit::{Csv, ResultLine};
 use softsync_softbody::methods::material::{
     fit_material, measure_particle_compression, measure_pbd_compression, particle_setting,
-    NamedMaterial,
+    Compression, MaterialFit, NamedMaterial,
 };
 use softsync_softbody::methods::{MethodKind, MethodSpec};
 use softsync_softbody::SoftBodyConfig;
 
 const SIZE_M: f32 = 0.2;
+
+/// A row of `material.csv`: the setting, its fit and the two measured strains.
+fn csv_row(
+    rate: f32,
+    setting: String,
+    volume_stiffness: String,
+    fit: &MaterialFit,
+    m: &Compression,
+) -> [String; 10] {
+    [
+        rate.to_string(),
+        setting,
+        volume_stiffness,
+        format!("{:.4}", fit.young_pa / 1e3),
+        format!("{:.4}", fit.poisson),
+        format!("{:.2}", fit.fit_err_pct),
+        format!("{:.4}", m[0].1 / 1e3),
+        format!("{:.5}", m[0].2),
+        format!("{:.4}", m[1].1 / 1e3),
+        format!("{:.5}", m[1].2),
+    ]
+}
 
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
@@ -62,18 +84,13 @@ fn main() {
                     .fixed("fit_err_pct", fit.fit_err_pct, 1);
                 println!("{line}");
                 lines.push(line.to_string());
-                csv.row([
-                    rate.to_string(),
+                csv.row(csv_row(
+                    rate,
                     format!("particle stiffness {k}"),
                     vol.to_string(),
-                    format!("{:.4}", fit.young_pa / 1e3),
-                    format!("{:.4}", fit.poisson),
-                    format!("{:.2}", fit.fit_err_pct),
-                    format!("{:.4}", m[0].1 / 1e3),
-                    format!("{:.5}", m[0].2),
-                    format!("{:.4}", m[1].1 / 1e3),
-                    format!("{:.5}", m[1].2),
-                ]);
+                    &fit,
+                    &m,
+                ));
             }
         }
     }
@@ -108,18 +125,7 @@ fn main() {
         let line = match measure_pbd_compression(spec, SIZE_M, rate) {
             Ok(m) => {
                 let fit = fit_material(&m);
-                csv.row([
-                    rate.to_string(),
-                    spec.label(),
-                    String::new(),
-                    format!("{:.4}", fit.young_pa / 1e3),
-                    format!("{:.4}", fit.poisson),
-                    format!("{:.2}", fit.fit_err_pct),
-                    format!("{:.4}", m[0].1 / 1e3),
-                    format!("{:.5}", m[0].2),
-                    format!("{:.4}", m[1].1 / 1e3),
-                    format!("{:.5}", m[1].2),
-                ]);
+                csv.row(csv_row(rate, spec.label(), String::new(), &fit, &m));
                 ResultLine::new("material.fit")
                     .field("method", spec.kind.name())
                     .field(
