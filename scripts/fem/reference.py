@@ -1108,6 +1108,8 @@ def merge_indent_answers(rows):
         if r["element"] != "P2":
             continue
         change = r.get("change_pct", "")
+        if not math.isfinite(r["value"]):
+            continue
         out[f"d={r['d_mm']:g}mm {r['law']}"] = {
             "value": float(r["value"]), "level": int(r["level"]), "dofs": int(r["dofs"]),
             "change_pct": float(change) if change != "" else None,
