@@ -92,6 +92,9 @@ pub struct SoftBody {
     /// The volume term's scratch: ∂V/∂x per welded vertex, and per particle.
     vertex_grad: Vec<Vec3>,
     particle_grad: Vec<Vec3>,
+    /// The volume term's scratch: the welded vertices where the particles are now, relative
+    /// to the center (not `vertices`, which may be blending or stale).
+    sim_vertices: Vec<Vec3>,
     /// Deformed welded vertices, world space.
     vertices: Vec<Vec3>,
     render_positions: Vec<Vec3>,
@@ -447,6 +450,7 @@ impl BodyPlan {
             planned_v: Vec::with_capacity(n),
             vertex_grad: Vec::new(),
             particle_grad: Vec::new(),
+            sim_vertices: Vec::new(),
             rest_volume_m3,
             size_m,
             roll_radius_m,

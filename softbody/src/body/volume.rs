@@ -34,7 +34,7 @@ impl SoftBody {
     }
 
     /// The volume term (`SoftBodyConfig::volume_stiffness`): a global pressure. With `V` the
-    /// enclosed volume of the deformed surface (as the last step left it), `gₚ = ∂V/∂xₚ`
+    /// enclosed volume of the surface the particles make now, `gₚ = ∂V/∂xₚ`
     /// through the skinning (each vertex is its rest place plus the weighted displacement of
     /// its particles, so `gₚ = Σᵥ wᵥₚ ∂V/∂xᵥ`), and `V'` the volume the planned velocities
     /// of the free particles ([`freedom`](Self::freedom) `f`, weighting each) would give after the step
@@ -48,11 +48,29 @@ impl SoftBody {
         if rate <= 0.0 || self.tear.is_some() || self.rest_volume_m3 <= 0.0 {
             return;
         }
+        // The shape the particles make now, built here from this step's displacements
+        // (`self.scratch`, measured from the world): `vertices` is what the last deformation
+        // showed — blending towards a received state, or still at rest in a world rebuilt from
+        // a snapshot — and a term that read it would make two peers with the same physics
+        // state step differently.
+        self.sim_vertices.clear();
+        for (v, rest) in self.rest_vertices.iter().enumerate() {
+            let mut p = r * *rest;
+            if self.map.soft_vertex[v] {
+                let (ids, ws) = self.map.vertex_particles.row(v);
+                for (&pi, &w) in ids.iter().zip(ws) {
+                    let i = pi as usize;
+                    p += (self.scratch[i] + r * self.anchor_shift[i]) * w;
+                }
+            }
+            self.sim_vertices.push(p);
+        }
         let tris = &self.welded.triangles;
+        let verts = &self.sim_vertices;
         let volume: f32 = tris
             .iter()
             .map(|t| {
-                let [a, b, c] = t.map(|i| self.vertices[i as usize]);
+                let [a, b, c] = t.map(|i| verts[i as usize]);
                 a.dot(b.cross(c)) / 6.0
             })
             .sum();
@@ -66,9 +84,9 @@ impl SoftBody {
             return;
         }
         self.vertex_grad.clear();
-        self.vertex_grad.resize(self.vertices.len(), Vec3::ZERO);
+        self.vertex_grad.resize(verts.len(), Vec3::ZERO);
         for t in tris {
-            let [a, b, c] = t.map(|i| self.vertices[i as usize]);
+            let [a, b, c] = t.map(|i| verts[i as usize]);
             self.vertex_grad[t[0] as usize] += b.cross(c) / 6.0;
             self.vertex_grad[t[1] as usize] += c.cross(a) / 6.0;
             self.vertex_grad[t[2] as usize] += a.cross(b) / 6.0;
