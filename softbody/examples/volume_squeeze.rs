@@ -91,7 +91,9 @@ fn main() {
         RGBColor(214, 39, 40),
     ];
     for (ci, cell) in [0.06f32, 0.1].into_iter().enumerate() {
-        let on = MethodSpec::new(MethodKind::Particle).cell(cell);
+        let on = MethodSpec::new(MethodKind::Particle)
+            .cell(cell)
+            .volume_stiffness(250.0);
         let off = on.volume_stiffness(0.0);
         let (mut with, mut without) = (Vec::new(), Vec::new());
         for _ in 0..repeats {
