@@ -81,6 +81,7 @@ pub use device::DeviceFrame;
 pub use events::{Counters, Event, PeerError, TopologyError};
 pub use messages::Say;
 pub use mirror::{build_body, LocalBody, MirroredObject};
+pub use peer::cost::{FrameCost, Phase};
 pub use peer::cutter::HandTool;
 pub use peer::{Peer, PeerConfig};
 pub use scene::{BodyClass, Class, FixedBox, Kind, Placed, Scene, Shape};

@@ -14,6 +14,7 @@ mod blade;
 mod bounds;
 mod builds;
 mod comanip;
+pub mod cost;
 pub(crate) mod cutter;
 mod orphans;
 mod show;
@@ -37,6 +38,7 @@ use crate::events::{Counters, Event, PeerError};
 use crate::join::{may_rejoin, Joining};
 use crate::mirror::{LocalBody, Mirror};
 use crate::scene::{Kind, Scene};
+use cost::Phase;
 
 /// How a peer simulates and how patient it is.
 #[derive(Clone, Debug)]
@@ -118,6 +120,8 @@ pub struct Peer {
     sim_time_s: f64,
     steps: u64,
     last_step_at: Instant,
+    /// A lent clock measuring where frames go (`cost.rs`).
+    stopwatch: cost::Stopwatch,
 }
 
 /// The hands' answer to "may this peer move that object": its session says who owns it.
@@ -182,6 +186,7 @@ impl Peer {
             sim_time_s: 0.0,
             steps: 0,
             last_step_at: Instant::ZERO,
+            stopwatch: cost::Stopwatch::default(),
         })
     }
 
@@ -226,6 +231,7 @@ impl Peer {
     /// events, the join timeout. Call once per frame, after this frame's datagrams and link
     /// events. An error means the peer must stop.
     pub fn pump(&mut self, now: Instant) -> Result<(), PeerError> {
+        self.stopwatch.start();
         if let Some(next) = self.joining.next_contact(now) {
             // The same session: the peers asked before keep their sequences with us in step.
             self.session.join_via(now, next);
@@ -233,11 +239,14 @@ impl Peer {
         if self.session.poll_timeout().is_some_and(|t| t <= now) {
             self.session.handle_timeout(now);
         }
+        self.stopwatch.lap(Phase::Timers);
         while let Some(e) = self.session.poll_event() {
             self.on_session_event(now, e)?;
         }
+        self.stopwatch.lap(Phase::Events);
         self.land_builds(now);
         self.adopt_orphans(now);
+        self.stopwatch.lap(Phase::Builds);
         if self.joining.overdue(now, self.config.join_timeout) {
             return Err(PeerError::NotWelcomed {
                 secs: self.config.join_timeout.as_secs(),
@@ -572,6 +581,7 @@ impl Peer {
     /// Advance the simulation by one fixed step at `now` and publish what we own (then send
     /// what [`Peer::poll_transmit`] gives).
     pub fn fixed_step(&mut self, now: Instant) {
+        self.stopwatch.start();
         let me = self.me();
         let dt = self.config.dt_s;
         self.sim_time_s += dt as f64;
@@ -606,6 +616,7 @@ impl Peer {
                 self.session.set_interest(p, at);
             }
         }
+        self.stopwatch.lap(Phase::Shown);
         // Hands, then physics.
         let own = SessionOwnership {
             me,
@@ -619,12 +630,16 @@ impl Peer {
         }
         self.send_remote_hands(now);
         self.apply_remote_hands(now);
+        self.stopwatch.lap(Phase::Hands);
         self.use_scalpels(now);
         self.flush_blades(now);
+        self.stopwatch.lap(Phase::Blades);
         self.mirror.soft.step(&mut self.mirror.world, dt);
+        self.stopwatch.lap(Phase::Physics);
         self.run_auto(now);
         self.publish_holders(now);
         self.age_fades();
+        self.stopwatch.lap(Phase::Publish);
         // Remote soft bodies: show exactly the interpolated state again after the step.
         for id in &remote {
             let soft = matches!(
@@ -638,6 +653,7 @@ impl Peer {
                 }
             }
         }
+        self.stopwatch.lap(Phase::Shown);
         // Publish ours.
         let owned: Vec<NetId> = self
             .mirror
@@ -672,6 +688,7 @@ impl Peer {
                 self.events.push_back(Event::Warning(msg));
             }
         }
+        self.stopwatch.lap(Phase::Publish);
     }
 
     fn on_hand_event(&mut self, now: Instant, e: InteractionEvent) {
