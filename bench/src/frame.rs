@@ -334,7 +334,10 @@ pub fn run(plan: &FramePlan) -> Result<FrameReport, String> {
                         let to = s.pos + s.rot * Vec3::new(x(k + 1), 0.0, 0.0);
                         report.tears_asked += 1;
                         notes[3].push("tear");
-                        if c.peer.tear(now, id, from, to, Vec3::Y * 0.08).is_err() {
+                        if c.peer
+                            .tear(now, id, from, to, s.rot * Vec3::Y * 0.08)
+                            .is_err()
+                        {
                             report.blades_refused += 1;
                         }
                         stroke = Some((id, k + 1));

@@ -38,6 +38,20 @@ fn a_client_tears_the_bunny_and_cuts_the_box_and_the_host_shows_the_same_pieces(
     assert_eq!(client.peer.session().owner(soft_box), Some(CLIENT));
     // A stroke across the bunny's back: the tip 3 cm above its center, the blade upright.
     let c = client.peer.shown_state(room.now, bunny).unwrap().pos;
+    // A blade along its own stroke cuts nothing: refused by the owner, never in the room's log
+    // (every peer would refuse it when it replays the body's history).
+    let now = room.now;
+    let along = room.nodes[1].peer.tear(
+        now,
+        bunny,
+        c + Vec3::new(-0.05, 0.03, 0.0),
+        c + Vec3::new(-0.025, 0.03, 0.0),
+        Vec3::X * 0.04,
+    );
+    assert!(
+        along.as_ref().is_err_and(|e| e.0.contains("blade along")),
+        "{along:?}"
+    );
     let path: Vec<Vec3> = (0..5)
         .map(|k| c + Vec3::new(-0.05 + 0.025 * k as f32, 0.03, 0.0))
         .collect();

@@ -241,6 +241,10 @@ impl Peer {
             to: q(to_r)?,
             blade: q(blade_r)?,
         };
+        // as every peer will read it (quantised, in the rest frame): refused here, not by all
+        if let Some(seg) = segment_of(&event) {
+            seg.validate().map_err(|e| TopologyError(e.to_string()))?;
+        }
         self.stroke_of(now, id, author);
         self.ask_topology(now, id, event, Vec::new())
     }

@@ -101,6 +101,37 @@ pub struct TearSegment {
     pub blade: Vec3,
 }
 
+impl TearSegment {
+    /// Whether every peer can apply it: finite, the segment and the blade each 10 µm to 1 m
+    /// long, the blade not along the segment. An owner checks before it asks for a tear, so
+    /// the room's log never holds an entry every peer then refuses.
+    pub fn validate(&self) -> Result<(), CutError> {
+        self.frame().map(|_| ())
+    }
+
+    /// The unit direction along the segment and the blade's unit direction across it.
+    fn frame(&self) -> Result<(Vec3, Vec3), CutError> {
+        if !(self.from.is_finite() && self.to.is_finite() && self.blade.is_finite()) {
+            return Err(CutError::NonFinite("tear segment"));
+        }
+        let along = self.to - self.from;
+        let (len, blade_len) = (along.length(), self.blade.length());
+        for l in [len, blade_len] {
+            if !(1e-5..=MAX_SEGMENT_M).contains(&l) {
+                return Err(CutError::Degenerate(
+                    "tear segment or blade shorter than 10 µm or longer than 1 m",
+                ));
+            }
+        }
+        let along = along / len;
+        let up = self.blade - along * self.blade.dot(along);
+        if up.length() < 0.05 * blade_len {
+            return Err(CutError::Degenerate("blade along the tear direction"));
+        }
+        Ok((along, up.normalize()))
+    }
+}
+
 /// A closed half-space `normal · x <= offset`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct HalfSpace {
@@ -327,24 +358,7 @@ impl TearMesh {
     }
 
     fn make_box(&self, seg: &TearSegment) -> Result<TearBox, CutError> {
-        if !(seg.from.is_finite() && seg.to.is_finite() && seg.blade.is_finite()) {
-            return Err(CutError::NonFinite("tear segment"));
-        }
-        let along = seg.to - seg.from;
-        let (len, blade_len) = (along.length(), seg.blade.length());
-        for l in [len, blade_len] {
-            if !(1e-5..=MAX_SEGMENT_M).contains(&l) {
-                return Err(CutError::Degenerate(
-                    "tear segment or blade shorter than 10 µm or longer than 1 m",
-                ));
-            }
-        }
-        let along = along / len;
-        let up = seg.blade - along * seg.blade.dot(along);
-        if up.length() < 0.05 * blade_len {
-            return Err(CutError::Degenerate("blade along the tear direction"));
-        }
-        let up = up.normalize();
+        let (along, up) = seg.frame()?;
         let side = along.cross(up);
         let half = 0.5 * self.width_m;
         let h = |normal: Vec3, offset: f32| HalfSpace { normal, offset };
