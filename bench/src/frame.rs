@@ -96,7 +96,7 @@ pub struct FrameSample {
     /// Datagrams in (decoding, the session's handling, snapshots for joiners).
     pub datagrams_s: f64,
     /// The peer's own phases ([`Phase::ALL`] order).
-    pub phases_s: [f64; 8],
+    pub phases_s: [f64; 10],
     /// Datagrams out.
     pub transmit_s: f64,
     /// What this frame did that may cost: `topology` (a cut or tear applied), `host` (the
@@ -529,25 +529,63 @@ impl FrameReport {
         md
     }
 
-    /// Writes `frame.csv`, `frame.svg` (frame cost over time), `spikes.md` and `RESULT.txt`
-    /// under `dir`; returns the RESULT lines.
+    /// Writes under `dir`: `frame.csv` (per peer and 0.1 s: frames, median, max, the max's
+    /// worst phase and notes), `slow_frames.csv` (every frame over 2 ms, phase by phase),
+    /// `frame.svg` (each peer's costliest frame per 0.1 s, over time), `spikes.md` and
+    /// `RESULT.txt`; returns the RESULT lines.
     pub fn write(&self, dir: &Path) -> Result<Vec<String>, String> {
         std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
         let mut cols = vec!["t_s", "peer", "total_ms", "datagrams_ms"];
         cols.extend(Phase::ALL.iter().map(|p| p.name()));
         cols.extend(["transmit_ms", "note"]);
-        let mut csv = Csv::new(&cols);
-        for s in &self.samples {
+        let mut slow = Csv::new(&cols);
+        for s in self.samples.iter().filter(|s| s.total_s > 2e-3) {
             let mut row = vec![
-                format!("{:.4}", s.t_s),
+                format!("{:.3}", s.t_s),
                 s.peer.0.to_string(),
-                format!("{:.4}", ms(s.total_s)),
-                format!("{:.4}", ms(s.datagrams_s)),
+                format!("{:.3}", ms(s.total_s)),
+                format!("{:.3}", ms(s.datagrams_s)),
             ];
-            row.extend(s.phases_s.iter().map(|v| format!("{:.4}", ms(*v))));
-            row.push(format!("{:.4}", ms(s.transmit_s)));
+            row.extend(s.phases_s.iter().map(|v| format!("{:.3}", ms(*v))));
+            row.push(format!("{:.3}", ms(s.transmit_s)));
             row.push(s.note.clone());
-            csv.row(row);
+            slow.row(row);
+        }
+        slow.write(dir.join("slow_frames.csv"))
+            .map_err(|e| format!("slow_frames.csv: {e}"))?;
+        // per peer and bin of 0.1 s
+        let mut bins: BTreeMap<(u64, i64), Vec<&FrameSample>> = BTreeMap::new();
+        for s in &self.samples {
+            bins.entry((s.peer.0, (s.t_s * 10.0).floor() as i64))
+                .or_default()
+                .push(s);
+        }
+        let mut csv = Csv::new(&[
+            "t_s",
+            "peer",
+            "frames",
+            "p50_ms",
+            "max_ms",
+            "max_worst_phase",
+            "max_note",
+        ]);
+        let mut per: BTreeMap<u64, Vec<(f64, f64)>> = BTreeMap::new();
+        for ((peer, bin), frames) in &bins {
+            let v: Vec<f64> = frames.iter().map(|s| ms(s.total_s)).collect();
+            let Some(top) = frames.iter().max_by(|a, b| a.total_s.total_cmp(&b.total_s)) else {
+                continue;
+            };
+            let t = *bin as f64 / 10.0;
+            csv.row([
+                format!("{t:.1}"),
+                peer.to_string(),
+                frames.len().to_string(),
+                format!("{:.3}", percentile(&v, 0.5)),
+                format!("{:.3}", ms(top.total_s)),
+                top.worst_phase().to_owned(),
+                top.note.clone(),
+            ]);
+            per.entry(*peer).or_default().push((t, ms(top.total_s)));
         }
         csv.write(dir.join("frame.csv"))
             .map_err(|e| format!("frame.csv: {e}"))?;
@@ -558,12 +596,6 @@ impl FrameReport {
             RGBColor(44, 160, 44),
             RGBColor(214, 39, 40),
         ];
-        let mut per: BTreeMap<u64, Vec<(f64, f64)>> = BTreeMap::new();
-        for s in &self.samples {
-            per.entry(s.peer.0)
-                .or_default()
-                .push((s.t_s, ms(s.total_s)));
-        }
         let top = self
             .samples
             .iter()
@@ -594,7 +626,8 @@ impl FrameReport {
             vec![(0.0, 8.0), (span, 8.0)],
         ));
         let chart = LineChart {
-            title: "Frame cost, every peer, everything but rendering".into(),
+            title: "Frame cost: each peer's costliest frame per 0.1 s (everything but rendering)"
+                .into(),
             x_desc: "time (s)".into(),
             y_desc: "frame (ms)".into(),
             x_range: 0.0..span,

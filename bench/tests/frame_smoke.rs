@@ -43,8 +43,13 @@ fn the_quick_frame_budget_room_does_everything_and_prints_its_result() {
         "{}",
         lines[0]
     );
+    // a row per peer and 0.1 s: 8 s, three or four peers
     let csv = std::fs::read_to_string(dir.join("frame.csv")).unwrap();
-    assert_eq!(csv.lines().count(), frames + 1);
+    assert!(
+        (240..=330).contains(&csv.lines().count()),
+        "{}",
+        csv.lines().count()
+    );
     assert!(dir.join("frame.svg").is_file());
     let _ = std::fs::remove_dir_all(&dir);
 }

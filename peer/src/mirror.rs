@@ -290,7 +290,14 @@ impl Mirror {
 
     /// Rigid props we own are dynamic; the others follow the network, kinematically.
     pub(crate) fn set_simulated(&mut self, id: NetId, ours: bool) {
-        let Some(LocalBody::Rigid(h)) = self.objects.get(&id).map(|o| o.body) else {
+        let body = self.objects.get(&id).map(|o| o.body);
+        if let (Some(LocalBody::Soft(h)), true) = (body, ours) {
+            // ours: simulated here again (a replica is made by `apply_shown`)
+            if let Some(b) = self.soft.get_mut(h) {
+                b.set_replica(false);
+            }
+        }
+        let Some(LocalBody::Rigid(h)) = body else {
             return;
         };
         if let Some(b) = self.world.bodies.get_mut(h) {
@@ -337,6 +344,17 @@ impl Mirror {
     /// Show state `s` on object `id`'s body. False when a soft body refused it (wrong particle
     /// count, non-finite values): the body keeps its last state.
     pub(crate) fn apply_shown(&mut self, id: NetId, s: &ObjectState) -> bool {
+        self.show(id, s, true)
+    }
+
+    /// [`Self::apply_shown`] before a step: a soft body's particles go where the state says
+    /// (for the step's contacts) and it becomes a replica, deformed by the `apply_shown` after
+    /// the step alone.
+    pub(crate) fn place_shown(&mut self, id: NetId, s: &ObjectState) -> bool {
+        self.show(id, s, false)
+    }
+
+    fn show(&mut self, id: NetId, s: &ObjectState, deform: bool) -> bool {
         let Some(o) = self.objects.get(&id) else {
             return true;
         };
@@ -356,9 +374,16 @@ impl Mirror {
                 true
             }
             LocalBody::Soft(h) => match self.soft.get_mut(h) {
-                Some(b) => b
+                Some(b) if deform => b
                     .apply_state(&mut self.world, s.pos, s.rot, &s.particles)
                     .is_ok(),
+                Some(b) => {
+                    // sent particle by particle: the owner simulates it, we show it; centre
+                    // only: we simulate the particles around the centre we are given
+                    b.set_replica(!s.particles.is_empty());
+                    b.place_state(&mut self.world, s.pos, s.rot, &s.particles)
+                        .is_ok()
+                }
                 None => true,
             },
         }

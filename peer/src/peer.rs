@@ -599,7 +599,9 @@ impl Peer {
             self.mirror.set_simulated(*id, false);
             if let Some(mut d) = self.session.display_state(now, *id) {
                 self.predict_shown(*id, &mut d.state);
-                self.apply_shown(*id, &d.state);
+                if !self.mirror.place_shown(*id, &d.state) {
+                    self.counters.apply_errors += 1;
+                }
             }
         }
         // Under an uplink budget, what is near each peer's head goes to it first.
@@ -634,8 +636,14 @@ impl Peer {
         self.use_scalpels(now);
         self.flush_blades(now);
         self.stopwatch.lap(Phase::Blades);
-        self.mirror.soft.step(&mut self.mirror.world, dt);
-        self.stopwatch.lap(Phase::Physics);
+        // `SoftBodySet::step`, its three parts timed apart
+        self.mirror.world.integration_parameters.dt = dt;
+        self.mirror.soft.pre_physics(&mut self.mirror.world, dt);
+        self.stopwatch.lap(Phase::Restoring);
+        self.mirror.world.step();
+        self.stopwatch.lap(Phase::Rapier);
+        self.mirror.soft.post_physics(&self.mirror.world);
+        self.stopwatch.lap(Phase::Deform);
         self.run_auto(now);
         self.publish_holders(now);
         self.age_fades();

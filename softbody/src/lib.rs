@@ -17,7 +17,7 @@ pub mod scenario;
 pub use body::build::{BodyBuild, BuildStep};
 pub use body::handle::SoftBodyHandle;
 pub use body::set::{SoftBodySet, SoftPart};
-pub use body::{Activity, SoftBody, SoftBodyPlan, StageClock, TearTimings};
+pub use body::{Activity, BodyWork, SoftBody, SoftBodyPlan, StageClock, TearTimings};
 pub use cluster::{build_particle_map, ClusterMethod, ParticleMap, WeightedRows};
 pub use config::{
     CenterCollider, ContinuousCollision, ParticleCollider, RestoringScheme, SimulationSpace,

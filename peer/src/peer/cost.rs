@@ -19,22 +19,28 @@ pub enum Phase {
     Hands,
     /// Scalpels and cut/tear requests.
     Blades,
-    /// The physics step: rapier and the soft bodies (restoring, deformation).
-    Physics,
+    /// The soft bodies' restoring velocities (`SoftBodySet::pre_physics`).
+    Restoring,
+    /// rapier's step: contacts, solver, integration, new bodies' first broad phase.
+    Rapier,
+    /// The soft bodies' meshes deformed from their particles (`SoftBodySet::post_physics`).
+    Deform,
     /// Automatic bodies, holders, and publishing what we own.
     Publish,
 }
 
 impl Phase {
     /// Every phase, in order.
-    pub const ALL: [Phase; 8] = [
+    pub const ALL: [Phase; 10] = [
         Phase::Timers,
         Phase::Events,
         Phase::Builds,
         Phase::Shown,
         Phase::Hands,
         Phase::Blades,
-        Phase::Physics,
+        Phase::Restoring,
+        Phase::Rapier,
+        Phase::Deform,
         Phase::Publish,
     ];
 
@@ -47,7 +53,9 @@ impl Phase {
             Phase::Shown => "shown",
             Phase::Hands => "hands",
             Phase::Blades => "blades",
-            Phase::Physics => "physics",
+            Phase::Restoring => "restoring",
+            Phase::Rapier => "rapier",
+            Phase::Deform => "deform",
             Phase::Publish => "publish",
         }
     }
@@ -57,7 +65,7 @@ impl Phase {
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FrameCost {
     /// Indexed like [`Phase::ALL`].
-    pub seconds: [f64; 8],
+    pub seconds: [f64; 10],
 }
 
 impl FrameCost {

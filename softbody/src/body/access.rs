@@ -144,6 +144,51 @@ impl SoftBody {
         center_rot: Quat,
         particles: &[Vec3],
     ) -> Result<(), SoftBodyError> {
+        self.set_state(world, center_pos, center_rot, particles, true)
+    }
+
+    /// [`Self::apply_state`] without deforming the mesh: the bodies go where the state says
+    /// (for this step's contacts) and the mesh stays as it was until the next `apply_state`
+    /// or step deforms it. A replica shown before and after each step deforms once.
+    pub fn place_state(
+        &mut self,
+        world: &mut PhysicsWorld,
+        center_pos: Vec3,
+        center_rot: Quat,
+        particles: &[Vec3],
+    ) -> Result<(), SoftBodyError> {
+        self.set_state(world, center_pos, center_rot, particles, false)
+    }
+
+    /// Whether the body shows a state simulated elsewhere (a room's body another peer owns,
+    /// sent particle by particle): the step does not deform it — the next `apply_state`
+    /// overwrites whatever it made. Its restoring still runs: it keeps the particles the state
+    /// placed from sinking into what they touch during the step (measured: without it the
+    /// viewers' rapier step took twice as long at the 99th percentile, pressed pieces' contacts
+    /// unresolved). Off by default, and for a body the peer simulates itself (its own, or a
+    /// centre-only body).
+    pub fn set_replica(&mut self, on: bool) {
+        self.replica = on;
+    }
+
+    /// See [`Self::set_replica`].
+    pub fn is_replica(&self) -> bool {
+        self.replica
+    }
+
+    /// The work the steps and states did on this body so far.
+    pub fn work(&self) -> super::BodyWork {
+        self.work
+    }
+
+    fn set_state(
+        &mut self,
+        world: &mut PhysicsWorld,
+        center_pos: Vec3,
+        center_rot: Quat,
+        particles: &[Vec3],
+        deform: bool,
+    ) -> Result<(), SoftBodyError> {
         if particles.is_empty() && !self.particles.is_empty() {
             return self.apply_center_only(world, center_pos, center_rot);
         }
@@ -175,7 +220,9 @@ impl SoftBody {
                 b.set_linvel(Vec3::ZERO, true);
             }
         }
-        self.deform(world);
+        if deform {
+            self.deform(world);
+        }
         Ok(())
     }
 

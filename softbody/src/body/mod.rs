@@ -111,6 +111,21 @@ pub struct SoftBody {
     /// Center and every particle asleep at the last step, nothing driven: the step skipped
     /// the body (an untouched resting body costs one bounds query).
     dormant: bool,
+    /// Shows a state simulated elsewhere ([`SoftBody::set_replica`]): the step does not
+    /// deform it (its next `apply_state` does).
+    replica: bool,
+    /// How much work the steps did on it ([`SoftBody::work`]).
+    work: BodyWork,
+}
+
+/// What the steps computed for one body, counted ([`SoftBody::work`]): the per-frame work a
+/// replica costs is bounded by counting, not by timing.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BodyWork {
+    /// Meshes deformed from the particles (a step's, or an `apply_state`'s).
+    pub deformations: u64,
+    /// Restoring passes (every particle's velocity planned).
+    pub restorings: u64,
 }
 
 fn groups(bit: u32, self_collisions: bool) -> (InteractionGroups, InteractionGroups) {
@@ -458,6 +473,8 @@ impl BodyPlan {
             non_finite_recoveries: 0,
             blend: level::Blend::default(),
             dormant: false,
+            replica: false,
+            work: BodyWork::default(),
         };
         body.deform(world);
         body
@@ -494,6 +511,7 @@ impl SoftBody {
     /// can destabilise it. A uniform displacement (the whole body lagging its center) decays at
     /// the full rate instead of being amplified as in the thesis's form.
     fn apply_restoring_velocities(&mut self, world: &mut PhysicsWorld, dt_s: f32) {
+        self.work.restorings += 1;
         self.apply_rolling_resistance(world);
         self.turn_center_by_hands(world, dt_s);
         let Some(center) = world.bodies.get(self.center) else {
@@ -653,6 +671,7 @@ impl SoftBody {
     /// "translate by the particles' movement, then rotate about the weighted particle pivot"
     /// applied incrementally, without the accumulation drift of the incremental form.
     fn deform(&mut self, world: &PhysicsWorld) {
+        self.work.deformations += 1;
         let Some(center) = world.bodies.get(self.center) else {
             return;
         };

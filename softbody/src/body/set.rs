@@ -422,8 +422,9 @@ impl SoftBodySet {
     pub fn post_physics(&mut self, world: &PhysicsWorld) {
         for (_, b) in self.slots.iter_mut() {
             if let Some(b) = b {
-                // a dormant body did not move: its mesh is as it was
-                if !b.dormant || b.blend.active() {
+                // a dormant body did not move: its mesh is as it was; a replica's mesh is made
+                // by its next apply_state (unless a resolution change's blend moves it on)
+                if (!b.dormant && !b.replica) || b.blend.active() {
                     b.blend.start_step();
                     b.deform(world);
                 }

@@ -1,0 +1,55 @@
+//! What a remote body costs a peer that only shows it (issue 34: a peer that mostly shows
+//! other people's objects should cost little), counted rather than timed: an untouched soft
+//! body another peer simulates is deformed once per frame (by the state shown after the
+//! step), not three times (before the step, by the step, after it).
+#![allow(clippy::unwrap_used, missing_docs)]
+
+mod common;
+
+use std::time::Duration;
+
+use common::hub::{Node, Room, CLIENT, HOST};
+use softsync_net::{Instant, MemoryHub};
+use softsync_peer::LocalBody;
+
+#[test]
+fn an_untouched_remote_soft_body_is_deformed_once_per_frame_and_its_owner_simulates_it() {
+    let hub = MemoryHub::new(1200);
+    let mut room = Room {
+        nodes: [Node::new(&hub, HOST, 1), Node::new(&hub, CLIENT, 2)],
+        now: Instant::ZERO,
+    };
+    // joined, and the bodies settled on the table
+    room.run(Duration::from_secs(4));
+    let work = |n: &Node| -> Vec<(bool, u64, u64)> {
+        n.peer
+            .objects()
+            .values()
+            .filter_map(|o| match o.body {
+                LocalBody::Soft(h) => n.peer.soft_bodies().get(h),
+                _ => None,
+            })
+            .map(|b| (b.is_replica(), b.work().deformations, b.work().restorings))
+            .collect()
+    };
+    let (client0, host0) = (work(&room.nodes[1]), work(&room.nodes[0]));
+    assert_eq!(client0.len(), 3, "the thesis room's three soft bodies");
+    const FRAMES: u64 = 90;
+    room.run(Duration::from_secs_f32(FRAMES as f32 * common::hub::DT));
+    let (client1, host1) = (work(&room.nodes[1]), work(&room.nodes[0]));
+    for (a, b) in client0.iter().zip(&client1) {
+        // the client owns none of them: each is a replica, deformed once a frame at most
+        assert!(b.0, "a remote body is not a replica: {b:?}");
+        let deformed = b.1 - a.1;
+        assert!(
+            (FRAMES - 2..=FRAMES + 1).contains(&deformed),
+            "{deformed} deformations in {FRAMES} frames"
+        );
+    }
+    for (a, b) in host0.iter().zip(&host1) {
+        // the owner simulates them: not replicas, restored (or dormant) and deformed by its
+        // own steps, at most once a frame
+        assert!(!b.0);
+        assert!(b.1 - a.1 <= FRAMES + 1, "{} deformations", b.1 - a.1);
+    }
+}
