@@ -292,9 +292,9 @@ impl Mirror {
     pub(crate) fn set_simulated(&mut self, id: NetId, ours: bool) {
         let body = self.objects.get(&id).map(|o| o.body);
         if let (Some(LocalBody::Soft(h)), true) = (body, ours) {
-            // ours: simulated here again (a replica is made by `apply_shown`)
+            // ours: simulated here again (a replica is made by `place_shown`)
             if let Some(b) = self.soft.get_mut(h) {
-                b.set_replica(false);
+                b.set_replica(&mut self.world, false);
             }
         }
         let Some(LocalBody::Rigid(h)) = body else {
@@ -354,6 +354,18 @@ impl Mirror {
         self.show(id, s, false)
     }
 
+    /// After the step: a replica (kinematic, moved by the step to the state placed before it)
+    /// only has its mesh deformed; any other soft body we show takes `s` again.
+    pub(crate) fn finish_shown(&mut self, id: NetId, s: &ObjectState) -> bool {
+        if let Some(LocalBody::Soft(h)) = self.objects.get(&id).map(|o| o.body) {
+            if let Some(b) = self.soft.get_mut(h).filter(|b| b.is_replica()) {
+                b.update_mesh(&self.world);
+                return true;
+            }
+        }
+        self.show(id, s, true)
+    }
+
     fn show(&mut self, id: NetId, s: &ObjectState, deform: bool) -> bool {
         let Some(o) = self.objects.get(&id) else {
             return true;
@@ -380,7 +392,7 @@ impl Mirror {
                 Some(b) => {
                     // sent particle by particle: the owner simulates it, we show it; centre
                     // only: we simulate the particles around the centre we are given
-                    b.set_replica(!s.particles.is_empty());
+                    b.set_replica(&mut self.world, !s.particles.is_empty());
                     b.place_state(&mut self.world, s.pos, s.rot, &s.particles)
                         .is_ok()
                 }

@@ -657,7 +657,9 @@ impl Peer {
             if soft {
                 if let Some(mut d) = self.session.display_state(now, *id) {
                     self.predict_shown(*id, &mut d.state);
-                    self.apply_shown(*id, &d.state);
+                    if !self.mirror.finish_shown(*id, &d.state) {
+                        self.counters.apply_errors += 1;
+                    }
                 }
             }
         }

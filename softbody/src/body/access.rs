@@ -2,7 +2,7 @@
 //! bodies, particle map and meshes, `apply_state` for replicas, and particle drives.
 
 use glam::{Quat, Vec3};
-use rapier3d::prelude::{ColliderHandle, PhysicsWorld, RigidBodyHandle};
+use rapier3d::prelude::{ColliderHandle, PhysicsWorld, RigidBodyHandle, RigidBodyType};
 
 use super::{SoftBody, TearTimings};
 use crate::cluster::ParticleMap;
@@ -161,14 +161,47 @@ impl SoftBody {
     }
 
     /// Whether the body shows a state simulated elsewhere (a room's body another peer owns,
-    /// sent particle by particle): the step does not deform it — the next `apply_state`
-    /// overwrites whatever it made. Its restoring still runs: it keeps the particles the state
-    /// placed from sinking into what they touch during the step (measured: without it the
-    /// viewers' rapier step took twice as long at the 99th percentile, pressed pieces' contacts
-    /// unresolved). Off by default, and for a body the peer simulates itself (its own, or a
-    /// centre-only body).
-    pub fn set_replica(&mut self, on: bool) {
+    /// sent particle by particle). A replica's center and particles are kinematic
+    /// (position-based): [`Self::place_state`] sets where the step moves them, they push the
+    /// dynamic bodies they meet and nothing pushes them, a replica at rest sleeps, and no
+    /// position is a user change (rapier's narrow phase re-examines every collider a user
+    /// moved, and wakes what it touches). The step neither restores nor deforms it:
+    /// [`Self::update_mesh`] after the step does, once. Off (dynamic again, at rest) for a
+    /// body the peer simulates itself: its own, or a centre-only body. A fixed center stays
+    /// fixed.
+    pub fn set_replica(&mut self, world: &mut PhysicsWorld, on: bool) {
+        if self.replica == on {
+            return;
+        }
         self.replica = on;
+        let (from, to) = if on {
+            (
+                RigidBodyType::Dynamic,
+                RigidBodyType::KinematicPositionBased,
+            )
+        } else {
+            (
+                RigidBodyType::KinematicPositionBased,
+                RigidBodyType::Dynamic,
+            )
+        };
+        for &h in std::iter::once(&self.center).chain(&self.particles) {
+            if let Some(b) = world.bodies.get_mut(h) {
+                if b.body_type() == from {
+                    b.set_body_type(to, true);
+                    if !on {
+                        b.set_linvel(Vec3::ZERO, true);
+                        b.set_angvel(Vec3::ZERO, true);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Deforms the mesh to where the particles are now: for a replica after the step that
+    /// moved it to the state [`Self::place_state`] gave.
+    pub fn update_mesh(&mut self, world: &PhysicsWorld) {
+        self.deform(world);
     }
 
     /// See [`Self::set_replica`].
@@ -191,6 +224,9 @@ impl SoftBody {
     ) -> Result<(), SoftBodyError> {
         if particles.is_empty() && !self.particles.is_empty() {
             return self.apply_center_only(world, center_pos, center_rot);
+        }
+        if self.replica && !deform {
+            return self.place_replica(world, center_pos, center_rot, particles);
         }
         if particles.len() != self.particles.len() {
             return Err(SoftBodyError::Config(format!(
@@ -222,6 +258,48 @@ impl SoftBody {
         }
         if deform {
             self.deform(world);
+        }
+        Ok(())
+    }
+
+    /// A replica's state: where the step moves its kinematic bodies (a particle a topology
+    /// change made dynamic again is made kinematic first).
+    fn place_replica(
+        &mut self,
+        world: &mut PhysicsWorld,
+        center_pos: Vec3,
+        center_rot: Quat,
+        particles: &[Vec3],
+    ) -> Result<(), SoftBodyError> {
+        if particles.len() != self.particles.len() {
+            return Err(SoftBodyError::Config(format!(
+                "state has {} particles, the body {}",
+                particles.len(),
+                self.particles.len()
+            )));
+        }
+        if !(center_pos.is_finite() && center_rot.is_finite() && center_rot.length_squared() > 0.5)
+            || particles.iter().any(|p| !p.is_finite())
+        {
+            return Err(SoftBodyError::Config("state is not finite".into()));
+        }
+        let kinematic = |b: &mut rapier3d::prelude::RigidBody| {
+            if b.body_type() == RigidBodyType::Dynamic {
+                b.set_body_type(RigidBodyType::KinematicPositionBased, true);
+            }
+        };
+        if let Some(c) = world.bodies.get_mut(self.center) {
+            kinematic(c);
+            c.set_next_kinematic_position(rapier3d::prelude::Pose::from_parts(
+                center_pos,
+                center_rot.normalize(),
+            ));
+        }
+        for (&h, &p) in self.particles.iter().zip(particles) {
+            if let Some(b) = world.bodies.get_mut(h) {
+                kinematic(b);
+                b.set_next_kinematic_translation(p);
+            }
         }
         Ok(())
     }

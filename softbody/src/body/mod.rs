@@ -111,8 +111,8 @@ pub struct SoftBody {
     /// Center and every particle asleep at the last step, nothing driven: the step skipped
     /// the body (an untouched resting body costs one bounds query).
     dormant: bool,
-    /// Shows a state simulated elsewhere ([`SoftBody::set_replica`]): the step does not
-    /// deform it (its next `apply_state` does).
+    /// Shows a state simulated elsewhere ([`SoftBody::set_replica`]): kinematic, neither
+    /// restored nor deformed by the step (`update_mesh` after it does).
     replica: bool,
     /// How much work the steps did on it ([`SoftBody::work`]).
     work: BodyWork,
@@ -511,6 +511,9 @@ impl SoftBody {
     /// can destabilise it. A uniform displacement (the whole body lagging its center) decays at
     /// the full rate instead of being amplified as in the thesis's form.
     fn apply_restoring_velocities(&mut self, world: &mut PhysicsWorld, dt_s: f32) {
+        if self.replica {
+            return; // kinematic: its owner's state moves it
+        }
         self.work.restorings += 1;
         self.apply_rolling_resistance(world);
         self.turn_center_by_hands(world, dt_s);
