@@ -12,6 +12,8 @@
 //!
 //! Each live peer's frame — its datagrams in, [`Peer::pump`], [`Peer::fixed_step`], its
 //! datagrams out — is timed on the wall clock, phase by phase ([`Peer::set_stopwatch`]).
+//! Virtual time is paced to the wall clock ([`FramePlan::real_time`]): work a peer does off
+//! the frame, on worker threads, has the time it would have in an app.
 //! Rendering is not in it: nothing here draws. One process steps the four peers one after
 //! another, so each frame is measured alone, as one core would run it.
 
@@ -56,6 +58,11 @@ pub struct FramePlan {
     pub seed: u64,
     /// The shipped scenes (`assets/`).
     pub assets: PathBuf,
+    /// Keep virtual time no faster than the wall clock (a frame every 11.1 ms at the
+    /// earliest): what runs off the frame (a cut's pieces built on worker threads, landing
+    /// 30 ms later) gets the wall-clock time it would have in an app. Without it the frames
+    /// come faster than real time and a landing waits for its worker.
+    pub real_time: bool,
 }
 
 impl FramePlan {
@@ -68,6 +75,7 @@ impl FramePlan {
             cut_every_s: 10.0,
             seed: 7,
             assets: assets.to_owned(),
+            real_time: true,
         }
     }
 
@@ -296,7 +304,15 @@ pub fn run(plan: &FramePlan) -> Result<FrameReport, String> {
     let (mut tears, mut cuts) = (0usize, 0usize);
     // the tear stroke under way: body, segment index
     let mut stroke: Option<(NetId, usize)> = None;
+    let wall_start = wall_s();
     while t < end_s {
+        if plan.real_time {
+            let ahead = t - (wall_s() - wall_start);
+            if ahead > 0.0 {
+                #[allow(clippy::disallowed_methods)] // the bench paces itself on the wall clock
+                std::thread::sleep(Duration::from_secs_f64(ahead));
+            }
+        }
         now += dt;
         t += f64::from(DT_S);
         let measuring = t >= WARMUP_S;
