@@ -116,6 +116,8 @@ pub struct SoftBody {
     replica: bool,
     /// How much work the steps did on it ([`SoftBody::work`]).
     work: BodyWork,
+    /// How long its particles have been still with its center asleep, seconds.
+    still_s: f32,
 }
 
 /// What the steps computed for one body, counted ([`SoftBody::work`]): the per-frame work a
@@ -127,6 +129,14 @@ pub struct BodyWork {
     /// Restoring passes (every particle's velocity planned).
     pub restorings: u64,
 }
+
+/// A particle that moved less than this (m/s) through the last step is still (see
+/// `STILL_BEFORE_SLEEP_S`).
+const STILL_MPS: f32 = 1e-3;
+
+/// How long a body's particles must be still, its center asleep, before the whole body is put
+/// to sleep (rapier's own wait, `time_until_sleep`).
+const STILL_BEFORE_SLEEP_S: f32 = 0.5;
 
 fn groups(bit: u32, self_collisions: bool) -> (InteractionGroups, InteractionGroups) {
     // Two bits per body: particles P, center C. Particles never touch their own center
@@ -475,6 +485,7 @@ impl BodyPlan {
             dormant: false,
             replica: false,
             work: BodyWork::default(),
+            still_s: 0.0,
         };
         body.deform(world);
         body
@@ -514,7 +525,6 @@ impl SoftBody {
         if self.replica {
             return; // kinematic: its owner's state moves it
         }
-        self.work.restorings += 1;
         self.apply_rolling_resistance(world);
         self.turn_center_by_hands(world, dt_s);
         let Some(center) = world.bodies.get(self.center) else {
@@ -557,6 +567,12 @@ impl SoftBody {
         if self.dormant {
             return;
         }
+        self.work.restorings += 1;
+        let center_still = world
+            .bodies
+            .get(self.center)
+            .is_some_and(|b| b.is_sleeping());
+        let mut still = center_still;
         let max_dv = self.config.max_velocity_change_mps;
         let thesis = self.config.restoring == RestoringScheme::Thesis;
         // Thesis: expectedDelta = fixedDeltaTime / 0.0111112 (Appendix A.7).
@@ -609,6 +625,9 @@ impl SoftBody {
             {
                 continue;
             }
+            // still: it moved less than 1 mm/s through the last step, whatever the restoring
+            // asks of it (a particle it presses into what carries the body never gets there)
+            still &= self.drives[j].is_none() && v.length_squared() < STILL_MPS * STILL_MPS;
             self.planned_v[j] = Some(new_v);
         }
         // Every particle within 0.1 % of the body's size of its place: its shape, and so its
@@ -616,9 +635,26 @@ impl SoftBody {
         if most_displaced.sqrt() > 1e-3 * self.size_m {
             self.keep_volume(dt, r, vc, wc);
         }
+        // Its center asleep and every particle asleep or still (it moved under 1 mm/s through
+        // the last step) for as long as rapier waits before sleeping a body: the whole body sleeps, and
+        // the next steps skip it. A particle pressed into what carries the body is moved out a
+        // little every step by the solver, which rapier counts as motion: without this a
+        // resting room bunny kept a few of its particles awake, and the body, for ever.
+        self.still_s = if still { self.still_s + dt } else { 0.0 };
+        if self.still_s >= STILL_BEFORE_SLEEP_S {
+            self.still_s = 0.0;
+            self.sleep(world);
+            return;
+        }
         for (j, &h) in self.particles.iter().enumerate() {
             if let (Some(v), Some(body)) = (self.planned_v[j], world.bodies.get_mut(h)) {
-                body.set_linvel(v, true);
+                // A sleeping particle asked to move wakes; an awake one is not woken again:
+                // rapier's wake-up restarts the countdown to sleep, and a body whose restoring
+                // set a velocity every step (µm/s against its contacts, far below rapier's
+                // 5 cm/s threshold) never slept (measured: 60 of the bunny's 613 particles, 36 of
+                // a room bunny's 40, so no resting body was ever dormant).
+                let wake = body.is_sleeping();
+                body.set_linvel(v, wake);
             }
         }
     }
