@@ -646,6 +646,7 @@ impl SoftBody {
             self.sleep(world);
             return;
         }
+        let held = self.drives.iter().any(Option::is_some);
         for (j, &h) in self.particles.iter().enumerate() {
             if let (Some(v), Some(body)) = (self.planned_v[j], world.bodies.get_mut(h)) {
                 // A sleeping particle asked to move wakes; an awake one is not woken again:
@@ -653,7 +654,9 @@ impl SoftBody {
                 // set a velocity every step (µm/s against its contacts, far below rapier's
                 // 5 cm/s threshold) never slept (measured: 60 of the bunny's 613 particles, 36 of
                 // a room bunny's 40, so no resting body was ever dormant).
-                let wake = body.is_sleeping();
+                // (A held body's particles are woken every step, as before: a hand's pull
+                // must never find one asleep.)
+                let wake = held || body.is_sleeping();
                 body.set_linvel(v, wake);
             }
         }
