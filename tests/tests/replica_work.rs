@@ -51,6 +51,10 @@ fn an_untouched_remote_soft_body_is_deformed_once_per_frame_and_its_owner_lets_i
         // the owner simulates them (not replicas); at rest on the table they sleep, and its
         // steps skip them: no restoring, no deformation
         assert!(!b.0);
-        assert_eq!((b.1 - a.1, b.2 - a.2), (0, 0), "the owner's resting body costs steps");
+        assert_eq!(
+            (b.1 - a.1, b.2 - a.2),
+            (0, 0),
+            "the owner's resting body costs steps"
+        );
     }
 }
