@@ -228,18 +228,7 @@ impl SoftBody {
         if self.replica && !deform {
             return self.place_replica(world, center_pos, center_rot, particles);
         }
-        if particles.len() != self.particles.len() {
-            return Err(SoftBodyError::Config(format!(
-                "state has {} particles, the body {}",
-                particles.len(),
-                self.particles.len()
-            )));
-        }
-        if !(center_pos.is_finite() && center_rot.is_finite() && center_rot.length_squared() > 0.5)
-            || particles.iter().any(|p| !p.is_finite())
-        {
-            return Err(SoftBodyError::Config("state is not finite".into()));
-        }
+        self.check_state(center_pos, center_rot, particles)?;
         if let Some(c) = world.bodies.get_mut(self.center) {
             c.set_position(
                 rapier3d::prelude::Pose::from_parts(center_pos, center_rot.normalize()),
@@ -262,11 +251,9 @@ impl SoftBody {
         Ok(())
     }
 
-    /// A replica's state: where the step moves its kinematic bodies (a particle a topology
-    /// change made dynamic again is made kinematic first).
-    fn place_replica(
-        &mut self,
-        world: &mut PhysicsWorld,
+    /// A full state for this body: its particle count, everything finite, a rotation.
+    fn check_state(
+        &self,
         center_pos: Vec3,
         center_rot: Quat,
         particles: &[Vec3],
@@ -283,6 +270,19 @@ impl SoftBody {
         {
             return Err(SoftBodyError::Config("state is not finite".into()));
         }
+        Ok(())
+    }
+
+    /// A replica's state: where the step moves its kinematic bodies (a particle a topology
+    /// change made dynamic again is made kinematic first).
+    fn place_replica(
+        &mut self,
+        world: &mut PhysicsWorld,
+        center_pos: Vec3,
+        center_rot: Quat,
+        particles: &[Vec3],
+    ) -> Result<(), SoftBodyError> {
+        self.check_state(center_pos, center_rot, particles)?;
         let kinematic = |b: &mut rapier3d::prelude::RigidBody| {
             if b.body_type() == RigidBodyType::Dynamic {
                 b.set_body_type(RigidBodyType::KinematicPositionBased, true);
