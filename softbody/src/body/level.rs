@@ -24,6 +24,16 @@ pub const BLEND_STEP_M: f32 = 0.0005;
 /// Most steps a correction fades over.
 pub const MAX_BLEND_STEPS: u32 = 90;
 
+/// What the steps computed for one body, counted ([`SoftBody::work`]): the per-frame work a
+/// replica costs is bounded by counting, not by timing.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BodyWork {
+    /// Meshes deformed from the particles (a step's, or an `apply_state`'s).
+    pub deformations: u64,
+    /// Restoring passes (every particle's velocity planned).
+    pub restorings: u64,
+}
+
 /// What a body is doing, for choosing its resolution ([`crate::methods::auto`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Activity {

@@ -25,7 +25,7 @@ pub(crate) mod set;
 mod topology;
 mod volume;
 
-pub use level::Activity;
+pub use level::{Activity, BodyWork};
 pub use topology::{StageClock, TearTimings};
 
 use glam::{Quat, Vec3};
@@ -118,16 +118,6 @@ pub struct SoftBody {
     work: BodyWork,
     /// How long its particles have been still with its center asleep, seconds.
     still_s: f32,
-}
-
-/// What the steps computed for one body, counted ([`SoftBody::work`]): the per-frame work a
-/// replica costs is bounded by counting, not by timing.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct BodyWork {
-    /// Meshes deformed from the particles (a step's, or an `apply_state`'s).
-    pub deformations: u64,
-    /// Restoring passes (every particle's velocity planned).
-    pub restorings: u64,
 }
 
 /// A particle that moved less than this (m/s) through the last step is still (see
@@ -635,11 +625,8 @@ impl SoftBody {
         if most_displaced.sqrt() > 1e-3 * self.size_m {
             self.keep_volume(dt, r, vc, wc);
         }
-        // Its center asleep and every particle asleep or still (it moved under 1 mm/s through
-        // the last step) for as long as rapier waits before sleeping a body: the whole body sleeps, and
-        // the next steps skip it. A particle pressed into what carries the body is moved out a
-        // little every step by the solver, which rapier counts as motion: without this a
-        // resting room bunny kept a few of its particles awake, and the body, for ever.
+        // Center asleep, every particle asleep or still for 0.5 s: the whole body sleeps (the
+        // solver moves particles pressed into a table by µm a step, which rapier counts as motion).
         self.still_s = if still { self.still_s + dt } else { 0.0 };
         if self.still_s >= STILL_BEFORE_SLEEP_S {
             self.still_s = 0.0;
@@ -649,13 +636,8 @@ impl SoftBody {
         let held = self.drives.iter().any(Option::is_some);
         for (j, &h) in self.particles.iter().enumerate() {
             if let (Some(v), Some(body)) = (self.planned_v[j], world.bodies.get_mut(h)) {
-                // A sleeping particle asked to move wakes; an awake one is not woken again:
-                // rapier's wake-up restarts the countdown to sleep, and a body whose restoring
-                // set a velocity every step (µm/s against its contacts, far below rapier's
-                // 5 cm/s threshold) never slept (measured: 60 of the bunny's 613 particles, 36 of
-                // a room bunny's 40, so no resting body was ever dormant).
-                // (A held body's particles are woken every step, as before: a hand's pull
-                // must never find one asleep.)
+                // An awake particle of a body nobody holds is not woken again: rapier's wake-up
+                // restarts the countdown to sleep, and resting bodies never slept.
                 let wake = held || body.is_sleeping();
                 body.set_linvel(v, wake);
             }
