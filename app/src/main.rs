@@ -197,6 +197,7 @@ fn run(args: &[String]) -> Result<ExitCode, Failure> {
             seed,
             peers,
             max_peers,
+            busy_loops,
         } => {
             let plan = bench::SoakPlan {
                 seconds,
@@ -204,6 +205,7 @@ fn run(args: &[String]) -> Result<ExitCode, Failure> {
                 start_peers: peers,
                 max_peers,
                 min_running: 3.min(peers),
+                busy_loops,
             };
             let violations = bench::soak(&out, &plan).map_err(Failure::runtime)?;
             Ok(if violations == 0 {

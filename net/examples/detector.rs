@@ -7,12 +7,15 @@
 //! Detection: 20 kills of the host of a 4-peer room on a loopback-like link (1 ms latency,
 //! 1 ms jitter, no loss), from the kill to a survivor being host. False alarms: host changes
 //! and members dropped (nobody dies or leaves) in a 5-peer room under 150 ms latency, 30 ms jitter and 20 % loss (the seeded conditioner)
-//! over 10 virtual minutes (`--quick`: 1 minute, 5 kills). Writes
+//! over 10 virtual minutes (`--quick`: 1 minute, 5 kills), and on a clean 20 ± 5 ms link
+//! whose every process stops now and then for 10 – 249 ms (the seeded CPU-stall model,
+//! `harness::StallModel::tolerated`) over as long. Writes
 //! `docs/results/net/detector.{csv,svg}` and prints `RESULT wild.migration` lines.
 //!
 //! What this does not measure: a real process's SIGKILL over WebRTC (the live detection time
-//! adds the peers' frame loops and the data channel), and CPU starvation, which a virtual
-//! clock does not have.
+//! adds the peers' frame loops and the data channel), and real CPU starvation, which only
+//! the stall model stands for (`softsync bench soak --busy-loops 1` runs real processes on a
+//! machine whose busy loops take half the CPU).
 #![allow(clippy::unwrap_used, clippy::print_stdout)]
 
 use std::path::Path;
@@ -20,7 +23,7 @@ use std::time::Duration;
 
 use softsync_benchkit::plotters::style::{BLUE, RED};
 use softsync_benchkit::{percentile, write_svg, ChartStyle, Csv, LineChart, ResultLine, Series};
-use softsync_net::harness::Harness;
+use softsync_net::harness::{Harness, StallModel};
 use softsync_net::{ConditionerConfig, FailureDetector, SessionConfig};
 
 fn detection_ms(cfg: &SessionConfig, kills: u64) -> Vec<f64> {
@@ -44,6 +47,26 @@ fn false_alarms(cfg: &SessionConfig, minutes: u64) -> usize {
     h.failure_verdicts() - before
 }
 
+/// Host changes and drops in a 5-peer room on a clean 20 ± 5 ms link whose every process
+/// stops now and then for 10 – 249 ms (the seeded CPU-stall model), over `minutes`.
+fn stall_alarms(cfg: &SessionConfig, minutes: u64) -> (usize, usize) {
+    let link = ConditionerConfig {
+        seed: 12,
+        latency: Duration::from_millis(20),
+        jitter: Duration::from_millis(5),
+        ..ConditionerConfig::default()
+    };
+    let mut h = Harness::new(5, cfg.clone(), link);
+    h.advance(Duration::from_secs(3));
+    let before = h.failure_verdicts();
+    let stalls = h.run_with_stalls(
+        Duration::from_secs(60 * minutes),
+        Duration::from_millis(5),
+        StallModel::tolerated(12),
+    );
+    (h.failure_verdicts() - before, stalls)
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let quick = std::env::args().any(|a| a == "--quick");
     let (kills, minutes) = if quick { (5, 1) } else { (20, 10) };
@@ -51,13 +74,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut rows = Vec::new();
     // (label, phi or None for the fixed timeout, config)
     let mut setups: Vec<(String, Option<f32>, SessionConfig)> =
-        vec![("fixed 1 s".into(), None, base.clone())];
+        vec![("fixed 1 s".into(), None, base.clone().fixed_detection())];
     for phi in [1.0f32, 2.0, 3.0, 5.0, 9.0, 12.0] {
         let mut cfg = base.clone().fast_detection();
+        let FailureDetector::Adaptive { min_timeout, .. } = FailureDetector::ADAPTIVE else {
+            unreachable!("the default detector is the adaptive one")
+        };
         cfg.detector = FailureDetector::Adaptive {
             phi,
             deviations: 4.0,
-            min_timeout: Duration::from_millis(250),
+            min_timeout,
         };
         setups.push((format!("adaptive phi {phi}"), Some(phi), cfg));
     }
@@ -70,6 +96,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "p95_ms",
         "false_alarms",
         "minutes",
+        "stall_false_alarms",
+        "stalls",
     ]);
     for (label, phi, cfg) in &setups {
         progress.set_message(label.clone());
@@ -77,6 +105,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         d.sort_by(f64::total_cmp);
         let (p50, p95) = (percentile(&d, 50.0), percentile(&d, 95.0));
         let alarms = false_alarms(cfg, minutes);
+        let (stall_alarms, stalls) = stall_alarms(cfg, minutes);
         csv.row([
             label.clone(),
             phi.map_or(String::new(), |p| p.to_string()),
@@ -85,14 +114,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             format!("{p95:.0}"),
             alarms.to_string(),
             minutes.to_string(),
+            stall_alarms.to_string(),
+            stalls.to_string(),
         ]);
         progress.result(format_args!(
-            "{label:<18} detection min {:>5.0} p50 {p50:>5.0} p95 {p95:>5.0} max {:>5.0} ms   false alarms in {minutes} min: {alarms}",
+            "{label:<18} detection min {:>5.0} p50 {p50:>5.0} p95 {p95:>5.0} max {:>5.0} ms   false alarms in {minutes} min: {alarms}, under {stalls} stalls: {stall_alarms}",
             d.first().copied().unwrap_or(f64::NAN),
             d.last().copied().unwrap_or(f64::NAN),
         ));
         progress.inc();
-        rows.push((label.clone(), *phi, p95, alarms));
+        rows.push((label.clone(), *phi, p95, alarms, stall_alarms));
     }
     progress.finish();
     let out = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/results/net");
@@ -140,16 +171,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }],
         )?;
     }
-    for (label, phi, p95, alarms) in &rows {
+    for (label, phi, p95, alarms, stall_alarms) in &rows {
         let default = *phi == Some(9.0);
         if phi.is_none() || default {
             println!(
                 "{}",
                 ResultLine::new("wild.migration")
-                    .field("detector", if default { "adaptive" } else { "fixed" })
+                    .field("detector", if default { "default" } else { "fixed" })
                     .field("where", "harness")
                     .fixed("p95_ms", *p95, 0)
                     .field("false_alarms", alarms)
+                    .field("stall_false_alarms", stall_alarms)
                     .field("minutes", minutes)
                     .field("label", label.replace(' ', "_"))
             );

@@ -1,11 +1,13 @@
 //! In-process N-peer harness on virtual time (a generalisation of quinn-proto's test `Pair`):
-//! step every peer, jump to the next timeout, kill peers, partition links, change the MTU.
-//! Used by the tests and the bench; no sockets, no sleeps.
+//! step every peer, jump to the next timeout, kill peers, freeze them (a stopped process; the
+//! seeded CPU-stall model, [`StallModel`]), partition links, change the MTU. Used by the tests
+//! and the bench; no sockets, no sleeps.
 
 use std::time::Duration;
 
 use crate::ids::PeerId;
 use crate::policy::SessionConfig;
+use crate::rng::SeededRng;
 use crate::session::{Event, Session};
 use crate::time::Instant;
 use crate::transport::{ConditionerConfig, HubEndpoint, LinkConditioner, MemoryHub, Transport};
@@ -159,6 +161,11 @@ impl Harness {
     /// Process everything due at the current time (several rounds, so replies go out).
     pub fn step(&mut self) {
         let now = self.now;
+        // what a stopped (or killed) peer sent before it stopped is on the wire: it arrives
+        // (the hub drops a killed peer's)
+        for p in self.peers.iter_mut().filter(|p| !p.alive) {
+            p.transport.release(now);
+        }
         for _round in 0..4 {
             let mut any = false;
             for p in self.peers.iter_mut().filter(|p| p.alive) {
@@ -198,8 +205,10 @@ impl Harness {
     pub fn next_deadline(&self) -> Option<Instant> {
         self.peers
             .iter()
-            .filter(|p| p.alive)
-            .flat_map(|p| [p.session.poll_timeout(), p.transport.poll_timeout()])
+            .flat_map(|p| {
+                let session = p.alive.then(|| p.session.poll_timeout()).flatten();
+                [session, p.transport.poll_timeout()]
+            })
             .flatten()
             .min()
     }
@@ -268,5 +277,79 @@ impl Harness {
             f(self);
             self.advance(frame);
         }
+    }
+
+    /// Run for `total` in frames of `frame` while every peer's process stops now and then, as
+    /// `model` says (frozen: it neither sends nor processes, what others send it waits). The
+    /// number of stops made.
+    pub fn run_with_stalls(
+        &mut self,
+        total: Duration,
+        frame: Duration,
+        model: StallModel,
+    ) -> usize {
+        let n = self.peers.len();
+        let mut rng = SeededRng::new(model.seed);
+        let start = self.now;
+        let mut next: Vec<Instant> = (0..n).map(|_| start + model.gap(&mut rng)).collect();
+        let mut until: Vec<Option<Instant>> = vec![None; n];
+        let mut stalls = 0;
+        self.run_frames(total, frame, |h| {
+            for i in 0..n {
+                if until[i].is_some_and(|u| h.now >= u) {
+                    h.freeze(i, false);
+                    until[i] = None;
+                    next[i] = h.now + model.gap(&mut rng);
+                } else if until[i].is_none() && h.now >= next[i] {
+                    h.freeze(i, true);
+                    let d =
+                        rng.range_f64(model.shortest.as_secs_f64(), model.longest.as_secs_f64());
+                    until[i] = Some(h.now + Duration::from_secs_f64(d));
+                    stalls += 1;
+                }
+            }
+        });
+        for (i, u) in until.iter().enumerate() {
+            if u.is_some() {
+                self.freeze(i, false);
+            }
+        }
+        stalls
+    }
+}
+
+/// The seeded CPU-stall model ([`Harness::run_with_stalls`]): every process stops at random
+/// moments (exponential gaps of `mean_gap` on average) for a time drawn uniformly from
+/// `shortest..longest`, as a loaded machine's scheduler, a page-fault storm or a long frame
+/// makes them. With `longest` under the detector's tolerated stall, any host change or member
+/// seen leaving is a false alarm.
+#[derive(Clone, Copy, Debug)]
+pub struct StallModel {
+    /// The model's seed.
+    pub seed: u64,
+    /// The mean time between one process's stops.
+    pub mean_gap: Duration,
+    /// The shortest stop.
+    pub shortest: Duration,
+    /// The longest stop.
+    pub longest: Duration,
+}
+
+impl StallModel {
+    /// Stops of 10 ms to just under [`FailureDetector::TOLERATED_STALL`] every 1.5 s on
+    /// average.
+    ///
+    /// [`FailureDetector::TOLERATED_STALL`]: crate::policy::FailureDetector::TOLERATED_STALL
+    pub fn tolerated(seed: u64) -> StallModel {
+        StallModel {
+            seed,
+            mean_gap: Duration::from_millis(1500),
+            shortest: Duration::from_millis(10),
+            longest: crate::policy::FailureDetector::TOLERATED_STALL - Duration::from_millis(1),
+        }
+    }
+
+    fn gap(&self, rng: &mut SeededRng) -> Duration {
+        Duration::from_secs_f64(-self.mean_gap.as_secs_f64() * (1.0 - rng.next_f64()).ln())
     }
 }

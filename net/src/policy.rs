@@ -173,7 +173,8 @@ pub struct SessionConfig {
     pub classes: Vec<ClassConfig>,
     /// A peer silent this long is gone, whatever the transport says.
     pub peer_timeout: Duration,
-    /// Heartbeat period (also the RTT probe).
+    /// Heartbeat period (also the RTT probe). With the adaptive detector a quiet link is
+    /// pinged at least this often; with the fixed one at least every 1.5 periods.
     pub heartbeat_interval: Duration,
     /// Largest datagram we ever emit.
     pub mtu: usize,
@@ -288,13 +289,12 @@ fn default_heal_window() -> Duration {
 }
 
 /// How a silent peer is judged gone: a fixed timeout, or one that adapts to each link.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub enum FailureDetector {
-    /// Silent for [`SessionConfig::peer_timeout`]: gone (the default).
-    #[default]
+    /// Silent for [`SessionConfig::peer_timeout`]: gone ([`SessionConfig::fixed_detection`]).
     Fixed,
     /// Accrual, in the spirit of phi-accrual (Hayashibara et al., 2004), from each link's
-    /// last 64 datagram inter-arrival gaps: the share of gaps longer than 1.5 heartbeat
+    /// last 64 datagram inter-arrival gaps: the share of gaps longer than 1.75 heartbeat
     /// intervals estimates the chance `q` that a heartbeat is lost (at least 1 %); a peer is
     /// gone once it was silent for the `k` heartbeat intervals that make `q^k` < 10^−phi (phi 9: a
     /// run of losses that long is a one-in-a-billion event), plus `deviations`
@@ -315,13 +315,29 @@ pub enum FailureDetector {
 }
 
 impl FailureDetector {
-    /// The adaptive detector with its defaults: phi 9, 4 deviations, at least 250 ms (with a 50 ms
-    /// heartbeat, [`SessionConfig::fast_detection`]).
+    /// The adaptive detector with its defaults (the default detector, with a 50 ms heartbeat):
+    /// phi 9, 4 deviations, and at least 345 ms of silence. A peer stopped for less than
+    /// 250 ms must never be taken for gone ([`FailureDetector::TOLERATED_STALL`]): its last
+    /// datagram before the stop may be 1.25 heartbeat intervals older (62.5 ms), and the first
+    /// after it may come 30 ms later than its rhythm (jitter, a reordered datagram), so
+    /// 250 + 62.5 + 30 ≈ 345. A heartbeat lost just before such a stop is not covered.
     pub const ADAPTIVE: FailureDetector = FailureDetector::Adaptive {
         phi: 9.0,
         deviations: 4.0,
-        min_timeout: Duration::from_millis(250),
+        min_timeout: Duration::from_millis(345),
     };
+
+    /// The longest stop of a live peer (a starved process, a page fault storm, a debugger's
+    /// breakpoint) the default detector lets pass without a verdict: a host stopped for less
+    /// is not replaced. Longer stops are taken for a crash (a host SIGSTOPped for 0.5 s is
+    /// replaced).
+    pub const TOLERATED_STALL: Duration = Duration::from_millis(250);
+}
+
+impl Default for FailureDetector {
+    fn default() -> Self {
+        FailureDetector::ADAPTIVE
+    }
 }
 
 /// The application's message types and the room's bounds on messages. Every peer enforces
@@ -384,7 +400,7 @@ impl Default for SessionConfig {
         SessionConfig {
             classes: vec![ClassConfig::rigid("rigid", SendPolicy::default())],
             peer_timeout: Duration::from_secs(1),
-            heartbeat_interval: Duration::from_millis(200),
+            heartbeat_interval: Duration::from_millis(50),
             mtu: 1200,
             min_rto: Duration::from_millis(60),
             max_members: default_max_members(),
@@ -394,7 +410,7 @@ impl Default for SessionConfig {
             messages: MessageConfig::default(),
             room_key: None,
             room_token: None,
-            detector: FailureDetector::Fixed,
+            detector: FailureDetector::ADAPTIVE,
             heal_window: default_heal_window(),
             uplink_bytes_per_s: None,
             state_route: StateRoute::Relay,
@@ -405,10 +421,21 @@ impl Default for SessionConfig {
 
 impl SessionConfig {
     /// This configuration with the adaptive failure detector ([`FailureDetector::ADAPTIVE`])
-    /// and 50 ms heartbeats: a dead host is noticed in a few hundred ms on a good link.
+    /// and 50 ms heartbeats (the default): a dead host is noticed in about a third of a
+    /// second on a good link, a host stopped for less than
+    /// [`FailureDetector::TOLERATED_STALL`] never is.
     pub fn fast_detection(mut self) -> Self {
         self.detector = FailureDetector::ADAPTIVE;
         self.heartbeat_interval = Duration::from_millis(50);
+        self
+    }
+
+    /// This configuration with the fixed detector and 200 ms heartbeats (the default before
+    /// the adaptive one): a peer is gone after [`peer_timeout`](Self::peer_timeout) of
+    /// silence, whatever its link; a fifth of the heartbeats.
+    pub fn fixed_detection(mut self) -> Self {
+        self.detector = FailureDetector::Fixed;
+        self.heartbeat_interval = Duration::from_millis(200);
         self
     }
 

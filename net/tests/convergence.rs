@@ -306,9 +306,10 @@ fn center_only_mode_replicates_the_center_only() {
 /// and follows again at once.
 #[test]
 fn outage_losing_hundreds_of_datagrams_recovers_at_once() {
+    // an outage nobody takes for a failure: the fixed detector, at the 20 s timeout
     let cfg = SessionConfig {
         peer_timeout: ms(20_000),
-        ..config()
+        ..config().fixed_detection()
     };
     let mut h = room_with(2, cfg, ConditionerConfig::default(), ms(1500));
     let (id, _) = spawn_rigid(&mut h, 0, Vec3::ZERO);

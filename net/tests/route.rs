@@ -25,9 +25,11 @@ fn pose(i: usize, t: f32) -> Vec3 {
 /// sent over the last 2 s, the largest distance any member shows any client's object from
 /// where its owner had it 100 ms earlier at most).
 fn room(n: usize, route: StateRoute) -> (u64, f32) {
+    // the fixed detector's 5 heartbeats a second: the default's 20 to every quiet link are
+    // a constant beside what the route changes
     let cfg = SessionConfig {
         state_route: route,
-        ..config()
+        ..config().fixed_detection()
     };
     let mut h = Harness::new(n, cfg, steady_link());
     h.advance(ms(2000));

@@ -18,13 +18,34 @@ use softsync_peer::Event;
 
 /// The `bench-ball` room with its soft classes centre-only, and hands that grab a soft body
 /// by its centre (thesis 4.1.1: one particle cannot lift the ball).
+///
+/// On the fixed failure detector: with the default one's heartbeat rhythm this run shows a
+/// bug of the mode, not fixed yet. At the drop's impact the owner's centre dips 8.5 cm below
+/// its rest (the centre does not collide; its particles stop on the table), the host places
+/// its centre there and carries its particles rigidly with it, into the table; the ball stays
+/// flattened by 3.2 cm on the host, also after authority comes back.
 fn node(hub: &MemoryHub, me: PeerId, seed: u64) -> Node {
-    Node::bench_ball(hub, me, seed, |scene, hand| {
-        for c in scene.classes.iter_mut().filter(|c| c.is_soft()) {
-            c.replication.centre_only = Some(true);
-        }
-        hand.soft_grab = SoftGrab::Center;
-    })
+    let assets = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets");
+    let mut scene = softsync_peer::Scene::by_name("bench-ball", &assets).unwrap();
+    for c in scene.classes.iter_mut().filter(|c| c.is_soft()) {
+        c.replication.centre_only = Some(true);
+    }
+    let hand = softsync_interaction::HandConfig {
+        physical_controller: false,
+        hover_radius_m: 0.015,
+        soft_grab: SoftGrab::Center,
+        ..Default::default()
+    };
+    let config = softsync_peer::PeerConfig {
+        hand,
+        dt_s: DT,
+        ..softsync_peer::PeerConfig::default()
+    };
+    let policy = softsync_net::SendPolicy::default();
+    let cfg = scene
+        .session_config(policy.clone(), policy.clone(), policy)
+        .fixed_detection();
+    Node::with_session_config(hub, me, seed, scene, config, 0.02, cfg)
 }
 
 fn frame(n: &mut Node, now: Instant, hand: Option<HandInput>) {

@@ -3,7 +3,8 @@
 //! SIGSTOPs/SIGCONTs peers and the host every 3-7 s, and the bots keep grabbing and squeezing.
 //! Every second, from the dumps: one host per term, no object with two owners, exactly one
 //! acting host, the same members everywhere (every live process, no dead one), every object
-//! owned by a live member, no scene object lost, late joiners matching the owners. Zero
+//! owned by a live member, no scene object lost, late joiners matching the owners, and no
+//! takeover without a host kill or stop before it (the default detector's false alarms). Zero
 //! violations. Runs alone (nextest: threads-required), as CPU starvation is a fault of its own.
 #![allow(clippy::unwrap_used, missing_docs)]
 
@@ -32,6 +33,8 @@ fn a_two_minute_churn_soak_has_no_violation() {
     println!("{r}");
     assert!(o.status.success(), "{text}");
     assert_eq!(common::field(r, "violations"), "0", "{text}");
+    // with the default (adaptive) detector: every takeover follows a host kill or stop
+    assert_eq!(common::field(r, "false_takeovers"), "0", "{text}");
     let events: u32 = common::field(r, "events").parse().unwrap();
     assert!(events >= 15, "{text}");
     // the scheduler did all it does, the host included

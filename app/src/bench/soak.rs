@@ -3,8 +3,11 @@
 //! and every bot keeps reaching for objects, grabbing, squeezing and letting go. Every second
 //! the invariants of [`soak_check`](super::soak_check) are checked on what each peer's dump
 //! showed at that moment; each late joiner's view is compared with the owners' own states a few
-//! seconds after it joined. Prints `RESULT soak …`, writes a timeline (CSV, chart) and the
-//! event log.
+//! seconds after it joined. Every peer that starts to act as host is matched to a host kill or
+//! stop in the 8 s before it; one without is a false takeover (a violation: a new host chosen
+//! while the old one was alive and running). `--busy-loops N` spins N threads beside the room
+//! (a loaded machine). Prints `RESULT soak …`, writes a timeline (CSV, chart) and the event
+//! log.
 
 use std::collections::BTreeSet;
 use std::io::{Read, Seek, SeekFrom};
@@ -34,6 +37,81 @@ pub struct SoakPlan {
     pub max_peers: usize,
     /// Never fewer running (not stopped) processes than this.
     pub min_running: usize,
+    /// Threads that spin beside the room for the whole soak (a loaded machine).
+    pub busy_loops: usize,
+}
+
+/// A takeover (a peer that starts to act as host) this long after a host was killed or
+/// stopped is that event's; any other is false: a new host chosen while the old one was alive
+/// and running.
+const TAKEOVER_WINDOW_MS: u64 = 8_000;
+
+/// Threads that spin until dropped.
+struct BusyLoops {
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    threads: Vec<std::thread::JoinHandle<()>>,
+}
+
+impl BusyLoops {
+    fn start(n: usize) -> BusyLoops {
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let threads = (0..n)
+            .map(|_| {
+                let stop = stop.clone();
+                std::thread::spawn(move || {
+                    let mut x = 0u64;
+                    while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                        x = std::hint::black_box(
+                            x.wrapping_mul(6364136223846793005).wrapping_add(1),
+                        );
+                    }
+                })
+            })
+            .collect();
+        BusyLoops { stop, threads }
+    }
+}
+
+impl Drop for BusyLoops {
+    fn drop(&mut self) {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        for t in self.threads.drain(..) {
+            let _ = t.join();
+        }
+    }
+}
+
+/// Who took over from whom: every peer that starts to act as host, matched to the host kill
+/// or stop before it.
+#[derive(Default)]
+struct Takeovers {
+    /// Host kills and stops not yet matched to a takeover (wall ms).
+    causes: Vec<u64>,
+    /// Takeovers matched to a cause.
+    justified: usize,
+    /// Takeovers without one: (wall ms, what).
+    false_ones: Vec<(u64, String)>,
+}
+
+impl Takeovers {
+    /// The host was killed or stopped at `at`.
+    fn cause(&mut self, at: u64) {
+        self.causes.push(at);
+    }
+
+    /// `who` started to act as host at `at`.
+    fn took_over(&mut self, at: u64, who: &str) {
+        self.causes.retain(|c| at < c + TAKEOVER_WINDOW_MS);
+        if self.causes.is_empty() {
+            self.false_ones.push((
+                at,
+                format!("{who} took over with the host alive and running"),
+            ));
+        } else {
+            self.causes.remove(0);
+            self.justified += 1;
+        }
+    }
 }
 
 /// A late joiner's view this long after its first dump line is compared with the owners'.
@@ -109,6 +187,8 @@ struct Member {
     ended_ms: Option<u64>,
     /// Started after the first ones (a late joiner), not yet compared.
     late: bool,
+    /// Whether its latest line said it is the host (none before its first line).
+    was_host: Option<bool>,
 }
 
 impl Member {
@@ -208,6 +288,7 @@ impl Soak {
             resumed_ms: 0,
             ended_ms: None,
             late: k > 0,
+            was_host: None,
         });
         Ok(())
     }
@@ -234,6 +315,7 @@ pub fn soak(out: &Path, plan: &SoakPlan) -> Result<usize, String> {
         spawned: 0,
         duration_s: plan.seconds + 120.0,
     };
+    let _busy = BusyLoops::start(plan.busy_loops);
     s.spawn(true)?;
     s.members[0].proc.line("hosting", Duration::from_secs(30))?;
     for _ in 1..plan.start_peers {
@@ -264,6 +346,7 @@ pub fn soak(out: &Path, plan: &SoakPlan) -> Result<usize, String> {
     let (mut joiner_compared, mut joiner_skipped) = (0usize, 0usize);
     let mut host_changes = 0usize;
     let mut last_host: Option<u64> = None;
+    let mut takeovers = Takeovers::default();
     let t0 = Instant::now();
     while wall_ms() < end {
         let now = wall_ms();
@@ -273,6 +356,16 @@ pub fn soak(out: &Path, plan: &SoakPlan) -> Result<usize, String> {
                 if let Some(l) = m.tail.lines.first() {
                     m.id = l.peer;
                     m.first_line_ms.get_or_insert(l.wall_ms);
+                }
+                if let Some(l) = m.tail.lines.last() {
+                    let host = l.host == Some(l.peer);
+                    // the first host is no takeover; a joiner hosting from its first line is
+                    let first_host = m.name == "p0" && m.was_host.is_none();
+                    if host && m.was_host != Some(true) && !first_host {
+                        let who = format!("{} ({}, term {})", m.name, l.peer, l.term);
+                        takeovers.took_over(l.wall_ms, &who);
+                    }
+                    m.was_host = Some(host);
                 }
                 if m.stopped && now >= m.resume_at {
                     m.signal("-CONT");
@@ -307,6 +400,9 @@ pub fn soak(out: &Path, plan: &SoakPlan) -> Result<usize, String> {
         }
         if now >= next_event && now < quiet_from {
             if let Some((kind, what)) = disturb(&mut s, &mut rng, plan, now)? {
+                if matches!(kind, Disturb::KillHost | Disturb::StopHost) {
+                    takeovers.cause(now);
+                }
                 println!(
                     "{:7.1} s  {:9}  {what}",
                     (now - start) as f64 / 1e3,
@@ -416,6 +512,13 @@ pub fn soak(out: &Path, plan: &SoakPlan) -> Result<usize, String> {
     }
     std::thread::sleep(Duration::from_secs(2));
     let minutes = plan.seconds / 60.0;
+    for (at, what) in &takeovers.false_ones {
+        println!(
+            "{:7.1} s  VIOLATION false_takeover: {what}",
+            at.saturating_sub(start) as f64 / 1e3
+        );
+        violations.push((*at, "false_takeover", what.clone()));
+    }
     write_outputs(out, &timeline, &events, &violations)?;
     let count = |k: &str| events.iter().filter(|e| e.1 == k).count();
     let joiner = Summary::of(&joiner_errors);
@@ -431,6 +534,12 @@ pub fn soak(out: &Path, plan: &SoakPlan) -> Result<usize, String> {
             .field("host_kills", count("kill-host"))
             .field("stops", count("stop") + count("stop-host"))
             .field("host_changes", host_changes)
+            .field(
+                "takeovers",
+                takeovers.justified + takeovers.false_ones.len()
+            )
+            .field("false_takeovers", takeovers.false_ones.len())
+            .field("busy_loops", plan.busy_loops)
             .field("late_joiners_checked", joiner_errors.len())
             .field("late_joiner_states_compared", joiner_compared)
             .field("late_joiner_states_skipped", joiner_skipped)

@@ -124,5 +124,9 @@ pub(super) enum BenchSub {
         /// Never more processes than this (the start counted; 2-16).
         #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u16).range(2..=16))]
         max_peers: u16,
+        /// Threads that spin for the whole soak, beside the room (1 on 2 cores: half the
+        /// CPU), so the peers' processes are starved as on a loaded machine.
+        #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u16).range(0..=64))]
+        busy_loops: u16,
     },
 }

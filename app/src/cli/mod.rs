@@ -194,10 +194,14 @@ struct PeerOpts {
     /// SOFTSYNC_ROOM_TOKEN).
     #[arg(long, value_name = "TOKEN", value_parser = token)]
     room_token: Option<softsync_net::wire::RoomToken>,
-    /// Notice a dead host or member in a few hundred ms instead of a second: 50 ms heartbeats
-    /// and a timeout that adapts to each link's loss and jitter (every peer of the room
-    /// should say it; a process starved of CPU for 250 ms or more is then taken for dead).
+    /// The fixed failure detector: a peer is gone after a second of silence (200 ms
+    /// heartbeats). The default notices a dead host or member in about a third of a second
+    /// (50 ms heartbeats and a timeout that adapts to each link's loss and jitter) and lets a
+    /// peer stopped for less than 250 ms pass. Every peer of a room should choose the same.
     #[arg(long)]
+    fixed_detection: bool,
+    /// The default now (kept so older scripts run): see --fixed-detection.
+    #[arg(long, hide = true, conflicts_with = "fixed_detection")]
     fast_detection: bool,
     /// The room takes at most N peers, the host included: a joiner beyond is refused with the
     /// reason (size a room to what its machines can serve). Every peer of the room must give
@@ -352,6 +356,8 @@ pub enum Command {
         peers: usize,
         /// At most this many processes.
         max_peers: usize,
+        /// Spinning threads beside the room.
+        busy_loops: usize,
     },
     /// Print this (help, or the version).
     Help(String),
@@ -408,7 +414,7 @@ pub struct PeerArgs {
     pub tls_ca: Option<PathBuf>,
     /// A join token.
     pub room_token: Option<softsync_net::wire::RoomToken>,
-    /// The adaptive failure detector and 50 ms heartbeats.
+    /// The adaptive failure detector and 50 ms heartbeats (true unless --fixed-detection).
     pub fast_detection: bool,
     /// The room's size cap.
     pub max_members: usize,
@@ -639,6 +645,7 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
                     seed,
                     peers,
                     max_peers,
+                    busy_loops,
                 },
         } => {
             if max_peers < peers {
@@ -652,6 +659,7 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
                 seed,
                 peers: usize::from(peers),
                 max_peers: usize::from(max_peers),
+                busy_loops: usize::from(busy_loops),
             }
         }
         Sub::Host { bind, signal, peer } => {
@@ -724,7 +732,7 @@ fn peer_args(
         tls: p.tls_cert.zip(p.tls_key),
         tls_ca: p.tls_ca,
         room_token: p.room_token,
-        fast_detection: p.fast_detection,
+        fast_detection: p.fast_detection || !p.fixed_detection,
         max_members: usize::from(p.max_members),
         no_net_thread: p.no_net_thread,
         uplink_bytes_per_s: p.uplink_kbps.map(|k| (k * 125.0).round().max(1.0) as u32),

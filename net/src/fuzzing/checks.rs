@@ -265,7 +265,7 @@ pub(super) fn room_config(setup: &Setup) -> SessionConfig {
     if setup.adaptive {
         cfg.fast_detection()
     } else {
-        cfg
+        cfg.fixed_detection()
     }
 }
 

@@ -670,7 +670,7 @@ impl ArrivalGaps {
     }
 
     /// The silence after which the peer is gone, from the gaps and the heartbeat interval
-    /// `hb` (a live peer with the adaptive detector pings at most 1.5 `hb` apart): the share
+    /// `hb` (a live peer with the adaptive detector pings at most 1.25 `hb` apart): the share
     /// of gaps longer than 1.75 `hb` estimates the chance `q` that a heartbeat is lost (at
     /// least 1 %), so `k` lost in a row, `q^k`, is below 10^−phi for `k = ⌈phi / −log₁₀ q⌉`
     /// heartbeats; to those `k + ½` intervals come `deviations` standard deviations of the
@@ -688,8 +688,8 @@ impl ArrivalGaps {
         if n < Self::MIN_SAMPLES {
             return max;
         }
-        // A live peer pings at most 1.5 intervals apart (a ping whenever it was quiet for
-        // half of one); a gap past 1.75 means something was lost.
+        // A live peer pings at most 1.25 intervals apart (a round every half interval pings
+        // a link quiet for three quarters of one); a gap past 1.75 means something was lost.
         let unit = hb.as_secs_f32() * 1e3;
         let long = self.gaps_ms.iter().filter(|g| **g > 1.75 * unit).count();
         let q = (long as f32 / n as f32).clamp(0.01, 0.9);

@@ -163,11 +163,14 @@ impl Session {
             return;
         }
         let hb = self.cfg.heartbeat_interval;
-        // The adaptive detector reads the rhythm of the gaps: a ping whenever the link was
-        // quiet for half an interval keeps every gap within 1.5 intervals when nothing is lost.
-        let quiet_for = match self.cfg.detector {
-            FailureDetector::Fixed => hb,
-            FailureDetector::Adaptive { .. } => hb / 2,
+        // The adaptive detector reads the rhythm of the gaps: a round every half interval
+        // pings the links quiet for three quarters of one, so a quiet link's gaps are one
+        // interval even when rounds run a little late, and no live peer's gap is longer than
+        // 1.25 intervals when nothing is lost. The fixed one: a round per interval pinging
+        // the links quiet for one, so gaps of up to two.
+        let (round, quiet_for) = match self.cfg.detector {
+            FailureDetector::Fixed => (hb, hb),
+            FailureDetector::Adaptive { .. } => (hb / 2, hb * 3 / 4),
         };
         for p in self.others() {
             let l = self.links.entry(p).or_default();
@@ -181,7 +184,7 @@ impl Session {
                 l.ping_due = true;
             }
         }
-        self.schedule.next_heartbeat = now + hb;
+        self.schedule.next_heartbeat = now + round;
     }
 
     /// Peers we keep link state for that are neither members nor our host.
@@ -246,9 +249,23 @@ impl Session {
         let Some(gap) = self.stalls.driven(now) else {
             return;
         };
-        // A session driven only at its deadlines sees gaps of up to a heartbeat interval.
-        let pause = (self.cfg.peer_timeout / 2).max(self.cfg.heartbeat_interval * 2);
-        if gap < pause || self.role == Role::Joining {
+        // The fixed detector waits a peer timeout, so only a gap of half of one matters. The
+        // adaptive one judges after about a third of a second, so a stall of a tenth (a starved
+        // process, as the soak with busy loops makes them) must not leave the others looking
+        // silent for it; but a driver that calls less often than the session asks (a test on
+        // its own cadence, a loop of 10 frames a second) is not stalling: the stall is how late
+        // we are past the heartbeat round we asked for, at most two intervals apart.
+        let (stall, pause) = match self.cfg.detector {
+            FailureDetector::Fixed => (
+                gap,
+                (self.cfg.peer_timeout / 2).max(self.cfg.heartbeat_interval * 2),
+            ),
+            FailureDetector::Adaptive { .. } => (
+                gap.min(now.saturating_since(self.schedule.next_heartbeat)),
+                self.cfg.heartbeat_interval * 2,
+            ),
+        };
+        if stall < pause || self.role == Role::Joining {
             return;
         }
         // Members and our host only: strangers are forgotten on their own schedule.
@@ -257,10 +274,14 @@ impl Session {
                 continue;
             }
             if let Some(h) = l.last_heard.as_mut() {
-                *h = (*h + gap).min(now);
+                *h = (*h + stall).min(now);
             }
-            // What arrived during our stall comes in a burst: not the link's rhythm.
-            l.gaps.clear();
+            // What arrived during a long stall comes in a burst: not the link's rhythm. (A
+            // short one's burst is a few gaps of 64; forgetting them all would leave the
+            // detector at the peer timeout for 16 gaps after every hiccup.)
+            if gap >= self.cfg.peer_timeout / 2 {
+                l.gaps.clear();
+            }
         }
         if gap >= self.cfg.peer_timeout {
             self.stalls.stalled(now);

@@ -127,6 +127,12 @@ impl<T: Transport> LinkConditioner<T> {
         self.cfg = cfg;
     }
 
+    /// Hands the wrapped transport what is due by `now`: datagrams on their way travel on
+    /// while their sender's process is stopped (the harness's frozen peers).
+    pub fn release(&mut self, now: Instant) {
+        self.flush(now);
+    }
+
     fn flush(&mut self, now: Instant) {
         while self.queue.peek().is_some_and(|d| d.at <= now) {
             if let Some(d) = self.queue.pop() {

@@ -95,6 +95,19 @@ impl Node {
     ) -> Self {
         let policy = SendPolicy::default();
         let cfg = scene.session_config(policy.clone(), policy.clone(), policy);
+        Self::with_session_config(hub, me, seed, scene, config, loss, cfg)
+    }
+
+    /// As [`Node::with_loss`], with the session's configuration given.
+    pub fn with_session_config(
+        hub: &MemoryHub,
+        me: PeerId,
+        seed: u64,
+        scene: Scene,
+        config: PeerConfig,
+        loss: f64,
+        cfg: softsync_net::SessionConfig,
+    ) -> Self {
         let (session, contact) = if me == HOST {
             (Session::host(me, cfg, Instant::ZERO), None)
         } else {
