@@ -13,8 +13,12 @@ use softsync_net::{Instant, PeerEvent, PeerId};
 /// How long a joiner waits for an answer to its `Hello` before trying the next peer.
 pub const JOIN_RETRY: Duration = Duration::from_millis(1000);
 
+/// A peer's rejoins are limited within this window (a loop of drops and rejoins is what the
+/// limit stops; a process stalled now and then over a long session is not one).
+pub const REJOIN_WINDOW: Duration = Duration::from_secs(60);
+
 /// Whether a peer the room went on without may join again, having done so `rejoins` times
-/// already under a limit of `limit` (0: never).
+/// within the last [`REJOIN_WINDOW`] under a limit of `limit` (0: never).
 pub fn may_rejoin(rejoins: u64, limit: u32) -> bool {
     rejoins < u64::from(limit)
 }
@@ -29,6 +33,8 @@ pub struct Joining {
     contact: Option<(PeerId, Instant)>,
     /// When joining started (the join timeout counts from here).
     started: Instant,
+    /// When we joined again lately (within [`REJOIN_WINDOW`]).
+    rejoined: std::collections::VecDeque<Instant>,
 }
 
 impl Joining {
@@ -39,7 +45,20 @@ impl Joining {
             contacts: contact.into_iter().collect(),
             contact: contact.map(|c| (c, now)),
             started: now,
+            rejoined: std::collections::VecDeque::new(),
         }
+    }
+
+    /// Whether we may join again at `now` under `limit` rejoins per [`REJOIN_WINDOW`].
+    pub fn may_rejoin(&mut self, now: Instant, limit: u32) -> bool {
+        while self
+            .rejoined
+            .front()
+            .is_some_and(|t| now.saturating_since(*t) >= REJOIN_WINDOW)
+        {
+            self.rejoined.pop_front();
+        }
+        may_rejoin(self.rejoined.len() as u64, limit)
     }
 
     /// In the room (host, or welcomed).
@@ -83,6 +102,7 @@ impl Joining {
 
     /// Out of the room: join again through `host`, counting the timeout from `now`.
     pub fn restart(&mut self, now: Instant, host: PeerId) {
+        self.rejoined.push_back(now);
         self.joined = false;
         if !self.contacts.contains(&host) {
             self.contacts.push(host);
@@ -202,5 +222,13 @@ mod tests {
         assert!(may_rejoin(2, 3));
         assert!(!may_rejoin(3, 3));
         assert!(!may_rejoin(0, 0));
+        // the limit counts rejoins within a minute: a long session's odd stall is no loop
+        let mut j = Joining::new(Instant::ZERO, true, None);
+        for s in [0, 10, 20] {
+            assert!(j.may_rejoin(at_ms(s * 1000), 3));
+            j.restart(at_ms(s * 1000), PeerId(1));
+        }
+        assert!(!j.may_rejoin(at_ms(59_000), 3));
+        assert!(j.may_rejoin(at_ms(60_000), 3));
     }
 }

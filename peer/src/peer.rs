@@ -35,7 +35,7 @@ use softsync_net::{
 
 use crate::avatar::Avatar;
 use crate::events::{Counters, Event, PeerError};
-use crate::join::{may_rejoin, Joining};
+use crate::join::Joining;
 use crate::mirror::{LocalBody, Mirror};
 use crate::scene::{Kind, Scene};
 use cost::Phase;
@@ -49,7 +49,8 @@ pub struct PeerConfig {
     pub dt_s: f32,
     /// Spawn an avatar (head and hands); false to measure one object's traffic.
     pub avatar: bool,
-    /// How many times to join again after the room went on without us (0: stop instead).
+    /// How many times to join again after the room went on without us within a minute
+    /// ([`crate::join::REJOIN_WINDOW`]; 0: stop instead).
     pub rejoin_limit: u32,
     /// How long a joiner waits for a welcome before [`Peer::pump`] gives up.
     pub join_timeout: Duration,
@@ -348,7 +349,7 @@ impl Peer {
             }
             SessionEvent::Refused { reason } => return Err(PeerError::Refused(reason)),
             SessionEvent::Dropped { host, reason } => {
-                if !may_rejoin(self.counters.rejoins, self.config.rejoin_limit) {
+                if !self.joining.may_rejoin(now, self.config.rejoin_limit) {
                     return Err(PeerError::Dropped {
                         reason,
                         rejoins: self.counters.rejoins,

@@ -169,9 +169,9 @@ struct PeerOpts {
     /// Give up joining after S seconds.
     #[arg(long, value_name = "S", default_value_t = 15.0, value_parser = positive::<3600>)]
     connect_timeout: f64,
-    /// A peer the room went on without (it stalled or was cut off for longer than the 1 s
-    /// peer timeout; a stalled host is replaced) joins again, at most N times; 0: exit with
-    /// code 3 instead.
+    /// A peer the room went on without (it stalled or was cut off for longer than the failure
+    /// detector allows, ~0.35 s by default; a stalled host is replaced) joins again, at most
+    /// N times within a minute; 0: exit with code 3 instead.
     #[arg(long, value_name = "N", default_value_t = 3, value_parser = clap::value_parser!(u32).range(0..=1000))]
     rejoin_limit: u32,
     /// A file holding the room's secret: the host admits only peers that prove they hold

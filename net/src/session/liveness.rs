@@ -302,11 +302,19 @@ impl Session {
             return;
         };
         let reason = match why {
-            DropWhy::TimedOut => format!(
-                "dropped from the room: silent for longer than the peer timeout ({} ms); \
-                 join again",
-                self.cfg.peer_timeout.as_millis()
-            ),
+            DropWhy::TimedOut => match self.cfg.detector {
+                FailureDetector::Fixed => format!(
+                    "dropped from the room: silent for longer than the peer timeout ({} ms); \
+                     join again",
+                    self.cfg.peer_timeout.as_millis()
+                ),
+                FailureDetector::Adaptive { min_timeout, .. } => format!(
+                    "dropped from the room: silent for longer than the failure detector allows \
+                     ({}–{} ms, by the link's loss and jitter); join again",
+                    min_timeout.as_millis(),
+                    self.cfg.peer_timeout.as_millis()
+                ),
+            },
             DropWhy::OlderTerm(old) => format!(
                 "the room moved on: peer {} became host in term {} while this peer was out of \
                  touch (it still spoke for term {}); join again",
