@@ -7,7 +7,7 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use softsync_bevy::Room;
+use softsync_bevy::{ConnectTimes, Room};
 use softsync_net::Event as RoomEvent;
 use softsync_peer::messages::MessageTypes;
 use softsync_peer::{Bot, DeviceFrame, Event, Say};
@@ -41,6 +41,66 @@ pub struct Driver {
     /// `--bot throw`: the rollback bench's squeeze-and-throw motion (the same a rollback
     /// peer's bot makes), with its frame count, instead of a script.
     pub throw: Option<(SqueezeThrow, i32)>,
+    /// A joiner's timeline, printed once it shows the room's first state.
+    pub join_timeline: Option<JoinTimeline>,
+}
+
+/// Where a joiner's time went, in milliseconds since the process started (the clock the
+/// `SOFTSYNC_LOG` records carry): the room's [`ConnectTimes`], then the Welcome and the first
+/// state the peer shows. One line, `join timeline ms: …`, which `softsync bench join` reads.
+pub struct JoinTimeline {
+    marks: Vec<(&'static str, f64)>,
+    welcome: Option<f64>,
+}
+
+impl JoinTimeline {
+    /// From the room's connect times.
+    pub fn new(t: &ConnectTimes) -> Self {
+        let ms = |i: std::time::Instant| crate::stderr_log::since_start_ms() - i.elapsed().as_secs_f64() * 1e3;
+        let mut marks = vec![("start", ms(t.started)), ("registered", ms(t.registered))];
+        if let Some(c) = t.contact {
+            marks.push(("contact", ms(c)));
+        }
+        if let Some(s) = t.scene {
+            marks.push(("scene", ms(s)));
+        }
+        marks.push(("opened", ms(t.opened)));
+        JoinTimeline {
+            marks,
+            welcome: None,
+        }
+    }
+
+    /// Once a frame: the line, when this frame first shows an object of the room.
+    fn frame(&mut self, room: &mut Room) -> Option<String> {
+        if !room.peer.joined() {
+            return None;
+        }
+        let now_ms = crate::stderr_log::since_start_ms();
+        let welcome = *self.welcome.get_or_insert(now_ms);
+        let me = room.peer.me();
+        let now = room.now();
+        let ids: Vec<_> = room
+            .peer
+            .objects()
+            .iter()
+            .filter(|(_, o)| o.avatar_of != Some(me))
+            .map(|(id, _)| *id)
+            .collect();
+        if !ids.into_iter().any(|id| room.peer.shown_state(now, id).is_some()) {
+            return None;
+        }
+        let mut line = String::from("join timeline ms:");
+        for (name, t) in self
+            .marks
+            .iter()
+            .copied()
+            .chain([("welcome", welcome), ("first_state", now_ms)])
+        {
+            line += &format!(" {name}={t:.1}");
+        }
+        Some(line)
+    }
 }
 
 impl Driver {
@@ -63,6 +123,7 @@ impl Driver {
             recent_events: VecDeque::new(),
             stats: StatsLine::default(),
             throw: None,
+            join_timeline: None,
             next_stats: Duration::from_secs(1),
             next_dump: Duration::ZERO,
             exiting: false,
@@ -139,6 +200,10 @@ impl Driver {
 
     /// The stats line once a second, the dump at its rate; true when `--duration` is over.
     pub fn report(&mut self, room: &mut Room) -> bool {
+        if let Some(line) = self.join_timeline.as_mut().and_then(|j| j.frame(room)) {
+            println!("{line}");
+            self.join_timeline = None;
+        }
         let now = room.now();
         self.stats.frame(now);
         let t = Duration::from_micros(now.as_micros());

@@ -35,7 +35,7 @@ use softsync_peer::{bot, Bot, PeerConfig, Scene};
 use softsync_rollback::script::SqueezeThrow;
 
 use crate::cli::{Command, FrontEnd, PeerArgs, UsageError};
-use crate::driver::Driver;
+use crate::driver::{Driver, JoinTimeline};
 use crate::plugins::ReportPlugin;
 
 /// A failure with its exit code.
@@ -645,6 +645,9 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
         room.signal_url()
     );
     let mut driver = Driver::new(bot, a.duration, dump, a.dump_hz, a.quiet);
+    if !a.host {
+        driver.join_timeline = room.connect_times().map(JoinTimeline::new);
+    }
     if let Some(slot) = throw {
         let me = room.peer.me();
         let slot = slot.unwrap_or((me.0 % 5) as usize);

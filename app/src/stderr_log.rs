@@ -3,8 +3,22 @@
 //! will not come up. `SOFTSYNC_LOG=debug,rtc_ice,webrtc` keeps those crates' records at debug
 //! and above; without prefixes every crate's. Unset: nothing is installed (the desktop front
 //! end's bevy logger may take `log` instead).
+//!
+//! Each record carries the milliseconds since the process started ([`since_start_ms`]), the
+//! clock the join timeline is printed on too: `softsync bench join` lines the two up to say
+//! where a join's time goes (ICE, DTLS) inside the WebRTC stack.
+
+use std::sync::OnceLock;
+use std::time::Instant;
 
 use log::{Level, Log, Metadata, Record};
+
+static START: OnceLock<Instant> = OnceLock::new();
+
+/// Milliseconds since the process started (since [`install`], which `main` calls first).
+pub fn since_start_ms() -> f64 {
+    START.get_or_init(Instant::now).elapsed().as_secs_f64() * 1e3
+}
 
 struct StderrLog {
     level: Level,
@@ -19,7 +33,13 @@ impl Log for StderrLog {
 
     fn log(&self, r: &Record<'_>) {
         if self.enabled(r.metadata()) {
-            eprintln!("log {} {}: {}", r.level(), r.target(), r.args());
+            eprintln!(
+                "log {:.1} {} {}: {}",
+                since_start_ms(),
+                r.level(),
+                r.target(),
+                r.args()
+            );
         }
     }
 
@@ -28,6 +48,7 @@ impl Log for StderrLog {
 
 /// Installs the logger if SOFTSYNC_LOG names a level (error, warn, info, debug, trace).
 pub fn install() {
+    START.get_or_init(Instant::now);
     let Ok(spec) = std::env::var("SOFTSYNC_LOG") else {
         return;
     };

@@ -294,6 +294,7 @@ pub struct Room {
     /// Every datagram received, sorted by protocol (and those no protocol here serves).
     door: FrontDoor,
     fetched: Option<FetchedScene>,
+    connect_times: Option<ConnectTimes>,
     /// A failure met while pumped between frames, for the next [`Room::network_in`].
     deferred: Option<OpenError>,
     /// Pumps between frames ([`Room::pump_between_frames`]).
@@ -313,6 +314,23 @@ pub struct FetchedScene {
     pub fetch: Duration,
     /// Requests sent (more than the chunks when some were lost).
     pub requests: u64,
+}
+
+/// When each step of [`Room::open`] ended, on the wall clock: where a join's time went before
+/// the room runs (the Welcome and the first state follow as it does). `softsync bench join`
+/// prints them beside the WebRTC stack's own (ICE, DTLS).
+#[derive(Clone, Copy, Debug)]
+pub struct ConnectTimes {
+    /// Connecting started.
+    pub started: std::time::Instant,
+    /// The signaling server assigned us an id.
+    pub registered: std::time::Instant,
+    /// A joiner's first data channel to a peer of the room was open (its contact).
+    pub contact: Option<std::time::Instant>,
+    /// A joiner without a scene had the room's scene ([`Room::open_fetching_scene`]).
+    pub scene: Option<std::time::Instant>,
+    /// The room was built: a joiner says Hello at its first pump.
+    pub opened: std::time::Instant,
 }
 
 impl Room {
@@ -348,6 +366,9 @@ impl Room {
             url,
             started,
         } = crate::connect::connect(&opts)?;
+        let registered = std::time::Instant::now();
+        let mut contact_at = None;
+        let mut scene_at = None;
         let mut transport: Box<MatchboxTransport> = Box::new(t);
         let me = transport.local_id();
         let now0 = Instant::ZERO;
@@ -362,6 +383,7 @@ impl Room {
         } else {
             // The first data channel is our contact (a peer that is not the host redirects).
             let mut c = crate::connect::first_contact(transport.as_mut(), &opts, started)?;
+            contact_at = Some(std::time::Instant::now());
             let scene = match scene {
                 Some(s) => s,
                 None => {
@@ -376,6 +398,7 @@ impl Room {
                     // contact that is another joiner could not answer it)
                     c = f.from;
                     fetched = Some(f);
+                    scene_at = Some(std::time::Instant::now());
                     s
                 }
             };
@@ -414,6 +437,13 @@ impl Room {
             share: None,
             door: FrontDoor::default(),
             fetched,
+            connect_times: Some(ConnectTimes {
+                started,
+                registered,
+                contact: contact_at,
+                scene: scene_at,
+                opened: std::time::Instant::now(),
+            }),
             deferred: None,
             background_pumps: 0,
             takeover: (!opts.host)
@@ -443,6 +473,7 @@ impl Room {
             share: None,
             door: FrontDoor::default(),
             fetched: None,
+            connect_times: None,
             deferred: None,
             background_pumps: 0,
             takeover: None,
@@ -464,6 +495,11 @@ impl Room {
         self.share
             .as_ref()
             .map_or((0, 0), |s| (s.served, s.refused))
+    }
+
+    /// When each step of opening the room ended (None for a room on a caller's transport).
+    pub fn connect_times(&self) -> Option<&ConnectTimes> {
+        self.connect_times.as_ref()
     }
 
     /// Now, on the session's clock.

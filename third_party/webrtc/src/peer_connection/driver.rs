@@ -411,7 +411,8 @@ fn resolve_bind_addrs<A: ToSocketAddrs>(addrs: &[A]) -> Result<Vec<BindAddr>> {
 /// an ICE restart after a Wi-Fi/cellular handover re-enumerates and picks up the new address
 /// rather than rebinding the one that disappeared (webrtc#874).
 ///
-/// Skipped: loopback (no peer can reach it), unspecified, and link-local addresses (`169.254/16`,
+/// Skipped: loopback (no peer can reach it; softsync patch: unless nothing else is up),
+/// unspecified, and link-local addresses (`169.254/16`,
 /// `fe80::/10` — an IPv6 link-local is meaningless to the peer without its scope id, which does
 /// not survive into a candidate).
 fn expand_wildcard(wildcard: SocketAddr, out: &mut Vec<BindAddr>) {
@@ -432,17 +433,35 @@ fn expand_wildcard(wildcard: SocketAddr, out: &mut Vec<BindAddr>) {
     // deduplicated away, and mistaking that for "no interface" would add the wildcard back
     // alongside it.
     let mut usable = 0;
+    // softsync patch: the loopback addresses, for a host where nothing else is up
+    let mut loopback = Vec::new();
     for interface in interfaces {
         let Some(addr) = interface.addr else { continue };
         if addr.is_ipv4() != wildcard.is_ipv4() {
             continue;
         }
         let ip = addr.ip();
-        if ip.is_loopback() || ip.is_unspecified() || is_link_local(&ip) {
+        if ip.is_loopback() {
+            loopback.push(ip);
+            continue;
+        }
+        if ip.is_unspecified() || is_link_local(&ip) {
             continue;
         }
         usable += 1;
         push_unique(out, SocketAddr::new(ip, port), true);
+    }
+
+    if usable == 0 && !loopback.is_empty() {
+        // softsync patch: only loopback is up (a network namespace, a machine offline), so the
+        // only peers there can be are on this host. Bound to the wildcard, the host candidate
+        // reads `0.0.0.0`, which no peer can use: the pair comes up only as peer-reflexive and
+        // is nominated after the agent's 1 s wait. Loopback candidates connect at once.
+        debug!("Only loopback is up: expanding {wildcard} into {loopback:?}");
+        for ip in loopback {
+            push_unique(out, SocketAddr::new(ip, port), true);
+        }
+        return;
     }
 
     if usable == 0 {
@@ -848,8 +867,19 @@ where
             // this iteration) or enqueues a fresh `WriteNotify` for the next one.
             self.inner.write_pending.store(false, Ordering::Release);
             self.poll_writes().await?;
-            self.poll_events().await;
+            let state_changed = self.poll_events().await;
             self.poll_reads().await?;
+
+            // softsync patch: a state change inside the core (ICE nominated a pair, so DTLS
+            // starts; DTLS completed, so SCTP sends its INIT) leaves the first flight in the
+            // endpoint's queue, which only the handlers' `handle_timeout` drains. Waiting for
+            // the next timer cost ~200 ms per step of a connect. Drain it now: handlers act on
+            // their own timers only once those are due, so an early call sends what is queued
+            // and nothing else.
+            if state_changed {
+                self.handle_timeout(self.inner.runtime.now()).await?;
+                self.poll_writes().await?;
+            }
 
             // Wake senders blocked in `DataChannel::writable()`: the poll_* passes above
             // applied any SCTP buffer releases (acked/abandoned bytes) to the per-channel
@@ -2129,7 +2159,9 @@ where
         self.gso_scratch = scratch;
     }
 
-    async fn poll_events(&mut self) {
+    /// Whether the core reported an event (softsync patch: the loop then drains what the state
+    /// change queued).
+    async fn poll_events(&mut self) -> bool {
         // 2.a stun_gatherer poll_event()
         while let Some(event) = self.stun_gatherer.poll_event() {
             self.handle_stun_gather_event(event).await;
@@ -2141,9 +2173,12 @@ where
         }
 
         // 2.c peer_connection poll_event() - Process all events
-        for event in Self::drain_core_events(self.inner.clone()).await {
+        let events = Self::drain_core_events(self.inner.clone()).await;
+        let any = !events.is_empty();
+        for event in events {
             self.handle_rtc_event(event).await;
         }
+        any
     }
 
     async fn poll_reads(&mut self) -> Result<()> {

@@ -1289,6 +1289,11 @@ impl PeerConnection for PeerConnectionImpl {
             let mut core = self.inner.core.lock().await;
             core.add_remote_candidate(candidate.clone())?;
         }
+        // softsync patch: wake the driver so it re-polls its timeout. A new remote candidate
+        // asks the ICE agent for a connectivity check at once, but the driver slept on the
+        // timer it had (the agent's 200 ms check interval): every join waited that long for
+        // its first check. (`set_remote_description` wakes it the same way.)
+        self.inner.wake_writes().await;
 
         let candidate_str = match candidate.candidate.strip_prefix("candidate:") {
             Some(s) => s,
