@@ -433,14 +433,19 @@ fn expand_wildcard(wildcard: SocketAddr, out: &mut Vec<BindAddr>) {
     // deduplicated away, and mistaking that for "no interface" would add the wildcard back
     // alongside it.
     let mut usable = 0;
-    // softsync patch: the loopback addresses, for a host where nothing else is up
+    // softsync patch: the loopback addresses, for a host where nothing else is up, in either
+    // family (with an IPv4 interface up, `::1` would only be a candidate for peers on the
+    // same host, in vain for any other)
     let mut loopback = Vec::new();
+    let mut other_family_usable = false;
     for interface in interfaces {
         let Some(addr) = interface.addr else { continue };
+        let ip = addr.ip();
         if addr.is_ipv4() != wildcard.is_ipv4() {
+            other_family_usable |=
+                !(ip.is_loopback() || ip.is_unspecified() || is_link_local(&ip));
             continue;
         }
-        let ip = addr.ip();
         if ip.is_loopback() {
             loopback.push(ip);
             continue;
@@ -452,7 +457,7 @@ fn expand_wildcard(wildcard: SocketAddr, out: &mut Vec<BindAddr>) {
         push_unique(out, SocketAddr::new(ip, port), true);
     }
 
-    if usable == 0 && !loopback.is_empty() {
+    if usable == 0 && !other_family_usable && !loopback.is_empty() {
         // softsync patch: only loopback is up (a network namespace, a machine offline), so the
         // only peers there can be are on this host. Bound to the wildcard, the host candidate
         // reads `0.0.0.0`, which no peer can use: the pair comes up only as peer-reflexive and
@@ -868,7 +873,7 @@ where
             self.inner.write_pending.store(false, Ordering::Release);
             self.poll_writes().await?;
             let state_changed = self.poll_events().await;
-            self.poll_reads().await?;
+            let relayed_in = self.poll_reads().await?;
 
             // softsync patch: a state change inside the core (ICE nominated a pair, so DTLS
             // starts; DTLS completed, so SCTP sends its INIT) leaves the first flight in the
@@ -878,7 +883,15 @@ where
             // and nothing else.
             if state_changed {
                 self.handle_timeout(self.inner.runtime.now()).await?;
-                self.poll_writes().await?;
+            }
+            // softsync patch: datagrams that came through a TURN relay reach the core in
+            // `poll_reads` (3.a), after this pass's writes and events: their answers (an ICE
+            // check's response, the next DTLS flight) and the events they raised (DTLS done,
+            // so SCTP starts) waited for the next timer, ~200 ms per flight on each side.
+            // Go round again at once: the next pass flushes them. Each such pass consumed
+            // an event or a relayed datagram, so this cannot spin.
+            if state_changed || relayed_in {
+                continue;
             }
 
             // Wake senders blocked in `DataChannel::writable()`: the poll_* passes above
@@ -2181,13 +2194,16 @@ where
         any
     }
 
-    async fn poll_reads(&mut self) -> Result<()> {
+    /// Whether relayed datagrams reached the core (softsync patch: the loop then flushes the
+    /// answers they queued).
+    async fn poll_reads(&mut self) -> Result<bool> {
         // 3.a turn_relayer poll_read() - deliver decapsulated relay data,
         // but no need for stun_gatherer poll_read()
         let mut turn_messages = Vec::new();
         while let Some(message) = self.turn_relayer.poll_read() {
             turn_messages.push(message);
         }
+        let relayed_in = !turn_messages.is_empty();
         if !turn_messages.is_empty() {
             let mut core = self.inner.core.lock().await;
             for message in turn_messages {
@@ -2209,14 +2225,14 @@ where
         // `a_rwnd` falls, and the peer slows down. Draining regardless would move the backlog
         // into this process's heap and throttle nobody.
         if self.flush_pending_data_channel_events().await {
-            return Ok(());
+            return Ok(relayed_in);
         }
 
         for message in Self::drain_core_data(self.inner.clone()).await {
             self.handle_rtc_message(message).await;
         }
 
-        Ok(())
+        Ok(relayed_in)
     }
 
     async fn poll_timeout(&mut self) -> Instant {

@@ -200,7 +200,14 @@ impl<A: ToSocketAddrs> Default for PeerConnectionBuilder<A> {
             udp_addrs: vec![],
             tcp_addrs: vec![],
             dedicated_reactor_pool_size: 0,
-            setting_engine: SettingEngine::default(),
+            // softsync patch: a relayed pair may be nominated 1 s after checks begin, not
+            // rtc-ice's 2 s. Through TURN a connect waited the full 2 s though the relay pair
+            // was valid in ~15 ms; direct pairs (host: at once, server-reflexive: 500 ms)
+            // still come first when they answer within the second. An application that sets
+            // its own engine keeps its own waits.
+            setting_engine: SettingEngineBuilder::new()
+                .with_relay_acceptance_min_wait(Some(RELAY_ACCEPTANCE_MIN_WAIT))
+                .build(),
             // `usize::MAX` = unbounded: no send back-pressure unless the application
             // opts in via `with_data_channel_send_buffer_limit`. This keeps `send`/
             // `send_text` non-blocking by default (zero behaviour change).
@@ -730,6 +737,10 @@ pub trait PeerConnection: crate::sealed::Sealed + Send + Sync + 'static {
 /// round trip, so it normally completes in a few milliseconds. This only caps the case of a driver
 /// that cannot get there promptly — one blocked in an application callback, say — where releasing
 /// the allocations is best effort and `close()` must not be held up for it.
+/// softsync patch: how long ICE checks run before a relayed pair may be nominated (rtc-ice's
+/// default is 2 s).
+const RELAY_ACCEPTANCE_MIN_WAIT: Duration = Duration::from_millis(1000);
+
 const DRIVER_STOP_TIMEOUT: Duration = Duration::from_millis(100);
 
 pub(crate) struct PeerConnectionImpl {
