@@ -13,7 +13,8 @@ use softsync_peer::messages::MessageTypes;
 use softsync_peer::{Bot, DeviceFrame, Event, Say};
 use softsync_rollback::script::SqueezeThrow;
 
-use crate::report::{snapshot, Dump, Rates, StatsLine};
+use crate::report::{Rates, StatsLine};
+use softsync_peer::dump::{snapshot, Dump};
 
 /// The binary's side of one peer: its bot or device and its reports.
 pub struct Driver {
@@ -56,7 +57,9 @@ pub struct JoinTimeline {
 impl JoinTimeline {
     /// From the room's connect times.
     pub fn new(t: &ConnectTimes) -> Self {
-        let ms = |i: std::time::Instant| crate::stderr_log::since_start_ms() - i.elapsed().as_secs_f64() * 1e3;
+        let ms = |i: std::time::Instant| {
+            crate::stderr_log::since_start_ms() - i.elapsed().as_secs_f64() * 1e3
+        };
         let mut marks = vec![("start", ms(t.started)), ("registered", ms(t.registered))];
         if let Some(c) = t.contact {
             marks.push(("contact", ms(c)));
@@ -87,7 +90,10 @@ impl JoinTimeline {
             .filter(|(_, o)| o.avatar_of != Some(me))
             .map(|(id, _)| *id)
             .collect();
-        if !ids.into_iter().any(|id| room.peer.shown_state(now, id).is_some()) {
+        if !ids
+            .into_iter()
+            .any(|id| room.peer.shown_state(now, id).is_some())
+        {
             return None;
         }
         let mut line = String::from("join timeline ms:");
@@ -243,7 +249,10 @@ impl Driver {
 
     fn write_dump(&mut self, room: &mut Room) {
         if self.dump.is_some() {
-            let line = snapshot(room.now(), &mut room.peer);
+            let wall_ms = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_millis() as u64);
+            let line = snapshot(room.now(), wall_ms, &mut room.peer);
             if let Some(d) = &mut self.dump {
                 if let Err(e) = d.write(&line) {
                     eprintln!("dump: {e}; no more dumps");

@@ -1,8 +1,8 @@
-//! `softsync`: signal, host, join, bench. See `softsync help`.
+//! `softsync`: signal, host, join, token. See `softsync help`. (The benchmarks are
+//! `softsync-bench`, another package.)
 
 #![allow(clippy::disallowed_methods)] // the app is the I/O layer: clocks, sleeps, processes
 
-mod bench;
 mod cli;
 #[cfg(feature = "desktop")]
 mod desktop;
@@ -106,19 +106,6 @@ fn run(args: &[String]) -> Result<ExitCode, Failure> {
             },
         ),
         Command::Peer(p) => peer(*p),
-        Command::BenchNetLive {
-            out,
-            seconds,
-            quick,
-            centre_only,
-        } => {
-            if centre_only {
-                bench::centre_only_live(&out, seconds).map_err(Failure::runtime)?;
-            } else {
-                bench::net_live(&out, seconds, quick).map_err(Failure::runtime)?;
-            }
-            Ok(ExitCode::SUCCESS)
-        }
         Command::Token {
             room,
             room_key_file,
@@ -140,79 +127,6 @@ fn run(args: &[String]) -> Result<ExitCode, Failure> {
                 .ok_or_else(|| Failure::runtime("the key names no room"))?;
             println!("{token}");
             Ok(ExitCode::SUCCESS)
-        }
-        Command::BenchAuto {
-            out,
-            seconds,
-            assets,
-        } => {
-            bench::auto(&out, seconds, &assets_dir(assets.as_deref())).map_err(Failure::runtime)?;
-            Ok(ExitCode::SUCCESS)
-        }
-        Command::BenchComanip { out, quick } => {
-            bench::comanip(&out, quick).map_err(Failure::runtime)?;
-            Ok(ExitCode::SUCCESS)
-        }
-        Command::BenchAbuse {
-            out,
-            seconds,
-            attacks,
-            hostile,
-        } => {
-            bench::abuse(&out, seconds, &attacks, &hostile).map_err(Failure::runtime)?;
-            Ok(ExitCode::SUCCESS)
-        }
-        Command::BenchRoomLoad {
-            out,
-            seconds,
-            peers,
-            direct,
-        } => {
-            bench::room_load(&out, seconds, &peers, direct).map_err(Failure::runtime)?;
-            Ok(ExitCode::SUCCESS)
-        }
-        Command::BenchSignalLb {
-            out,
-            rooms,
-            real_rooms,
-            parallel,
-            config,
-        } => {
-            let plan = bench::LbPlan {
-                rooms,
-                real_rooms,
-                config,
-                parallel,
-            };
-            let ok = bench::signal_lb(&out, &plan).map_err(Failure::runtime)?;
-            Ok(if ok {
-                ExitCode::SUCCESS
-            } else {
-                ExitCode::FAILURE
-            })
-        }
-        Command::BenchSoak {
-            out,
-            seconds,
-            seed,
-            peers,
-            max_peers,
-            busy_loops,
-        } => {
-            let plan = bench::SoakPlan {
-                seconds,
-                seed,
-                start_peers: peers,
-                max_peers,
-                min_running: 3.min(peers),
-                busy_loops,
-            };
-            let violations = bench::soak(&out, &plan).map_err(Failure::runtime)?;
-            Ok(if violations == 0 {
-                ExitCode::SUCCESS
-            } else {
-                ExitCode::FAILURE
-            })
         }
     }
 }
@@ -530,7 +444,7 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     }
     let dump = match &a.dump {
         Some(p) => Some(
-            report::Dump::create(p)
+            softsync_peer::dump::Dump::create(p)
                 .map_err(|e| Failure::usage(format!("--dump {}: {e}", p.display())))?,
         ),
         None => None,

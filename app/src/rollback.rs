@@ -4,8 +4,10 @@
 //! - `epoch n=N frame=F players=A,B,…` when an epoch starts here;
 //! - `grab object=K` / `release object=K` when our right hand takes or lets go of the scene's
 //!   object K (in our own view);
-//! - `rollback.check frame=F checksum=X` for every confirmed frame that is a multiple of 60
-//!   (two processes agree when their lines for a frame are equal);
+//! - `rollback.check epoch=N frame=F checksum=X` for every confirmed frame that is a multiple
+//!   of 60 (two processes agree when their lines for an epoch and frame are equal: a new
+//!   epoch restarts the world at its frame, so a frame past that one has another state in
+//!   each epoch, and a peer may have confirmed it in the old one before it switched);
 //! - a stats line a second, and `rollback.summary …` at the end.
 
 use std::process::ExitCode;
@@ -111,6 +113,7 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
     let mut next = started;
     let mut last_line = started;
     let mut checked = -1i32;
+    let mut checked_epoch = 0u32;
     let mut joined = a.host;
     let mut holding: Option<usize> = None;
     // datagram payload bytes sent (session, ggrs, snapshots): the stats line's `up=` rate
@@ -209,12 +212,19 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
             failure = Some(Failure::connect("no welcome from the room's host in time"));
             break;
         }
-        if let Some(c) = peer.confirmed_frame() {
+        if let (Some(c), Some((n, start))) =
+            (peer.confirmed_frame(), peer.epoch().map(|e| (e.n, e.frame)))
+        {
+            if n != checked_epoch {
+                // the new epoch's timeline from its frame on: checked again, under its number
+                checked_epoch = n;
+                checked = checked.min(start);
+            }
             let mut f = (checked + 1).max(c - 120);
             f = (f + 59) / 60 * 60;
             while f <= c {
                 if let Some(sum) = peer.checksum_at(f) {
-                    println!("rollback.check frame={f} checksum={sum:032x}");
+                    println!("rollback.check epoch={n} frame={f} checksum={sum:032x}");
                 }
                 checked = f;
                 f += 60;

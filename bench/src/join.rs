@@ -22,6 +22,8 @@
 //! Run it inside a network namespace (`scripts/bench-net-live --join`): on a namespace with only
 //! loopback, the way the tests run.
 
+#![allow(clippy::disallowed_methods)] // real processes on the wall clock: clocks, sleeps
+
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -89,19 +91,25 @@ fn parse(stdout: &str, stderr: &str) -> Result<Breakdown, String> {
             rest.split_whitespace().next()?.parse().ok()
         })
     };
-    let need = |what: &str, v: Option<f64>| v.ok_or(format!("no {what} mark in the joiner's output"));
+    let need =
+        |what: &str, v: Option<f64>| v.ok_or(format!("no {what} mark in the joiner's output"));
     let start = need("start", mark("start"))?;
     // matchbox's own record of the id, when there: the room's `registered` mark is taken
     // when `connect` next polls for it (every 5 ms), sometimes after the offer came
     let registered = need("registered", record("IdAssigned(").or(mark("registered")))?;
     let offer = need("offer", record("received offer"))?;
-    let ice = need("ICE connected", record("Setting new connection state: Connected"))?;
+    let ice = need(
+        "ICE connected",
+        record("Setting new connection state: Connected"),
+    )?;
     let dtls = need("DTLS", record("] is completed"))?;
     let contact = need("contact", mark("contact"))?;
     let scene = mark("scene").unwrap_or(contact);
     let welcome = need("welcome", mark("welcome"))?;
     let first = need("first_state", mark("first_state"))?;
-    let marks = [start, registered, offer, ice, dtls, contact, scene, welcome, first];
+    let marks = [
+        start, registered, offer, ice, dtls, contact, scene, welcome, first,
+    ];
     let mut phases = [0.0; 8];
     for (i, p) in phases.iter_mut().enumerate() {
         *p = marks[i + 1] - marks[i];
@@ -214,7 +222,10 @@ impl JoinReport {
         for (k, v) in m.iter_mut().enumerate() {
             *v = median(&self.joins.iter().map(|j| j.phases[k]).collect::<Vec<_>>());
         }
-        (m, median(&self.joins.iter().map(|j| j.total).collect::<Vec<_>>()))
+        (
+            m,
+            median(&self.joins.iter().map(|j| j.total).collect::<Vec<_>>()),
+        )
     }
 
     /// `RESULT join.breakdown build=… joins=… signaling_ms=… … first_state_ms=… total_ms=…`
@@ -297,6 +308,7 @@ pub fn write(reports: &[JoinReport], out: &Path) -> Result<Vec<String>, String> 
 
 #[cfg(test)]
 mod tests {
+    #![allow(clippy::unwrap_used)]
     use super::*;
 
     const STDOUT: &str = "scene thesis-room from peer 1: 113633 bytes in 24 ms\n\

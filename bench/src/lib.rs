@@ -3,8 +3,20 @@
 //! - [`frame`]: the frame-budget room — four peers in one process, eleven soft bodies, two
 //!   hands on one body, a tear stroke every 2 s, a cut every 10 s, a host migration —
 //!   and where each frame's time goes.
-
 //! - [`join`]: where a join's time goes, on real WebRTC between `softsync` processes.
+//! - [`live`]: rooms of real `softsync` processes on real WebRTC: the thesis's tables, rooms of
+//!   growing size, several hands on one body, a room under attack, signaling behind a load
+//!   balancer, the churn soak; and `method: auto` in one process.
+//! - [`cli`]: the command line.
 
+pub mod cli;
 pub mod frame;
 pub mod join;
+pub mod live;
+
+/// The repository's `assets/` (the shipped scenes and meshes the benches load).
+pub fn assets_dir() -> std::path::PathBuf {
+    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join("assets")
+}

@@ -1,118 +1,166 @@
-//! `softsync-bench`: the framework's benchmarks that are not product code.
+//! `softsync-bench`: the framework's benchmarks, out of the product binary.
 //!
 //! ```text
-//! softsync-bench frame [--quick] [--out DIR] [--assets DIR]
-//! softsync-bench join [--joins N] [--build LABEL=PATH]... [--out DIR]
+//! softsync-bench frame [--quick]            the frame-budget room, in one process
+//! softsync-bench join [--build L=PATH]...   where a join's time goes
+//! softsync-bench net-live | room-load | comanip | abuse | signal-lb | soak | auto
 //! ```
-//! `frame`: the frame-budget room ([`softsync_bench::frame`]); writes `frame.csv`, `frame.svg`,
-//! `spikes.md` and `RESULT.txt` under `docs/results/frame/` (or `--out`) and prints the RESULT
-//! lines.
-//!
-//! `join`: where a join's time goes ([`softsync_bench::join`]), for each `--build` (default:
-//! the `softsync` binary beside this one, labelled `this`); writes `join.csv`, `join.md` and
-//! `join.txt` under `docs/results/live/` (or `--out`). Run it in a network namespace
-//! (`scripts/bench-net-live --join`).
+//! Each writes its CSV, charts and `RESULT` lines under `docs/results/` (or `--out`); the
+//! live ones run rooms of the `softsync` binary beside this one (or `SOFTSYNC_BIN`) on real
+//! WebRTC, so run them in a network namespace (the `scripts/bench-*` do). `--help` on each
+//! says more.
 #![allow(clippy::print_stdout)]
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
+use clap::Parser;
+use softsync_bench::cli::{Cli, Route, Sub};
 use softsync_bench::frame::{self, FramePlan};
-
-const USAGE: &str = "usage: softsync-bench frame [--quick] [--out DIR] [--assets DIR]\n\
-       softsync-bench join [--joins N] [--build LABEL=PATH]... [--out DIR]\n\
-  frame    the frame-budget room: 4 peers in one process, 11 soft bodies, two hands on one,\n\
-           a tear every 2 s, a cut every 10 s, the host stopped at 30 s; 60 s measured\n\
-           (--quick: 8 s, every kind of event in it)\n\
-  join     where a join's time goes: one `softsync host`, N joiners in turn (default 20), each\n\
-           to its first state; per build (default: the softsync binary beside this one)";
+use softsync_bench::join::{self, JoinPlan};
+use softsync_bench::live;
 
 fn main() -> ExitCode {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    match run(&args) {
-        Ok(()) => ExitCode::SUCCESS,
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
         Err(e) => {
-            eprintln!("softsync-bench: {e}\n{USAGE}");
-            ExitCode::from(2)
+            let _ = e.print();
+            return ExitCode::from(if e.use_stderr() { 2 } else { 0 });
         }
-    }
-}
-
-fn run(args: &[String]) -> Result<(), String> {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
-    let mut assets = root.join("assets");
-    let mut out = root.join("docs/results/frame");
-    let mut quick = false;
-    let mut it = args.iter();
-    match it.next().map(String::as_str) {
-        Some("frame") => {}
-        Some("join") => return run_join(&root, it.as_slice()),
-        Some("-h" | "--help") => {
-            println!("{USAGE}");
-            return Ok(());
-        }
-        Some(other) => return Err(format!("unknown bench `{other}`")),
-        None => return Err("which bench?".into()),
-    }
-    while let Some(a) = it.next() {
-        match a.as_str() {
-            "--quick" => quick = true,
-            "--out" => out = it.next().ok_or("--out needs a directory")?.into(),
-            "--assets" => assets = it.next().ok_or("--assets needs a directory")?.into(),
-            other => return Err(format!("unknown option `{other}`")),
-        }
-    }
-    let plan = if quick {
-        FramePlan::quick(&assets)
-    } else {
-        FramePlan::full(&assets)
     };
-    let report = frame::run(&plan)?;
-    for w in report.warnings.iter().take(20) {
-        eprintln!("warning: {w}");
-    }
-    let lines = report.write(&out)?;
-    println!("{}", report.spikes_md(10));
-    for l in lines {
-        println!("{l}");
-    }
-    Ok(())
-}
-
-fn run_join(root: &std::path::Path, args: &[String]) -> Result<(), String> {
-    use softsync_bench::join::{self, JoinPlan};
-    let mut out = root.join("docs/results/live");
-    let mut joins = 20usize;
-    let mut builds: Vec<(String, PathBuf)> = Vec::new();
-    let mut it = args.iter();
-    while let Some(a) = it.next() {
-        match a.as_str() {
-            "--out" => out = it.next().ok_or("--out needs a directory")?.into(),
-            "--joins" => {
-                joins = it
-                    .next()
-                    .and_then(|v| v.parse().ok())
-                    .filter(|n| (1..=1000).contains(n))
-                    .ok_or("--joins needs a count, 1-1000")?
-            }
-            "--build" => {
-                let b = it.next().ok_or("--build needs LABEL=PATH")?;
-                let (label, path) = b.split_once('=').ok_or("--build needs LABEL=PATH")?;
-                builds.push((label.to_owned(), path.into()));
-            }
-            other => return Err(format!("unknown option `{other}`")),
+    match run(cli.bench) {
+        Ok(true) => ExitCode::SUCCESS,
+        Ok(false) => ExitCode::FAILURE,
+        Err(e) => {
+            eprintln!("softsync-bench: {e}");
+            ExitCode::FAILURE
         }
     }
+}
+
+/// Runs one bench; false when it ran and found a failure (a soak's violation, a room the load
+/// balancer lost).
+fn run(bench: Sub) -> Result<bool, String> {
+    match bench {
+        Sub::Frame { out, quick, assets } => {
+            let assets = assets.unwrap_or_else(softsync_bench::assets_dir);
+            let plan = if quick {
+                FramePlan::quick(&assets)
+            } else {
+                FramePlan::full(&assets)
+            };
+            let report = frame::run(&plan)?;
+            for w in report.warnings.iter().take(20) {
+                eprintln!("warning: {w}");
+            }
+            let lines = report.write(&out)?;
+            println!("{}", report.spikes_md(10));
+            for l in lines {
+                println!("{l}");
+            }
+        }
+        Sub::Join { out, joins, builds } => run_join(&out, usize::from(joins), builds)?,
+        Sub::NetLive {
+            out,
+            seconds,
+            quick,
+            centre_only,
+        } => {
+            if centre_only {
+                live::centre_only_live(&out, seconds)?;
+            } else {
+                live::net_live(&out, seconds, quick)?;
+            }
+        }
+        Sub::Auto {
+            out,
+            seconds,
+            assets,
+        } => {
+            let assets = assets.unwrap_or_else(softsync_bench::assets_dir);
+            live::auto(&out, seconds, &assets)?;
+        }
+        Sub::Comanip { out, quick } => live::comanip(&out, quick)?,
+        Sub::Abuse {
+            out,
+            seconds,
+            attacks,
+            hostile,
+        } => {
+            let attacks = attacks.map_or_else(
+                || live::ATTACKS.iter().map(|a| a.to_string()).collect(),
+                |a| a.0,
+            );
+            let hostile = hostile.unwrap_or_else(|| beside("softsync-hostile"));
+            live::abuse(&out, seconds, &attacks, &hostile)?;
+        }
+        Sub::RoomLoad {
+            out,
+            seconds,
+            peers,
+            state_route,
+        } => live::room_load(&out, seconds, &peers.0, state_route == Route::Direct)?,
+        Sub::SignalLb {
+            out,
+            rooms,
+            real_rooms,
+            parallel,
+            config,
+        } => {
+            let plan = live::LbPlan {
+                rooms: usize::from(rooms),
+                real_rooms: usize::from(real_rooms),
+                config,
+                parallel: usize::from(parallel),
+            };
+            return live::signal_lb(&out, &plan);
+        }
+        Sub::Soak {
+            out,
+            minutes,
+            seed,
+            peers,
+            max_peers,
+            busy_loops,
+        } => {
+            if max_peers < peers {
+                return Err(format!(
+                    "--max-peers {max_peers} is less than --peers {peers}"
+                ));
+            }
+            let plan = live::SoakPlan {
+                seconds: minutes * 60.0,
+                seed,
+                start_peers: usize::from(peers),
+                max_peers: usize::from(max_peers),
+                min_running: 3.min(usize::from(peers)),
+                busy_loops: usize::from(busy_loops),
+            };
+            return Ok(live::soak(&out, &plan)? == 0);
+        }
+    }
+    Ok(true)
+}
+
+/// A binary beside this one (cargo builds every binary of the workspace into one directory).
+fn beside(name: &str) -> PathBuf {
+    std::env::current_exe()
+        .map(|e| e.with_file_name(name))
+        .unwrap_or_else(|_| PathBuf::from(name))
+}
+
+fn run_join(out: &Path, joins: usize, mut builds: Vec<(String, PathBuf)>) -> Result<(), String> {
     if builds.is_empty() {
-        let exe = std::env::current_exe().map_err(|e| e.to_string())?;
-        let beside = exe.with_file_name("softsync");
-        builds.push(("this".to_owned(), beside));
+        builds.push(("this".to_owned(), live::softsync_binary()?));
     }
     let scratch = std::env::temp_dir().join(format!("softsync-bench-join-{}", std::process::id()));
     let mut reports = Vec::new();
     for (label, softsync) in builds {
         if !softsync.is_file() {
-            return Err(format!("{}: no such binary (build it: cargo build -p softsync)", softsync.display()));
+            return Err(format!(
+                "{}: no such binary (build it: cargo build -p softsync)",
+                softsync.display()
+            ));
         }
         let plan = JoinPlan {
             softsync,
@@ -121,10 +169,14 @@ fn run_join(root: &std::path::Path, args: &[String]) -> Result<(), String> {
             scratch: scratch.join(&label),
         };
         let r = join::run(&plan)?;
-        eprintln!("{label}: {} joins in {:.1} s", r.joins.len(), r.took.as_secs_f64());
+        eprintln!(
+            "{label}: {} joins in {:.1} s",
+            r.joins.len(),
+            r.took.as_secs_f64()
+        );
         reports.push(r);
     }
-    let lines = join::write(&reports, &out)?;
+    let lines = join::write(&reports, out)?;
     let _ = std::fs::remove_dir_all(&scratch);
     for l in lines {
         println!("{l}");

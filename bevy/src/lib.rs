@@ -72,7 +72,9 @@ pub use plugin::{
     AvatarPart, Hand, NetEntities, NetObject, Received, RoomEvent, RoomFailed, RoomStats, SoftBody,
     SoftsyncApp, SoftsyncPlugin, SoftsyncSet,
 };
-pub use room::{wall_ms, Clock, ConnectTimes, FetchedScene, OpenError, Room, RoomOptions, LEAVE_GRACE};
+pub use room::{
+    wall_ms, Clock, ConnectTimes, FetchedScene, OpenError, Room, RoomOptions, LEAVE_GRACE,
+};
 /// The networking crate (sessions, wire format, policies).
 pub use softsync_net as net;
 /// The engine-agnostic peer (scenes, hands, bots, the built-in messages).

@@ -69,6 +69,7 @@
 pub mod avatar;
 pub mod bot;
 pub mod device;
+pub mod dump;
 pub mod events;
 pub mod join;
 pub mod messages;

@@ -166,14 +166,14 @@ fn the_owner_moves_the_box_between_levels_as_it_is_used_and_the_replica_follows(
     assert!(room.nodes[1].peer.counters().resolution_requests >= 2);
 }
 
-/// The short version of `scripts/bench-auto`: the binary's `bench auto` over the first 4 s of
+/// The short version of `scripts/bench-auto`: `softsync-bench auto` over the first 4 s of
 /// its script (the soft ball's grab and squeeze) writes its tables and a RESULT line with
 /// every field; the error is a measurement, bounded only to catch a broken comparison.
 #[test]
 fn bench_auto_writes_its_tables_and_result_line() {
     let dir = common::scratch("bench-auto");
-    let out = std::process::Command::new(common::binary())
-        .args(["bench", "auto", "--seconds", "4", "--out"])
+    let out = std::process::Command::new(common::bench_binary())
+        .args(["auto", "--seconds", "4", "--out"])
         .arg(&dir)
         .arg("--assets")
         .arg(common::repo_file("assets"))

@@ -2,8 +2,10 @@
 //! peer simulates the room from everyone's inputs (ggrs); the host keeps membership.
 //!
 //! Inside a network namespace (`scripts/netns-run`), like every live test. Agreement is read
-//! from the `rollback.check frame=F checksum=X` lines each process prints for confirmed
-//! frames: two processes agree when their lines for a frame are equal.
+//! from the `rollback.check epoch=N frame=F checksum=X` lines each process prints for
+//! confirmed frames: two processes agree when their lines for an epoch and frame are equal (a
+//! new epoch restarts the world at its frame: a frame past it has another state in each
+//! epoch, and a peer may have confirmed it in the old one before it switched).
 #![allow(clippy::unwrap_used, clippy::disallowed_methods, missing_docs)]
 
 use std::collections::BTreeMap;
@@ -12,14 +14,17 @@ use std::time::Duration;
 mod common;
 use common::{embedded_host, field, peer_on, require_netns, scratch, Proc};
 
-/// frame → checksum, from a process's lines.
-fn checks(p: &Proc) -> BTreeMap<i64, String> {
+/// (epoch, frame) → checksum, from a process's lines.
+fn checks(p: &Proc) -> BTreeMap<(u32, i64), String> {
     p.stdout()
         .lines()
         .filter(|l| l.starts_with("rollback.check "))
         .map(|l| {
             (
-                field(l, "frame").parse().unwrap(),
+                (
+                    field(l, "epoch").parse().unwrap(),
+                    field(l, "frame").parse().unwrap(),
+                ),
                 field(l, "checksum").to_owned(),
             )
         })
@@ -29,7 +34,7 @@ fn checks(p: &Proc) -> BTreeMap<i64, String> {
 /// The frames both processes checked, and that they agree on every one (at least `min`).
 fn assert_agree(a: &Proc, b: &Proc, min: usize) -> usize {
     let (ca, cb) = (checks(a), checks(b));
-    let common: Vec<i64> = ca.keys().filter(|f| cb.contains_key(f)).copied().collect();
+    let common: Vec<(u32, i64)> = ca.keys().filter(|f| cb.contains_key(f)).copied().collect();
     assert!(
         common.len() >= min,
         "only {} common checked frames:\n{}\n{}",
@@ -38,7 +43,7 @@ fn assert_agree(a: &Proc, b: &Proc, min: usize) -> usize {
         b.logs()
     );
     for f in &common {
-        assert_eq!(ca[f], cb[f], "worlds differ at frame {f}");
+        assert_eq!(ca[f], cb[f], "worlds differ at (epoch, frame) {f:?}");
     }
     common.len()
 }

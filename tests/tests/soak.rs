@@ -1,4 +1,4 @@
-//! The churn soak, short (issue 18 point 5): `softsync bench soak --minutes 2`, a room of six
+//! The churn soak, short (issue 18 point 5): `softsync-bench soak --minutes 2`, a room of six
 //! bots (at most eight) on real WebRTC while a seeded scheduler joins, leaves, SIGKILLs and
 //! SIGSTOPs/SIGCONTs peers and the host every 3-7 s, and the bots keep grabbing and squeezing.
 //! Every second, from the dumps: one host per term, no object with two owners, exactly one
@@ -16,8 +16,8 @@ use std::process::Command;
 fn a_two_minute_churn_soak_has_no_violation() {
     common::require_netns();
     let out = common::scratch("soak");
-    let o = Command::new(common::binary())
-        .args(["bench", "soak", "--minutes", "2", "--seed", "7", "--out"])
+    let o = Command::new(common::bench_binary())
+        .args(["soak", "--minutes", "2", "--seed", "7", "--out"])
         .arg(&out)
         .output()
         .unwrap();

@@ -9,10 +9,8 @@ use std::time::Duration;
 use clap::{Args, Parser, Subcommand};
 use softsync_net::ConditionerConfig;
 
-mod bench;
 mod values;
 mod view;
-use bench::BenchSub;
 use values::*;
 pub use view::ViewArgs;
 use view::ViewOpts;
@@ -105,11 +103,6 @@ enum Sub {
         bind: Option<SocketAddr>,
         #[command(flatten)]
         peer: PeerOpts,
-    },
-    /// Benchmarks of real rooms (processes on loopback WebRTC).
-    Bench {
-        #[command(subcommand)]
-        which: BenchSub,
     },
 }
 
@@ -273,26 +266,6 @@ pub enum Command {
     },
     /// A peer.
     Peer(Box<PeerArgs>),
-    /// The live network benchmark.
-    BenchNetLive {
-        /// Output directory.
-        out: PathBuf,
-        /// Seconds per configuration.
-        seconds: f64,
-        /// Fewer configurations.
-        quick: bool,
-        /// Only centre-only against per-particle sync.
-        centre_only: bool,
-    },
-    /// `method: auto` against fixed resolutions.
-    BenchAuto {
-        /// Output directory.
-        out: PathBuf,
-        /// Seconds of the script.
-        seconds: f64,
-        /// The assets folder, if given.
-        assets: Option<PathBuf>,
-    },
     /// A join token.
     Token {
         /// The room.
@@ -301,63 +274,6 @@ pub enum Command {
         room_key_file: Option<PathBuf>,
         /// Seconds valid.
         valid: f64,
-    },
-    /// Several hands on one body, live.
-    BenchComanip {
-        /// Output directory.
-        out: PathBuf,
-        /// Fewer rooms.
-        quick: bool,
-    },
-    /// A room under attack.
-    BenchAbuse {
-        /// Output directory.
-        out: PathBuf,
-        /// Seconds per attack.
-        seconds: f64,
-        /// Attacks.
-        attacks: Vec<String>,
-        /// The hostile client.
-        hostile: PathBuf,
-    },
-    /// Rooms of growing size.
-    BenchRoomLoad {
-        /// Output directory.
-        out: PathBuf,
-        /// Seconds measured per room.
-        seconds: f64,
-        /// Room sizes (peers, host included).
-        peers: Vec<usize>,
-        /// `direct` state.
-        direct: bool,
-    },
-    /// Signaling behind a load balancer.
-    BenchSignalLb {
-        /// Output directory.
-        out: PathBuf,
-        /// Light rooms.
-        rooms: usize,
-        /// Real rooms.
-        real_rooms: usize,
-        /// Rooms opened at once.
-        parallel: usize,
-        /// HAProxy's configuration.
-        config: PathBuf,
-    },
-    /// A churn soak.
-    BenchSoak {
-        /// Output directory.
-        out: PathBuf,
-        /// Seconds of churn.
-        seconds: f64,
-        /// The scheduler's seed.
-        seed: u64,
-        /// Processes at the start.
-        peers: usize,
-        /// At most this many processes.
-        max_peers: usize,
-        /// Spinning threads beside the room.
-        busy_loops: usize,
     },
     /// Print this (help, or the version).
     Help(String),
@@ -551,117 +467,6 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
             room_key_file,
             valid,
         },
-        Sub::Bench {
-            which:
-                BenchSub::NetLive {
-                    out,
-                    seconds,
-                    quick,
-                    centre_only,
-                },
-        } => Command::BenchNetLive {
-            out,
-            seconds,
-            quick,
-            centre_only,
-        },
-        Sub::Bench {
-            which:
-                BenchSub::Auto {
-                    out,
-                    seconds,
-                    assets,
-                },
-        } => Command::BenchAuto {
-            out,
-            seconds,
-            assets,
-        },
-        Sub::Bench {
-            which: BenchSub::Comanip { out, quick },
-        } => Command::BenchComanip { out, quick },
-        Sub::Bench {
-            which:
-                BenchSub::Abuse {
-                    out,
-                    seconds,
-                    attacks,
-                    hostile,
-                },
-        } => Command::BenchAbuse {
-            out,
-            seconds,
-            attacks: attacks.map_or_else(
-                || {
-                    crate::bench::ATTACKS
-                        .iter()
-                        .map(|a| a.to_string())
-                        .collect()
-                },
-                |a| a.0,
-            ),
-            hostile: hostile.unwrap_or_else(|| {
-                std::env::current_exe()
-                    .ok()
-                    .and_then(|e| e.parent().map(|d| d.join("softsync-hostile")))
-                    .unwrap_or_else(|| PathBuf::from("softsync-hostile"))
-            }),
-        },
-        Sub::Bench {
-            which:
-                BenchSub::RoomLoad {
-                    out,
-                    seconds,
-                    peers,
-                    state_route,
-                },
-        } => Command::BenchRoomLoad {
-            out,
-            seconds,
-            peers: peers.0,
-            direct: state_route == Route::Direct,
-        },
-        Sub::Bench {
-            which:
-                BenchSub::SignalLb {
-                    out,
-                    rooms,
-                    real_rooms,
-                    parallel,
-                    config,
-                },
-        } => Command::BenchSignalLb {
-            out,
-            rooms: usize::from(rooms),
-            real_rooms: usize::from(real_rooms),
-            parallel: usize::from(parallel),
-            config,
-        },
-        Sub::Bench {
-            which:
-                BenchSub::Soak {
-                    out,
-                    minutes,
-                    seed,
-                    peers,
-                    max_peers,
-                    busy_loops,
-                },
-        } => {
-            if max_peers < peers {
-                return Err(UsageError(format!(
-                    "--max-peers {max_peers} is less than --peers {peers}"
-                )));
-            }
-            Command::BenchSoak {
-                out,
-                seconds: minutes * 60.0,
-                seed,
-                peers: usize::from(peers),
-                max_peers: usize::from(max_peers),
-                busy_loops: usize::from(busy_loops),
-            }
-        }
         Sub::Host { bind, signal, peer } => {
             let bind = bind.unwrap_or(SocketAddr::from(([127, 0, 0, 1], 3536)));
             Command::Peer(Box::new(peer_args(true, bind, signal, peer)?))

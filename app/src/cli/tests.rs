@@ -9,14 +9,7 @@ fn args(s: &str) -> Vec<String> {
 
 #[test]
 fn help_is_generated_for_every_command() {
-    for a in [
-        "",
-        "help",
-        "--help",
-        "help host",
-        "join --help",
-        "bench room-load --help",
-    ] {
+    for a in ["", "help", "--help", "help host", "join --help"] {
         let Command::Help(text) = parse(&args(a)).unwrap() else {
             panic!("{a:?} is not help");
         };
@@ -29,12 +22,6 @@ fn help_is_generated_for_every_command() {
         text.contains("--net-condition") && text.contains("--signal"),
         "{text}"
     );
-    let Command::BenchRoomLoad { peers, seconds, .. } =
-        parse(&args("bench room-load --peers 2,4")).unwrap()
-    else {
-        panic!()
-    };
-    assert_eq!((peers, seconds), (vec![2, 4], 10.0));
 }
 
 #[test]
@@ -100,7 +87,8 @@ fn flags_parse_and_bad_ones_are_named() {
             "host --room a --signal ws://x:1 --bind 127.0.0.1:1",
             "cannot be used with",
         ),
-        ("bench room-load --peers 2,40", "2-32"),
+        // the benchmarks are softsync-bench's, not the product's
+        ("bench soak", "unrecognized subcommand"),
     ] {
         let e = parse(&args(bad)).unwrap_err().to_string();
         assert!(e.contains(says), "{bad}: {e}");

@@ -24,10 +24,6 @@ pub(super) enum SyncArg {
     Rollback,
 }
 
-/// Room sizes of `bench room-load`.
-#[derive(Clone, Debug)]
-pub(super) struct Sizes(pub(super) Vec<usize>);
-
 pub(super) fn seconds(v: &str) -> Result<f64, String> {
     match v.parse::<f64>() {
         Ok(s) if s.is_finite() && (0.0..1e7).contains(&s) => Ok(s),
@@ -86,37 +82,6 @@ pub(super) fn window_size(v: &str) -> Result<(u32, u32), String> {
         Some((Ok(a), Ok(b))) if (64..=8192).contains(&a) && (64..=8192).contains(&b) => Ok((a, b)),
         _ => Err(format!("{v:?} is not WIDTHxHEIGHT (64-8192)")),
     }
-}
-
-pub(super) fn room_sizes(v: &str) -> Result<Sizes, String> {
-    v.split(',')
-        .map(|p| match p.trim().parse::<usize>() {
-            Ok(n) if (2..=32).contains(&n) => Ok(n),
-            _ => Err(format!("{p:?} must be 2-32")),
-        })
-        .collect::<Result<_, _>>()
-        .map(Sizes)
-}
-
-/// Attack names of `bench abuse`.
-#[derive(Clone, Debug)]
-pub(super) struct Attacks(pub(super) Vec<String>);
-
-pub(super) fn attacks(v: &str) -> Result<Attacks, String> {
-    v.split(',')
-        .map(|a| {
-            let a = a.trim();
-            if crate::bench::ATTACKS.contains(&a) {
-                Ok(a.to_owned())
-            } else {
-                Err(format!(
-                    "{a:?} is not an attack ({})",
-                    crate::bench::ATTACKS.join(", ")
-                ))
-            }
-        })
-        .collect::<Result<_, _>>()
-        .map(Attacks)
 }
 
 pub(super) fn condition(v: &str) -> Result<ConditionerConfig, String> {

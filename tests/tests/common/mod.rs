@@ -27,6 +27,18 @@ pub fn binary() -> PathBuf {
     bin
 }
 
+/// The built `softsync-bench` (`target/<profile>/softsync-bench`): the benches' binary, which
+/// runs rooms of [`binary`]'s processes.
+pub fn bench_binary() -> PathBuf {
+    let bin = binary().with_file_name("softsync-bench");
+    assert!(
+        bin.exists(),
+        "{} is missing: build it first (`cargo build -p softsync-bench`; scripts/test does)",
+        bin.display()
+    );
+    bin
+}
+
 /// A built example program of `softsync-bevy` (`target/<profile>/examples/NAME`).
 pub fn example(name: &str) -> PathBuf {
     let bin = binary().parent().unwrap().join("examples").join(name);

@@ -30,7 +30,7 @@ use softsync_benchkit::{
 };
 
 use super::Proc;
-use crate::report::{read_dump, DumpLine};
+use softsync_peer::dump::{read_dump, DumpLine};
 
 /// The bunny's place in the thesis room.
 const BUNNY: &str = "bunny";

@@ -22,7 +22,7 @@ use softsync_benchkit::{
 use super::soak_check::{failures, Life, PeerAt, Streaks};
 use super::views::{is_avatar, line_at, remote_errors, RemoteErrors};
 use super::{grab_script, Proc};
-use crate::report::DumpLine;
+use softsync_peer::dump::DumpLine;
 
 /// What the soak is asked to do.
 #[derive(Clone, Debug)]

@@ -10,7 +10,7 @@ use softsync_benchkit::{Csv, Progress, ResultLine, Summary};
 
 use super::views::{agrees_within, line_at, only, remote_errors, RoomView};
 use super::{grab_script, Proc};
-use crate::report::{read_dump, DumpLine};
+use softsync_peer::dump::{read_dump, DumpLine};
 
 /// One room-load measurement.
 struct LoadRow {

@@ -4,7 +4,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use crate::report::{DumpLine, DumpObject};
+use softsync_peer::dump::{DumpLine, DumpObject};
 
 /// What a peer's view says of the room at one moment: members, and the owner of every object.
 #[derive(Clone, Debug, PartialEq, Eq)]

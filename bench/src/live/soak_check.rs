@@ -10,7 +10,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use crate::report::DumpLine;
+use softsync_peer::dump::DumpLine;
 
 /// Where a process stands, as the scheduler knows it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -186,7 +186,7 @@ impl Streaks {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bench::views::test_line;
+    use crate::live::views::test_line;
 
     fn line(peer: u64, host: u64, term: u32, members: &[u64], owners: &[(u32, u64)]) -> DumpLine {
         test_line(peer, host, term, 0, members, owners)

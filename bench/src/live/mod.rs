@@ -1,4 +1,7 @@
-//! `softsync bench net-live`: the thesis's Tables 9-11 on real WebRTC between real processes.
+//! The live benches: rooms of real `softsync` processes on real WebRTC, each a subcommand of
+//! `softsync-bench` (they were `softsync bench …` before they left the product binary).
+//!
+//! `softsync-bench net-live`: the thesis's Tables 9-11 on real WebRTC between real processes.
 //!
 //! For each send rate × ignore threshold, a host opens the `bench-ball` room and a bot joins:
 //! - avatar: the bot sways its head and both hands, with pauses (it owns its avatar);
@@ -15,8 +18,10 @@
 //! earliest joiner announces itself). Must run where WebRTC may run: on the shared machines
 //! inside `scripts/netns-run` (`scripts/bench-net-live` does it).
 //!
-//! `softsync bench room-load` (rooms of growing size) is in [`load`]; both spawn peers with
-//! this module's [`Proc`].
+//! `softsync-bench room-load` (rooms of growing size) is in `load.rs`; both spawn peers with
+//! this module's `Proc`.
+
+#![allow(clippy::disallowed_methods)] // real processes on the wall clock: clocks, sleeps
 
 mod abuse;
 mod auto;
@@ -45,8 +50,28 @@ use softsync_benchkit::{
     median, thesis, write_svg, ChartStyle, Csv, LineChart, Progress, ResultLine, Series, Summary,
 };
 
-use crate::report::{read_dump, DumpLine};
+use softsync_peer::dump::{read_dump, DumpLine};
 use views::{near_cut, points, truth_at, Track};
+
+/// The `softsync` binary the live benches run: `SOFTSYNC_BIN` if set, else the one beside
+/// this `softsync-bench` (cargo builds both into one target directory).
+pub fn softsync_binary() -> Result<PathBuf, String> {
+    let bin = match std::env::var_os("SOFTSYNC_BIN").filter(|v| !v.is_empty()) {
+        Some(p) => PathBuf::from(p),
+        None => std::env::current_exe()
+            .map_err(|e| e.to_string())?
+            .with_file_name("softsync"),
+    };
+    if bin.is_file() {
+        Ok(bin)
+    } else {
+        Err(format!(
+            "{}: no softsync binary (build it: cargo build -p softsync, with --release for \
+             a release softsync-bench; or set SOFTSYNC_BIN)",
+            bin.display()
+        ))
+    }
+}
 
 struct Proc {
     child: Child,
@@ -54,8 +79,9 @@ struct Proc {
 }
 
 impl Proc {
+    /// A `softsync` process ([`softsync_binary`]), its output in `dir/NAME.out` and `.err`.
     fn spawn(dir: &Path, name: &str, args: &[String]) -> Result<Proc, String> {
-        let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+        let exe = softsync_binary()?;
         Self::spawn_program(dir, name, &exe, args)
     }
 
@@ -470,7 +496,7 @@ pub fn centre_only_live(out: &Path, seconds: f64) -> Result<(), String> {
     std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
     let scratch = std::env::temp_dir().join(format!("softsync-centre-{}", std::process::id()));
     std::fs::create_dir_all(&scratch).map_err(|e| e.to_string())?;
-    let assets = crate::assets_dir(None);
+    let assets = crate::assets_dir();
     let text = std::fs::read_to_string(assets.join("bench-ball.ron"))
         .map_err(|e| format!("{}: {e}", assets.display()))?;
     let ball = "colour: (0.90, 0.25, 0.30),";

@@ -18,7 +18,7 @@ use softsync_benchkit::{Csv, Progress, ResultLine, Summary};
 use super::load::cpu_seconds;
 use super::views::remote_errors;
 use super::{grab_script, Proc};
-use crate::report::read_dump;
+use softsync_peer::dump::read_dump;
 
 /// Every attack the hostile client knows.
 pub const ATTACKS: [&str; 6] = [

@@ -1,14 +1,51 @@
-//! `softsync bench …`: the benchmarks' subcommands (each runs rooms of real processes or the
-//! library in-process and writes `docs/results/`).
+//! `softsync-bench`'s command line: one subcommand per bench (each writes `docs/results/`).
 
 use std::path::PathBuf;
 
-use clap::Subcommand;
+use clap::{Parser, Subcommand};
 
-use super::values::*;
+/// softsync's benchmarks: rooms in one process, and rooms of real `softsync` processes on
+/// real WebRTC (run those in a network namespace: the scripts under scripts/ do).
+#[derive(Parser, Debug)]
+#[command(name = "softsync-bench", version)]
+pub struct Cli {
+    /// The bench.
+    #[command(subcommand)]
+    pub bench: Sub,
+}
 
+/// The benches.
 #[derive(Subcommand, Debug)]
-pub(super) enum BenchSub {
+pub enum Sub {
+    /// The frame-budget room: 4 peers in one process, 11 soft bodies, two hands on one, a
+    /// tear every 2 s, a cut every 10 s, the host stopped at 30 s; 60 s measured
+    /// (`RESULT frame.budget`).
+    Frame {
+        /// Output directory.
+        #[arg(long, default_value = "docs/results/frame")]
+        out: PathBuf,
+        /// 8 s, every kind of event in it (CI's smoke run).
+        #[arg(long)]
+        quick: bool,
+        /// Where the shipped scenes and meshes are (default: the repository's assets/).
+        #[arg(long)]
+        assets: Option<PathBuf>,
+    },
+    /// Where a join's time goes: one `softsync host`, joiners one after another, each to
+    /// its first state, phase by phase (`RESULT join.breakdown`). Run it in a network
+    /// namespace (scripts/bench-net-live --join).
+    Join {
+        /// Output directory.
+        #[arg(long, default_value = "docs/results/live")]
+        out: PathBuf,
+        /// Joins measured per build.
+        #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u16).range(1..=1000))]
+        joins: u16,
+        /// A `softsync` build to measure, LABEL=PATH; several are measured in turn (default:
+        /// the softsync beside this binary, as `this`).
+        #[arg(long = "build", value_name = "LABEL=PATH", value_parser = build_arg)]
+        builds: Vec<(String, PathBuf)>,
+    },
     /// Bandwidth and error of a live two-peer room under send policies and link conditions.
     NetLive {
         /// Output directory.
@@ -129,4 +166,118 @@ pub(super) enum BenchSub {
         #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u16).range(0..=64))]
         busy_loops: u16,
     },
+}
+
+/// `--state-route` of `room-load`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Route {
+    /// Through the host.
+    Relay,
+    /// From each owner to every member.
+    Direct,
+}
+
+/// Room sizes of `room-load`.
+#[derive(Clone, Debug)]
+pub struct Sizes(pub Vec<usize>);
+
+/// Attack names of `abuse`.
+#[derive(Clone, Debug)]
+pub struct Attacks(pub Vec<String>);
+
+fn positive<const MAX: u32>(v: &str) -> Result<f64, String> {
+    match v.parse::<f64>() {
+        Ok(s) if s.is_finite() && s > 0.0 && s <= f64::from(MAX) => Ok(s),
+        _ => Err(format!("{v:?} must be a number in (0, {MAX}]")),
+    }
+}
+
+fn room_sizes(v: &str) -> Result<Sizes, String> {
+    v.split(',')
+        .map(|p| match p.trim().parse::<usize>() {
+            Ok(n) if (2..=32).contains(&n) => Ok(n),
+            _ => Err(format!("{p:?} must be 2-32")),
+        })
+        .collect::<Result<_, _>>()
+        .map(Sizes)
+}
+
+fn attacks(v: &str) -> Result<Attacks, String> {
+    v.split(',')
+        .map(|a| {
+            let a = a.trim();
+            if crate::live::ATTACKS.contains(&a) {
+                Ok(a.to_owned())
+            } else {
+                Err(format!(
+                    "{a:?} is not an attack ({})",
+                    crate::live::ATTACKS.join(", ")
+                ))
+            }
+        })
+        .collect::<Result<_, _>>()
+        .map(Attacks)
+}
+
+fn build_arg(v: &str) -> Result<(String, PathBuf), String> {
+    match v.split_once('=') {
+        Some((label, path)) if !label.is_empty() && !path.is_empty() => {
+            Ok((label.to_owned(), PathBuf::from(path)))
+        }
+        _ => Err(format!("{v:?} is not LABEL=PATH")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    fn parse(s: &str) -> Result<Cli, clap::Error> {
+        Cli::try_parse_from(std::iter::once("softsync-bench").chain(s.split_whitespace()))
+    }
+
+    #[test]
+    fn every_bench_parses_with_its_defaults() {
+        let Sub::RoomLoad { peers, seconds, .. } = parse("room-load --peers 2,4").unwrap().bench
+        else {
+            panic!()
+        };
+        assert_eq!((peers.0, seconds), (vec![2, 4], 10.0));
+        let Sub::Soak {
+            minutes,
+            busy_loops,
+            ..
+        } = parse("soak").unwrap().bench
+        else {
+            panic!()
+        };
+        assert_eq!((minutes, busy_loops), (10.0, 0));
+        let Sub::Join { joins, builds, .. } = parse("join --build before=/a --build after=/b")
+            .unwrap()
+            .bench
+        else {
+            panic!()
+        };
+        assert_eq!(joins, 20);
+        assert_eq!(builds[1], ("after".to_owned(), PathBuf::from("/b")));
+        assert!(matches!(
+            parse("frame --quick").unwrap().bench,
+            Sub::Frame { quick: true, .. }
+        ));
+    }
+
+    #[test]
+    fn bad_values_are_refused_with_what_is_wrong() {
+        for (args, says) in [
+            ("room-load --peers 2,64", "must be 2-32"),
+            ("abuse --attacks junk,nope", "is not an attack"),
+            ("join --build nolabel", "LABEL=PATH"),
+            ("soak --minutes 0", "(0, 120]"),
+            ("nosuch", "unrecognized subcommand"),
+        ] {
+            let e = parse(args).unwrap_err().to_string();
+            assert!(e.contains(says), "{args}: {e}");
+        }
+    }
 }
