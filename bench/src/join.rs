@@ -187,6 +187,8 @@ fn one_join(plan: &JoinPlan, host: &Host, room: &str, i: usize) -> Result<Breakd
 pub struct JoinReport {
     /// The build's name.
     pub label: String,
+    /// The `softsync` binary measured.
+    pub binary: PathBuf,
     /// Every join.
     pub joins: Vec<Breakdown>,
     /// Wall time of the run.
@@ -210,6 +212,7 @@ pub fn run(plan: &JoinPlan) -> Result<JoinReport, String> {
     drop(host);
     Ok(JoinReport {
         label: plan.label.clone(),
+        binary: plan.softsync.clone(),
         joins,
         took: t0.elapsed(),
     })
@@ -294,6 +297,13 @@ pub fn write(reports: &[JoinReport], out: &Path) -> Result<Vec<String>, String> 
         md += &format!(" **{total:.1}** |\n");
         lines.push(r.result_line().to_string());
     }
+    md += "\nBuilds: ";
+    md += &reports
+        .iter()
+        .map(|r| format!("`{}` = `{}`", r.label, r.binary.display()))
+        .collect::<Vec<_>>()
+        .join(", ");
+    md += ".\n";
     md += "\nRESULT lines (`join.txt`):\n\n```text\n";
     for l in &lines {
         md += l;
