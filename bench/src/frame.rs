@@ -20,7 +20,6 @@
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
 use std::time::Duration;
 
 use glam::{Quat, Vec3};
@@ -152,16 +151,7 @@ pub struct FrameReport {
     pub warnings: Vec<String>,
 }
 
-/// Wall-clock seconds since the first call (the peers' lent stopwatch). A bench measures
-/// the wall clock: that is the one place the clock is read.
-#[allow(clippy::disallowed_methods)]
-fn wall_s() -> f64 {
-    static START: OnceLock<std::time::Instant> = OnceLock::new();
-    START
-        .get_or_init(std::time::Instant::now)
-        .elapsed()
-        .as_secs_f64()
-}
+use crate::wall_s;
 
 struct Node {
     peer: Peer,

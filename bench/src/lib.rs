@@ -20,3 +20,14 @@ pub fn assets_dir() -> std::path::PathBuf {
         .join("..")
         .join("assets")
 }
+
+/// Wall-clock seconds since the first call: the one clock the in-process benches read (the
+/// frame bench lends it to its peers as their stopwatch; `method: auto` probes with it).
+#[allow(clippy::disallowed_methods)]
+pub fn wall_s() -> f64 {
+    static START: std::sync::OnceLock<std::time::Instant> = std::sync::OnceLock::new();
+    START
+        .get_or_init(std::time::Instant::now)
+        .elapsed()
+        .as_secs_f64()
+}

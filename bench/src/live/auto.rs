@@ -199,7 +199,7 @@ fn time_at_levels(run: &Run, id: NetId) -> String {
 pub fn auto(out: &Path, seconds: f64, assets: &Path) -> Result<(), String> {
     std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
     let mut scene = Scene::by_name("thesis-room-auto", assets)?;
-    scene.probe_auto(wall_ms)?;
+    scene.probe_auto(|| crate::wall_s() * 1e3)?;
     let mut ladders = Csv::new(&[
         "class",
         "level",
@@ -358,16 +358,4 @@ fn chart(
     };
     write_svg(out.join("auto.svg"), (900, 500), &[c])?;
     Ok(())
-}
-
-/// Milliseconds on the wall clock from a fixed origin: the clock `method: auto` probes each
-/// resolution's cost with (as `softsync_bevy::wall_ms`, which a room uses).
-fn wall_ms() -> f64 {
-    use std::sync::OnceLock;
-    static START: OnceLock<std::time::Instant> = OnceLock::new();
-    START
-        .get_or_init(std::time::Instant::now)
-        .elapsed()
-        .as_secs_f64()
-        * 1e3
 }
