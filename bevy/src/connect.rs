@@ -146,3 +146,20 @@ pub fn scene_server(scene: &Scene, cfg: &SessionConfig, me: PeerId) -> BlobServe
     }
     .with_key(key, me)
 }
+
+/// When each step of [`Room::open`](crate::Room::open) ended, on the wall clock: where a join's time went before
+/// the room runs (the Welcome and the first state follow as it does). `softsync bench join`
+/// prints them beside the WebRTC stack's own (ICE, DTLS).
+#[derive(Clone, Copy, Debug)]
+pub struct ConnectTimes {
+    /// Connecting started.
+    pub started: std::time::Instant,
+    /// The signaling server assigned us an id.
+    pub registered: std::time::Instant,
+    /// A joiner's first data channel to a peer of the room was open (its contact).
+    pub contact: Option<std::time::Instant>,
+    /// A joiner without a scene had the room's scene ([`Room::open_fetching_scene`](crate::Room::open_fetching_scene)).
+    pub scene: Option<std::time::Instant>,
+    /// The room was built: a joiner says Hello at its first pump.
+    pub opened: std::time::Instant,
+}

@@ -67,14 +67,13 @@ pub mod pump;
 pub mod room;
 mod scene_fetch;
 
-pub use connect::{connect, first_contact, scene_server, Connected};
+pub use connect::{connect, first_contact, scene_server, ConnectTimes, Connected};
 pub use plugin::{
     AvatarPart, Hand, NetEntities, NetObject, Received, RoomEvent, RoomFailed, RoomStats, SoftBody,
     SoftsyncApp, SoftsyncPlugin, SoftsyncSet,
 };
-pub use room::{
-    wall_ms, Clock, ConnectTimes, FetchedScene, OpenError, Room, RoomOptions, LEAVE_GRACE,
-};
+pub use room::{wall_ms, Clock, OpenError, Room, RoomOptions, LEAVE_GRACE};
+pub use scene_fetch::FetchedScene;
 /// The networking crate (sessions, wire format, policies).
 pub use softsync_net as net;
 /// The engine-agnostic peer (scenes, hands, bots, the built-in messages).

@@ -10,14 +10,14 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::Duration;
 
-use crate::connect::Connected;
+use crate::connect::{ConnectTimes, Connected};
+use crate::scene_fetch::FetchedScene;
 use softsync_net::door::{Door, FrontDoor};
 use softsync_net::messages::{Message, MessageTypes, RegisterError};
 use softsync_net::share::BlobServer;
-use softsync_net::PeerId;
 use softsync_net::{
-    ConditionerConfig, Delivery, Instant, LinkConditioner, MessageRefusal, MessageTarget, RoomKey,
-    SendPolicy, Session, SessionConfig, Transport,
+    ConditionerConfig, Delivery, Instant, LinkConditioner, MessageRefusal, MessageTarget, PeerId,
+    RoomKey, SendPolicy, Session, SessionConfig, Transport,
 };
 use softsync_net_matchbox::{MatchboxTransport, SignalServer, TlsIdentity};
 use softsync_peer::messages::SignalingMoved;
@@ -301,36 +301,6 @@ pub struct Room {
     background_pumps: u64,
     /// Where to serve the room's signaling if we take over from a host that served it.
     takeover: Option<(SocketAddr, Option<RoomKey>, Option<TlsIdentity>)>,
-}
-
-/// How a joiner received the room's scene ([`Room::open_fetching_scene`]).
-#[derive(Clone, Debug)]
-pub struct FetchedScene {
-    /// The peer that sent it.
-    pub from: PeerId,
-    /// The bundle's size (the scene file and its meshes).
-    pub bytes: u64,
-    /// From the first request to the verified bundle.
-    pub fetch: Duration,
-    /// Requests sent (more than the chunks when some were lost).
-    pub requests: u64,
-}
-
-/// When each step of [`Room::open`] ended, on the wall clock: where a join's time went before
-/// the room runs (the Welcome and the first state follow as it does). `softsync bench join`
-/// prints them beside the WebRTC stack's own (ICE, DTLS).
-#[derive(Clone, Copy, Debug)]
-pub struct ConnectTimes {
-    /// Connecting started.
-    pub started: std::time::Instant,
-    /// The signaling server assigned us an id.
-    pub registered: std::time::Instant,
-    /// A joiner's first data channel to a peer of the room was open (its contact).
-    pub contact: Option<std::time::Instant>,
-    /// A joiner without a scene had the room's scene ([`Room::open_fetching_scene`]).
-    pub scene: Option<std::time::Instant>,
-    /// The room was built: a joiner says Hello at its first pump.
-    pub opened: std::time::Instant,
 }
 
 impl Room {

@@ -13,7 +13,20 @@ use softsync_net_matchbox::MatchboxTransport;
 use softsync_peer::scene::MAX_BUNDLE_BYTES;
 use softsync_peer::Scene;
 
-use crate::room::{Clock, FetchedScene, OpenError, RoomOptions};
+use crate::room::{Clock, OpenError, RoomOptions};
+
+/// How a joiner received the room's scene ([`Room::open_fetching_scene`](crate::Room::open_fetching_scene)).
+#[derive(Clone, Debug)]
+pub struct FetchedScene {
+    /// The peer that sent it.
+    pub from: PeerId,
+    /// The bundle's size (the scene file and its meshes).
+    pub bytes: u64,
+    /// From the first request to the verified bundle.
+    pub fetch: Duration,
+    /// Requests sent (more than the chunks when some were lost).
+    pub requests: u64,
+}
 
 /// How long a contact may stay silent before a joiner asks the next one for the scene (another
 /// joiner that reached us first has no scene to give and says so at once; this is for one
