@@ -577,10 +577,12 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     let mut app = App::new();
     match front {
         FrontEnd::Headless => {
-            app.add_plugins(
-                MinimalPlugins.set(ScheduleRunnerPlugin::run_loop(Duration::from_millis(2))),
-            )
-            .add_plugins(TerminalCtrlCHandlerPlugin);
+            // Nothing is shown between two fixed steps: a headless frame comes once a step
+            // (the pump thread reads the network between frames). At 2 ms frames a bot spent
+            // half its CPU on frames that did nothing (issue 34, point 2).
+            let step = Duration::from_secs_f32(room.peer.config().dt_s);
+            app.add_plugins(MinimalPlugins.set(ScheduleRunnerPlugin::run_loop(step)))
+                .add_plugins(TerminalCtrlCHandlerPlugin);
         }
         #[cfg(feature = "desktop")]
         FrontEnd::Desktop => {

@@ -119,6 +119,13 @@ pub enum Sub {
         /// Which way object state travels in the rooms (every peer gets the same).
         #[arg(long, value_enum, default_value = "relay")]
         state_route: Route,
+        /// A `softsync` build to run the rooms with, LABEL=PATH; several take turns, round
+        /// after round (default: the softsync beside this binary, as `this`).
+        #[arg(long = "build", value_name = "LABEL=PATH", value_parser = build_arg)]
+        builds: Vec<(String, PathBuf)>,
+        /// Rounds of every room size (each build once per round).
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=20))]
+        rounds: u16,
     },
     /// Many rooms through signaling behind HAProxy (three instances, the room's path hashed):
     /// rooms of light signaling clients and a few of real peers, then one instance killed;

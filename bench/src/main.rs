@@ -99,7 +99,16 @@ fn run(bench: Sub) -> Result<bool, String> {
             seconds,
             peers,
             state_route,
-        } => live::room_load(&out, seconds, &peers.0, state_route == Route::Direct)?,
+            builds,
+            rounds,
+        } => live::room_load(
+            &out,
+            seconds,
+            &peers.0,
+            state_route == Route::Direct,
+            &builds,
+            usize::from(rounds),
+        )?,
         Sub::SignalLb {
             out,
             rooms,

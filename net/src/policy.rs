@@ -176,6 +176,14 @@ pub struct SessionConfig {
     /// Heartbeat period (also the RTT probe). With the adaptive detector a quiet link is
     /// pinged at least this often; with the fixed one at least every 1.5 periods.
     pub heartbeat_interval: Duration,
+    /// Heartbeat period of a link between two members when neither hosts (never shorter than
+    /// [`heartbeat_interval`](Self::heartbeat_interval)). Such a link only matters for
+    /// choosing the heir once the host is gone, and a room of `n` has `n²/2` of them against
+    /// `n` links to its host: at 50 ms they were most of a bot's datagrams (issue 34). The
+    /// host's death is still noticed on the fast link to it; a member that died less than
+    /// about a second before the host may be named heir by some and waited for that long.
+    #[serde(default = "default_member_heartbeat")]
+    pub member_heartbeat_interval: Duration,
     /// Largest datagram we ever emit.
     pub mtu: usize,
     /// Minimum retransmission timeout of reliable control messages.
@@ -282,6 +290,10 @@ pub enum StateRoute {
     /// From the owner to every member over the full mesh: one hop less (no relay delay),
     /// the host's uplink grows only with its own objects, each client's with the room.
     Direct,
+}
+
+fn default_member_heartbeat() -> Duration {
+    Duration::from_millis(250)
 }
 
 fn default_heal_window() -> Duration {
@@ -401,6 +413,7 @@ impl Default for SessionConfig {
             classes: vec![ClassConfig::rigid("rigid", SendPolicy::default())],
             peer_timeout: Duration::from_secs(1),
             heartbeat_interval: Duration::from_millis(50),
+            member_heartbeat_interval: default_member_heartbeat(),
             mtu: 1200,
             min_rto: Duration::from_millis(60),
             max_members: default_max_members(),

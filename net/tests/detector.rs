@@ -178,3 +178,71 @@ fn a_room_whose_processes_stall_now_and_then_raises_no_false_alarm() {
         }
     }
 }
+
+#[test]
+fn links_between_members_are_pinged_at_their_slower_interval() {
+    // Every member pings its host (and the host every member) at the fast interval; two
+    // members ping each other at `member_heartbeat_interval` (250 ms): a room of n pays ~n
+    // fast links, not n²/2. Nothing but heartbeats flows here (no objects).
+    let mut h = Harness::new(6, config(), lan(3));
+    h.advance(ms(3000));
+    let (host, member, other) = (Harness::id(0), Harness::id(2), Harness::id(3));
+    let up = |h: &mut Harness, i: usize, to| h.session(i).stats().links[&to].up;
+    let (to_host0, to_member0, host_to0) = (
+        up(&mut h, 2, host),
+        up(&mut h, 2, other),
+        up(&mut h, 0, member),
+    );
+    h.advance(ms(10_000));
+    let rate = |now: softsync_net::stats::Traffic, then| now.rate_since(&then, ms(10_000)).1;
+    let to_host = rate(up(&mut h, 2, host), to_host0);
+    let to_member = rate(up(&mut h, 2, other), to_member0);
+    let host_to = rate(up(&mut h, 0, member), host_to0);
+    eprintln!(
+        "member to host {to_host}/s, host to member {host_to}/s, member to member {to_member}/s"
+    );
+    assert!(
+        (15.0..=30.0).contains(&to_host),
+        "member to host {to_host}/s"
+    );
+    assert!(
+        (15.0..=30.0).contains(&host_to),
+        "host to member {host_to}/s"
+    );
+    assert!(
+        (2.0..=12.0).contains(&to_member),
+        "member to member {to_member}/s"
+    );
+    assert_eq!(h.host_changes(), 0);
+}
+
+#[test]
+fn a_host_and_its_heir_killed_together_are_replaced_by_the_next_heir() {
+    // The members judge each other on the slower links: with the heir dead too, they wait
+    // for the heir until its link's timeout (at most six member intervals, 1.5 s), then the
+    // next earliest joiner takes over. Meanwhile no session asks to be woken in the past for
+    // the dead host's deadline (a driver that trusted it would spin).
+    for seed in [1, 2, 3] {
+        let mut h = Harness::new(5, config(), lan(seed));
+        h.advance(ms(3000 + 11 * seed));
+        let start = h.now;
+        h.kill(1);
+        h.kill(0);
+        h.advance(ms(600));
+        assert_eq!(h.host_index(), None, "seed {seed}: the heir is dead");
+        for i in 2..5 {
+            let t = h.session(i).poll_timeout().expect("a deadline");
+            assert!(
+                t > h.now,
+                "seed {seed}: peer {i} asks to be woken in the past"
+            );
+        }
+        while h.host_index().is_none() && h.now.saturating_since(start) < ms(5000) {
+            h.advance(ms(5));
+        }
+        let took = h.now.saturating_since(start);
+        eprintln!("seed {seed}: {took:?}");
+        assert!(took <= ms(1800), "seed {seed}: {took:?}");
+        assert_eq!(h.host_index(), Some(2), "seed {seed}");
+    }
+}

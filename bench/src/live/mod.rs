@@ -141,12 +141,25 @@ impl Proc {
         url: &str,
         extra: &[&str],
     ) -> Result<Proc, String> {
+        Self::peer_with(&softsync_binary()?, dir, name, role, room, url, extra)
+    }
+
+    /// [`Proc::peer`] of the `softsync` binary `exe`.
+    fn peer_with(
+        exe: &Path,
+        dir: &Path,
+        name: &str,
+        role: &str,
+        room: &str,
+        url: &str,
+        extra: &[&str],
+    ) -> Result<Proc, String> {
         let args: Vec<String> = [role, "--room", room, "--signal", url, "--quiet"]
             .iter()
             .chain(extra)
             .map(|x| x.to_string())
             .collect();
-        Proc::spawn(dir, name, &args)
+        Self::spawn_program(dir, name, exe, &args)
     }
 
     /// A standalone signaling server on a free port, and its URL.

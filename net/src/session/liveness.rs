@@ -168,11 +168,18 @@ impl Session {
         // interval even when rounds run a little late, and no live peer's gap is longer than
         // 1.25 intervals when nothing is lost. The fixed one: a round per interval pinging
         // the links quiet for one, so gaps of up to two.
-        let (round, quiet_for) = match self.cfg.detector {
-            FailureDetector::Fixed => (hb, hb),
-            FailureDetector::Adaptive { .. } => (hb / 2, hb * 3 / 4),
+        // Each link at its own interval (`heartbeat_of`): a link between two members is
+        // pinged less often than one to or from the host.
+        let round = match self.cfg.detector {
+            FailureDetector::Fixed => hb,
+            FailureDetector::Adaptive { .. } => hb / 2,
         };
         for p in self.others() {
+            let link_hb = self.heartbeat_of(p);
+            let quiet_for = match self.cfg.detector {
+                FailureDetector::Fixed => link_hb,
+                FailureDetector::Adaptive { .. } => link_hb * 3 / 4,
+            };
             let l = self.links.entry(p).or_default();
             // Any datagram is a heartbeat: an explicit ping only if the link was quiet,
             // and at least once a second for the RTT estimate.
@@ -358,9 +365,26 @@ impl Session {
         });
     }
 
+    /// The heartbeat interval of our link to `p`: the fast one to our host, to every member
+    /// when we host, and while joining; [`member_heartbeat_interval`] between two members.
+    ///
+    /// [`member_heartbeat_interval`]: crate::SessionConfig::member_heartbeat_interval
+    pub(super) fn heartbeat_of(&self, p: PeerId) -> Duration {
+        let fast = self.cfg.heartbeat_interval;
+        if self.role == Role::Client && Some(p) != self.host && self.members.contains_key(&p) {
+            fast.max(self.cfg.member_heartbeat_interval)
+        } else {
+            fast
+        }
+    }
+
     /// How long `p` may be silent before it is gone: the peer timeout, or with the adaptive
-    /// detector what its link's gaps say.
+    /// detector what its link's gaps say. A link between two members, pinged at its slower
+    /// interval, is allowed proportionally more: at least two of its intervals, at most the
+    /// peer timeout or six intervals.
     pub(super) fn silence_allowed(&self, p: PeerId) -> Duration {
+        let hb = self.heartbeat_of(p);
+        let slow = hb > self.cfg.heartbeat_interval;
         match (self.cfg.detector, self.links.get(&p)) {
             (
                 FailureDetector::Adaptive {
@@ -369,13 +393,15 @@ impl Session {
                     min_timeout,
                 },
                 Some(l),
-            ) => l.gaps.timeout(
-                self.cfg.heartbeat_interval,
-                phi,
-                deviations,
-                min_timeout,
-                self.cfg.peer_timeout,
-            ),
+            ) => {
+                let (min, max) = if slow {
+                    (min_timeout.max(hb * 2), self.cfg.peer_timeout.max(hb * 6))
+                } else {
+                    (min_timeout, self.cfg.peer_timeout)
+                };
+                l.gaps.timeout(hb, phi, deviations, min, max)
+            }
+            _ if slow => self.cfg.peer_timeout.max(hb * 6),
             _ => self.cfg.peer_timeout,
         }
     }
@@ -395,6 +421,7 @@ impl Session {
     /// The host drops members silent past the timeout; a member whose host is silent takes
     /// over if it is the heir (or adopts a waiting `NewHost`).
     pub(super) fn check_liveness(&mut self, now: Instant) {
+        self.schedule.judged_at = Some(now);
         match self.role {
             Role::Host => {
                 let gone: Vec<PeerId> = self

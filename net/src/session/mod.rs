@@ -486,8 +486,13 @@ impl Session {
         for (p, l) in &self.links {
             t = min_opt(t, l.reliable.next_deadline());
             if self.members.contains_key(p) && *p != self.local {
-                if let Some(h) = l.last_heard {
-                    t = min_opt(t, Some(h + self.silence_allowed(*p)));
+                // a deadline already judged is not one to wake for again (a member waiting
+                // for the heir of a dead host would be woken at once, for ever)
+                let judged = self.schedule.judged_at;
+                if let Some(d) = l.last_heard.map(|h| h + self.silence_allowed(*p)) {
+                    if judged.is_none_or(|j| d > j) {
+                        t = min_opt(t, Some(d));
+                    }
                 }
             }
         }

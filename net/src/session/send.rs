@@ -28,6 +28,9 @@ pub(crate) struct SendSchedule {
     pub next_tick: Vec<Instant>,
     /// Next heartbeat round.
     pub next_heartbeat: Instant,
+    /// When liveness was last judged (`check_liveness`): a silence deadline at or before it
+    /// was acted on or is waited out on another's (a dead host while its heir takes over).
+    pub judged_at: Option<Instant>,
 }
 
 impl SendSchedule {
@@ -36,6 +39,7 @@ impl SendSchedule {
         SendSchedule {
             next_tick: vec![now; classes],
             next_heartbeat: now,
+            judged_at: None,
         }
     }
 
