@@ -26,6 +26,10 @@ pub struct Rates {
     pub up: f64,
     /// Bytes/s received.
     pub down: f64,
+    /// Datagrams/s sent.
+    pub up_packets: f64,
+    /// Datagrams/s received.
+    pub down_packets: f64,
 }
 
 /// Remembers the previous reading for rates, and the frames since.
@@ -53,9 +57,13 @@ impl StatsLine {
         let rates = match self.last {
             Some((t, up, down)) => {
                 let dt = now.saturating_since(t).max(Duration::from_millis(1));
+                let (up, up_packets) = st.up.rate_since(&up, dt);
+                let (down, down_packets) = st.down.rate_since(&down, dt);
                 Rates {
-                    up: st.up.rate_since(&up, dt).0,
-                    down: st.down.rate_since(&down, dt).0,
+                    up,
+                    down,
+                    up_packets,
+                    down_packets,
                 }
             }
             None => Rates::default(),
@@ -94,7 +102,7 @@ impl StatsLine {
             }
         };
         let line = format!(
-            "stats t={:.1}s peer={} host={} term={} peers={} up={:.0}B/s down={:.0}B/s rtt={} owned={}/{}{frames}{heal}",
+            "stats t={:.1}s peer={} host={} term={} peers={} up={:.0}B/s down={:.0}B/s datagrams={:.0}/{:.0}/s rtt={} owned={}/{}{frames}{heal}",
             now.as_secs_f64(),
             peer.me().0,
             session.host_id().map_or("-".into(), |h| h.0.to_string()),
@@ -102,6 +110,8 @@ impl StatsLine {
             session.members().len(),
             rates.up,
             rates.down,
+            rates.up_packets,
+            rates.down_packets,
             rtt,
             peer.owned_count(),
             peer.objects().len(),
