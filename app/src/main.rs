@@ -501,6 +501,8 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
         join_timeout: a.connect_timeout,
         agree_to_hands: true,
         build_off_frame: true,
+        // on the wall clock: no frame waits for a build's worker
+        land_when_ready: true,
     };
     if a.rollback {
         let scene = match scene {

@@ -170,6 +170,8 @@ impl Node {
         };
         let config = PeerConfig {
             dt_s: DT_S,
+            // as the app: paced to the wall clock, builds land once their worker is done
+            land_when_ready: true,
             // hands that reach exactly, as the app gives bots
             hand: HandConfig {
                 physical_controller: false,

@@ -62,6 +62,14 @@ pub struct PeerConfig {
     /// torn bodies) are built on a worker thread while the frame goes on (`peer/builds.rs`),
     /// or in the frame that receives them. The body is the same either way.
     pub build_off_frame: bool,
+    /// When an off-frame build lands: false, [`BUILD_LANDS_AFTER`](crate::mirror) (30 ms)
+    /// after it started, the frame waiting for the worker if it is not done (the frame it
+    /// lands in depends on the peer's clock alone: runs on virtual time repeat exactly);
+    /// true, at 30 ms or at the first frame after that once the worker is done, so no frame
+    /// ever waits for one (a slow machine's worker took 50 ms, and a frame waited 20 of
+    /// them); the body is the same, landing a frame or two later. The app sets it: its
+    /// peers run on the wall clock.
+    pub land_when_ready: bool,
 }
 
 impl Default for PeerConfig {
@@ -74,6 +82,7 @@ impl Default for PeerConfig {
             join_timeout: Duration::from_secs(15),
             agree_to_hands: true,
             build_off_frame: true,
+            land_when_ready: false,
         }
     }
 }

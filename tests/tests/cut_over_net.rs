@@ -158,6 +158,17 @@ fn a_hand_with_its_trigger_held_tears_along_its_path_and_both_peers_agree() {
 /// shows the box or all its pieces) and never overlaps (never the box and a piece at once).
 #[test]
 fn a_cuts_pieces_built_off_the_frame_are_the_frames_and_the_box_never_blinks() {
+    cut_pieces_off_the_frame(false);
+}
+
+/// The same with the client landing its builds once their workers are done (the app's
+/// `land_when_ready`): a frame never waits for a worker, and the pieces are the same.
+#[test]
+fn pieces_landed_once_their_workers_are_done_are_the_same_and_the_box_never_blinks() {
+    cut_pieces_off_the_frame(true);
+}
+
+fn cut_pieces_off_the_frame(land_when_ready: bool) {
     use softsync_peer::{LocalBody, PeerConfig, Scene};
     let hub = MemoryHub::new(1200);
     let assets = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets");
@@ -167,11 +178,17 @@ fn a_cuts_pieces_built_off_the_frame_are_the_frames_and_the_box_never_blinks() {
         build_off_frame: false,
         ..PeerConfig::default()
     };
+    let off_frame = PeerConfig {
+        dt_s: DT,
+        avatar: false,
+        land_when_ready,
+        ..PeerConfig::default()
+    };
     let scene = Scene::by_name("thesis-room", &assets).unwrap();
     let mut room = Room {
         nodes: [
-            Node::with_config(&hub, HOST, 1, scene, in_frame),
-            Node::new(&hub, CLIENT, 2),
+            Node::with_config(&hub, HOST, 1, scene.clone(), in_frame),
+            Node::with_config(&hub, CLIENT, 2, scene, off_frame),
         ],
         now: Instant::ZERO,
     };

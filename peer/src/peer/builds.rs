@@ -7,7 +7,9 @@
 //! [`LocalBody::Building`] until its body lands, which costs the frame only the copy of its
 //! rapier bodies into the world. A build lands [`BUILD_LANDS_AFTER`] (30 ms) after it starts,
 //! whenever the worker finished (waiting for it if it has not): the frame it lands in
-//! depends on the peer's clock alone, so runs on virtual time stay deterministic.
+//! depends on the peer's clock alone, so runs on virtual time stay deterministic. A peer on
+//! the wall clock (the app: `PeerConfig::land_when_ready`) lands it at the first frame after
+//! that once the worker is done instead, so no frame waits for a worker on a slow machine.
 //!
 //! Consistency: the worker replays the same log entries from the same class plan placed at the
 //! same pose with the same arithmetic as the frame would, so every peer ends with the same
@@ -129,13 +131,20 @@ impl Peer {
     /// While a despawned body is still shown, builds land together (all of a cut's pieces in
     /// one frame: never the body and one of its pieces in the world at once, overlapping).
     pub(super) fn land_builds(&mut self, now: Instant) {
-        // due, not merely done: when a build lands depends on the clock alone
+        // due, not merely done: when a build lands depends on the clock alone — unless the
+        // peer lands builds once they are done (`land_when_ready`: then a due build whose
+        // worker is still busy waits for a later frame, up to `LEAVING_MAX_S`)
+        let when_ready = self.config.land_when_ready;
         let mut ready: Vec<NetId> = self
             .mirror
             .builds
-            .iter()
-            .filter(|(_, b)| now.saturating_since(b.started) >= BUILD_LANDS_AFTER)
-            .map(|(id, _)| *id)
+            .iter_mut()
+            .filter_map(|(id, b)| {
+                let age = now.saturating_since(b.started);
+                let due = age >= BUILD_LANDS_AFTER
+                    && (!when_ready || age.as_secs_f64() > LEAVING_MAX_S || b.job.is_ready());
+                due.then_some(*id)
+            })
             .collect();
         ready.sort();
         let overdue = |since: &Instant| now.saturating_since(*since).as_secs_f64() > LEAVING_MAX_S;
