@@ -1,7 +1,8 @@
 //! What a remote body costs a peer that only shows it (issue 34: a peer that mostly shows
 //! other people's objects should cost little), counted rather than timed: an untouched soft
-//! body another peer simulates is deformed once per frame (by the state shown after the
-//! step), not three times (before the step, by the step, after it); the owner's resting body
+//! body another peer simulates is deformed at most once per frame (by the state shown after
+//! the step), not three times (before the step, by the step, after it), and not at all while
+//! it is shown at the same state (at rest: its mesh is kept); the owner's resting body
 //! sleeps and costs no restoring and no deformation (its particles never all slept before).
 #![allow(clippy::unwrap_used, missing_docs)]
 
@@ -22,7 +23,7 @@ fn an_untouched_remote_soft_body_is_deformed_once_per_frame_and_its_owner_lets_i
     };
     // joined, and the bodies settled on the table
     room.run(Duration::from_secs(4));
-    let work = |n: &Node| -> Vec<(bool, u64, u64)> {
+    let work = |n: &Node| -> Vec<(bool, u64, u64, u64)> {
         n.peer
             .objects()
             .values()
@@ -30,7 +31,10 @@ fn an_untouched_remote_soft_body_is_deformed_once_per_frame_and_its_owner_lets_i
                 LocalBody::Soft(h) => n.peer.soft_bodies().get(h),
                 _ => None,
             })
-            .map(|b| (b.is_replica(), b.work().deformations, b.work().restorings))
+            .map(|b| {
+                let w = b.work();
+                (b.is_replica(), w.deformations, w.restorings, w.meshes_kept)
+            })
             .collect()
     };
     let (client0, host0) = (work(&room.nodes[1]), work(&room.nodes[0]));
@@ -39,13 +43,15 @@ fn an_untouched_remote_soft_body_is_deformed_once_per_frame_and_its_owner_lets_i
     room.run(Duration::from_secs_f32(FRAMES as f32 * common::hub::DT));
     let (client1, host1) = (work(&room.nodes[1]), work(&room.nodes[0]));
     for (a, b) in client0.iter().zip(&client1) {
-        // the client owns none of them: each is a replica, deformed once a frame at most
+        // the client owns none of them: each is a replica, its mesh updated once a frame at
+        // most — and at rest, shown at the same state frame after frame, kept, not deformed
         assert!(b.0, "a remote body is not a replica: {b:?}");
-        let deformed = b.1 - a.1;
+        let (deformed, kept) = (b.1 - a.1, b.3 - a.3);
         assert!(
-            (FRAMES - 2..=FRAMES + 1).contains(&deformed),
-            "{deformed} deformations in {FRAMES} frames"
+            (FRAMES - 2..=FRAMES + 1).contains(&(deformed + kept)),
+            "{deformed} deformations and {kept} meshes kept in {FRAMES} frames"
         );
+        assert!(deformed <= 2, "{deformed} deformations of a body at rest");
     }
     for (a, b) in host0.iter().zip(&host1) {
         // the owner simulates them (not replicas); at rest on the table they sleep, and its

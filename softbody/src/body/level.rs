@@ -32,6 +32,8 @@ pub struct BodyWork {
     pub deformations: u64,
     /// Restoring passes (every particle's velocity planned).
     pub restorings: u64,
+    /// A replica's mesh kept: placed at the very state it was last deformed for.
+    pub meshes_kept: u64,
 }
 
 /// What a body is doing, for choosing its resolution ([`crate::methods::auto`]).

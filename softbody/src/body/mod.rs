@@ -114,6 +114,8 @@ pub struct SoftBody {
     /// Shows a state simulated elsewhere ([`SoftBody::set_replica`]): kinematic, neither
     /// restored nor deformed by the step (`update_mesh` after it does).
     replica: bool,
+    /// A replica's last placed state and the state its mesh was deformed for (fingerprints).
+    replica_mesh: (Option<u64>, Option<u64>),
     /// How much work the steps did on it ([`SoftBody::work`]).
     work: BodyWork,
     /// How long its particles have been still with its center asleep, seconds.
@@ -474,6 +476,7 @@ impl BodyPlan {
             blend: level::Blend::default(),
             dormant: false,
             replica: false,
+            replica_mesh: (None, None),
             work: BodyWork::default(),
             still_s: 0.0,
         };
@@ -696,6 +699,7 @@ impl SoftBody {
     /// applied incrementally, without the accumulation drift of the incremental form.
     fn deform(&mut self, world: &PhysicsWorld) {
         self.work.deformations += 1;
+        self.replica_mesh.1 = None;
         let Some(center) = world.bodies.get(self.center) else {
             return;
         };
