@@ -73,7 +73,7 @@ fn a_replica_shown_at_the_same_state_keeps_its_mesh_and_a_new_state_deforms_it()
     let (c, r) = b.center_pose(&world);
     let ps = b.particle_positions(&world);
     let dt = 1.0 / 90.0;
-    let mut frame = |set: &mut SoftBodySet, world: &mut PhysicsWorld, shift: Vec3| {
+    let frame = |set: &mut SoftBodySet, world: &mut PhysicsWorld, shift: Vec3| {
         let moved: Vec<Vec3> = ps.iter().map(|p| *p + shift).collect();
         let b = set.get_mut(h).unwrap();
         b.place_state(world, c + shift, r, &moved).unwrap();
