@@ -102,17 +102,14 @@ pub struct SoftBody {
     slot_normals: Vec<Vec3>,
     rest_volume_m3: f32,
     size_m: f32,
-    /// The center's lever for rolling resistance: the mean rest vertex distance from the
-    /// center × `center_scale` (the ball center's radius).
+    /// Rolling resistance's lever: mean rest vertex distance × `center_scale`.
     roll_radius_m: f32,
     non_finite_recoveries: u64,
     /// A resolution change's correction still shown (see `level`).
     blend: level::Blend,
-    /// Center and every particle asleep at the last step, nothing driven: the step skipped
-    /// the body (an untouched resting body costs one bounds query).
+    /// All asleep at the last step, nothing driven: the step skipped it (one bounds query).
     dormant: bool,
-    /// Shows a state simulated elsewhere ([`SoftBody::set_replica`]): kinematic, neither
-    /// restored nor deformed by the step (`update_mesh` after it does).
+    /// Shows a state simulated elsewhere ([`SoftBody::set_replica`]; `update_mesh` deforms).
     replica: bool,
     /// A replica's last placed state and the state its mesh was deformed for (fingerprints).
     replica_mesh: (Option<u64>, Option<u64>),
