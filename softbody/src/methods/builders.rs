@@ -190,13 +190,15 @@ pub fn build_pbd_welded(
                 SurfaceMap::Embedded(tm.embedding),
                 triangles.to_vec(),
             );
-            body.neo_hookean = Some(NeoHookeanGroup::new(
+            let mut group = NeoHookeanGroup::new(
                 tm.tets,
                 &tm.nodes,
                 &lt.inside_fraction,
                 m.young_pa,
                 m.bulk_pa,
-            ));
+            );
+            group.min_volume_ratio = spec.params.volume_floor.max(0.0);
+            body.neo_hookean = Some(group);
             body.colliding_nodes = Some(material_nodes);
             body.pin_surface = true;
             Ok(body)

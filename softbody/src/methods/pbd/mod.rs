@@ -70,10 +70,19 @@ pub struct PbdParams {
     /// scenarios' props are all fixed or kinematic, so no figure changes with it.
     #[serde(default = "two_way_default")]
     pub two_way: bool,
+    /// The Neo-Hookean tets' hard volume floor: no tet is squeezed below this fraction of its
+    /// rest volume (`det F ≥ volume_floor`, [`neohookean::MIN_VOLUME_RATIO`] by default; 0
+    /// turns it off, to measure what the floor holds up). The other methods ignore it.
+    #[serde(default = "volume_floor_default")]
+    pub volume_floor: f32,
 }
 
 fn two_way_default() -> bool {
     true
+}
+
+fn volume_floor_default() -> f32 {
+    neohookean::MIN_VOLUME_RATIO
 }
 
 impl Default for PbdParams {
@@ -88,6 +97,7 @@ impl Default for PbdParams {
             sleep_speed_mps: 0.02,
             sleep_after_s: 0.5,
             two_way: true,
+            volume_floor: volume_floor_default(),
         }
     }
 }

@@ -35,6 +35,9 @@ pub struct NeoHookeanGroup {
     pub mu_pa: f32,
     /// Lamé's first parameter of the small-strain material, Pa.
     pub lambda_pa: f32,
+    /// The hard floor: no tet below this fraction of its rest volume (`det F`);
+    /// [`MIN_VOLUME_RATIO`] from [`new`](Self::new), 0 turns it off.
+    pub min_volume_ratio: f32,
     inv_rest: Vec<Mat3>,
     lambda_dev: Vec<f32>,
     lambda_vol: Vec<f32>,
@@ -94,6 +97,7 @@ impl NeoHookeanGroup {
                 .collect(),
             mu_pa,
             lambda_pa,
+            min_volume_ratio: MIN_VOLUME_RATIO,
             inv_rest,
             lambda_dev: vec![0.0; n],
             lambda_vol: vec![0.0; n],
@@ -204,9 +208,13 @@ impl NeoHookeanGroup {
         self.enforce_floor(x, inv_mass);
     }
 
-    /// The hard floor `det F ≥ MIN_VOLUME_RATIO` on every tet (a rigid constraint, projected
+    /// The hard floor `det F ≥ min_volume_ratio` on every tet (a rigid constraint, projected
     /// fully: an inequality has no multiplier to carry).
     pub(super) fn enforce_floor(&mut self, x: &mut [Vec3], inv_mass: &[f32]) {
+        let floor = self.min_volume_ratio;
+        if floor <= 0.0 {
+            return;
+        }
         // Lifting one tet may push a neighbour under: sweep until none is (bounded).
         for sweep in 0..FLOOR_SWEEPS {
             let mut below = false;
@@ -215,7 +223,7 @@ impl NeoHookeanGroup {
                 for pass in 0..4 {
                     let f = self.deformation(k, x);
                     let j = f.determinant();
-                    if j >= MIN_VOLUME_RATIO {
+                    if j >= floor {
                         break;
                     }
                     below = true;
@@ -232,7 +240,7 @@ impl NeoHookeanGroup {
                     if wsum < 1e-30 {
                         break;
                     }
-                    let dl = (MIN_VOLUME_RATIO - j) / wsum;
+                    let dl = (floor - j) / wsum;
                     for i in 0..4 {
                         x[t[i] as usize] += g[i] * (w[i] * dl);
                     }
