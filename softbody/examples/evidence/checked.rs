@@ -140,6 +140,9 @@ pub fn section(md: &mut String, out: &Path, live: &Path) {
     if let (Some(a), Some(b)) = (vol("c0.060"), vol("c0.100")) {
         writeln!(md, "- *\"The room's soft body loses volume\"* (the particle method kept 0.43–0.45 in the squeeze) — it now has a volume term (`SoftBodyConfig::volume_stiffness`, on by default at 250/s): the squeeze keeps {:.3} (c0.060) and {:.3} (c0.100) where it kept {:.3} and {:.3}; the reference keeps {:.3}. Step time ×{:.2} and ×{:.2} (`cargo run --release -p softsync-softbody --example volume_squeeze`, [volume.svg](volume.svg)). The particle rows of section 1 on this page were measured with the term on at 250/s (compare their `min vol` with these).", num(a, "min_vol"), num(b, "min_vol"), num(a, "min_vol_without"), num(b, "min_vol_without"), num(a, "reference_min_vol"), num(a, "step_ratio"), num(b, "step_ratio")).unwrap();
     }
+    if let Some(f) = find(&volume, &[("method", "neo_hookean")]) {
+        writeln!(md, "- How much of the reference's squeeze volume its volume floor holds up (no tet under 20 % of its rest volume, `PbdParams::volume_floor`): with the floor it keeps {:.3}, without it {:.3}; the floor's share is {:.3} of the rest volume (it engaged {} times, {} in tets mostly material). The particle method's {:.3} is to be read against {:.3}, the material's own bulk response.", num(f, "min_vol"), num(f, "min_vol_no_floor"), num(f, "floor_share"), field(f, "floor_hits").unwrap_or_default(), field(f, "floor_hits_material").unwrap_or_default(), vol("c0.060").map_or(f64::NAN, |a| num(a, "min_vol")), num(f, "min_vol_no_floor")).unwrap();
+    }
     let mat = |c: &str| find(&material, &[("config", c)]);
     if let (Some(a), Some(b), Some(c), Some(d)) = (
         mat("k20_vol250_60hz"),
