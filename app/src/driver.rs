@@ -157,7 +157,13 @@ impl Driver {
             return;
         };
         let t = room.now().as_secs_f64();
-        println!("event peer={} t={t:.2} {line}", room.peer.me().0);
+        // the room clock (every peer reads it alike) beside this process's own
+        let at = room.peer.session().room_time(room.now());
+        let rt = at.map_or_else(|| "-".to_string(), |d| format!("{:.3}", d.as_secs_f64()));
+        println!(
+            "event peer={} t={t:.2} room_t={rt} {line}",
+            room.peer.me().0
+        );
         if self.recent_events.len() >= 6 {
             self.recent_events.pop_front();
         }

@@ -76,6 +76,17 @@ pub enum Sub {
         #[arg(long)]
         assets: Option<PathBuf>,
     },
+    /// The room clock live: a host and two bots dump their room time, the host is SIGKILLed
+    /// halfway; how far apart the peers read it before and after (`RESULT clock.room`). Run
+    /// it in a network namespace (scripts/netns-run).
+    RoomClock {
+        /// Output directory.
+        #[arg(long, default_value = "docs/results/clock")]
+        out: PathBuf,
+        /// Seconds before the kill, and after it.
+        #[arg(long, default_value_t = 10.0)]
+        seconds: f64,
+    },
     /// Several hands from several processes on the thesis room's bunny (remote hands): own
     /// response, remote-hand lag, gap, agreement (`RESULT comanip.live`). Run it in a network
     /// namespace (scripts/bench-comanip).

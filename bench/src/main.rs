@@ -81,6 +81,7 @@ fn run(bench: Sub) -> Result<bool, String> {
             live::auto(&out, seconds, &assets)?;
         }
         Sub::Comanip { out, quick } => live::comanip(&out, quick)?,
+        Sub::RoomClock { out, seconds } => live::room_clock(&out, seconds)?,
         Sub::Abuse {
             out,
             seconds,

@@ -149,7 +149,14 @@ fn render() -> String {
         tag::PING
     )
     .unwrap();
-    writeln!(w, "| {} | pong | `varint` echoed ping time |", tag::PONG).unwrap();
+    writeln!(
+        w,
+        "| {} | pong | `varint` echoed ping time, `varint` the answerer's room time in µs plus one \
+         (0: it does not know the room time; the host's is the room clock), then, if not 0, \
+         `varint` µs the ping waited for this answer |",
+        tag::PONG
+    )
+    .unwrap();
     writeln!(
         w,
         "| {} | keyframe request | `varint` count ≤ {}, then `varint` object ids |",

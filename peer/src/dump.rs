@@ -76,6 +76,10 @@ pub struct DumpLine {
     pub state_t: f64,
     /// Wall clock, ms since the Unix epoch.
     pub wall_ms: u64,
+    /// The room time (s; `Session::room_time`): the host's clock, which every peer of the
+    /// room reads alike. None until this peer has heard it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub room_s: Option<f64>,
     /// This peer's id.
     pub peer: u64,
     /// The peer it follows as host.
@@ -175,6 +179,7 @@ pub fn snapshot(now: Instant, wall_ms: u64, peer: &mut Peer) -> DumpLine {
         t: now.as_secs_f64(),
         state_t: peer.last_step_at().as_secs_f64(),
         wall_ms,
+        room_s: session.room_time(now).map(|d| d.as_secs_f64()),
         peer: me.0,
         host: session.host_id().map(|h| h.0),
         term: session.term().0,

@@ -25,6 +25,7 @@
 
 mod abuse;
 mod auto;
+mod clock;
 mod comanip;
 mod lb;
 mod load;
@@ -34,6 +35,7 @@ mod views;
 
 pub use abuse::{abuse, ATTACKS};
 pub use auto::auto;
+pub use clock::room_clock;
 pub use comanip::comanip;
 pub use lb::{signal_lb, LbPlan};
 pub use load::room_load;

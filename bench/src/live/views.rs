@@ -294,6 +294,7 @@ pub fn test_line(
         t: wall_ms as f64 / 1e3,
         state_t: wall_ms as f64 / 1e3,
         wall_ms,
+        room_s: None,
         peer,
         host: Some(host),
         term,

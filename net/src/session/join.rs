@@ -31,6 +31,7 @@ impl Session {
             return false;
         }
         self.host = Some(contact);
+        self.clock.follow();
         self.say_hello(now, contact);
         true
     }
@@ -185,6 +186,9 @@ impl Session {
     ) {
         self.role = Role::Client;
         self.term = term;
+        if self.host != Some(host) {
+            self.clock.follow();
+        }
         self.host = Some(host);
         self.members = members.into_iter().collect();
         self.events.push_back(Event::Joined { host, term });

@@ -432,8 +432,8 @@ pub(crate) struct Link {
     pub message_asks: RateWindow,
     /// `Hello`s it repeated this second, as a member.
     pub hello_asks: RateWindow,
-    /// A ping of its to answer (its time).
-    pub pong_due: Option<u32>,
+    /// A ping of its to answer (its time, and when it came).
+    pub pong_due: Option<(u32, Instant)>,
     /// A ping of ours to send.
     pub ping_due: bool,
     /// Unreliable application messages for the next datagram (encoded sections).

@@ -153,6 +153,7 @@ impl Session {
         self.term = Term(next_term);
         self.role = Role::Host;
         self.host = Some(self.local);
+        self.clock.host();
         let term = self.term;
         let dead: Vec<PeerId> = self
             .members
@@ -309,6 +310,7 @@ impl Session {
     ) {
         self.term = term;
         self.host = Some(host);
+        self.clock.follow();
         self.role = Role::Client;
         self.heal_remember_members();
         self.members = members.into_iter().collect();

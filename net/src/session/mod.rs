@@ -23,11 +23,13 @@
 //! | `messages` | application messages: outbox, duplicate filter, retained table, host relay |
 //! | `control` | routing control messages; the host as a client of itself |
 //! | [`topology`] | tears and cuts: the owner's requests, the host's checks, per-object logs |
+//! | `clock` | the room clock: the host's, learnt from its pongs, carried on by a new host |
 
 mod access;
 mod authority;
 pub mod ban;
 mod budget;
+mod clock;
 mod control;
 mod delta;
 mod footprint;
@@ -238,6 +240,8 @@ pub struct Session {
     version_refusals: (u64, u32),
     /// Peers the room lost, and the beacons that heal a partition.
     heal: heal::Heal,
+    /// The room clock as this peer reads it.
+    clock: clock::RoomClock,
 }
 
 impl Session {
@@ -271,6 +275,7 @@ impl Session {
             bans: ban::Bans::default(),
             version_refusals: (0, 0),
             heal: heal::Heal::default(),
+            clock: clock::RoomClock::default(),
         }
     }
 
@@ -278,6 +283,7 @@ impl Session {
     pub fn host(local: PeerId, cfg: SessionConfig, now: Instant) -> Self {
         let mut s = Session::new(local, cfg, now, Role::Host);
         s.host = Some(local);
+        s.clock.host();
         s.term = Term(1);
         s.members.insert(local, 0);
         s.next_join_seq = 1;
@@ -313,6 +319,20 @@ impl Session {
     /// Current host, if known.
     pub fn host_id(&self) -> Option<PeerId> {
         self.host
+    }
+
+    /// The room time at our local time `now`: one clock every peer of the room reads alike
+    /// (within a few milliseconds, the round trip's asymmetry), the host's, carried on by the
+    /// next host when it goes. `None` until this peer has heard the host's clock (a joiner's
+    /// first pong). Readings never go back. See `session::clock`.
+    pub fn room_time(&self, now: Instant) -> Option<Duration> {
+        self.clock.read(now)
+    }
+
+    /// The round trip the room clock's estimate rests on (`None` for the host, and before
+    /// the first sample): half of it bounds the estimate's error.
+    pub fn room_clock_rtt(&self) -> Option<Duration> {
+        self.clock.best_rtt()
     }
 
     /// Are we the host?

@@ -217,16 +217,29 @@ impl Session {
                 }
                 Section::Ping { time_ms } => {
                     if let Some(l) = self.links.get_mut(&from) {
-                        l.pong_due = Some(time_ms);
+                        l.pong_due = Some((time_ms, now));
                     }
                 }
-                Section::Pong { time_ms } => {
+                Section::Pong { time_ms, room_us } => {
                     let now_ms = (now.as_micros() / 1000) & 0xFFFF_FFFF;
                     let rtt_ms = (now_ms as u32).wrapping_sub(time_ms);
                     if rtt_ms < 60_000 {
                         if let Some(l) = self.links.get_mut(&from) {
                             l.rtt.on_sample(Duration::from_millis(u64::from(rtt_ms)));
                             self.stats.links.entry(from).or_default().rtt = l.rtt.srtt();
+                            // the room clock, from our host's answer to our last ping (its
+                            // exact send time; an older ping's echo is not used)
+                            let sent = l.last_ping.filter(|t| {
+                                (t.as_micros() / 1000) & 0xFFFF_FFFF == u64::from(time_ms)
+                            });
+                            if let (Some(sent), Some((room, held)), true, false) = (
+                                sent,
+                                room_us,
+                                Some(from) == self.host,
+                                self.role == Role::Host,
+                            ) {
+                                self.clock.on_pong(now, sent, room, held);
+                            }
                         }
                     }
                 }

@@ -455,6 +455,7 @@ impl Session {
             .map(|cap| f64::from(cap) / self.links.len().max(1) as f64);
         let objects = &self.objects;
         let held = |id: NetId| objects.get(id).is_some_and(|o| o.info.held);
+        let room_us = self.clock.stamp_us(now);
         let link = self.links.get_mut(&to)?;
         // under a budget, state goes once the bucket holds a datagram's worth (or is full);
         // held objects' entries go at once when the bucket holds them all (in one datagram,
@@ -483,8 +484,10 @@ impl Session {
         if let Some((latest, mask)) = link.state_acks.take_owed() {
             w.state_ack(latest, mask);
         }
-        if let Some(t) = link.pong_due.take() {
-            w.pong(t);
+        if let Some((t, pinged)) = link.pong_due.take() {
+            // how long the ping waited here for this datagram: not part of the way back
+            let held_us = now.saturating_since(pinged).as_micros() as u64;
+            w.pong(t, room_us.map(|r| (r, held_us)));
         }
         if link.ping_due {
             link.ping_due = false;

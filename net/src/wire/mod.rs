@@ -183,6 +183,10 @@ pub enum Section<'a> {
     Pong {
         /// Echoed ping time.
         time_ms: u32,
+        /// The answerer's room time when it answered and how long the ping waited there
+        /// for the answer, µs, if it knows the room time (the host's is the room's clock:
+        /// `session::clock`).
+        room_us: Option<(u64, u64)>,
     },
     /// Please send keyframes for these objects.
     KeyframeRequest {
@@ -258,6 +262,11 @@ pub fn decode_packet(bytes: &[u8]) -> Result<(PacketHeader, Vec<Section<'_>>), N
             },
             tag::PONG => Section::Pong {
                 time_ms: r.varint_u32()?,
+                // 0 for none, else the time plus one, then the wait
+                room_us: match r.varint()?.checked_sub(1) {
+                    Some(t) => Some((t, r.varint()?)),
+                    None => None,
+                },
             },
             tag::KEYFRAME_REQUEST => {
                 let n = r.varint()? as usize;
@@ -424,10 +433,18 @@ impl PacketWriter {
         self.out.extend_from_slice(&mask.to_le_bytes());
     }
 
-    /// Answer to a ping, echoing its time.
-    pub fn pong(&mut self, time_ms: u32) {
+    /// Answer to a ping, echoing its time, with our room time and how long the ping waited
+    /// for this answer (µs) if we know the room time.
+    pub fn pong(&mut self, time_ms: u32, room_us: Option<(u64, u64)>) {
         self.out.push(tag::PONG);
         write_varint(&mut self.out, u64::from(time_ms));
+        match room_us {
+            Some((t, held)) => {
+                write_varint(&mut self.out, t.min(u64::MAX - 1) + 1);
+                write_varint(&mut self.out, held);
+            }
+            None => write_varint(&mut self.out, 0),
+        }
     }
 
     /// Heartbeat / RTT probe with our clock in ms.
@@ -638,7 +655,7 @@ mod tests {
         assert!(w.is_empty());
         w.ack(7);
         w.state_ack(4, 0b101);
-        w.pong(123);
+        w.pong(123, Some((77, 5)));
         w.ping(456);
         assert!(w.keyframe_request(&[NetId(5), NetId(300)]));
         w.state(1, &[0xAB, 0xCD]);
@@ -667,7 +684,10 @@ mod tests {
                     latest: 4,
                     mask: 0b101
                 },
-                Section::Pong { time_ms: 123 },
+                Section::Pong {
+                    time_ms: 123,
+                    room_us: Some((77, 5))
+                },
                 Section::Ping { time_ms: 456 },
                 Section::KeyframeRequest {
                     ids: vec![NetId(5), NetId(300)]

@@ -71,7 +71,7 @@ pub struct PbdParams {
     #[serde(default = "two_way_default")]
     pub two_way: bool,
     /// The Neo-Hookean tets' hard volume floor: no tet is squeezed below this fraction of its
-    /// rest volume (`det F ≥ volume_floor`, [`neohookean::MIN_VOLUME_RATIO`] by default; 0
+    /// rest volume (`det F ≥ volume_floor`, `MIN_VOLUME_RATIO`, 0.2, by default; 0
     /// turns it off, to measure what the floor holds up). The other methods ignore it.
     #[serde(default = "volume_floor_default")]
     pub volume_floor: f32,

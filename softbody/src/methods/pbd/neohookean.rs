@@ -36,7 +36,7 @@ pub struct NeoHookeanGroup {
     /// Lamé's first parameter of the small-strain material, Pa.
     pub lambda_pa: f32,
     /// The hard floor: no tet below this fraction of its rest volume (`det F`);
-    /// [`MIN_VOLUME_RATIO`] from [`new`](Self::new), 0 turns it off.
+    /// `MIN_VOLUME_RATIO` from [`new`](Self::new), 0 turns it off.
     pub min_volume_ratio: f32,
     inv_rest: Vec<Mat3>,
     lambda_dev: Vec<f32>,
