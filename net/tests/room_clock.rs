@@ -31,6 +31,18 @@ fn worst_error(h: &Harness) -> Duration {
         .unwrap()
 }
 
+/// Every live peer's room time now is no earlier than `last` (by index), which it updates.
+fn never_back(h: &Harness, last: &mut [Duration]) {
+    for (i, t) in readings(h) {
+        assert!(
+            t >= last[i],
+            "peer {i} went back: {t:?} after {:?}",
+            last[i]
+        );
+        last[i] = t;
+    }
+}
+
 #[test]
 fn every_peer_reads_the_room_time_and_a_new_host_carries_it_on_without_going_back() {
     // 25 ms each way, 8 ms of jitter, 5 % loss (bursts), duplicates and reordering
@@ -43,14 +55,7 @@ fn every_peer_reads_the_room_time_and_a_new_host_carries_it_on_without_going_bac
     for _ in 0..100 {
         h.advance(ms(20));
         worst = worst.max(worst_error(&h));
-        for (i, t) in readings(&h) {
-            assert!(
-                t >= last[i],
-                "peer {i} went back: {t:?} after {:?}",
-                last[i]
-            );
-            last[i] = t;
-        }
+        never_back(&h, &mut last);
     }
     assert!(worst <= ms(3), "members {worst:?} off the host's room time");
 
@@ -61,14 +66,7 @@ fn every_peer_reads_the_room_time_and_a_new_host_carries_it_on_without_going_bac
     let mut after = Duration::ZERO;
     for step in 0..150 {
         h.advance(ms(20));
-        for (i, t) in readings(&h) {
-            assert!(
-                t >= last[i],
-                "peer {i} went back: {t:?} after {:?}",
-                last[i]
-            );
-            last[i] = t;
-        }
+        never_back(&h, &mut last);
         if step >= 50 {
             after = after.max(worst_error(&h));
         }

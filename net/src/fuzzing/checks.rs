@@ -129,8 +129,9 @@ impl Room {
             self.wait(Duration::from_secs(1));
             verdict = self.divergence();
         }
-        // known issue 12: a rejoining peer may never get in
-        let stuck = self.joiner_stuck();
+        // known issue 12: a rejoining peer may never get in; known issue 13: a room that
+        // loses to a host it never knew never yields
+        let stuck = self.joiner_stuck() || self.unknown_winner();
         match verdict {
             Ok(n) => self.outcome.converged = Some(n),
             Err(_) if stuck && !strict => {}
@@ -203,6 +204,30 @@ impl Room {
         self.peers
             .iter()
             .any(|p| !p.gone && !p.refused && !p.session.is_connected())
+    }
+
+    /// Two live hosts whose rooms never merge because the losing one lost none of the
+    /// winning room's peers (known issue 13): the winner's beacons come from a stranger, which
+    /// may never make a room yield, and the loser beacons only the peers it lost.
+    pub(super) fn unknown_winner(&self) -> bool {
+        let hosts: Vec<&Session> = self
+            .peers
+            .iter()
+            .filter(|p| !p.gone && p.session.is_host())
+            .map(|p| &p.session)
+            .collect();
+        hosts.iter().any(|loser| {
+            hosts.iter().any(|winner| {
+                let (Some(w), Some(l)) = (winner.room_summary(), loser.room_summary()) else {
+                    return false;
+                };
+                let lost = loser.lost_peers();
+                winner.local_id() != loser.local_id()
+                    && w.beats(&l)
+                    && !lost.contains(&winner.local_id())
+                    && !winner.members().keys().any(|m| lost.contains(m))
+            })
+        })
     }
 
     /// Trace every live peer's room.

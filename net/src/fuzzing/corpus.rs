@@ -68,56 +68,130 @@ pub(super) fn datagram_kind(d: &[u8]) -> String {
 
 /// For each of [`KNOWN_ISSUES`], in order: a name, the issue's index, and the smallest script
 /// found that shows it (with [`Checks::STRICT`]). Committed under
-/// `net/fuzz/artifacts/play_session/`. One now: 12 (0-11 are fixed,
+/// `net/fuzz/artifacts/play_session/`. Two now: 12 and 13 (0-11 are fixed,
 /// [`fixed_issue_scripts`]).
 pub fn known_issue_scripts() -> Vec<(&'static str, usize, Script)> {
     use Step::*;
     let lossy = |loss: u8| Wait { ms: 232, loss };
     // the fuzzer's script, three waits retimed when links between members were given slower
     // heartbeats (the original no longer met the race; a search over its waits found these)
-    vec![(
-        "known-12-rejoiner-out-of-step-with-its-host",
-        12,
-        Script {
-            setup: Setup {
-                keyed: true,
-                three_members: true,
-                ..Setup::default()
+    vec![
+        (
+            "known-12-rejoiner-out-of-step-with-its-host",
+            12,
+            Script {
+                setup: Setup {
+                    keyed: true,
+                    three_members: true,
+                    ..Setup::default()
+                },
+                steps: vec![
+                    Release {
+                        peer: 12,
+                        object: 0,
+                    },
+                    wait(0),
+                    Release { peer: 4, object: 0 },
+                    Wait { ms: 13, loss: 204 },
+                    Wait { ms: 0, loss: 232 },
+                    Release { peer: 0, object: 0 },
+                    Move {
+                        peer: 4,
+                        object: 0,
+                        to: 0,
+                    },
+                    Despawn { peer: 3, object: 0 },
+                    lossy(3),
+                    Wait { ms: 0, loss: 216 },
+                    Despawn { peer: 0, object: 0 },
+                    Despawn { peer: 3, object: 0 },
+                    Wait { ms: 16, loss: 3 },
+                    wait(0),
+                    Move {
+                        peer: 0,
+                        object: 0,
+                        to: 232,
+                    },
+                    Release { peer: 0, object: 0 },
+                    Despawn { peer: 3, object: 0 },
+                    Wait { ms: 0, loss: 109 },
+                    Leave { peer: 0 },
+                ],
             },
-            steps: vec![
-                Release {
-                    peer: 12,
-                    object: 0,
+        ),
+        (
+            "known-13-a-room-that-loses-to-a-host-it-never-knew",
+            13,
+            // the fuzzer's script as `scripts/fuzz --ci` found it (not minimised)
+            Script {
+                setup: Setup {
+                    keyed: false,
+                    three_members: false,
+                    insider: false,
+                    hostile_joins: false,
+                    direct: false,
+                    budget: false,
+                    adaptive: false,
+                    refuse_asks: false,
+                    seed: 0,
                 },
-                wait(0),
-                Release { peer: 4, object: 0 },
-                Wait { ms: 13, loss: 204 },
-                Wait { ms: 0, loss: 232 },
-                Release { peer: 0, object: 0 },
-                Move {
-                    peer: 4,
-                    object: 0,
-                    to: 0,
-                },
-                Despawn { peer: 3, object: 0 },
-                lossy(3),
-                Wait { ms: 0, loss: 216 },
-                Despawn { peer: 0, object: 0 },
-                Despawn { peer: 3, object: 0 },
-                Wait { ms: 16, loss: 3 },
-                wait(0),
-                Move {
-                    peer: 0,
-                    object: 0,
-                    to: 232,
-                },
-                Release { peer: 0, object: 0 },
-                Despawn { peer: 3, object: 0 },
-                Wait { ms: 0, loss: 109 },
-                Leave { peer: 0 },
-            ],
-        },
-    )]
+                steps: vec![
+                    Spawn { peer: 1, shape: 0 },
+                    Wait { ms: 20, loss: 69 },
+                    Spawn {
+                        peer: 201,
+                        shape: 0,
+                    },
+                    Join { contact: 0 },
+                    Spawn {
+                        peer: 255,
+                        shape: 0,
+                    },
+                    Wait { ms: 10, loss: 6 },
+                    Spawn { peer: 1, shape: 3 },
+                    Say {
+                        peer: 2,
+                        how: 2,
+                        len: 30,
+                    },
+                    Say {
+                        peer: 0,
+                        how: 3,
+                        len: 4,
+                    },
+                    Say {
+                        peer: 1,
+                        how: 4,
+                        len: 5,
+                    },
+                    Say {
+                        peer: 2,
+                        how: 8,
+                        len: 1,
+                    },
+                    Say {
+                        peer: 0,
+                        how: 12,
+                        len: 7,
+                    },
+                    Say {
+                        peer: 2,
+                        how: 128,
+                        len: 0,
+                    },
+                    Wait { ms: 225, loss: 255 },
+                    Leave { peer: 8 },
+                    Release {
+                        peer: 11,
+                        object: 0,
+                    },
+                    Wait { ms: 1, loss: 0 },
+                    Wait { ms: 32, loss: 200 },
+                    Crash { peer: 0 },
+                ],
+            },
+        ),
+    ]
 }
 
 /// The scripts of the issues this fuzzer found that are fixed (0-9 of
