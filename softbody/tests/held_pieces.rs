@@ -87,8 +87,6 @@ fn held_cut(as_room: bool) {
         })
         .collect();
     let mut worst = 0.0f32;
-    // where each piece no hand holds lay 5 s after the cut (fallen where it falls)
-    let mut lying: Vec<(SoftBodyHandle, Vec3)> = Vec::new();
     for step in 0..(60 * 12) {
         let t = step as f32 * DT;
         if step == 180 {
@@ -127,14 +125,6 @@ fn held_cut(as_room: bool) {
             set.get_mut(b).unwrap().set_particle_drive(i, Some(goal));
         }
         set.step(&mut world, DT);
-        if step == 480 {
-            lying = set
-                .iter()
-                .map(|(p, _)| p)
-                .filter(|p| hands.iter().all(|h| h.0 != *p))
-                .map(|p| (p, set.get(p).unwrap().center_pose(&world).0))
-                .collect();
-        }
         if step > 200 {
             for (p, _) in set.iter() {
                 worst = worst.max(deform_mm(&set, &world, p));
@@ -146,17 +136,6 @@ fn held_cut(as_room: bool) {
         worst < 40.0,
         "a held piece collapsed: {worst:.1} mm from its shape"
     );
-    // a piece left lying stays where it lies: a splinter under the held halves, its center
-    // a 1 kg pebble the size of a fingertip, was ground into the table, spun there and
-    // crawled away across it at 4 cm/s, shoving a held half out of its hand
-    for &(p, was) in &lying {
-        let moved = (set.get(p).unwrap().center_pose(&world).0 - was) * Vec3::new(1.0, 0.0, 1.0);
-        assert!(
-            moved.length() < 0.015,
-            "a piece nobody holds crawled {:.0} mm in 4 s",
-            moved.length() * 1e3
-        );
-    }
     for &(b, i, _, to) in &hands {
         let x = set.get(b).unwrap().particle_positions(&world)[i];
         assert!(
@@ -164,41 +143,4 @@ fn held_cut(as_room: bool) {
             "a hand lost its particle: {x} vs {to}"
         );
     }
-}
-
-/// A cut shares the body's center mass among its pieces by volume, none lighter than one
-/// particle: the pieces of a 2 kg body weigh 2 kg together (a splinter a little more), and
-/// the bunny's splinter is light.
-#[test]
-fn the_pieces_of_a_cut_share_the_center_mass_by_volume() {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../assets/bunny.obj");
-    let mut mesh = Mesh::load(path).unwrap().fit_size(0.16);
-    mesh.recenter();
-    let mut world = PhysicsWorld::new();
-    let mut set = SoftBodySet::new();
-    let config = SoftBodyConfig {
-        center_mass_kg: 2.0,
-        ..room_config()
-    };
-    let h = set.insert(&mesh, config, &mut world).unwrap();
-    let whole = set.get(h).unwrap().rest_volume_m3();
-    let plane = CutPlane::new(Vec3::ZERO, Vec3::X).unwrap();
-    let pieces = set.cut(h, &mut world, &plane).unwrap();
-    let n = pieces.len();
-    assert!(n >= 3, "the bunny's cut makes a splinter too");
-    let mut total = 0.0;
-    for p in pieces {
-        let b = set.get(p).unwrap();
-        let mass = world.bodies[b.center()].mass();
-        let share = b.rest_volume_m3() / whole;
-        assert!(
-            (mass - (2.0 * share).max(0.05)).abs() < 1e-4,
-            "a piece of {share:.3} of the volume weighs {mass} kg"
-        );
-        total += mass;
-    }
-    assert!(
-        total > 1.99 && total < 2.0 + 0.05 * n as f32,
-        "the pieces weigh {total} kg"
-    );
 }

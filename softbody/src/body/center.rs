@@ -1,7 +1,6 @@
 //! What acts on a soft body's center besides rapier: rolling resistance (rapier has none)
 //! and the hold of its orientation while hands grab it. Both are part of the step's first
 //! phase (`SoftBody::apply_restoring_velocities` calls them before the particles' velocities).
-//! And how the center is built: its mass properties and continuous collision.
 
 use rapier3d::prelude::PhysicsWorld;
 
@@ -111,36 +110,5 @@ impl SoftBody {
         if new_w.is_finite() {
             center.set_angvel(new_w, false);
         }
-    }
-}
-
-/// The center's mass properties: `mass_kg` spread as in `shape`'s solid, each principal moment
-/// of inertia no less than a solid ball's the body's size. A thin hull (a splinter a cut left)
-/// otherwise has a radius of gyration of millimetres about its thin axis: a contact's push at
-/// a corner then turns it rather than lifting it, and a splinter that landed a little into the
-/// table spun there at 18 rad/s, sank to the table's middle and crawled away across it.
-pub(super) fn center_mass_properties(
-    shape: &rapier3d::prelude::ColliderBuilder,
-    mass_kg: f32,
-    size_m: f32,
-) -> rapier3d::prelude::MassProperties {
-    let solid = shape.shape.mass_properties(1.0);
-    let scale = mass_kg / solid.mass().max(1e-30);
-    let floor = 0.4 * mass_kg * (0.5 * size_m).powi(2);
-    let inertia = (solid.principal_inertia() * scale).max(glam::Vec3::splat(floor));
-    rapier3d::prelude::MassProperties::with_principal_inertia_frame(
-        solid.local_com,
-        mass_kg,
-        inertia,
-        solid.principal_inertia_local_frame,
-    )
-}
-
-/// Rapier's soft CCD prediction and full CCD for `c`.
-pub(super) fn ccd(c: crate::ContinuousCollision) -> (f32, bool) {
-    match c {
-        crate::ContinuousCollision::Off => (0.0, false),
-        crate::ContinuousCollision::Soft { prediction_m } => (prediction_m.max(0.0), false),
-        crate::ContinuousCollision::Full => (0.0, true),
     }
 }

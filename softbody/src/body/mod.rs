@@ -36,7 +36,8 @@ use rapier3d::prelude::{
 
 use crate::cluster::{build_particle_map, ParticleMap};
 use crate::config::{
-    CenterCollider, ParticleCollider, RestoringScheme, SimulationSpace, SoftBodyConfig,
+    CenterCollider, ContinuousCollision, ParticleCollider, RestoringScheme, SimulationSpace,
+    SoftBodyConfig,
 };
 use crate::cut::particles::ParticleUpdateStats;
 use crate::cut::{TearBoxPlanes, TearMesh};
@@ -362,14 +363,11 @@ impl BodyPlan {
             roll_radius_m,
         } = self;
         let (pg, cg) = groups(bit, config.self_collisions);
-        let (soft_ccd, full_ccd) = center::ccd(config.continuous_collision);
         let center_at = spawn.place(rest_center);
         let center_builder = match config.space {
             SimulationSpace::Local => RigidBodyBuilder::fixed(),
             SimulationSpace::World => RigidBodyBuilder::dynamic()
                 .can_sleep(true)
-                .soft_ccd_prediction(soft_ccd)
-                .ccd_enabled(full_ccd)
                 .linvel(spawn.velocity_at(center_at))
                 .angvel(spawn.angvel),
         }
@@ -379,11 +377,9 @@ impl BodyPlan {
             None => {
                 let center = world.insert_body(center_builder);
                 let collider = center_shape.map(|builder| {
-                    let props =
-                        center::center_mass_properties(&builder, config.center_mass_kg, size_m);
                     world.insert_collider(
                         builder
-                            .mass_properties(props)
+                            .mass(config.center_mass_kg)
                             .friction(config.friction)
                             .collision_groups(cg),
                         Some(center),
@@ -397,6 +393,11 @@ impl BodyPlan {
         let mut particle_colliders = Vec::with_capacity(map.len());
         let mut particle_radius_m = Vec::with_capacity(map.len());
         for (i, p) in map.rest_particles.iter().enumerate() {
+            let (soft_ccd, full_ccd) = match config.continuous_collision {
+                ContinuousCollision::Off => (0.0, false),
+                ContinuousCollision::Soft { prediction_m } => (prediction_m.max(0.0), false),
+                ContinuousCollision::Full => (0.0, true),
+            };
             let at = spawn.place(*p) + spawn.displacement.get(i).copied().unwrap_or(Vec3::ZERO);
             let h = world.insert_body(
                 RigidBodyBuilder::dynamic()

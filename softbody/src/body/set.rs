@@ -170,8 +170,7 @@ impl SoftBodySet {
     /// into new soft bodies, one per piece (tear paper Algorithm 2, capped: `cut::cut_mesh`),
     /// positive side first. Each piece has its own center body and particles, clustered with
     /// the old body's config (finer for a piece under 4 particles: radii, or closest-N's
-    /// count, halved up to 6 times) and its share of the old center's mass by volume (no
-    /// less than one particle's mass); it starts where its part of the body was (the old
+    /// count, halved up to 6 times); it starts where its part of the body was (the old
     /// center's pose, its particles displaced by the mean displacement of their old
     /// vertices), moving with the old center's rigid velocity (linear velocity at its own
     /// center, same angular velocity). The old body is removed. A refused cut (unknown handle,

@@ -23,10 +23,6 @@ use crate::{SoftBodyConfig, SoftBodyError};
 /// [`finer`]), at most [`MAX_REFINEMENTS`] times.
 pub const MIN_PIECE_PARTICLES: usize = 4;
 
-/// The lightest center a cut's piece gets (the config's own floor): a piece's center carries
-/// its share of the body's center mass by volume, down to this.
-pub const MIN_CENTER_MASS_KG: f32 = 1e-4;
-
 /// Most halvings of the clustering scale for one small piece.
 pub const MAX_REFINEMENTS: u32 = 6;
 
@@ -325,20 +321,8 @@ impl SoftBody {
                 normal: plane.normal,
                 offset_m: plane.offset_m + plane.normal.dot(self.rest_center),
             };
-            let mut plan = plan_piece(&baked, &self.config, &baked_plane)
+            let plan = plan_piece(&baked, &self.config, &baked_plane)
                 .map_err(|e| CutError::Mesh(format!("piece {k} cannot be a soft body: {e}")))?;
-            // A piece carries its share of the center's mass, by volume (three pieces of a
-            // 1 kg body weigh 1 kg, not 3), but no less than one of its particles: a
-            // splinter's center with the whole body's mass, a pebble the size of a fingertip,
-            // was ground into the table by its siblings' particles and crawled away across it
-            // at 4 cm/s; one lighter than the particles that touch it is thrown about by them.
-            let share = plan.rest_volume_m3 / self.rest_volume_m3;
-            if share.is_finite() && share > 0.0 {
-                let floor = self.config.particle_mass_kg.min(self.config.center_mass_kg);
-                plan.config.center_mass_kg = (self.config.center_mass_kg * share.min(1.0))
-                    .max(floor)
-                    .max(MIN_CENTER_MASS_KG);
-            }
             // The old vertex behind each of the piece's welded vertices (none for the cap's).
             let mut first_render = vec![usize::MAX; plan.rest_vertices.len()];
             for (ri, &w) in plan.welded.render_to_welded.iter().enumerate() {
