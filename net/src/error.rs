@@ -44,6 +44,9 @@ pub enum NetError {
     /// so the rest of its block is skipped.
     #[error("state of object {0:?} laid out for another resolution")]
     OtherLayout(NetId),
+    /// A room cannot be reopened this way ([`crate::Session::restore_object`]).
+    #[error("cannot restore the room: {0}")]
+    Restore(&'static str),
     /// A message could not be encoded (too large for its limit): it is not sent.
     #[error("cannot encode {what}")]
     Encode {

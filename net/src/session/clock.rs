@@ -45,6 +45,14 @@ impl RoomClock {
         self.samples.clear();
     }
 
+    /// We host a room reopened at `now` whose clock read `room` when it was last kept: room
+    /// time carries on from there.
+    pub fn resume(&mut self, now: Instant, room: Duration) {
+        let room_us = i64::try_from(room.as_micros()).unwrap_or(i64::MAX / 2);
+        self.offset_us = Some(room_us - now.as_micros() as i64);
+        self.samples.clear();
+    }
+
     /// Another peer hosts from now on: its samples start afresh (the offset stays until they
     /// come).
     pub fn follow(&mut self) {

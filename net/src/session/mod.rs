@@ -41,6 +41,7 @@ mod messages;
 mod migration;
 mod recv;
 pub mod registry;
+mod restore;
 mod send;
 mod spawn;
 #[cfg(test)]
@@ -55,6 +56,7 @@ pub use ban::{KickError, MAX_BANNED};
 pub use footprint::{Footprint, Leftovers, PeerFootprint};
 pub use recv::MAX_VERSION_REFUSALS_PER_S;
 pub use registry::{DisplayedState, ObjectState};
+pub use restore::KeptObject;
 
 use self::authority::PendingAsks;
 use self::link::Link;

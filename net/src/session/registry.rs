@@ -299,6 +299,11 @@ impl Registry {
         Some(NetId(id))
     }
 
+    /// Ids up to `id` are taken (an object restored under its old id): fresh ones start after.
+    pub fn skip_ids_through(&mut self, id: NetId) {
+        self.next_id = self.next_id.max(id.0.saturating_add(1));
+    }
+
     /// On taking over as host: skip `window` ids past the highest known, and remember them as
     /// ids the old host may have spawned without our hearing of it (claims may create those).
     pub fn reserve_lost_ids(&mut self, window: u32) {

@@ -269,6 +269,12 @@ impl Session {
             .map(|m| ReceivedMessage::from(m.clone()))
     }
 
+    /// The retained messages as the wire has them, to keep the room's state between sessions
+    /// ([`Session::restore_retained`] takes them back).
+    pub fn retained_for_keeping(&self) -> Vec<AppMessage> {
+        self.messages.retained.values().cloned().collect()
+    }
+
     /// An unreliable message for the next datagram to `to` (dropped, and counted, if its
     /// queue is full).
     fn queue_unreliable(&mut self, to: PeerId, msg: &AppMessage) {

@@ -1,0 +1,113 @@
+//! A room reopened from what was kept of it (a store, `softsync-store`): the host, before
+//! anyone joins, puts back each object under its old id with its class, state and topology
+//! log, the room's retained messages, and carries the room clock on from where it stood.
+//!
+//! The session only keeps the record: the caller builds each body (its class replayed through
+//! the log) before it restores the object. Joiners then get everything through the usual
+//! snapshot (a `Spawn` per object, its log, the retained messages), as from any host.
+
+use std::time::Duration;
+
+use super::{Role, Session};
+use crate::error::NetError;
+use crate::ids::{AuthorityEpoch, ClassId, NetId};
+use crate::session::topology::MAX_TOPOLOGY_LOG;
+use crate::session::ObjectState;
+use crate::time::Instant;
+use crate::wire::{self, AppMessage, SpawnInfo, TopologyEvent};
+
+/// One object as a room keeps it between sessions: nothing about who owned it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct KeptObject {
+    /// Its id, the same in every session of the room.
+    pub id: NetId,
+    /// Its class.
+    pub class: ClassId,
+    /// Its state (world-space particles for a soft body).
+    pub state: ObjectState,
+    /// Its topology log, in order (a cut's piece starts with its parent's).
+    pub topology: Vec<TopologyEvent>,
+}
+
+impl Session {
+    /// Host, before anyone joined: object `o` exists again, owned by us, under its old id
+    /// (ids later spawns get start past it). `Event::Spawned` follows, as for a spawn. Build
+    /// its body first: the session keeps only the record.
+    ///
+    /// Errors: not hosting, members already in, an unknown class, an id in use or 0, a state
+    /// that is not finite or has more particles than the wire carries, a log over
+    /// [`MAX_TOPOLOGY_LOG`].
+    pub fn restore_object(&mut self, now: Instant, o: KeptObject) -> Result<(), NetError> {
+        self.restoring()?;
+        let policy = self
+            .class(o.class)
+            .ok_or(NetError::UnknownClass(o.class.0))?
+            .authority;
+        if o.id.0 == 0 || self.objects.contains(o.id) {
+            return Err(NetError::Restore("object id 0 or in use"));
+        }
+        let rot = o.state.checked_rotation()?;
+        if o.state.particles.len() > wire::MAX_PARTICLES as usize {
+            return Err(NetError::InvalidState("too many particles"));
+        }
+        if o.topology.len() > MAX_TOPOLOGY_LOG {
+            return Err(NetError::Restore("topology log too long"));
+        }
+        let info = SpawnInfo {
+            id: o.id,
+            class: o.class,
+            owner: self.local,
+            epoch: AuthorityEpoch {
+                term: self.term.0,
+                grant: 0,
+            },
+            held: false,
+            policy,
+            particles: o.state.particles.len() as u32,
+            pos: o.state.pos.to_array(),
+            rot: rot.to_array(),
+            request: None,
+            topology: o.topology.len() as u32,
+        };
+        self.objects.skip_ids_through(o.id);
+        self.insert_object(now, info, None);
+        if let Some(obj) = self.objects.get_mut(o.id) {
+            obj.topology.set_entries(o.topology);
+        }
+        self.publish_state(now, o.id, &ObjectState { rot, ..o.state })
+    }
+
+    /// Host, before anyone joined: a retained message the room kept is the room's state again
+    /// (an `Event::Message` tells us, as a joiner is told). Messages of kinds the room's
+    /// table does not have, or not retained, are refused.
+    pub fn restore_retained(&mut self, msg: AppMessage) -> Result<(), NetError> {
+        self.restoring()?;
+        if !msg.valid()
+            || msg.retain_key().is_none()
+            || usize::from(msg.kind.0) >= self.cfg.messages.kinds.len()
+        {
+            return Err(NetError::Restore("not a retained message of the room"));
+        }
+        self.deliver_replay(msg);
+        Ok(())
+    }
+
+    /// Host, before anyone joined: the room's clock carries on from `room_time` (the time it
+    /// read when the room was last kept), so times stamped in the reopened room come after
+    /// every time stamped before.
+    pub fn resume_room_time(&mut self, now: Instant, room_time: Duration) -> Result<(), NetError> {
+        self.restoring()?;
+        self.clock.resume(now, room_time);
+        Ok(())
+    }
+
+    fn restoring(&self) -> Result<(), NetError> {
+        if self.role != Role::Host {
+            return Err(NetError::NotConnected);
+        }
+        if self.members.len() > 1 {
+            return Err(NetError::Restore("members joined already"));
+        }
+        Ok(())
+    }
+}
