@@ -1,0 +1,211 @@
+//! Rooms that remember. A room's lasting state — every object (class, pose, particles), each
+//! object's topology log (tears, cuts, resolution changes: the pieces are objects whose logs
+//! end in their `Cut`), the retained messages and the room time — kept in a database by the
+//! host while the room runs, so a room every peer left, or whose every process died, opens
+//! again as it was ([`softsync_net::Session::restore_object`]).
+//!
+//! - [`RoomStore`]: one trait, two back ends: [`SqliteStore`] (embedded, a file beside the
+//!   scene: the default) and PostgreSQL (not built yet: see the crate's README in
+//!   `docs/GUIDE.md`). The schema is versioned ([`schema`]); migrations run at open, a store
+//!   of a newer version is refused.
+//! - [`Tracker`]: what changed since the last write, as a [`Batch`] (one transaction: a cut's
+//!   parent leaves and its pieces arrive together, so nothing is ever half-applied).
+//! - [`StoreWriter`]: the writes on their own thread; the frame only hands batches over.
+//!
+//! What is not kept: who owned what, who was in the room, avatars (they belong to their
+//! peers), state in flight.
+
+pub mod codec;
+pub mod schema;
+mod sqlite;
+mod tracker;
+mod writer;
+
+use std::time::Duration;
+
+use softsync_net::wire::TopologyEvent;
+use softsync_net::{ClassId, NetId, ObjectState, RoomImage};
+
+pub use sqlite::SqliteStore;
+pub use tracker::Tracker;
+pub use writer::{StoreWriter, WriterStatus};
+
+/// What a room is made from: a store kept for one scene refuses another.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RoomIdentity {
+    /// SHA-256 (hex) of the scene's bundle (the scene file and the files it reads): the
+    /// scene is kept in the store under it.
+    pub scene_sha256: String,
+    /// The digest of the session configuration the peers agree on (classes, messages).
+    pub config_digest: u64,
+}
+
+impl RoomIdentity {
+    /// The identity of the room made from the scene bundle `bundle` under configuration
+    /// digest `config_digest`.
+    pub fn of(bundle: &[u8], config_digest: u64) -> Self {
+        RoomIdentity {
+            scene_sha256: sha256_hex(bundle),
+            config_digest,
+        }
+    }
+}
+
+/// SHA-256 of `bytes`, lowercase hex.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    let d = ring::digest::digest(&ring::digest::SHA256, bytes);
+    d.as_ref().iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// How one object's log changed since the last write.
+#[derive(Clone, Debug, PartialEq)]
+pub enum LogChange {
+    /// Entries `from..` are these (the entries before stay).
+    Append {
+        /// Position of the first.
+        from: u32,
+        /// The entries.
+        events: Vec<TopologyEvent>,
+    },
+    /// The whole log is this (a new object, or a log a new host rewrote).
+    Replace(Vec<TopologyEvent>),
+}
+
+/// One object's row: class and state.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ObjectRow {
+    /// Id.
+    pub id: NetId,
+    /// Class.
+    pub class: ClassId,
+    /// State.
+    pub state: ObjectState,
+}
+
+/// Everything one write changes, applied in one transaction, in this order: `full` empties
+/// the room first; removals; object rows; log changes; retained messages; the room time.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Batch {
+    /// The batch is the whole room: what the store had is dropped first.
+    pub full: bool,
+    /// Objects gone (their logs go with them).
+    pub remove: Vec<NetId>,
+    /// Objects written (new, or their state changed).
+    pub objects: Vec<ObjectRow>,
+    /// Log changes, per object.
+    pub logs: Vec<(NetId, LogChange)>,
+    /// The retained messages, all of them, when they changed.
+    pub retained: Option<Vec<softsync_net::wire::AppMessage>>,
+    /// The room time of this write.
+    pub room_time: Duration,
+    /// A checkpoint: every object's state is written as of `room_time`.
+    pub checkpoint: bool,
+}
+
+impl Batch {
+    /// Topology entries and objects added or removed (the "events" of a write).
+    pub fn events(&self) -> usize {
+        self.remove.len()
+            + self
+                .logs
+                .iter()
+                .map(|(_, c)| match c {
+                    LogChange::Append { events, .. } | LogChange::Replace(events) => events.len(),
+                })
+                .sum::<usize>()
+    }
+}
+
+/// What a store says about itself.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct StoreInfo {
+    /// Back end (`sqlite`, `postgres`).
+    pub backend: &'static str,
+    /// Schema version of the store as opened (after migrations).
+    pub schema_version: u32,
+    /// Schema version the store was at before this open migrated it (equal if none ran).
+    pub migrated_from: u32,
+}
+
+/// Why a store could not be opened, read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    /// The database said no (locked, corrupt, full disk, server gone): its words.
+    #[error("{backend} store {target}: {what}")]
+    Database {
+        /// Back end.
+        backend: &'static str,
+        /// The file or server.
+        target: String,
+        /// The database's error.
+        what: String,
+    },
+    /// The store was written by a newer softsync (schema `found`, this build knows up to
+    /// `known`): refused rather than misread.
+    #[error("the store's schema is version {found}, newer than this build's {known}: open it with a newer softsync")]
+    Newer {
+        /// The store's version.
+        found: u32,
+        /// Ours.
+        known: u32,
+    },
+    /// The store is not one of ours (tables missing or of another shape).
+    #[error("not a softsync room store: {0}")]
+    Foreign(String),
+    /// The store keeps a room made from another scene or configuration.
+    #[error("the store keeps a room of another scene (store: scene {stored_scene}, config {stored_config:016x}; given: scene {given_scene}, config {given_config:016x}): give the scene it was made from, or start afresh with --store-reset")]
+    OtherScene {
+        /// The store's scene hash.
+        stored_scene: String,
+        /// The store's config digest.
+        stored_config: u64,
+        /// The given scene's hash.
+        given_scene: String,
+        /// The given config digest.
+        given_config: u64,
+    },
+    /// A row could not be read back (a value out of range, an unknown event kind).
+    #[error("store row unreadable: {0}")]
+    Row(String),
+}
+
+/// A place a room is kept. One writer at a time (the host); every call is one transaction.
+pub trait RoomStore: Send {
+    /// Back end and schema.
+    fn info(&self) -> StoreInfo;
+
+    /// The identity of the room kept, if any room is.
+    fn identity(&mut self) -> Result<Option<RoomIdentity>, StoreError>;
+
+    /// Keep a room of `identity` from now on: the scene bundle is stored under its hash; a
+    /// store that kept another room is emptied first only if `reset` (otherwise
+    /// [`StoreError::OtherScene`]).
+    fn begin(
+        &mut self,
+        identity: &RoomIdentity,
+        bundle: &[u8],
+        reset: bool,
+    ) -> Result<(), StoreError>;
+
+    /// The room as kept: every object with its log, the retained messages, the room time.
+    fn load(&mut self) -> Result<RoomImage, StoreError>;
+
+    /// Apply `batch` in one transaction (all of it or none).
+    fn write(&mut self, batch: &Batch) -> Result<(), StoreError>;
+
+    /// The scene bundle kept under `sha256`.
+    fn scene(&mut self, sha256: &str) -> Result<Option<Vec<u8>>, StoreError>;
+}
+
+/// Open the store `target`: a path (SQLite; created if missing), or a `postgres://` URL (not
+/// built yet: refused with the reason).
+pub fn open(target: &str) -> Result<Box<dyn RoomStore>, StoreError> {
+    if target.starts_with("postgres://") || target.starts_with("postgresql://") {
+        return Err(StoreError::Database {
+            backend: "postgres",
+            target: target.to_string(),
+            what: "PostgreSQL stores are not built yet in this version: use a SQLite file".into(),
+        });
+    }
+    Ok(Box::new(SqliteStore::open(std::path::Path::new(target))?))
+}

@@ -1,0 +1,510 @@
+//! The embedded back end: one SQLite file (rusqlite, SQLite built in). Write-ahead log,
+//! `synchronous = FULL` (a write that returned survives a power cut), and the file locked for
+//! as long as the store is open (`locking_mode = EXCLUSIVE`, taken at open): a second host
+//! given the same file is refused at once instead of interleaving its writes.
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use glam::{Quat, Vec3};
+use rusqlite::{params, Connection, OptionalExtension, Transaction};
+use softsync_net::wire::{AppMessage, Delivery, MessageKind, MessageTarget};
+use softsync_net::{ClassId, KeptObject, NetId, ObjectState, PeerId, RoomImage};
+
+use crate::codec::{decode_event, decode_particles, encode_event, encode_particles, EVENT_FORMAT};
+use crate::schema::{migration_sql, SCHEMA_VERSION};
+use crate::{Batch, LogChange, RoomIdentity, RoomStore, StoreError, StoreInfo};
+
+/// How long an open waits for a lock another process holds before it says so.
+const LOCK_WAIT: Duration = Duration::from_millis(300);
+
+/// A room kept in a SQLite file.
+pub struct SqliteStore {
+    conn: Connection,
+    path: PathBuf,
+    migrated_from: u32,
+}
+
+impl std::fmt::Debug for SqliteStore {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SqliteStore")
+            .field("path", &self.path)
+            .finish()
+    }
+}
+
+fn db_err(path: &Path) -> impl Fn(rusqlite::Error) -> StoreError + '_ {
+    move |e| {
+        let what = match &e {
+            rusqlite::Error::SqliteFailure(f, _) if f.code == rusqlite::ErrorCode::DatabaseBusy => {
+                format!("in use by another host ({e})")
+            }
+            rusqlite::Error::SqliteFailure(f, _) if f.code == rusqlite::ErrorCode::NotADatabase => {
+                format!("corrupt or not a database ({e})")
+            }
+            rusqlite::Error::SqliteFailure(f, _) if f.code == rusqlite::ErrorCode::DiskFull => {
+                format!("disk full ({e})")
+            }
+            _ => e.to_string(),
+        };
+        StoreError::Database {
+            backend: "sqlite",
+            target: path.display().to_string(),
+            what,
+        }
+    }
+}
+
+impl SqliteStore {
+    /// Open (or create) the store at `path`, lock it, and migrate it to [`SCHEMA_VERSION`].
+    pub fn open(path: &Path) -> Result<Self, StoreError> {
+        let err = db_err(path);
+        if path.is_dir() {
+            return Err(StoreError::Database {
+                backend: "sqlite",
+                target: path.display().to_string(),
+                what: "is a folder, not a file".into(),
+            });
+        }
+        let conn = Connection::open(path).map_err(&err)?;
+        conn.busy_timeout(LOCK_WAIT).map_err(&err)?;
+        conn.pragma_update(None, "locking_mode", "EXCLUSIVE")
+            .map_err(&err)?;
+        conn.pragma_update(None, "journal_mode", "WAL")
+            .map_err(&err)?;
+        conn.pragma_update(None, "synchronous", "FULL")
+            .map_err(&err)?;
+        // take the lock now (EXCLUSIVE keeps it until the connection closes), and read the
+        // whole schema: a corrupt file fails here, not mid-room
+        conn.execute_batch("BEGIN EXCLUSIVE; COMMIT;")
+            .map_err(&err)?;
+        let check: String = conn
+            .query_row("PRAGMA quick_check", [], |r| r.get(0))
+            .map_err(&err)?;
+        if check != "ok" {
+            return Err(StoreError::Database {
+                backend: "sqlite",
+                target: path.display().to_string(),
+                what: format!("corrupt: {check}"),
+            });
+        }
+        let mut s = SqliteStore {
+            conn,
+            path: path.to_path_buf(),
+            migrated_from: 0,
+        };
+        s.migrate()?;
+        Ok(s)
+    }
+
+    /// The schema version the file says it is at (0: empty).
+    fn version(conn: &Connection, path: &Path) -> Result<u32, StoreError> {
+        let tables: i64 = conn
+            .query_row(
+                "SELECT count(*) FROM sqlite_master WHERE type = 'table'",
+                [],
+                |r| r.get(0),
+            )
+            .map_err(db_err(path))?;
+        if tables == 0 {
+            return Ok(0);
+        }
+        let has_meta: i64 = conn
+            .query_row(
+                "SELECT count(*) FROM sqlite_master WHERE type = 'table' AND name = 'meta'",
+                [],
+                |r| r.get(0),
+            )
+            .map_err(db_err(path))?;
+        if has_meta == 0 {
+            return Err(StoreError::Foreign(format!(
+                "{} has {tables} tables and no `meta`",
+                path.display()
+            )));
+        }
+        let v: Option<String> = conn
+            .query_row(
+                "SELECT value FROM meta WHERE key = 'schema_version'",
+                [],
+                |r| r.get(0),
+            )
+            .optional()
+            .map_err(db_err(path))?;
+        v.ok_or_else(|| StoreError::Foreign("no schema_version in meta".into()))?
+            .parse()
+            .map_err(|_| StoreError::Foreign("schema_version is not a number".into()))
+    }
+
+    fn migrate(&mut self) -> Result<(), StoreError> {
+        let path = self.path.clone();
+        let err = db_err(&path);
+        let found = Self::version(&self.conn, &path)?;
+        self.migrated_from = found;
+        if found > SCHEMA_VERSION {
+            return Err(StoreError::Newer {
+                found,
+                known: SCHEMA_VERSION,
+            });
+        }
+        if found == SCHEMA_VERSION {
+            return Ok(());
+        }
+        let tx = self.conn.transaction().map_err(&err)?;
+        for k in found..SCHEMA_VERSION {
+            let sql = migration_sql(k as usize, "BLOB")
+                .ok_or_else(|| StoreError::Foreign(format!("no migration from version {k}")))?;
+            tx.execute_batch(&sql).map_err(&err)?;
+        }
+        set_meta(&tx, "schema_version", &SCHEMA_VERSION.to_string()).map_err(&err)?;
+        set_meta(&tx, "event_format", &EVENT_FORMAT.to_string()).map_err(&err)?;
+        tx.commit().map_err(&err)
+    }
+
+    /// Run `sql` on the file directly (tests: an older schema, a forged version).
+    pub fn execute_raw(&mut self, sql: &str) -> Result<(), StoreError> {
+        self.conn.execute_batch(sql).map_err(db_err(&self.path))
+    }
+}
+
+fn set_meta(tx: &Transaction<'_>, key: &str, value: &str) -> rusqlite::Result<usize> {
+    tx.execute(
+        "INSERT INTO meta (key, value) VALUES (?1, ?2)
+         ON CONFLICT (key) DO UPDATE SET value = excluded.value",
+        params![key, value],
+    )
+}
+
+fn get_meta(conn: &Connection, key: &str) -> rusqlite::Result<Option<String>> {
+    conn.query_row("SELECT value FROM meta WHERE key = ?1", [key], |r| r.get(0))
+        .optional()
+}
+
+fn delivery_text(d: Delivery) -> &'static str {
+    match d {
+        Delivery::Retained => "retained",
+        Delivery::ObjectState(_) => "per-object",
+        Delivery::Reliable => "reliable",
+        Delivery::Unreliable => "unreliable",
+    }
+}
+
+fn write_object(
+    tx: &Transaction<'_>,
+    row: &crate::ObjectRow,
+    room_us: i64,
+) -> rusqlite::Result<usize> {
+    let (p, q) = (row.state.pos, row.state.rot);
+    tx.execute(
+        "INSERT INTO objects (id, class, px, py, pz, qx, qy, qz, qw, particles, state_room_us)
+         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11)
+         ON CONFLICT (id) DO UPDATE SET class = excluded.class, px = excluded.px,
+           py = excluded.py, pz = excluded.pz, qx = excluded.qx, qy = excluded.qy,
+           qz = excluded.qz, qw = excluded.qw, particles = excluded.particles,
+           state_room_us = excluded.state_room_us",
+        params![
+            i64::from(row.id.0),
+            i64::from(row.class.0),
+            f64::from(p.x),
+            f64::from(p.y),
+            f64::from(p.z),
+            f64::from(q.x),
+            f64::from(q.y),
+            f64::from(q.z),
+            f64::from(q.w),
+            encode_particles(&row.state.particles),
+            room_us
+        ],
+    )
+}
+
+fn write_events(
+    tx: &Transaction<'_>,
+    id: NetId,
+    from: u32,
+    events: &[softsync_net::wire::TopologyEvent],
+) -> rusqlite::Result<()> {
+    tx.execute(
+        "DELETE FROM topology WHERE object = ?1 AND seq >= ?2",
+        params![i64::from(id.0), i64::from(from)],
+    )?;
+    let mut st = tx.prepare_cached(
+        "INSERT INTO topology (object, seq, kind, event) VALUES (?1, ?2, ?3, ?4)",
+    )?;
+    for (k, e) in events.iter().enumerate() {
+        let (kind, json) = encode_event(e);
+        st.execute(params![
+            i64::from(id.0),
+            i64::from(from) + k as i64,
+            kind,
+            json
+        ])?;
+    }
+    Ok(())
+}
+
+impl RoomStore for SqliteStore {
+    fn info(&self) -> StoreInfo {
+        StoreInfo {
+            backend: "sqlite",
+            schema_version: SCHEMA_VERSION,
+            migrated_from: self.migrated_from,
+        }
+    }
+
+    fn identity(&mut self) -> Result<Option<RoomIdentity>, StoreError> {
+        let err = db_err(&self.path);
+        let scene = get_meta(&self.conn, "scene_sha256").map_err(&err)?;
+        let config = get_meta(&self.conn, "config_digest").map_err(&err)?;
+        match (scene, config) {
+            (Some(scene_sha256), Some(c)) => Ok(Some(RoomIdentity {
+                scene_sha256,
+                config_digest: u64::from_str_radix(&c, 16)
+                    .map_err(|_| StoreError::Row(format!("config_digest {c:?}")))?,
+            })),
+            _ => Ok(None),
+        }
+    }
+
+    fn begin(
+        &mut self,
+        identity: &RoomIdentity,
+        bundle: &[u8],
+        reset: bool,
+    ) -> Result<(), StoreError> {
+        if let Some(kept) = self.identity()? {
+            if kept != *identity && !reset {
+                return Err(StoreError::OtherScene {
+                    stored_scene: kept.scene_sha256,
+                    stored_config: kept.config_digest,
+                    given_scene: identity.scene_sha256.clone(),
+                    given_config: identity.config_digest,
+                });
+            }
+        }
+        let err = db_err(&self.path);
+        let tx = self.conn.transaction().map_err(&err)?;
+        if reset {
+            tx.execute_batch(
+                "DELETE FROM objects; DELETE FROM topology; DELETE FROM retained;
+                 DELETE FROM meta WHERE key IN ('room_time_us', 'checkpoint_room_time_us');",
+            )
+            .map_err(&err)?;
+        }
+        tx.execute(
+            "INSERT INTO scenes (sha256, bundle) VALUES (?1, ?2) ON CONFLICT (sha256) DO NOTHING",
+            params![identity.scene_sha256, bundle],
+        )
+        .map_err(&err)?;
+        set_meta(&tx, "scene_sha256", &identity.scene_sha256).map_err(&err)?;
+        set_meta(
+            &tx,
+            "config_digest",
+            &format!("{:016x}", identity.config_digest),
+        )
+        .map_err(&err)?;
+        tx.commit().map_err(&err)
+    }
+
+    fn load(&mut self) -> Result<RoomImage, StoreError> {
+        let err = db_err(&self.path);
+        let format: u32 = get_meta(&self.conn, "event_format")
+            .map_err(&err)?
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(EVENT_FORMAT);
+        if format > EVENT_FORMAT {
+            return Err(StoreError::Newer {
+                found: format,
+                known: EVENT_FORMAT,
+            });
+        }
+        let room_us: u64 = get_meta(&self.conn, "room_time_us")
+            .map_err(&err)?
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(0);
+        let mut objects = Vec::new();
+        {
+            let mut st = self
+                .conn
+                .prepare("SELECT id, class, px, py, pz, qx, qy, qz, qw, particles FROM objects ORDER BY id")
+                .map_err(&err)?;
+            let rows = st
+                .query_map([], |r| {
+                    Ok((
+                        r.get::<_, i64>(0)?,
+                        r.get::<_, i64>(1)?,
+                        [r.get::<_, f64>(2)?, r.get(3)?, r.get(4)?],
+                        [r.get::<_, f64>(5)?, r.get(6)?, r.get(7)?, r.get(8)?],
+                        r.get::<_, Vec<u8>>(9)?,
+                    ))
+                })
+                .map_err(&err)?;
+            for row in rows {
+                let (id, class, p, q, particles) = row.map_err(&err)?;
+                let id =
+                    u32::try_from(id).map_err(|_| StoreError::Row(format!("object id {id}")))?;
+                let class =
+                    u16::try_from(class).map_err(|_| StoreError::Row(format!("class {class}")))?;
+                let pos = Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32);
+                let rot = Quat::from_xyzw(q[0] as f32, q[1] as f32, q[2] as f32, q[3] as f32);
+                if !pos.is_finite() || !rot.is_finite() {
+                    return Err(StoreError::Row(format!("object {id}: pose not finite")));
+                }
+                objects.push(KeptObject {
+                    id: NetId(id),
+                    class: ClassId(class),
+                    state: ObjectState {
+                        pos,
+                        rot,
+                        particles: decode_particles(&particles)?,
+                    },
+                    topology: Vec::new(),
+                });
+            }
+        }
+        {
+            let mut st = self
+                .conn
+                .prepare("SELECT object, seq, kind, event FROM topology ORDER BY object, seq")
+                .map_err(&err)?;
+            let rows = st
+                .query_map([], |r| {
+                    Ok((
+                        r.get::<_, i64>(0)?,
+                        r.get::<_, i64>(1)?,
+                        r.get::<_, String>(2)?,
+                        r.get::<_, String>(3)?,
+                    ))
+                })
+                .map_err(&err)?;
+            for row in rows {
+                let (object, seq, kind, json) = row.map_err(&err)?;
+                let Some(o) = objects.iter_mut().find(|o| i64::from(o.id.0) == object) else {
+                    return Err(StoreError::Row(format!(
+                        "topology of object {object}, which is not kept"
+                    )));
+                };
+                if seq != o.topology.len() as i64 {
+                    return Err(StoreError::Row(format!(
+                        "object {object}'s log skips from {} to {seq}",
+                        o.topology.len()
+                    )));
+                }
+                o.topology.push(decode_event(&kind, &json)?);
+            }
+        }
+        let mut retained = Vec::new();
+        {
+            let mut st = self
+                .conn
+                .prepare("SELECT kind, object, origin, seq, delivery, payload FROM retained ORDER BY kind, object")
+                .map_err(&err)?;
+            let rows = st
+                .query_map([], |r| {
+                    Ok((
+                        r.get::<_, i64>(0)?,
+                        r.get::<_, i64>(1)?,
+                        r.get::<_, i64>(2)?,
+                        r.get::<_, i64>(3)?,
+                        r.get::<_, String>(4)?,
+                        r.get::<_, Vec<u8>>(5)?,
+                    ))
+                })
+                .map_err(&err)?;
+            for row in rows {
+                let (kind, object, origin, seq, delivery, payload) = row.map_err(&err)?;
+                let kind = u16::try_from(kind)
+                    .map_err(|_| StoreError::Row(format!("message kind {kind}")))?;
+                let seq = u32::try_from(seq)
+                    .map_err(|_| StoreError::Row(format!("message seq {seq}")))?;
+                let delivery = match (delivery.as_str(), u32::try_from(object)) {
+                    ("retained", _) => Delivery::Retained,
+                    ("per-object", Ok(o)) => Delivery::ObjectState(NetId(o)),
+                    (d, _) => {
+                        return Err(StoreError::Row(format!("retained message delivery {d:?}")))
+                    }
+                };
+                retained.push(AppMessage {
+                    origin: PeerId(origin as u64),
+                    seq,
+                    kind: MessageKind(kind),
+                    to: MessageTarget::Everyone,
+                    delivery,
+                    payload,
+                });
+            }
+        }
+        Ok(RoomImage {
+            room_time: Duration::from_micros(room_us),
+            objects,
+            retained,
+        })
+    }
+
+    fn write(&mut self, b: &Batch) -> Result<(), StoreError> {
+        let err = db_err(&self.path);
+        let room_us = i64::try_from(b.room_time.as_micros()).unwrap_or(i64::MAX);
+        let tx = self.conn.transaction().map_err(&err)?;
+        if b.full {
+            tx.execute_batch("DELETE FROM objects; DELETE FROM topology; DELETE FROM retained;")
+                .map_err(&err)?;
+        }
+        for id in &b.remove {
+            tx.execute("DELETE FROM objects WHERE id = ?1", [i64::from(id.0)])
+                .map_err(&err)?;
+            tx.execute("DELETE FROM topology WHERE object = ?1", [i64::from(id.0)])
+                .map_err(&err)?;
+            tx.execute("DELETE FROM retained WHERE object = ?1", [i64::from(id.0)])
+                .map_err(&err)?;
+        }
+        for row in &b.objects {
+            write_object(&tx, row, room_us).map_err(&err)?;
+        }
+        for (id, change) in &b.logs {
+            match change {
+                LogChange::Append { from, events } => write_events(&tx, *id, *from, events),
+                LogChange::Replace(events) => write_events(&tx, *id, 0, events),
+            }
+            .map_err(&err)?;
+        }
+        if let Some(msgs) = &b.retained {
+            tx.execute("DELETE FROM retained", []).map_err(&err)?;
+            for m in msgs {
+                let object = match m.delivery {
+                    Delivery::ObjectState(o) => i64::from(o.0),
+                    _ => -1,
+                };
+                tx.execute(
+                    "INSERT INTO retained (kind, object, origin, seq, delivery, payload)
+                     VALUES (?1, ?2, ?3, ?4, ?5, ?6)
+                     ON CONFLICT (kind, object) DO UPDATE SET origin = excluded.origin,
+                       seq = excluded.seq, delivery = excluded.delivery, payload = excluded.payload",
+                    params![
+                        i64::from(m.kind.0),
+                        object,
+                        m.origin.0 as i64,
+                        i64::from(m.seq),
+                        delivery_text(m.delivery),
+                        m.payload
+                    ],
+                )
+                .map_err(&err)?;
+            }
+        }
+        set_meta(&tx, "room_time_us", &room_us.to_string()).map_err(&err)?;
+        if b.checkpoint {
+            set_meta(&tx, "checkpoint_room_time_us", &room_us.to_string()).map_err(&err)?;
+        }
+        tx.commit().map_err(&err)
+    }
+
+    fn scene(&mut self, sha256: &str) -> Result<Option<Vec<u8>>, StoreError> {
+        self.conn
+            .query_row(
+                "SELECT bundle FROM scenes WHERE sha256 = ?1",
+                [sha256],
+                |r| r.get(0),
+            )
+            .optional()
+            .map_err(db_err(&self.path))
+    }
+}

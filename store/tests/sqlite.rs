@@ -1,0 +1,343 @@
+//! The SQLite store: every kind of topology event, a cut's pieces, retained messages (room-wide
+//! and per object) and the room time round-trip; a store of another scene, of a newer schema,
+//! a corrupt or truncated file, a file another host holds and a full disk each get a clear
+//! error, and what was written before stays readable.
+#![allow(clippy::unwrap_used)]
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use glam::{Quat, Vec3};
+use softsync_net::wire::{AppMessage, Delivery, MessageKind, MessageTarget, TopologyEvent};
+use softsync_net::{ClassId, KeptObject, NetId, ObjectState, PeerId, RoomImage};
+use softsync_store::{
+    LogChange, RoomIdentity, RoomStore, SqliteStore, StoreError, StoreWriter, Tracker,
+};
+
+fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("softsync-store-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn identity() -> RoomIdentity {
+    RoomIdentity::of(b"the thesis room", 0x1234)
+}
+
+fn tear(x: i32) -> TopologyEvent {
+    TopologyEvent::Tear {
+        from: [x, 10, -20],
+        to: [x + 500, 12, -20],
+        blade: [0, 4000, 0],
+    }
+}
+
+fn soft(x: f32, n: usize) -> ObjectState {
+    let pos = Vec3::new(x, 1.0, 0.0);
+    ObjectState {
+        pos,
+        rot: Quat::from_rotation_y(0.4),
+        particles: (0..n)
+            .map(|i| pos + Vec3::new(i as f32 * 1e-3, 0.01, -0.02))
+            .collect(),
+    }
+}
+
+/// A room with every kind of event: a torn bunny, two pieces of a cut box (the parent is gone),
+/// a body at another resolution, a rigid tool, and retained messages.
+fn room() -> RoomImage {
+    let cut = |keep| TopologyEvent::Cut {
+        point: [0, 100, 0],
+        normal: [0, 0, 32767],
+        keep,
+    };
+    let parent = vec![tear(0), tear(500), TopologyEvent::Lift];
+    let piece = |keep: u8| {
+        let mut l = parent.clone();
+        l.push(cut(keep));
+        l
+    };
+    RoomImage {
+        room_time: Duration::from_millis(123_456),
+        objects: vec![
+            KeptObject {
+                id: NetId(2),
+                class: ClassId(0),
+                state: ObjectState::rigid(Vec3::X, Quat::IDENTITY),
+                topology: vec![],
+            },
+            KeptObject {
+                id: NetId(5),
+                class: ClassId(1),
+                state: soft(0.2, 40),
+                topology: parent.clone(),
+            },
+            KeptObject {
+                id: NetId(9),
+                class: ClassId(1),
+                state: soft(0.4, 20),
+                topology: piece(0),
+            },
+            KeptObject {
+                id: NetId(10),
+                class: ClassId(1),
+                state: soft(0.5, 22),
+                topology: piece(1),
+            },
+            KeptObject {
+                id: NetId(11),
+                class: ClassId(2),
+                state: soft(-0.3, 12),
+                topology: vec![TopologyEvent::Resolution {
+                    level: 1,
+                    particles: 12,
+                }],
+            },
+        ],
+        retained: vec![
+            AppMessage {
+                origin: PeerId(77),
+                seq: 3,
+                kind: MessageKind(1),
+                to: MessageTarget::Everyone,
+                delivery: Delivery::Retained,
+                payload: b"step 4: retract".to_vec(),
+            },
+            AppMessage {
+                origin: PeerId(u64::MAX - 5),
+                seq: 9,
+                kind: MessageKind(2),
+                to: MessageTarget::Everyone,
+                delivery: Delivery::ObjectState(NetId(5)),
+                payload: vec![0, 255, 7],
+            },
+        ],
+    }
+}
+
+fn write_room(store: &mut SqliteStore, r: &RoomImage) {
+    store.begin(&identity(), b"bundle bytes", false).unwrap();
+    let b = Tracker::new().diff(r, true).unwrap();
+    store.write(&b).unwrap();
+}
+
+#[test]
+fn a_room_with_every_kind_of_event_comes_back_as_it_was_written() {
+    let d = temp_dir("roundtrip");
+    let path = d.join("room.db");
+    let r = room();
+    {
+        let mut s = SqliteStore::open(&path).unwrap();
+        assert_eq!(s.identity().unwrap(), None);
+        write_room(&mut s, &r);
+    }
+    let mut s = SqliteStore::open(&path).unwrap();
+    assert_eq!(s.identity().unwrap(), Some(identity()));
+    assert_eq!(s.load().unwrap(), r);
+    assert_eq!(
+        s.scene(&identity().scene_sha256).unwrap().as_deref(),
+        Some(&b"bundle bytes"[..])
+    );
+    // later writes: an entry appended, a piece removed, a state moved
+    let mut t = Tracker::new();
+    t.diff(&r, true).unwrap();
+    let mut r2 = r.clone();
+    r2.objects[1].topology.push(tear(1000));
+    r2.objects.remove(3);
+    r2.objects[0].state.pos = Vec3::new(0.0, 2.0, 0.0);
+    r2.room_time += Duration::from_secs(1);
+    let b = t.diff(&r2, true).unwrap();
+    assert!(!b.full);
+    assert_eq!(b.remove, vec![NetId(10)]);
+    assert!(matches!(
+        b.logs[..],
+        [(NetId(5), LogChange::Append { from: 3, .. })]
+    ));
+    s.write(&b).unwrap();
+    assert_eq!(s.load().unwrap(), r2);
+}
+
+#[test]
+fn another_scene_is_refused_unless_reset() {
+    let d = temp_dir("scene");
+    let path = d.join("room.db");
+    let mut s = SqliteStore::open(&path).unwrap();
+    write_room(&mut s, &room());
+    let other = RoomIdentity::of(b"another scene", 0x1234);
+    let e = s.begin(&other, b"x", false).unwrap_err();
+    assert!(matches!(e, StoreError::OtherScene { .. }), "{e}");
+    assert!(e.to_string().contains("--store-reset"), "{e}");
+    assert_eq!(s.load().unwrap(), room(), "a refusal loses nothing");
+    s.begin(&other, b"x", true).unwrap();
+    let empty = s.load().unwrap();
+    assert!(empty.objects.is_empty() && empty.retained.is_empty());
+    assert_eq!(s.identity().unwrap(), Some(other));
+}
+
+#[test]
+fn a_newer_schema_is_refused_and_a_foreign_database_is_named() {
+    let d = temp_dir("newer");
+    let path = d.join("room.db");
+    {
+        let mut s = SqliteStore::open(&path).unwrap();
+        write_room(&mut s, &room());
+        s.execute_raw("UPDATE meta SET value = '99' WHERE key = 'schema_version'")
+            .unwrap();
+    }
+    let e = SqliteStore::open(&path).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            StoreError::Newer {
+                found: 99,
+                known: 1
+            }
+        ),
+        "{e}"
+    );
+    assert!(e.to_string().contains("newer softsync"), "{e}");
+
+    let foreign = d.join("foreign.db");
+    {
+        let mut s = SqliteStore::open(&d.join("scratch.db")).unwrap();
+        s.execute_raw(&format!(
+            "ATTACH '{}' AS f; CREATE TABLE f.users (name TEXT); DETACH f;",
+            foreign.display()
+        ))
+        .unwrap();
+    }
+    let e = SqliteStore::open(&foreign).unwrap_err();
+    assert!(matches!(e, StoreError::Foreign(_)), "{e}");
+}
+
+#[test]
+fn a_corrupt_or_truncated_file_gets_a_clear_error() {
+    let d = temp_dir("corrupt");
+    let garbage = d.join("garbage.db");
+    std::fs::write(&garbage, vec![0x5a; 8192]).unwrap();
+    let e = SqliteStore::open(&garbage).unwrap_err().to_string();
+    assert!(e.contains("corrupt") || e.contains("not a database"), "{e}");
+
+    let path = d.join("room.db");
+    {
+        let mut s = SqliteStore::open(&path).unwrap();
+        write_room(&mut s, &room());
+        // many rows, so the file spans pages a truncation loses
+        let mut big = room();
+        for k in 0..200 {
+            big.objects.push(KeptObject {
+                id: NetId(100 + k),
+                class: ClassId(1),
+                state: soft(k as f32, 200),
+                topology: vec![tear(k as i32)],
+            });
+        }
+        let b = Tracker::new().diff(&big, true).unwrap();
+        s.write(&b).unwrap();
+        s.execute_raw("PRAGMA wal_checkpoint(TRUNCATE)").unwrap();
+    }
+    let len = std::fs::metadata(&path).unwrap().len();
+    let f = std::fs::OpenOptions::new().write(true).open(&path).unwrap();
+    f.set_len(len / 2).unwrap();
+    drop(f);
+    let r = SqliteStore::open(&path).and_then(|mut s| s.load());
+    let e = r.unwrap_err().to_string();
+    assert!(
+        e.contains("corrupt") || e.contains("malformed") || e.contains("not a database"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_store_another_host_holds_is_refused_at_once() {
+    let d = temp_dir("locked");
+    let path = d.join("room.db");
+    let mut first = SqliteStore::open(&path).unwrap();
+    write_room(&mut first, &room());
+    let e = SqliteStore::open(&path).unwrap_err().to_string();
+    assert!(e.contains("in use by another host"), "{e}");
+    drop(first);
+    assert_eq!(SqliteStore::open(&path).unwrap().load().unwrap(), room());
+}
+
+/// A tmpfs of `kib` KiB mounted on `dir` for the guard's life.
+struct SmallDisk(PathBuf);
+
+impl SmallDisk {
+    fn mount(dir: &Path, kib: u32) -> SmallDisk {
+        let ok = std::process::Command::new("mount")
+            .args(["-t", "tmpfs", "-o", &format!("size={kib}k"), "tmpfs"])
+            .arg(dir)
+            .status()
+            .unwrap()
+            .success();
+        assert!(
+            ok,
+            "mounting a {kib} KiB tmpfs on {} (needs root)",
+            dir.display()
+        );
+        SmallDisk(dir.to_path_buf())
+    }
+}
+
+impl Drop for SmallDisk {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("umount").arg(&self.0).status();
+    }
+}
+
+#[test]
+fn a_full_disk_fails_the_write_whole_and_keeps_what_was_written() {
+    let d = temp_dir("full");
+    let disk = d.join("disk");
+    std::fs::create_dir_all(&disk).unwrap();
+    let _guard = SmallDisk::mount(&disk, 512);
+    let path = disk.join("room.db");
+    let store = {
+        let mut s = SqliteStore::open(&path).unwrap();
+        s.begin(&identity(), b"bundle", false).unwrap();
+        s
+    };
+    let writer = StoreWriter::spawn(Box::new(store));
+    let mut t = Tracker::new();
+    let mut r = room();
+    let mut failed_at = None;
+    // grow the room until the disk is full: each batch adds a torn body of 2,000 particles
+    for k in 0..200u32 {
+        r.objects.push(KeptObject {
+            id: NetId(1000 + k),
+            class: ClassId(1),
+            state: soft(k as f32, 2000),
+            topology: (0..20).map(|i| tear(i * 100)).collect(),
+        });
+        r.room_time += Duration::from_millis(100);
+        if writer.take_failures() > 0 {
+            failed_at = Some(k);
+            t.resync();
+            break;
+        }
+        let b = t.diff(&r, false).unwrap();
+        writer.submit(b).unwrap();
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let status = writer.finish();
+    let k = failed_at.expect("the disk never filled");
+    let e = status.error.clone().unwrap_or_default();
+    assert!(e.contains("disk full") || e.contains("full"), "{e}");
+    // every object the store has is whole: its state and its whole log
+    let kept = SqliteStore::open(&path).unwrap().load().unwrap();
+    assert!(
+        kept.objects.len() >= room().objects.len() + 1,
+        "kept {} objects",
+        kept.objects.len()
+    );
+    assert!(
+        kept.objects.len() < r.objects.len(),
+        "nothing was refused ({k})"
+    );
+    for o in &kept.objects {
+        let want = r.objects.iter().find(|w| w.id == o.id).unwrap();
+        assert_eq!(o, want, "object {:?} half-written", o.id);
+    }
+}
