@@ -41,7 +41,9 @@ pub use policy::{
     AuthorityPolicy, ClassConfig, FailureDetector, MessageConfig, PeerBudget, SendPolicy,
     SessionConfig, SoftBodyMode, StateRoute,
 };
-pub use session::{DisplayedState, Event, KeptObject, KickError, ObjectState, RoomKey, Session};
+pub use session::{
+    DisplayedState, Event, KeptObject, KickError, ObjectState, RoomImage, RoomKey, Session,
+};
 pub use stats::Stats;
 pub use time::Instant;
 #[cfg(feature = "testing")]

@@ -84,5 +84,6 @@ pub use messages::Say;
 pub use mirror::{build_body, LocalBody, MirroredObject};
 pub use peer::cost::{FrameCost, Phase};
 pub use peer::cutter::HandTool;
+pub use peer::keep::Reopened;
 pub use peer::{Peer, PeerConfig};
 pub use scene::{BodyClass, Class, FixedBox, Kind, Placed, Scene, Shape};

@@ -16,6 +16,7 @@ mod builds;
 mod comanip;
 pub mod cost;
 pub(crate) mod cutter;
+pub mod keep;
 mod orphans;
 mod show;
 pub(crate) mod topology;

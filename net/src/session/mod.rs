@@ -56,7 +56,7 @@ pub use ban::{KickError, MAX_BANNED};
 pub use footprint::{Footprint, Leftovers, PeerFootprint};
 pub use recv::MAX_VERSION_REFUSALS_PER_S;
 pub use registry::{DisplayedState, ObjectState};
-pub use restore::KeptObject;
+pub use restore::{KeptObject, RoomImage};
 
 use self::authority::PendingAsks;
 use self::link::Link;

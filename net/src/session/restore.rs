@@ -29,6 +29,18 @@ pub struct KeptObject {
     pub topology: Vec<TopologyEvent>,
 }
 
+/// A room as it is kept between sessions: its objects, its retained messages and the room
+/// time it was kept at.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RoomImage {
+    /// The room clock's reading when the image was taken.
+    pub room_time: Duration,
+    /// The objects, by id.
+    pub objects: Vec<KeptObject>,
+    /// The retained messages (the room's state that is not objects).
+    pub retained: Vec<AppMessage>,
+}
+
 impl Session {
     /// Host, before anyone joined: object `o` exists again, owned by us, under its old id
     /// (ids later spawns get start past it). `Event::Spawned` follows, as for a spawn. Build

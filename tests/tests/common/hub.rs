@@ -133,6 +133,43 @@ impl Node {
         }
     }
 
+    /// A host that reopens a kept room (`image`) instead of opening its scene's objects.
+    pub fn reopened(
+        hub: &MemoryHub,
+        me: PeerId,
+        seed: u64,
+        name: &str,
+        image: &softsync_net::RoomImage,
+    ) -> (Self, softsync_peer::Reopened) {
+        let assets = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../assets");
+        let scene = Scene::by_name(name, &assets).unwrap();
+        let policy = SendPolicy::default();
+        let cfg = scene.session_config(policy.clone(), policy.clone(), policy);
+        let config = PeerConfig {
+            dt_s: DT,
+            avatar: false,
+            ..PeerConfig::default()
+        };
+        let session = Session::host(me, cfg, Instant::ZERO);
+        let mut peer = Peer::new(Instant::ZERO, session, None, scene, config).unwrap();
+        let done = peer.reopen(Instant::ZERO, image).unwrap();
+        let link = ConditionerConfig {
+            seed,
+            latency: Duration::from_millis(20),
+            jitter: Duration::from_millis(5),
+            loss: 0.02,
+            ..ConditionerConfig::default()
+        };
+        let node = Node {
+            peer,
+            link: LinkConditioner::new(hub.endpoint(me), link),
+            warnings: Vec::new(),
+            events: Vec::new(),
+            link_dead: false,
+        };
+        (node, done)
+    }
+
     pub fn frame(&mut self, now: Instant) {
         self.frame_with(now, None);
     }
