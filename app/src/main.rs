@@ -480,6 +480,7 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     opts.fast_detection = a.fast_detection;
     opts.max_members = a.max_members;
     opts.condition = a.condition.clone();
+    opts.store = a.store.clone();
     opts.send = SendPolicy {
         rate_hz: a.send_rate_hz,
         position_threshold_m: a.threshold_m,
@@ -560,6 +561,20 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
         room.peer.me().0,
         room.signal_url()
     );
+    if let (Some(r), Some(k)) = (room.reopened(), room.store()) {
+        println!(
+            "reopened the room kept in {}: {} objects, {} topology entries replayed, {} retained messages, room time {:.3} s",
+            k.target(),
+            r.objects,
+            r.entries,
+            r.messages,
+            room.peer.session().room_time(room.now()).unwrap_or_default().as_secs_f64()
+        );
+    } else if let Some(k) = room.store() {
+        if a.host {
+            println!("keeping the room in {}", k.target());
+        }
+    }
     let mut driver = Driver::new(bot, a.duration, dump, a.dump_hz, a.quiet);
     if !a.host {
         driver.join_timeline = room.connect_times().map(JoinTimeline::new);

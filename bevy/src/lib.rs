@@ -62,12 +62,15 @@
 
 pub mod connect;
 pub mod glue;
+pub mod keep;
 pub mod plugin;
 pub mod pump;
 pub mod room;
 mod scene_fetch;
+mod signal_move;
 
 pub use connect::{connect, first_contact, scene_server, ConnectTimes, Connected};
+pub use keep::{Keeper, StoreOptions};
 pub use plugin::{
     AvatarPart, Hand, NetEntities, NetObject, Received, RoomEvent, RoomFailed, RoomStats, SoftBody,
     SoftsyncApp, SoftsyncPlugin, SoftsyncSet,

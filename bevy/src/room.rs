@@ -11,7 +11,9 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use crate::connect::{ConnectTimes, Connected};
+use crate::keep::{Keeper, StoreOptions};
 use crate::scene_fetch::FetchedScene;
+use crate::signal_move::signaling_move;
 use softsync_net::door::{Door, FrontDoor};
 use softsync_net::messages::{Message, MessageTypes, RegisterError};
 use softsync_net::share::BlobServer;
@@ -126,6 +128,9 @@ pub struct RoomOptions {
     /// (it is part of the handshake's digest, so a new host after a migration keeps it).
     /// Default 64, the session's limit.
     pub max_members: usize,
+    /// Keep the room in a store (`crate::keep`): a host reopens the room kept there and
+    /// writes it as it runs; a joiner writes it if it becomes host. `None`: not kept.
+    pub store: Option<StoreOptions>,
 }
 
 impl RoomOptions {
@@ -160,6 +165,7 @@ impl RoomOptions {
             uplink_bytes_per_s: None,
             state_route: softsync_net::StateRoute::Relay,
             max_members: softsync_net::SessionConfig::default().max_members,
+            store: None,
         }
     }
 
@@ -301,6 +307,9 @@ pub struct Room {
     background_pumps: u64,
     /// Where to serve the room's signaling if we take over from a host that served it.
     takeover: Option<(SocketAddr, Option<RoomKey>, Option<TlsIdentity>)>,
+    /// The room's store, if it is kept, and what the reopen from it did.
+    keeper: Option<Keeper>,
+    reopened: Option<softsync_peer::Reopened>,
 }
 
 impl Room {
@@ -326,9 +335,19 @@ impl Room {
     }
 
     fn open_with(scene: Option<Scene>, opts: RoomOptions) -> Result<Room, OpenError> {
-        // Wrong options fail before anything opens.
+        // Wrong options fail before anything opens; so does a store that will not open.
+        let mut kept = None;
+        let mut keeper = None;
         if let Some(scene) = &scene {
-            opts.session_config(scene)?;
+            let cfg = opts.session_config(scene)?;
+            if let (Some(store), true) = (&opts.store, opts.host) {
+                let (k, image) = crate::keep::host_store(store, scene, &cfg)?;
+                keeper = Some(k);
+                kept = image;
+            }
+        }
+        if let (Some(store), false) = (&opts.store, opts.host) {
+            keeper = Some(Keeper::joining(store.clone()));
         }
         let Connected {
             transport: t,
@@ -386,9 +405,18 @@ impl Room {
         let clock = Clock::start();
         let mut peer = Peer::new(clock.now(), session, contact, scene, opts.peer.clone())
             .map_err(|e| OpenError::Config(e.to_string()))?;
-        if opts.host {
-            peer.open(clock.now())
-                .map_err(|e| OpenError::Peer(e.to_string()))?;
+        let mut reopened = None;
+        match (opts.host, &kept) {
+            (true, Some(image)) => {
+                let done = peer
+                    .reopen(clock.now(), image)
+                    .map_err(|e| OpenError::Peer(e.to_string()))?;
+                reopened = Some(done);
+            }
+            (true, None) => peer
+                .open(clock.now())
+                .map_err(|e| OpenError::Peer(e.to_string()))?,
+            (false, _) => {}
         }
         // Data channels that opened while we fetched the scene: contacts for the join.
         for e in link_news {
@@ -420,6 +448,8 @@ impl Room {
                 .then_some(opts.takeover_bind)
                 .flatten()
                 .map(|b| (b, opts.room_key.clone(), opts.tls.clone())),
+            keeper,
+            reopened,
         })
     }
 
@@ -447,6 +477,8 @@ impl Room {
             deferred: None,
             background_pumps: 0,
             takeover: None,
+            keeper: None,
+            reopened: None,
         }
     }
 
@@ -693,6 +725,19 @@ impl Room {
         self.peer.fixed_step(now);
         self.flush();
         self.take_events(now);
+        if let Some(k) = &mut self.keeper {
+            k.tick(now, &self.peer, &mut self.events);
+        }
+    }
+
+    /// The room's store, if it is kept (what it has written: [`Keeper::status`]).
+    pub fn store(&self) -> Option<&Keeper> {
+        self.keeper.as_ref()
+    }
+
+    /// What opening the room from its store put back, if it was reopened.
+    pub fn reopened(&self) -> Option<&softsync_peer::Reopened> {
+        self.reopened.as_ref()
     }
 
     /// Network out: everything the peer has to send.
@@ -735,6 +780,11 @@ impl Room {
             return;
         }
         self.left = true;
+        // the store's last checkpoint before we go (the room may go on without it)
+        let now = self.now();
+        if let Some(k) = &mut self.keeper {
+            k.finish(now, &self.peer);
+        }
         if self.peer.joined() {
             let now = self.now();
             self.peer.leave(now);
@@ -744,57 +794,5 @@ impl Room {
             }
             std::thread::sleep(LEAVE_GRACE);
         }
-    }
-}
-
-/// Whether to follow a `SignalingMoved` notice from `from`: only the room's host (as this peer
-/// knows it: a new host sends it right after its `NewHost`) says where the room's signaling
-/// is, with a `ws://` or `wss://` URL. A member's own notice would move everyone's signaling
-/// to a server of its choosing, where it could harvest the room's signaling proof.
-fn signaling_move(
-    notice: Result<SignalingMoved, softsync_net::MessageRefusal>,
-    from: PeerId,
-    host: Option<PeerId>,
-) -> Result<String, String> {
-    match notice {
-        Ok(SignalingMoved { url }) if url.starts_with("ws://") || url.starts_with("wss://") => {
-            if Some(from) == host {
-                Ok(url)
-            } else {
-                Err(format!(
-                    "a signaling notice from peer {} ignored: only the host ({}) says where the \
-                     room's signaling is",
-                    from.0,
-                    host.map_or(0, |h| h.0)
-                ))
-            }
-        }
-        _ => Err(format!("a malformed signaling notice from peer {}", from.0)),
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    #![allow(clippy::unwrap_used)]
-    use super::*;
-
-    fn notice(url: &str) -> Result<SignalingMoved, softsync_net::MessageRefusal> {
-        Ok(SignalingMoved { url: url.into() })
-    }
-
-    #[test]
-    fn only_the_host_moves_the_rooms_signaling() {
-        let host = Some(PeerId(1));
-        assert_eq!(
-            signaling_move(notice("ws://192.0.2.7:3536"), PeerId(1), host),
-            Ok("ws://192.0.2.7:3536".to_owned())
-        );
-        // a member's notice (it would send everyone to its own server)
-        let e = signaling_move(notice("ws://198.51.100.9:3536"), PeerId(5), host).unwrap_err();
-        assert!(e.contains("only the host"), "{e}");
-        // not while we know no host, and never a URL of another scheme
-        assert!(signaling_move(notice("ws://192.0.2.7:3536"), PeerId(1), None).is_err());
-        assert!(signaling_move(notice("http://192.0.2.7"), PeerId(1), host).is_err());
-        assert!(signaling_move(notice("wsx:evil"), PeerId(1), host).is_err());
     }
 }

@@ -46,6 +46,8 @@
 //!                               scalpel again
 //! say TEXT                      send TEXT to everyone in the room (a reliable
 //!                               [`Say`](crate::messages::Say) message; at most 200 bytes)
+//! note TEXT                     as `say`, retained: the room keeps the latest note (a late
+//!                               joiner gets it; a kept room keeps it between sessions)
 //! kick PEER [REASON]            the host kicks PEER out and bans it for the room's life
 //!                               (`Session::kick`); PEER is an id as the peer printed it
 //!                               (decimal, or hex with 0x) or `newest` (the member that
@@ -103,8 +105,8 @@ pub enum Cmd {
     Cut(Option<String>, Vec3),
     /// Sweep a hand's cutter from one offset of the target's center to another (seconds).
     Slice(usize, Option<String>, Vec3, Vec3, f64),
-    /// Send a line of text to the room.
-    Say(String),
+    /// Send a line of text to the room (retained: a note the room keeps).
+    Say(String, bool),
     /// Host: kick a peer (`None`: the member that joined last) and ban it, with a reason.
     Kick(Option<u64>, String),
     /// Restart.
@@ -263,12 +265,12 @@ pub fn parse(text: &str) -> Result<Vec<Cmd>, ScriptError> {
                     vec3(&w, 6)?,
                     dur(&w, 9, 0.5)?,
                 ),
-                "say" => {
-                    let text = piece["say".len()..].trim();
+                "say" | "note" => {
+                    let text = piece[w[0].len()..].trim();
                     if text.is_empty() || text.len() > 200 {
-                        return Err("say needs a text of 1 to 200 bytes".into());
+                        return Err(format!("{} needs a text of 1 to 200 bytes", w[0]));
                     }
-                    Cmd::Say(text.to_owned())
+                    Cmd::Say(text.to_owned(), w[0] == "note")
                 }
                 "kick" => {
                     let who = match arg(1)? {
@@ -721,9 +723,14 @@ impl Bot {
                 }
                 None
             }
-            Cmd::Say(text) => {
+            Cmd::Say(text, retained) => {
                 let msg = crate::messages::Say { text: text.clone() };
-                match peer.send(now, MessageTarget::Everyone, Delivery::Reliable, &msg) {
+                let how = if retained {
+                    Delivery::Retained
+                } else {
+                    Delivery::Reliable
+                };
+                match peer.send(now, MessageTarget::Everyone, how, &msg) {
                     Ok(seq) => self.say(format!("said {text:?} (message {seq})")),
                     Err(e) => self.say(format!("say: {e}")),
                 }
@@ -1032,7 +1039,7 @@ mod tests {
             .unwrap();
         assert_eq!(
             parse("say  the valve is open ").unwrap(),
-            [Cmd::Say("the valve is open".into())]
+            [Cmd::Say("the valve is open".into(), false)]
         );
         assert!(parse("say").is_err());
         assert_eq!(

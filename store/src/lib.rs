@@ -36,18 +36,30 @@ pub struct RoomIdentity {
     /// SHA-256 (hex) of the scene's bundle (the scene file and the files it reads): the
     /// scene is kept in the store under it.
     pub scene_sha256: String,
-    /// The digest of the session configuration the peers agree on (classes, messages).
-    pub config_digest: u64,
+    /// A digest of the room's message table, the names in order ([`RoomIdentity::messages`]):
+    /// a retained message names its type by its index there.
+    pub messages_digest: u64,
 }
 
 impl RoomIdentity {
-    /// The identity of the room made from the scene bundle `bundle` under configuration
-    /// digest `config_digest`.
-    pub fn of(bundle: &[u8], config_digest: u64) -> Self {
+    /// The identity of the room made from the scene bundle `bundle` with message table
+    /// digest `messages_digest`.
+    pub fn of(bundle: &[u8], messages_digest: u64) -> Self {
         RoomIdentity {
             scene_sha256: sha256_hex(bundle),
-            config_digest,
+            messages_digest,
         }
+    }
+
+    /// The digest of a message table (FNV-1a of the names, one per line): stable across
+    /// builds, unlike the handshake's digest.
+    pub fn messages(names: &[String]) -> u64 {
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        for b in names.join("\n").bytes() {
+            h ^= u64::from(b);
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+        h
     }
 }
 
@@ -153,16 +165,16 @@ pub enum StoreError {
     #[error("not a softsync room store: {0}")]
     Foreign(String),
     /// The store keeps a room made from another scene or configuration.
-    #[error("the store keeps a room of another scene (store: scene {stored_scene}, config {stored_config:016x}; given: scene {given_scene}, config {given_config:016x}): give the scene it was made from, or start afresh with --store-reset")]
+    #[error("the store keeps a room of another scene (store: scene {stored_scene}, messages {stored_messages:016x}; given: scene {given_scene}, messages {given_messages:016x}): give the scene it was made from, or start afresh with --store-reset")]
     OtherScene {
         /// The store's scene hash.
         stored_scene: String,
         /// The store's config digest.
-        stored_config: u64,
+        stored_messages: u64,
         /// The given scene's hash.
         given_scene: String,
         /// The given config digest.
-        given_config: u64,
+        given_messages: u64,
     },
     /// A row could not be read back (a value out of range, an unknown event kind).
     #[error("store row unreadable: {0}")]

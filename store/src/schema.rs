@@ -6,7 +6,7 @@
 //!
 //! | table | rows |
 //! |---|---|
-//! | `meta` | `key`/`value` text: `schema_version`, `event_format`, `scene_sha256`, `config_digest` (hex), `room_time_us`, `checkpoint_room_time_us` |
+//! | `meta` | `key`/`value` text: `schema_version`, `event_format`, `scene_sha256`, `messages_digest` (hex), `room_time_us`, `checkpoint_room_time_us` |
 //! | `scenes` | `sha256`, `bundle`: each scene the room was made from, content-addressed |
 //! | `objects` | `id`, `class`, pose (`px py pz qx qy qz qw`), `particles` (blob of f32 triples), `state_room_us` (room time of the state) |
 //! | `topology` | `object`, `seq`, `kind`, `event` (JSON; [`crate::codec`]) |

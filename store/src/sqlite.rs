@@ -254,12 +254,12 @@ impl RoomStore for SqliteStore {
     fn identity(&mut self) -> Result<Option<RoomIdentity>, StoreError> {
         let err = db_err(&self.path);
         let scene = get_meta(&self.conn, "scene_sha256").map_err(&err)?;
-        let config = get_meta(&self.conn, "config_digest").map_err(&err)?;
+        let config = get_meta(&self.conn, "messages_digest").map_err(&err)?;
         match (scene, config) {
             (Some(scene_sha256), Some(c)) => Ok(Some(RoomIdentity {
                 scene_sha256,
-                config_digest: u64::from_str_radix(&c, 16)
-                    .map_err(|_| StoreError::Row(format!("config_digest {c:?}")))?,
+                messages_digest: u64::from_str_radix(&c, 16)
+                    .map_err(|_| StoreError::Row(format!("messages_digest {c:?}")))?,
             })),
             _ => Ok(None),
         }
@@ -275,9 +275,9 @@ impl RoomStore for SqliteStore {
             if kept != *identity && !reset {
                 return Err(StoreError::OtherScene {
                     stored_scene: kept.scene_sha256,
-                    stored_config: kept.config_digest,
+                    stored_messages: kept.messages_digest,
                     given_scene: identity.scene_sha256.clone(),
-                    given_config: identity.config_digest,
+                    given_messages: identity.messages_digest,
                 });
             }
         }
@@ -298,8 +298,8 @@ impl RoomStore for SqliteStore {
         set_meta(&tx, "scene_sha256", &identity.scene_sha256).map_err(&err)?;
         set_meta(
             &tx,
-            "config_digest",
-            &format!("{:016x}", identity.config_digest),
+            "messages_digest",
+            &format!("{:016x}", identity.messages_digest),
         )
         .map_err(&err)?;
         tx.commit().map_err(&err)

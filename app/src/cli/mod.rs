@@ -218,6 +218,19 @@ struct PeerOpts {
     /// frame then slows the room: for comparison).
     #[arg(long)]
     no_net_thread: bool,
+    /// Keep the room in this store (a SQLite file, created if missing). A host reopens the
+    /// room kept there — the same objects under the same ids, their tears and cuts, the
+    /// retained messages — and writes it as the room runs (changes within 0.1 s, every moved
+    /// state each --store-checkpoint); a joiner writes it if it becomes host. A store of
+    /// another scene is refused.
+    #[arg(long, value_name = "FILE", help_heading = "Keeping the room")]
+    store: Option<String>,
+    /// Start the room afresh from the scene, dropping what the store kept.
+    #[arg(long, requires = "store", help_heading = "Keeping the room")]
+    store_reset: bool,
+    /// Seconds between checkpoints of every moved state.
+    #[arg(long, value_name = "S", default_value_t = 1.0, value_parser = positive::<3600>, help_heading = "Keeping the room")]
+    store_checkpoint: f64,
     /// No stats lines.
     #[arg(long)]
     quiet: bool,
@@ -342,6 +355,8 @@ pub struct PeerArgs {
     pub state_route: softsync_net::StateRoute,
     /// Rollback (ggrs) rather than state sync.
     pub rollback: bool,
+    /// The room's store.
+    pub store: Option<softsync_bevy::StoreOptions>,
     /// No stats lines.
     pub quiet: bool,
     /// Spawn no avatar.
@@ -496,6 +511,9 @@ fn peer_args(
         (false, true) => FrontEnd::Vr,
         (false, false) => FrontEnd::Headless,
     };
+    if p.sync == SyncArg::Rollback && p.store.is_some() {
+        return err("--store keeps state-sync rooms only (not --sync rollback)");
+    }
     if front == FrontEnd::Headless {
         if let Some(f) = p.view.first_given() {
             return err(format!("--{f} needs --desktop or --vr"));
@@ -546,6 +564,11 @@ fn peer_args(
             Route::Direct => softsync_net::StateRoute::Direct,
         },
         rollback: p.sync == SyncArg::Rollback,
+        store: p.store.map(|target| softsync_bevy::StoreOptions {
+            reset: p.store_reset,
+            checkpoint: Duration::from_secs_f64(p.store_checkpoint.max(0.05)),
+            ..softsync_bevy::StoreOptions::new(target)
+        }),
         quiet: p.quiet,
         no_avatar: p.no_avatar,
         front,

@@ -26,7 +26,8 @@ pub struct Reopened {
 
 impl Peer {
     /// The room as it is now, to keep: every networked object but the avatars, each with its
-    /// class, latest state and topology log; the retained messages; the room time (zero
+    /// class, latest state and topology log; the retained messages but the built-in
+    /// [`Holders`](crate::messages::Holders) (who holds what is about the people present); the room time (zero
     /// before the room clock is known).
     pub fn room_image(&self, now: Instant) -> RoomImage {
         let objects = self
@@ -46,10 +47,18 @@ impl Peer {
                 })
             })
             .collect();
+        // who holds what is about the people in the room now, not the room's state
+        let holders = self.message_types.kind::<crate::messages::Holders>();
+        let retained = self
+            .session
+            .retained_for_keeping()
+            .into_iter()
+            .filter(|m| Some(m.kind) != holders)
+            .collect();
         RoomImage {
             room_time: self.session.room_time(now).unwrap_or_default(),
             objects,
-            retained: self.session.retained_for_keeping(),
+            retained,
         }
     }
 
