@@ -4,10 +4,10 @@
 //! host while the room runs, so a room every peer left, or whose every process died, opens
 //! again as it was ([`softsync_net::Session::restore_object`]).
 //!
-//! - [`RoomStore`]: one trait, two back ends: [`SqliteStore`] (embedded, a file beside the
-//!   scene: the default) and PostgreSQL (not built yet: see the crate's README in
-//!   `docs/GUIDE.md`). The schema is versioned ([`schema`]); migrations run at open, a store
-//!   of a newer version is refused.
+//! - [`RoomStore`]: one trait, two back ends on one schema and one set of statements:
+//!   [`SqliteStore`] (embedded, a file beside the scene: the default) and [`PgStore`]
+//!   (PostgreSQL, for rooms whose peers are on different machines). The schema is versioned
+//!   ([`schema`]); migrations run at open, a store of a newer version is refused.
 //! - [`Tracker`]: what changed since the last write, as a [`Batch`] (one transaction: a cut's
 //!   parent leaves and its pieces arrive together, so nothing is ever half-applied).
 //! - [`StoreWriter`]: the writes on their own thread; the frame only hands batches over.
@@ -16,7 +16,10 @@
 //! peers), state in flight.
 
 pub mod codec;
+mod postgres;
+mod rows;
 pub mod schema;
+mod sql;
 mod sqlite;
 mod tracker;
 mod writer;
@@ -26,6 +29,7 @@ use std::time::Duration;
 use softsync_net::wire::TopologyEvent;
 use softsync_net::{ClassId, NetId, ObjectState, RoomImage};
 
+pub use postgres::PgStore;
 pub use sqlite::SqliteStore;
 pub use tracker::Tracker;
 pub use writer::{StoreWriter, WriterStatus};
@@ -209,15 +213,11 @@ pub trait RoomStore: Send {
     fn scene(&mut self, sha256: &str) -> Result<Option<Vec<u8>>, StoreError>;
 }
 
-/// Open the store `target`: a path (SQLite; created if missing), or a `postgres://` URL (not
-/// built yet: refused with the reason).
+/// Open the store `target`: a `postgres://` or `postgresql://` URL ([`PgStore`]), or else a
+/// path ([`SqliteStore`]; created if missing).
 pub fn open(target: &str) -> Result<Box<dyn RoomStore>, StoreError> {
     if target.starts_with("postgres://") || target.starts_with("postgresql://") {
-        return Err(StoreError::Database {
-            backend: "postgres",
-            target: target.to_string(),
-            what: "PostgreSQL stores are not built yet in this version: use a SQLite file".into(),
-        });
+        return Ok(Box::new(PgStore::open(target)?));
     }
     Ok(Box::new(SqliteStore::open(std::path::Path::new(target))?))
 }

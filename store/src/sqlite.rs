@@ -6,13 +6,13 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use glam::{Quat, Vec3};
 use rusqlite::{params, Connection, OptionalExtension, Transaction};
-use softsync_net::wire::{AppMessage, Delivery, MessageKind, MessageTarget};
-use softsync_net::{ClassId, KeptObject, NetId, ObjectState, PeerId, RoomImage};
+use softsync_net::{NetId, RoomImage};
 
-use crate::codec::{decode_event, decode_particles, encode_event, encode_particles, EVENT_FORMAT};
+use crate::codec::{encode_event, encode_particles, EVENT_FORMAT};
+use crate::rows;
 use crate::schema::{migration_sql, SCHEMA_VERSION};
+use crate::sql;
 use crate::{Batch, LogChange, RoomIdentity, RoomStore, StoreError, StoreInfo};
 
 /// How long an open waits for a lock another process holds before it says so.
@@ -167,25 +167,12 @@ impl SqliteStore {
 }
 
 fn set_meta(tx: &Transaction<'_>, key: &str, value: &str) -> rusqlite::Result<usize> {
-    tx.execute(
-        "INSERT INTO meta (key, value) VALUES (?1, ?2)
-         ON CONFLICT (key) DO UPDATE SET value = excluded.value",
-        params![key, value],
-    )
+    tx.execute(sql::SET_META, params![key, value])
 }
 
 fn get_meta(conn: &Connection, key: &str) -> rusqlite::Result<Option<String>> {
-    conn.query_row("SELECT value FROM meta WHERE key = ?1", [key], |r| r.get(0))
+    conn.query_row(sql::GET_META, [key], |r| r.get(0))
         .optional()
-}
-
-fn delivery_text(d: Delivery) -> &'static str {
-    match d {
-        Delivery::Retained => "retained",
-        Delivery::ObjectState(_) => "per-object",
-        Delivery::Reliable => "reliable",
-        Delivery::Unreliable => "unreliable",
-    }
 }
 
 fn write_object(
@@ -195,12 +182,7 @@ fn write_object(
 ) -> rusqlite::Result<usize> {
     let (p, q) = (row.state.pos, row.state.rot);
     tx.execute(
-        "INSERT INTO objects (id, class, px, py, pz, qx, qy, qz, qw, particles, state_room_us)
-         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11)
-         ON CONFLICT (id) DO UPDATE SET class = excluded.class, px = excluded.px,
-           py = excluded.py, pz = excluded.pz, qx = excluded.qx, qy = excluded.qy,
-           qz = excluded.qz, qw = excluded.qw, particles = excluded.particles,
-           state_room_us = excluded.state_room_us",
+        sql::PUT_OBJECT,
         params![
             i64::from(row.id.0),
             i64::from(row.class.0),
@@ -223,13 +205,8 @@ fn write_events(
     from: u32,
     events: &[softsync_net::wire::TopologyEvent],
 ) -> rusqlite::Result<()> {
-    tx.execute(
-        "DELETE FROM topology WHERE object = ?1 AND seq >= ?2",
-        params![i64::from(id.0), i64::from(from)],
-    )?;
-    let mut st = tx.prepare_cached(
-        "INSERT INTO topology (object, seq, kind, event) VALUES (?1, ?2, ?3, ?4)",
-    )?;
+    tx.execute(sql::CUT_LOG, params![i64::from(id.0), i64::from(from)])?;
+    let mut st = tx.prepare_cached(sql::PUT_EVENT)?;
     for (k, e) in events.iter().enumerate() {
         let (kind, json) = encode_event(e);
         st.execute(params![
@@ -284,17 +261,15 @@ impl RoomStore for SqliteStore {
         let err = db_err(&self.path);
         let tx = self.conn.transaction().map_err(&err)?;
         if reset {
-            tx.execute_batch(
-                "DELETE FROM objects; DELETE FROM topology; DELETE FROM retained;
-                 DELETE FROM meta WHERE key IN ('room_time_us', 'checkpoint_room_time_us');",
-            )
+            tx.execute_batch(&format!(
+                "{}; {};",
+                sql::EMPTY_ROOM.join("; "),
+                sql::FORGET_TIMES
+            ))
             .map_err(&err)?;
         }
-        tx.execute(
-            "INSERT INTO scenes (sha256, bundle) VALUES (?1, ?2) ON CONFLICT (sha256) DO NOTHING",
-            params![identity.scene_sha256, bundle],
-        )
-        .map_err(&err)?;
+        tx.execute(sql::PUT_SCENE, params![identity.scene_sha256, bundle])
+            .map_err(&err)?;
         set_meta(&tx, "scene_sha256", &identity.scene_sha256).map_err(&err)?;
         set_meta(
             &tx,
@@ -322,116 +297,58 @@ impl RoomStore for SqliteStore {
             .and_then(|v| v.parse().ok())
             .unwrap_or(0);
         let mut objects = Vec::new();
-        {
-            let mut st = self
-                .conn
-                .prepare("SELECT id, class, px, py, pz, qx, qy, qz, qw, particles FROM objects ORDER BY id")
-                .map_err(&err)?;
-            let rows = st
-                .query_map([], |r| {
-                    Ok((
-                        r.get::<_, i64>(0)?,
-                        r.get::<_, i64>(1)?,
-                        [r.get::<_, f64>(2)?, r.get(3)?, r.get(4)?],
-                        [r.get::<_, f64>(5)?, r.get(6)?, r.get(7)?, r.get(8)?],
-                        r.get::<_, Vec<u8>>(9)?,
-                    ))
-                })
-                .map_err(&err)?;
-            for row in rows {
-                let (id, class, p, q, particles) = row.map_err(&err)?;
-                let id =
-                    u32::try_from(id).map_err(|_| StoreError::Row(format!("object id {id}")))?;
-                let class =
-                    u16::try_from(class).map_err(|_| StoreError::Row(format!("class {class}")))?;
-                let pos = Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32);
-                let rot = Quat::from_xyzw(q[0] as f32, q[1] as f32, q[2] as f32, q[3] as f32);
-                if !pos.is_finite() || !rot.is_finite() {
-                    return Err(StoreError::Row(format!("object {id}: pose not finite")));
-                }
-                objects.push(KeptObject {
-                    id: NetId(id),
-                    class: ClassId(class),
-                    state: ObjectState {
-                        pos,
-                        rot,
-                        particles: decode_particles(&particles)?,
-                    },
-                    topology: Vec::new(),
-                });
-            }
+        let mut st = self.conn.prepare(sql::LOAD_OBJECTS).map_err(&err)?;
+        let mut rows = st.query([]).map_err(&err)?;
+        while let Some(r) = rows.next().map_err(&err)? {
+            let p = [
+                r.get(2).map_err(&err)?,
+                r.get(3).map_err(&err)?,
+                r.get(4).map_err(&err)?,
+            ];
+            let q = [
+                r.get(5).map_err(&err)?,
+                r.get(6).map_err(&err)?,
+                r.get(7).map_err(&err)?,
+                r.get(8).map_err(&err)?,
+            ];
+            let particles: Vec<u8> = r.get(9).map_err(&err)?;
+            objects.push(rows::object(
+                r.get(0).map_err(&err)?,
+                r.get(1).map_err(&err)?,
+                p,
+                q,
+                &particles,
+            )?);
         }
-        {
-            let mut st = self
-                .conn
-                .prepare("SELECT object, seq, kind, event FROM topology ORDER BY object, seq")
-                .map_err(&err)?;
-            let rows = st
-                .query_map([], |r| {
-                    Ok((
-                        r.get::<_, i64>(0)?,
-                        r.get::<_, i64>(1)?,
-                        r.get::<_, String>(2)?,
-                        r.get::<_, String>(3)?,
-                    ))
-                })
-                .map_err(&err)?;
-            for row in rows {
-                let (object, seq, kind, json) = row.map_err(&err)?;
-                let Some(o) = objects.iter_mut().find(|o| i64::from(o.id.0) == object) else {
-                    return Err(StoreError::Row(format!(
-                        "topology of object {object}, which is not kept"
-                    )));
-                };
-                if seq != o.topology.len() as i64 {
-                    return Err(StoreError::Row(format!(
-                        "object {object}'s log skips from {} to {seq}",
-                        o.topology.len()
-                    )));
-                }
-                o.topology.push(decode_event(&kind, &json)?);
-            }
+        drop(rows);
+        drop(st);
+        let mut st = self.conn.prepare(sql::LOAD_TOPOLOGY).map_err(&err)?;
+        let mut rows = st.query([]).map_err(&err)?;
+        while let Some(r) = rows.next().map_err(&err)? {
+            let (kind, json): (String, String) = (r.get(2).map_err(&err)?, r.get(3).map_err(&err)?);
+            rows::push_event(
+                &mut objects,
+                r.get(0).map_err(&err)?,
+                r.get(1).map_err(&err)?,
+                &kind,
+                &json,
+            )?;
         }
+        drop(rows);
+        drop(st);
         let mut retained = Vec::new();
-        {
-            let mut st = self
-                .conn
-                .prepare("SELECT kind, object, origin, seq, delivery, payload FROM retained ORDER BY kind, object")
-                .map_err(&err)?;
-            let rows = st
-                .query_map([], |r| {
-                    Ok((
-                        r.get::<_, i64>(0)?,
-                        r.get::<_, i64>(1)?,
-                        r.get::<_, i64>(2)?,
-                        r.get::<_, i64>(3)?,
-                        r.get::<_, String>(4)?,
-                        r.get::<_, Vec<u8>>(5)?,
-                    ))
-                })
-                .map_err(&err)?;
-            for row in rows {
-                let (kind, object, origin, seq, delivery, payload) = row.map_err(&err)?;
-                let kind = u16::try_from(kind)
-                    .map_err(|_| StoreError::Row(format!("message kind {kind}")))?;
-                let seq = u32::try_from(seq)
-                    .map_err(|_| StoreError::Row(format!("message seq {seq}")))?;
-                let delivery = match (delivery.as_str(), u32::try_from(object)) {
-                    ("retained", _) => Delivery::Retained,
-                    ("per-object", Ok(o)) => Delivery::ObjectState(NetId(o)),
-                    (d, _) => {
-                        return Err(StoreError::Row(format!("retained message delivery {d:?}")))
-                    }
-                };
-                retained.push(AppMessage {
-                    origin: PeerId(origin as u64),
-                    seq,
-                    kind: MessageKind(kind),
-                    to: MessageTarget::Everyone,
-                    delivery,
-                    payload,
-                });
-            }
+        let mut st = self.conn.prepare(sql::LOAD_RETAINED).map_err(&err)?;
+        let mut rows = st.query([]).map_err(&err)?;
+        while let Some(r) = rows.next().map_err(&err)? {
+            let delivery: String = r.get(4).map_err(&err)?;
+            retained.push(rows::retained(
+                r.get(0).map_err(&err)?,
+                r.get(1).map_err(&err)?,
+                r.get(2).map_err(&err)?,
+                r.get(3).map_err(&err)?,
+                &delivery,
+                r.get(5).map_err(&err)?,
+            )?);
         }
         Ok(RoomImage {
             room_time: Duration::from_micros(room_us),
@@ -445,15 +362,15 @@ impl RoomStore for SqliteStore {
         let room_us = i64::try_from(b.room_time.as_micros()).unwrap_or(i64::MAX);
         let tx = self.conn.transaction().map_err(&err)?;
         if b.full {
-            tx.execute_batch("DELETE FROM objects; DELETE FROM topology; DELETE FROM retained;")
+            tx.execute_batch(&sql::EMPTY_ROOM.join("; "))
                 .map_err(&err)?;
         }
         for id in &b.remove {
-            tx.execute("DELETE FROM objects WHERE id = ?1", [i64::from(id.0)])
+            tx.execute(sql::DROP_OBJECT[0], [i64::from(id.0)])
                 .map_err(&err)?;
-            tx.execute("DELETE FROM topology WHERE object = ?1", [i64::from(id.0)])
+            tx.execute(sql::DROP_OBJECT[1], [i64::from(id.0)])
                 .map_err(&err)?;
-            tx.execute("DELETE FROM retained WHERE object = ?1", [i64::from(id.0)])
+            tx.execute(sql::DROP_OBJECT[2], [i64::from(id.0)])
                 .map_err(&err)?;
         }
         for row in &b.objects {
@@ -467,23 +384,17 @@ impl RoomStore for SqliteStore {
             .map_err(&err)?;
         }
         if let Some(msgs) = &b.retained {
-            tx.execute("DELETE FROM retained", []).map_err(&err)?;
+            tx.execute(sql::EMPTY_RETAINED, []).map_err(&err)?;
             for m in msgs {
-                let object = match m.delivery {
-                    Delivery::ObjectState(o) => i64::from(o.0),
-                    _ => -1,
-                };
+                let object = rows::retained_object(m);
                 tx.execute(
-                    "INSERT INTO retained (kind, object, origin, seq, delivery, payload)
-                     VALUES (?1, ?2, ?3, ?4, ?5, ?6)
-                     ON CONFLICT (kind, object) DO UPDATE SET origin = excluded.origin,
-                       seq = excluded.seq, delivery = excluded.delivery, payload = excluded.payload",
+                    sql::PUT_RETAINED,
                     params![
                         i64::from(m.kind.0),
                         object,
                         m.origin.0 as i64,
                         i64::from(m.seq),
-                        delivery_text(m.delivery),
+                        rows::delivery_text(m.delivery),
                         m.payload
                     ],
                 )
@@ -499,11 +410,7 @@ impl RoomStore for SqliteStore {
 
     fn scene(&mut self, sha256: &str) -> Result<Option<Vec<u8>>, StoreError> {
         self.conn
-            .query_row(
-                "SELECT bundle FROM scenes WHERE sha256 = ?1",
-                [sha256],
-                |r| r.get(0),
-            )
+            .query_row(sql::GET_SCENE, [sha256], |r| r.get(0))
             .optional()
             .map_err(db_err(&self.path))
     }

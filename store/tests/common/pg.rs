@@ -1,0 +1,133 @@
+//! A PostgreSQL server for one test: Debian's package (`.ci/run` installs it), a cluster made
+//! by `initdb` in a scratch folder, listening on a unix socket only (no TCP), run as the
+//! `postgres` user (PostgreSQL refuses to run as root, and CI runs as root), stopped and
+//! removed when the guard goes.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// A running server and the database `room` in it.
+pub struct PgServer {
+    dir: PathBuf,
+    bin: PathBuf,
+    child: Option<Child>,
+    /// `postgresql://postgres@/room?host=SOCKET_DIR`.
+    pub url: String,
+}
+
+fn bin_dir() -> PathBuf {
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir("/usr/lib/postgresql")
+        .map(|r| {
+            r.filter_map(|e| e.ok())
+                .map(|e| e.path().join("bin"))
+                .collect()
+        })
+        .unwrap_or_default();
+    dirs.retain(|d| d.join("initdb").exists());
+    dirs.sort();
+    dirs.pop()
+        .expect("PostgreSQL is not installed (Debian's postgresql package; .ci/run installs it)")
+}
+
+fn as_postgres(bin: &Path, program: &str) -> Command {
+    let mut c = Command::new("runuser");
+    c.args(["-u", "postgres", "--"]).arg(bin.join(program));
+    c
+}
+
+impl PgServer {
+    /// initdb, start, wait for the socket, create the database.
+    pub fn start(name: &str) -> PgServer {
+        let bin = bin_dir();
+        let dir = std::env::temp_dir().join(format!("softsync-pg-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(dir.join("sock")).unwrap();
+        let ok = Command::new("chown")
+            .args(["-R", "postgres:postgres"])
+            .arg(&dir)
+            .status()
+            .unwrap()
+            .success();
+        assert!(ok, "chown {} to postgres", dir.display());
+        let out = as_postgres(&bin, "initdb")
+            .args(["-A", "trust", "-U", "postgres", "--no-sync", "-D"])
+            .arg(dir.join("data"))
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "initdb: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let mut s = PgServer {
+            url: format!(
+                "postgresql://postgres@/room?host={}",
+                dir.join("sock").display()
+            ),
+            dir,
+            bin,
+            child: None,
+        };
+        s.run();
+        let admin = format!(
+            "postgresql://postgres@/postgres?host={}",
+            s.dir.join("sock").display()
+        );
+        let mut c = postgres::Client::connect(&admin, postgres::NoTls).unwrap();
+        c.batch_execute("CREATE DATABASE room").unwrap();
+        s
+    }
+
+    /// Start (again) on the same cluster and wait until it takes connections.
+    pub fn run(&mut self) {
+        let child = as_postgres(&self.bin, "postgres")
+            .arg("-D")
+            .arg(self.dir.join("data"))
+            .arg("-k")
+            .arg(self.dir.join("sock"))
+            .args(["-c", "listen_addresses=", "-c", "fsync=off"])
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(self.dir.join("server.log")).unwrap())
+            .spawn()
+            .unwrap();
+        self.child = Some(child);
+        let admin = format!(
+            "postgresql://postgres@/postgres?host={}",
+            self.dir.join("sock").display()
+        );
+        let t0 = Instant::now();
+        loop {
+            if postgres::Client::connect(&admin, postgres::NoTls).is_ok() {
+                return;
+            }
+            assert!(
+                t0.elapsed() < Duration::from_secs(30),
+                "PostgreSQL did not start: {}",
+                std::fs::read_to_string(self.dir.join("server.log")).unwrap_or_default()
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    /// Stop the server (fast shutdown: open connections are closed) and wait for it.
+    pub fn stop(&mut self) {
+        if let Some(mut c) = self.child.take() {
+            let _ = as_postgres(&self.bin, "pg_ctl")
+                .args(["stop", "-m", "fast", "-w", "-D"])
+                .arg(self.dir.join("data"))
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .status();
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+impl Drop for PgServer {
+    fn drop(&mut self) {
+        self.stop();
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
