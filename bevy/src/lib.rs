@@ -62,7 +62,7 @@
 
 pub mod connect;
 pub mod glue;
-pub mod keep;
+mod keep;
 pub mod plugin;
 pub mod pump;
 pub mod room;
@@ -70,7 +70,6 @@ mod scene_fetch;
 mod signal_move;
 
 pub use connect::{connect, first_contact, scene_server, ConnectTimes, Connected};
-pub use keep::{Keeper, StoreOptions};
 pub use plugin::{
     AvatarPart, Hand, NetEntities, NetObject, Received, RoomEvent, RoomFailed, RoomStats, SoftBody,
     SoftsyncApp, SoftsyncPlugin, SoftsyncSet,
@@ -81,6 +80,7 @@ pub use scene_fetch::FetchedScene;
 pub use softsync_net as net;
 /// The engine-agnostic peer (scenes, hands, bots, the built-in messages).
 pub use softsync_peer as peer;
+pub use softsync_store::keeper::{Keeper, StoreOptions};
 
 /// What an app on this crate uses most.
 pub mod prelude {

@@ -11,7 +11,6 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use crate::connect::{ConnectTimes, Connected};
-use crate::keep::{Keeper, StoreOptions};
 use crate::scene_fetch::FetchedScene;
 use crate::signal_move::signaling_move;
 use softsync_net::door::{Door, FrontDoor};
@@ -24,6 +23,7 @@ use softsync_net::{
 use softsync_net_matchbox::{MatchboxTransport, SignalServer, TlsIdentity};
 use softsync_peer::messages::SignalingMoved;
 use softsync_peer::{Event, Peer, PeerConfig, PeerError, Scene};
+use softsync_store::keeper::{Keeper, StoreOptions};
 
 /// Milliseconds on this process's wall clock (the `method: auto` probe's timer).
 pub fn wall_ms() -> f64 {
@@ -128,7 +128,7 @@ pub struct RoomOptions {
     /// (it is part of the handshake's digest, so a new host after a migration keeps it).
     /// Default 64, the session's limit.
     pub max_members: usize,
-    /// Keep the room in a store (`crate::keep`): a host reopens the room kept there and
+    /// Keep the room in a store ([`softsync_store::keeper`]): a host reopens the room kept there and
     /// writes it as it runs; a joiner writes it if it becomes host. `None`: not kept.
     pub store: Option<StoreOptions>,
 }

@@ -12,10 +12,14 @@
 //!   parent leaves and its pieces arrive together, so nothing is ever half-applied).
 //! - [`StoreWriter`]: the writes on their own thread; the frame only hands batches over.
 //!
+//! - [`keeper::Keeper`]: a running [`softsync_peer::Peer`]'s room into its store (what the
+//!   `softsync` binary's `--store` runs): looks every 0.1 s, checkpoints every second.
+//!
 //! What is not kept: who owned what, who was in the room, avatars (they belong to their
 //! peers), state in flight.
 
 pub mod codec;
+pub mod keeper;
 mod postgres;
 mod rows;
 pub mod schema;
