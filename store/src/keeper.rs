@@ -203,7 +203,9 @@ impl Keeper {
                 if writer.submit(b).is_err() {
                     self.tracker.resync();
                     if let Some(b) = self.tracker.diff(&image, true) {
-                        // the queue was full: wait for it rather than lose the last state
+                        // the queue was full: wait for it rather than lose the last state (the
+                        // room is leaving: no frame waits)
+                        #[allow(clippy::disallowed_methods)]
                         std::thread::sleep(Duration::from_millis(50));
                         let _ = writer.submit(b);
                     }

@@ -25,6 +25,8 @@ mod rows;
 pub mod schema;
 mod sql;
 mod sqlite;
+#[cfg(feature = "testing")]
+pub mod testing;
 mod tracker;
 mod writer;
 

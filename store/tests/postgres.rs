@@ -4,15 +4,15 @@
 //! server stopped mid-session costs the writes while it is down and nothing else: each
 //! failed write is said, the store keeps its last whole write, and once the server is back
 //! the next write brings the whole room.
-#![allow(clippy::unwrap_used)]
+#![allow(clippy::unwrap_used, clippy::disallowed_methods)]
 
 mod common;
 
 use std::time::Duration;
 
-use common::pg::PgServer;
 use common::*;
 use softsync_net::{ClassId, KeptObject, NetId};
+use softsync_store::testing::PgCluster as PgServer;
 use softsync_store::{PgStore, RoomStore, StoreError, StoreWriter, Tracker};
 
 #[test]

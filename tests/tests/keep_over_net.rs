@@ -111,8 +111,7 @@ fn a_torn_and_cut_room_kept_in_sqlite_reopens_the_same_for_its_host_and_a_new_jo
             .zip(before)
             .map(|(o, _)| {
                 let s = room.nodes[0].peer.shown_state(now, o.id).unwrap();
-                let d = state_distance(&s, &o.state);
-                d
+                state_distance(&s, &o.state)
             })
             .collect()
     };

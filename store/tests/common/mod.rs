@@ -1,8 +1,6 @@
 //! What the store tests share: a room with every kind of event, its identity, a scratch
-//! folder, and a PostgreSQL server of the test's own.
+//! folder.
 #![allow(dead_code, clippy::unwrap_used)]
-
-pub mod pg;
 
 use std::path::PathBuf;
 use std::time::Duration;

@@ -1,14 +1,17 @@
-//! A PostgreSQL server for one test: Debian's package (`.ci/run` installs it), a cluster made
+//! A PostgreSQL server of its own, for a test or a bench (feature `testing`): Debian's package (`.ci/run` installs it), a cluster made
 //! by `initdb` in a scratch folder, listening on a unix socket only (no TCP), run as the
 //! `postgres` user (PostgreSQL refuses to run as root, and CI runs as root), stopped and
 //! removed when the guard goes.
+
+#![allow(clippy::unwrap_used, clippy::disallowed_methods)]
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// A running server and the database `room` in it.
-pub struct PgServer {
+#[derive(Debug)]
+pub struct PgCluster {
     dir: PathBuf,
     bin: PathBuf,
     child: Option<Child>,
@@ -36,9 +39,10 @@ fn as_postgres(bin: &Path, program: &str) -> Command {
     c
 }
 
-impl PgServer {
-    /// initdb, start, wait for the socket, create the database.
-    pub fn start(name: &str) -> PgServer {
+impl PgCluster {
+    /// initdb, start, wait for the socket, create the database `room`. Panics with the reason
+    /// if PostgreSQL is not installed or will not start (a test's or a bench's setup).
+    pub fn start(name: &str) -> PgCluster {
         let bin = bin_dir();
         let dir = std::env::temp_dir().join(format!("softsync-pg-{name}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
@@ -60,7 +64,7 @@ impl PgServer {
             "initdb: {}",
             String::from_utf8_lossy(&out.stderr)
         );
-        let mut s = PgServer {
+        let mut s = PgCluster {
             url: format!(
                 "postgresql://postgres@/room?host={}",
                 dir.join("sock").display()
@@ -125,7 +129,7 @@ impl PgServer {
     }
 }
 
-impl Drop for PgServer {
+impl Drop for PgCluster {
     fn drop(&mut self) {
         self.stop();
         let _ = std::fs::remove_dir_all(&self.dir);
