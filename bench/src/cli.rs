@@ -87,6 +87,30 @@ pub enum Sub {
         #[arg(long, default_value_t = 10.0)]
         seconds: f64,
     },
+    /// The room store, SQLite and PostgreSQL side by side: reopening the thesis room with 100
+    /// tear segments (`RESULT store.reopen`), and the frame-budget room written as it runs
+    /// against the same room unkept, interleaved (`RESULT store.write`). PostgreSQL is a
+    /// cluster of the bench's own (as the postgres user, unix socket) unless --postgres.
+    Store {
+        /// Output directory.
+        #[arg(long, default_value = "docs/results/store")]
+        out: PathBuf,
+        /// A PostgreSQL database to use instead of a cluster of our own (it is emptied).
+        #[arg(long, value_name = "URL")]
+        postgres: Option<String>,
+        /// Rounds of the write bench (each: unkept, SQLite, PostgreSQL).
+        #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u16).range(1..=100))]
+        rounds: u16,
+        /// Seconds measured per run of the write bench (the host stops half-way).
+        #[arg(long, default_value_t = 20.0)]
+        seconds: f64,
+        /// Reopens measured per back end.
+        #[arg(long, default_value_t = 7, value_parser = clap::value_parser!(u16).range(1..=1000))]
+        runs: u16,
+        /// Where the shipped scenes and meshes are (default: the repository's assets/).
+        #[arg(long)]
+        assets: Option<PathBuf>,
+    },
     /// Several hands from several processes on the thesis room's bunny (remote hands): own
     /// response, remote-hand lag, gap, agreement (`RESULT comanip.live`). Run it in a network
     /// namespace (scripts/bench-comanip).

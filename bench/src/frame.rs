@@ -32,6 +32,7 @@ use softsync_net::{
     Transport,
 };
 use softsync_peer::{Event, Peer, PeerConfig, Phase, Scene};
+use softsync_store::keeper::{open_store, Keeper, StoreOptions};
 
 /// The room's fixed step: 90 Hz, a VR headset's frame.
 pub const DT_S: f32 = 1.0 / 90.0;
@@ -62,6 +63,9 @@ pub struct FramePlan {
     /// 30 ms later) gets the wall-clock time it would have in an app. Without it the frames
     /// come faster than real time and a landing waits for its worker.
     pub real_time: bool,
+    /// Keep the room in this store while it runs (`softsync_store::keeper`: the host writes,
+    /// and its heir after the migration); `None`: not kept.
+    pub store: Option<String>,
 }
 
 impl FramePlan {
@@ -75,6 +79,7 @@ impl FramePlan {
             seed: 7,
             assets: assets.to_owned(),
             real_time: true,
+            store: None,
         }
     }
 
@@ -106,6 +111,10 @@ pub struct FrameSample {
     pub phases_s: [f64; 10],
     /// Datagrams out.
     pub transmit_s: f64,
+    /// The peer hosted the room in this frame.
+    pub hosting: bool,
+    /// The store's share of the frame (the keeper's look at the room and its hand-over).
+    pub store_s: f64,
     /// What this frame did that may cost: `topology` (a cut or tear applied), `host` (the
     /// host changed), `cut`/`tear` (asked this frame), joined by `+`.
     pub note: String,
@@ -149,6 +158,8 @@ pub struct FrameReport {
     pub soft_bodies_at_end: usize,
     /// Warnings the peers said.
     pub warnings: Vec<String>,
+    /// What each store writer wrote (the host's, its heir's), when the room was kept.
+    pub store_written: Vec<softsync_store::WriterStatus>,
 }
 
 use crate::wall_s;
@@ -157,10 +168,17 @@ struct Node {
     peer: Peer,
     link: LinkConditioner<HubEndpoint>,
     alive: bool,
+    keeper: Option<Keeper>,
 }
 
 impl Node {
-    fn new(hub: &MemoryHub, me: PeerId, seed: u64, scene: Scene) -> Result<Self, String> {
+    fn new(
+        hub: &MemoryHub,
+        me: PeerId,
+        seed: u64,
+        scene: Scene,
+        store: Option<&str>,
+    ) -> Result<Self, String> {
         let policy = SendPolicy::default();
         let cfg = scene.session_config(policy.clone(), policy.clone(), policy);
         let (session, contact) = if me == HOST {
@@ -180,6 +198,18 @@ impl Node {
             },
             ..PeerConfig::default()
         };
+        let keeper = match (store, me == HOST) {
+            (Some(target), true) => {
+                let opts = StoreOptions {
+                    reset: true,
+                    ..StoreOptions::new(target)
+                };
+                let (writer, _) = open_store(&opts, &scene, session.config())?;
+                Some(Keeper::hosting(opts, writer))
+            }
+            (Some(target), false) => Some(Keeper::joining(StoreOptions::new(target))),
+            (None, _) => None,
+        };
         let mut peer =
             Peer::new(Instant::ZERO, session, contact, scene, config).map_err(|e| e.to_string())?;
         if me == HOST {
@@ -197,6 +227,7 @@ impl Node {
             peer,
             link: LinkConditioner::new(hub.endpoint(me), link),
             alive: true,
+            keeper,
         })
     }
 
@@ -222,6 +253,16 @@ impl Node {
             }
             self.peer.fixed_step(now);
         }
+        let kept = wall_s();
+        let mut said = Vec::new();
+        if let Some(k) = &mut self.keeper {
+            k.tick(now, &self.peer, &mut said);
+        }
+        for e in said {
+            if let Event::Warning(w) = e {
+                warnings.push(format!("{:?}: {w}", self.peer.me()));
+            }
+        }
         let out = wall_s();
         while let Some(t) = self.peer.poll_transmit(now) {
             self.link.send(now, &t);
@@ -244,6 +285,8 @@ impl Node {
             datagrams_s,
             phases_s: self.peer.take_frame_cost().seconds,
             transmit_s: end - out,
+            hosting: self.peer.session().is_host(),
+            store_s: out - kept,
             note: notes.join("+"),
         })
     }
@@ -282,7 +325,13 @@ pub fn run(plan: &FramePlan) -> Result<FrameReport, String> {
     let hub = MemoryHub::new(1200);
     let mut nodes = Vec::new();
     for (i, me) in [HOST, A, B, C].into_iter().enumerate() {
-        nodes.push(Node::new(&hub, me, plan.seed + i as u64, scene.clone())?);
+        nodes.push(Node::new(
+            &hub,
+            me,
+            plan.seed + i as u64,
+            scene.clone(),
+            plan.store.as_deref(),
+        )?);
     }
     let mut report = FrameReport::default();
     let mut now = Instant::ZERO;
@@ -311,6 +360,10 @@ pub fn run(plan: &FramePlan) -> Result<FrameReport, String> {
         let since = t - WARMUP_S;
         if measuring && plan.kill_host_at_s.is_some_and(|k| since >= k) && nodes[0].alive {
             nodes[0].alive = false; // stopped: the others hear nothing more from it
+                                    // its store goes with its process (the file's lock too)
+            if let Some(st) = nodes[0].keeper.take().and_then(|k| k.status()) {
+                report.store_written.push(st);
+            }
         }
         // The ball (the first soft ball spawned) and the holders' grip, once C sees the room.
         if ball.is_none() && t > 1.0 {
@@ -430,6 +483,12 @@ pub fn run(plan: &FramePlan) -> Result<FrameReport, String> {
         .map(|n| n.peer.counters().host_changes)
         .sum();
     report.soft_bodies_at_end = nodes[3].soft_ids(NetId(u32::MAX)).len();
+    for n in &mut nodes {
+        let now_end = now;
+        if let Some(st) = n.keeper.as_mut().and_then(|k| k.finish(now_end, &n.peer)) {
+            report.store_written.push(st);
+        }
+    }
     Ok(report)
 }
 

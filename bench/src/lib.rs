@@ -7,12 +7,15 @@
 //! - [`live`]: rooms of real `softsync` processes on real WebRTC: the thesis's tables, rooms of
 //!   growing size, several hands on one body, a room under attack, signaling behind a load
 //!   balancer, the churn soak; and `method: auto` in one process.
+//! - [`store`]: the room store — reopening a torn room, and what writing it costs the frame,
+//!   SQLite and PostgreSQL side by side.
 //! - [`cli`]: the command line.
 
 pub mod cli;
 pub mod frame;
 pub mod join;
 pub mod live;
+pub mod store;
 
 /// The repository's `assets/` (the shipped scenes and meshes the benches load).
 pub fn assets_dir() -> std::path::PathBuf {

@@ -3,6 +3,7 @@
 //! ```text
 //! softsync-bench frame [--quick]            the frame-budget room, in one process
 //! softsync-bench join [--build L=PATH]...   where a join's time goes
+//! softsync-bench store [--postgres URL]      the room store: reopen, and writing as it runs
 //! softsync-bench net-live | room-load | comanip | abuse | signal-lb | soak | auto
 //! ```
 //! Each writes its CSV, charts and `RESULT` lines under `docs/results/` (or `--out`); the
@@ -19,6 +20,39 @@ use softsync_bench::cli::{Cli, Route, Sub};
 use softsync_bench::frame::{self, FramePlan};
 use softsync_bench::join::{self, JoinPlan};
 use softsync_bench::live;
+
+/// `store`: reopen and write, SQLite and PostgreSQL side by side.
+fn run_store(
+    out: &Path,
+    postgres: Option<String>,
+    rounds: usize,
+    seconds: f64,
+    runs: usize,
+    assets: Option<PathBuf>,
+) -> Result<(), String> {
+    use softsync_bench::store;
+    let assets = assets.unwrap_or_else(softsync_bench::assets_dir);
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let cluster = postgres
+        .is_none()
+        .then(|| softsync_store::testing::PgCluster::start("bench"));
+    let pg =
+        postgres.unwrap_or_else(|| cluster.as_ref().map(|c| c.url.clone()).unwrap_or_default());
+    let sqlite = store::scratch_sqlite("store");
+    let backends: store::Backends =
+        vec![("sqlite", sqlite.display().to_string()), ("postgres", pg)];
+    let mut lines = store::reopen(&assets, &backends, runs, out)?;
+    lines.extend(store::write(&assets, &backends, rounds, seconds, out)?);
+    let text: Vec<String> = lines.iter().map(ToString::to_string).collect();
+    for l in &text {
+        println!("{l}");
+    }
+    std::fs::write(out.join("RESULT.txt"), text.join("\n") + "\n")
+        .map_err(|e| format!("RESULT.txt: {e}"))?;
+    drop(cluster);
+    let _ = std::fs::remove_file(&sqlite);
+    Ok(())
+}
 
 fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
@@ -81,6 +115,14 @@ fn run(bench: Sub) -> Result<bool, String> {
             live::auto(&out, seconds, &assets)?;
         }
         Sub::Comanip { out, quick } => live::comanip(&out, quick)?,
+        Sub::Store {
+            out,
+            postgres,
+            rounds,
+            seconds,
+            runs,
+            assets,
+        } => run_store(&out, postgres, rounds.into(), seconds, runs.into(), assets)?,
         Sub::RoomClock { out, seconds } => live::room_clock(&out, seconds)?,
         Sub::Abuse {
             out,

@@ -125,6 +125,36 @@ pub struct Batch {
 }
 
 impl Batch {
+    /// The bytes of values this batch writes (particles, poses, events, messages): what the
+    /// room costs its store, before the database's own overhead.
+    pub fn payload_bytes(&self) -> usize {
+        let objects: usize = self
+            .objects
+            .iter()
+            .map(|o| 8 + 2 + 7 * 8 + 12 * o.state.particles.len())
+            .sum();
+        let events: usize = self
+            .logs
+            .iter()
+            .map(|(_, c)| match c {
+                LogChange::Append { events, .. } | LogChange::Replace(events) => events
+                    .iter()
+                    .map(|e| {
+                        let (k, j) = codec::encode_event(e);
+                        16 + k.len() + j.len()
+                    })
+                    .sum::<usize>(),
+            })
+            .sum();
+        let retained: usize = self
+            .retained
+            .iter()
+            .flatten()
+            .map(|m| 40 + m.payload.len())
+            .sum();
+        objects + events + retained + 8 * self.remove.len()
+    }
+
     /// Topology entries and objects added or removed (the "events" of a write).
     pub fn events(&self) -> usize {
         self.remove.len()

@@ -24,6 +24,8 @@ pub struct WriterStatus {
     pub events: u64,
     /// Object rows written.
     pub rows: u64,
+    /// Payload bytes written ([`Batch::payload_bytes`]).
+    pub bytes: u64,
     /// Checkpoints written.
     pub checkpoints: u64,
     /// Writes that failed.
@@ -77,6 +79,7 @@ impl StoreWriter {
                             s.written += 1;
                             s.events += b.events() as u64;
                             s.rows += b.objects.len() as u64;
+                            s.bytes += b.payload_bytes() as u64;
                             s.checkpoints += u64::from(b.checkpoint);
                             s.error = None;
                             s.last_room_time = b.room_time;
