@@ -133,6 +133,123 @@ pub fn decode_particles(b: &[u8]) -> Result<Vec<Vec3>, StoreError> {
     Ok(out)
 }
 
+/// `b` as lowercase hex.
+pub fn hex(b: &[u8]) -> String {
+    b.iter().map(|x| format!("{x:02x}")).collect()
+}
+
+/// Hex back to bytes.
+pub fn unhex(s: &str) -> Result<Vec<u8>, StoreError> {
+    if s.len() % 2 != 0 || !s.is_ascii() {
+        return Err(StoreError::Row(format!("{} hex digits", s.len())));
+    }
+    (0..s.len() / 2)
+        .map(|i| {
+            u8::from_str_radix(&s[2 * i..2 * i + 2], 16)
+                .map_err(|_| StoreError::Row(format!("not hex: {:?}", &s[2 * i..2 * i + 2])))
+        })
+        .collect()
+}
+
+/// A room image as JSON (a recording's start): objects with their logs in the event row
+/// form, retained messages with hex payloads.
+pub fn image_to_json(image: &softsync_net::RoomImage) -> String {
+    use serde_json::json;
+    let objects: Vec<serde_json::Value> = image
+        .objects
+        .iter()
+        .map(|o| {
+            let log: Vec<serde_json::Value> = o
+                .topology
+                .iter()
+                .map(|e| {
+                    let (k, j) = encode_event(e);
+                    json!([k, j])
+                })
+                .collect();
+            json!({
+                "id": o.id.0, "class": o.class.0,
+                "pos": o.state.pos.to_array(), "rot": o.state.rot.to_array(),
+                "particles": hex(&encode_particles(&o.state.particles)),
+                "log": log,
+            })
+        })
+        .collect();
+    let retained: Vec<serde_json::Value> = image
+        .retained
+        .iter()
+        .map(|m| {
+            json!({
+                "kind": m.kind.0, "object": crate::rows::retained_object(m), "origin": m.origin.0,
+                "seq": m.seq, "delivery": crate::rows::delivery_text(m.delivery),
+                "payload": hex(&m.payload),
+            })
+        })
+        .collect();
+    json!({"room_us": image.room_time.as_micros() as u64, "objects": objects, "retained": retained})
+        .to_string()
+}
+
+/// [`image_to_json`] back.
+pub fn image_from_json(text: &str) -> Result<softsync_net::RoomImage, StoreError> {
+    use softsync_net::{ClassId, KeptObject, NetId, ObjectState};
+    let bad = |what: &str| StoreError::Row(format!("recording image: {what}"));
+    let v: serde_json::Value = serde_json::from_str(text).map_err(|e| bad(&e.to_string()))?;
+    let num = |v: &serde_json::Value, k: &str| v[k].as_u64().ok_or_else(|| bad(k));
+    let floats = |v: &serde_json::Value, k: &str, n: usize| -> Result<Vec<f32>, StoreError> {
+        let a = v[k].as_array().ok_or_else(|| bad(k))?;
+        let f: Vec<f32> = a
+            .iter()
+            .filter_map(|x| x.as_f64())
+            .map(|x| x as f32)
+            .collect();
+        if f.len() != n || f.iter().any(|x| !x.is_finite()) {
+            return Err(bad(k));
+        }
+        Ok(f)
+    };
+    let mut objects = Vec::new();
+    for o in v["objects"].as_array().ok_or_else(|| bad("objects"))? {
+        let p = floats(o, "pos", 3)?;
+        let q = floats(o, "rot", 4)?;
+        let mut topology = Vec::new();
+        for e in o["log"].as_array().ok_or_else(|| bad("log"))? {
+            let (Some(k), Some(j)) = (e[0].as_str(), e[1].as_str()) else {
+                return Err(bad("log entry"));
+            };
+            topology.push(decode_event(k, j)?);
+        }
+        objects.push(KeptObject {
+            id: NetId(u32::try_from(num(o, "id")?).map_err(|_| bad("id"))?),
+            class: ClassId(u16::try_from(num(o, "class")?).map_err(|_| bad("class"))?),
+            state: ObjectState {
+                pos: Vec3::new(p[0], p[1], p[2]),
+                rot: glam::Quat::from_xyzw(q[0], q[1], q[2], q[3]),
+                particles: decode_particles(&unhex(
+                    o["particles"].as_str().ok_or_else(|| bad("particles"))?,
+                )?)?,
+            },
+            topology,
+        });
+    }
+    let mut retained = Vec::new();
+    for m in v["retained"].as_array().ok_or_else(|| bad("retained"))? {
+        retained.push(crate::rows::retained(
+            m["kind"].as_i64().ok_or_else(|| bad("kind"))?,
+            m["object"].as_i64().ok_or_else(|| bad("object"))?,
+            m["origin"].as_u64().ok_or_else(|| bad("origin"))? as i64,
+            m["seq"].as_i64().ok_or_else(|| bad("seq"))?,
+            m["delivery"].as_str().ok_or_else(|| bad("delivery"))?,
+            unhex(m["payload"].as_str().ok_or_else(|| bad("payload"))?)?,
+        )?);
+    }
+    Ok(softsync_net::RoomImage {
+        room_time: std::time::Duration::from_micros(num(&v, "room_us")?),
+        objects,
+        retained,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

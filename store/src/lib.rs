@@ -19,8 +19,10 @@
 //! peers), state in flight.
 
 pub mod codec;
+mod db;
 pub mod keeper;
 mod postgres;
+pub mod record;
 mod rows;
 pub mod schema;
 mod sql;
@@ -122,6 +124,8 @@ pub struct Batch {
     pub room_time: Duration,
     /// A checkpoint: every object's state is written as of `room_time`.
     pub checkpoint: bool,
+    /// What this write adds to a recording of the session (`--record`).
+    pub record: Option<record::RecordBatch>,
 }
 
 impl Batch {
@@ -152,7 +156,14 @@ impl Batch {
             .flatten()
             .map(|m| 40 + m.payload.len())
             .sum();
-        objects + events + retained + 8 * self.remove.len()
+        objects
+            + events
+            + retained
+            + 8 * self.remove.len()
+            + self
+                .record
+                .as_ref()
+                .map_or(0, record::RecordBatch::payload_bytes)
     }
 
     /// Topology entries and objects added or removed (the "events" of a write).
@@ -247,6 +258,45 @@ pub trait RoomStore: Send {
 
     /// The scene bundle kept under `sha256`.
     fn scene(&mut self, sha256: &str) -> Result<Option<Vec<u8>>, StoreError>;
+
+    /// Every recorded session, oldest first.
+    fn recordings(&mut self) -> Result<Vec<record::RecordingInfo>, StoreError>;
+
+    /// Recording `id`: what it is and the room at its start.
+    fn recording(&mut self, id: i64) -> Result<Option<record::Recording>, StoreError>;
+
+    /// Recording `id`'s events with `from_us <= room time < to_us`, in order.
+    fn recording_events(
+        &mut self,
+        id: i64,
+        from_us: u64,
+        to_us: u64,
+    ) -> Result<Vec<record::RecEvent>, StoreError>;
+
+    /// Every object's state at room time `t_us` of recording `id` (interpolated between the
+    /// recorded states around it).
+    fn recording_state_at(
+        &mut self,
+        id: i64,
+        t_us: u64,
+    ) -> Result<Vec<record::RecState>, StoreError>;
+
+    /// Delete recording `id`; false if there was none. The room's state stays.
+    fn delete_recording(&mut self, id: i64) -> Result<bool, StoreError>;
+}
+
+/// Delete every recording that started before `before_unix_ms`; their ids.
+pub fn prune_recordings(
+    store: &mut dyn RoomStore,
+    before_unix_ms: i64,
+) -> Result<Vec<i64>, StoreError> {
+    let mut gone = Vec::new();
+    for r in store.recordings()? {
+        if r.started_unix_ms < before_unix_ms && store.delete_recording(r.id)? {
+            gone.push(r.id);
+        }
+    }
+    Ok(gone)
 }
 
 /// Open the store `target`: a `postgres://` or `postgresql://` URL ([`PgStore`]), or else a

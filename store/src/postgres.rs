@@ -41,7 +41,7 @@ impl std::fmt::Debug for PgStore {
     }
 }
 
-fn db_err(target: &str) -> impl Fn(postgres::Error) -> StoreError + '_ {
+pub(crate) fn db_err(target: &str) -> impl Fn(postgres::Error) -> StoreError + '_ {
     move |e| {
         let what = match e.as_db_error() {
             Some(d) => format!("{} ({})", d.message(), d.code().code()),
@@ -399,7 +399,13 @@ impl RoomStore for PgStore {
                     .map_err(&err)?;
             }
         }
-        set_meta(&mut tx, "room_time_us", &room_us.to_string()).map_err(&err)?;
+        if let Some(r) = &b.record {
+            crate::record::write(&mut crate::db::Pg(&mut tx, &self.target), r)?;
+        }
+        // a batch with no room time (a recording's alone) leaves the room's
+        if room_us > 0 {
+            set_meta(&mut tx, "room_time_us", &room_us.to_string()).map_err(&err)?;
+        }
         if b.checkpoint {
             set_meta(&mut tx, "checkpoint_room_time_us", &room_us.to_string()).map_err(&err)?;
         }
@@ -411,6 +417,40 @@ impl RoomStore for PgStore {
             .query_opt(&numbered(sql::GET_SCENE), &[&sha256])
             .and_then(|r| r.map(|r| r.try_get(0)).transpose())
             .map_err(db_err(&self.target))
+    }
+
+    fn recordings(&mut self) -> Result<Vec<crate::record::RecordingInfo>, StoreError> {
+        crate::record::list(&mut crate::db::Pg(&mut self.client, &self.target))
+    }
+
+    fn recording(&mut self, id: i64) -> Result<Option<crate::record::Recording>, StoreError> {
+        crate::record::open(&mut crate::db::Pg(&mut self.client, &self.target), id)
+    }
+
+    fn recording_events(
+        &mut self,
+        id: i64,
+        from_us: u64,
+        to_us: u64,
+    ) -> Result<Vec<crate::record::RecEvent>, StoreError> {
+        crate::record::events(
+            &mut crate::db::Pg(&mut self.client, &self.target),
+            id,
+            from_us,
+            to_us,
+        )
+    }
+
+    fn recording_state_at(
+        &mut self,
+        id: i64,
+        t_us: u64,
+    ) -> Result<Vec<crate::record::RecState>, StoreError> {
+        crate::record::state_at(&mut crate::db::Pg(&mut self.client, &self.target), id, t_us)
+    }
+
+    fn delete_recording(&mut self, id: i64) -> Result<bool, StoreError> {
+        crate::record::delete(&mut crate::db::Pg(&mut self.client, &self.target), id)
     }
 }
 

@@ -11,9 +11,12 @@
 //! | `objects` | `id`, `class`, pose (`px py pz qx qy qz qw`), `particles` (blob of f32 triples), `state_room_us` (room time of the state) |
 //! | `topology` | `object`, `seq`, `kind`, `event` (JSON; [`crate::codec`]) |
 //! | `retained` | `kind`, `object` (-1: room-wide), `origin`, `seq`, `delivery`, `payload` |
+//! | `recordings` (v2) | `id` (its start, Unix ms), `started_unix_ms`, `start_room_us`, `end_room_us`, `host`, `image` (the room at the start, JSON: [`crate::codec::image_to_json`]) |
+//! | `record_events` (v2) | `recording`, `n` (order), `room_us`, `kind`, `peer`, `object`, `data` (JSON) |
+//! | `record_states` (v2) | `recording`, `object`, `room_us`, `class`, pose, `particles`: the shown state when it changed, at the replication rate |
 
 /// The schema this build writes.
-pub const SCHEMA_VERSION: u32 = 1;
+pub const SCHEMA_VERSION: u32 = 2;
 
 /// The placeholder for the blob type in [`MIGRATIONS`].
 pub const BLOB_TYPE: &str = "{BLOB}";
@@ -36,6 +39,23 @@ pub const MIGRATIONS: &[&str] = &[
         kind BIGINT NOT NULL, object BIGINT NOT NULL, origin BIGINT NOT NULL, seq BIGINT NOT NULL,
         delivery TEXT NOT NULL, payload {BLOB} NOT NULL,
         PRIMARY KEY (kind, object));",
+    // 1 → 2: recorded sessions (`record.rs`): each recording's start (the room then, as
+    // JSON), its events in order, the objects' shown states over time
+    "CREATE TABLE recordings (
+        id BIGINT PRIMARY KEY, started_unix_ms BIGINT NOT NULL, start_room_us BIGINT NOT NULL,
+        end_room_us BIGINT NOT NULL, host BIGINT NOT NULL, image TEXT NOT NULL);
+     CREATE TABLE record_events (
+        recording BIGINT NOT NULL, n BIGINT NOT NULL, room_us BIGINT NOT NULL,
+        kind TEXT NOT NULL, peer BIGINT, object BIGINT, data TEXT NOT NULL,
+        PRIMARY KEY (recording, n));
+     CREATE INDEX record_events_time ON record_events (recording, room_us);
+     CREATE TABLE record_states (
+        recording BIGINT NOT NULL, object BIGINT NOT NULL, room_us BIGINT NOT NULL,
+        class BIGINT NOT NULL,
+        px DOUBLE PRECISION NOT NULL, py DOUBLE PRECISION NOT NULL, pz DOUBLE PRECISION NOT NULL,
+        qx DOUBLE PRECISION NOT NULL, qy DOUBLE PRECISION NOT NULL, qz DOUBLE PRECISION NOT NULL,
+        qw DOUBLE PRECISION NOT NULL, particles {BLOB} NOT NULL,
+        PRIMARY KEY (recording, object, room_us));",
 ];
 
 /// Migration `k`'s SQL with the back end's blob type.

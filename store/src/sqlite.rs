@@ -33,7 +33,7 @@ impl std::fmt::Debug for SqliteStore {
     }
 }
 
-fn db_err(path: &Path) -> impl Fn(rusqlite::Error) -> StoreError + '_ {
+pub(crate) fn db_err(path: &Path) -> impl Fn(rusqlite::Error) -> StoreError + '_ {
     move |e| {
         let what = match &e {
             rusqlite::Error::SqliteFailure(f, _) if f.code == rusqlite::ErrorCode::DatabaseBusy => {
@@ -401,7 +401,13 @@ impl RoomStore for SqliteStore {
                 .map_err(&err)?;
             }
         }
-        set_meta(&tx, "room_time_us", &room_us.to_string()).map_err(&err)?;
+        if let Some(r) = &b.record {
+            crate::record::write(&mut crate::db::Lite(&tx, &self.path), r)?;
+        }
+        // a batch with no room time (a recording's alone) leaves the room's
+        if room_us > 0 {
+            set_meta(&tx, "room_time_us", &room_us.to_string()).map_err(&err)?;
+        }
         if b.checkpoint {
             set_meta(&tx, "checkpoint_room_time_us", &room_us.to_string()).map_err(&err)?;
         }
@@ -413,5 +419,39 @@ impl RoomStore for SqliteStore {
             .query_row(sql::GET_SCENE, [sha256], |r| r.get(0))
             .optional()
             .map_err(db_err(&self.path))
+    }
+
+    fn recordings(&mut self) -> Result<Vec<crate::record::RecordingInfo>, StoreError> {
+        crate::record::list(&mut crate::db::Lite(&self.conn, &self.path))
+    }
+
+    fn recording(&mut self, id: i64) -> Result<Option<crate::record::Recording>, StoreError> {
+        crate::record::open(&mut crate::db::Lite(&self.conn, &self.path), id)
+    }
+
+    fn recording_events(
+        &mut self,
+        id: i64,
+        from_us: u64,
+        to_us: u64,
+    ) -> Result<Vec<crate::record::RecEvent>, StoreError> {
+        crate::record::events(
+            &mut crate::db::Lite(&self.conn, &self.path),
+            id,
+            from_us,
+            to_us,
+        )
+    }
+
+    fn recording_state_at(
+        &mut self,
+        id: i64,
+        t_us: u64,
+    ) -> Result<Vec<crate::record::RecState>, StoreError> {
+        crate::record::state_at(&mut crate::db::Lite(&self.conn, &self.path), id, t_us)
+    }
+
+    fn delete_recording(&mut self, id: i64) -> Result<bool, StoreError> {
+        crate::record::delete(&mut crate::db::Lite(&self.conn, &self.path), id)
     }
 }

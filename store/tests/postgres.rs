@@ -96,3 +96,52 @@ fn a_server_stopped_mid_session_costs_only_the_writes_while_it_is_down() {
         "the room is whole again after the server came back"
     );
 }
+
+#[test]
+fn a_postgres_store_of_the_previous_schema_is_migrated_and_records() {
+    let pg = PgServer::start("migrate");
+    {
+        let mut s = PgStore::open(&pg.url).unwrap();
+        s.begin(&identity(), b"bundle", false).unwrap();
+        s.write(&Tracker::new().diff(&room(), true).unwrap())
+            .unwrap();
+        s.execute_raw(
+            "DROP TABLE recordings; DROP TABLE record_events; DROP TABLE record_states;
+             UPDATE meta SET value = '1' WHERE key = 'schema_version';",
+        )
+        .unwrap();
+    }
+    let mut s = PgStore::open(&pg.url).unwrap();
+    assert_eq!(s.info().migrated_from, 1);
+    assert_eq!(s.load().unwrap(), room());
+    let b = softsync_store::record::RecordBatch {
+        recording: 42,
+        start: Some(softsync_store::record::RecStart {
+            id: 42,
+            room_us: 10,
+            host: 1,
+            image: room(),
+        }),
+        states: vec![softsync_store::record::RecState {
+            room_us: 10,
+            object: NetId(5),
+            class: ClassId(1),
+            state: soft(0.3, 12),
+        }],
+        end_us: 20,
+        ..Default::default()
+    };
+    s.write(&softsync_store::Batch {
+        record: Some(b),
+        ..Default::default()
+    })
+    .unwrap();
+    let list = s.recordings().unwrap();
+    assert_eq!((list.len(), list[0].states), (1, 1));
+    assert_eq!(s.recording(42).unwrap().unwrap().image, room());
+    assert_eq!(
+        s.recording_state_at(42, 15).unwrap()[0].state,
+        soft(0.3, 12)
+    );
+    assert!(s.delete_recording(42).unwrap());
+}

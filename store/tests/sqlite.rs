@@ -91,7 +91,7 @@ fn a_newer_schema_is_refused_and_a_foreign_database_is_named() {
             e,
             StoreError::Newer {
                 found: 99,
-                known: 1
+                known: 2
             }
         ),
         "{e}"
@@ -240,4 +240,107 @@ fn a_full_disk_fails_the_write_whole_and_keeps_what_was_written() {
         let want = r.objects.iter().find(|w| w.id == o.id).unwrap();
         assert_eq!(o, want, "object {:?} half-written", o.id);
     }
+}
+
+#[test]
+fn a_store_of_the_previous_schema_is_migrated_and_keeps_its_room() {
+    let d = temp_dir("migrate");
+    let path = d.join("room.db");
+    {
+        let mut s = SqliteStore::open(&path).unwrap();
+        write_room(&mut s, &room());
+        // what version 1 was: the same room tables, no recordings
+        s.execute_raw(
+            "DROP TABLE recordings; DROP TABLE record_events; DROP TABLE record_states;
+             UPDATE meta SET value = '1' WHERE key = 'schema_version';",
+        )
+        .unwrap();
+    }
+    let mut s = SqliteStore::open(&path).unwrap();
+    let info = s.info();
+    assert_eq!((info.migrated_from, info.schema_version), (1, 2));
+    assert_eq!(s.load().unwrap(), room());
+    assert!(s.recordings().unwrap().is_empty());
+    drop(s);
+    assert_eq!(SqliteStore::open(&path).unwrap().info().migrated_from, 2);
+}
+
+#[test]
+fn a_recording_round_trips_is_read_at_any_time_and_is_deleted_alone() {
+    use softsync_store::record::{RecEvent, RecStart, RecState, RecordBatch};
+    let d = temp_dir("record");
+    let mut s = SqliteStore::open(&d.join("room.db")).unwrap();
+    write_room(&mut s, &room());
+    let state = |t: u64, x: f32| RecState {
+        room_us: t,
+        object: NetId(5),
+        class: ClassId(1),
+        state: soft(x, 40),
+    };
+    let ev = |t: u64, kind: &str, object: Option<u32>| RecEvent {
+        room_us: t,
+        kind: kind.into(),
+        peer: Some(9),
+        object,
+        data: "{}".into(),
+    };
+    let first = RecordBatch {
+        recording: 1_700_000_000_000,
+        start: Some(RecStart {
+            id: 1_700_000_000_000,
+            room_us: 1_000_000,
+            host: 9,
+            image: room(),
+        }),
+        events: vec![ev(1_000_000, "join", None), ev(1_100_000, "tear", Some(5))],
+        first_n: 0,
+        states: vec![state(1_000_000, 0.0), state(1_200_000, 0.2)],
+        end_us: 1_200_000,
+    };
+    let second = RecordBatch {
+        recording: first.recording,
+        events: vec![ev(1_300_000, "gone", Some(5))],
+        first_n: 2,
+        end_us: 1_400_000,
+        ..Default::default()
+    };
+    for b in [first.clone(), second] {
+        s.write(&softsync_store::Batch {
+            record: Some(b),
+            ..Default::default()
+        })
+        .unwrap();
+    }
+    let list = s.recordings().unwrap();
+    assert_eq!(list.len(), 1);
+    assert_eq!(
+        (list[0].events, list[0].states, list[0].end_us),
+        (3, 2, 1_400_000)
+    );
+    let r = s.recording(first.recording).unwrap().unwrap();
+    assert_eq!(r.image, room());
+    let evs = s.recording_events(r.info.id, 1_050_000, u64::MAX).unwrap();
+    assert_eq!(
+        evs.iter().map(|e| e.kind.as_str()).collect::<Vec<_>>(),
+        ["tear", "gone"]
+    );
+    // half-way between two states: interpolated; after `gone`: not there
+    let at = s.recording_state_at(r.info.id, 1_100_000).unwrap();
+    assert_eq!(at.len(), 1);
+    assert!(
+        (at[0].state.pos.x - 0.1).abs() < 1e-5,
+        "{:?}",
+        at[0].state.pos
+    );
+    assert!(s
+        .recording_state_at(r.info.id, 1_350_000)
+        .unwrap()
+        .is_empty());
+    // deleting it leaves the room
+    assert_eq!(
+        softsync_store::prune_recordings(&mut s, 1_700_000_000_001).unwrap(),
+        vec![first.recording]
+    );
+    assert!(s.recordings().unwrap().is_empty());
+    assert_eq!(s.load().unwrap(), room());
 }
