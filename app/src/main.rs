@@ -8,6 +8,7 @@ mod cli;
 mod desktop;
 mod driver;
 mod plugins;
+mod replay;
 mod report;
 mod rollback;
 mod stderr_log;
@@ -39,13 +40,13 @@ use crate::driver::{Driver, JoinTimeline};
 use crate::plugins::ReportPlugin;
 
 /// A failure with its exit code.
-struct Failure {
+pub(crate) struct Failure {
     code: u8,
     msg: String,
 }
 
 impl Failure {
-    fn usage(msg: impl std::fmt::Display) -> Self {
+    pub(crate) fn usage(msg: impl std::fmt::Display) -> Self {
         Failure {
             code: 2,
             msg: msg.to_string(),
@@ -57,7 +58,7 @@ impl Failure {
             msg: msg.to_string(),
         }
     }
-    fn runtime(msg: impl std::fmt::Display) -> Self {
+    pub(crate) fn runtime(msg: impl std::fmt::Display) -> Self {
         Failure {
             code: 1,
             msg: msg.to_string(),
@@ -106,6 +107,8 @@ fn run(args: &[String]) -> Result<ExitCode, Failure> {
             },
         ),
         Command::Peer(p) => peer(*p),
+        Command::Replay(r) => replay::replay(r),
+        Command::Store(a) => replay::store(a),
         Command::Token {
             room,
             room_key_file,

@@ -256,7 +256,7 @@ impl Node {
         let kept = wall_s();
         let mut said = Vec::new();
         if let Some(k) = &mut self.keeper {
-            k.tick(now, &self.peer, &mut said);
+            k.tick(now, &mut self.peer, &mut said);
         }
         for e in said {
             if let Event::Warning(w) = e {

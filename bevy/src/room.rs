@@ -618,6 +618,9 @@ impl Room {
                 }
                 _ => {}
             }
+            if let Some(k) = &mut self.keeper {
+                k.observe(now, &self.peer, &e);
+            }
             self.events.push(e);
         }
     }
@@ -726,7 +729,7 @@ impl Room {
         self.flush();
         self.take_events(now);
         if let Some(k) = &mut self.keeper {
-            k.tick(now, &self.peer, &mut self.events);
+            k.tick(now, &mut self.peer, &mut self.events);
         }
     }
 

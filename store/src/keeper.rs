@@ -33,6 +33,12 @@ pub struct StoreOptions {
     pub checkpoint: Duration,
     /// How often the room is looked at for topology changes, arrivals and departures.
     pub flush: Duration,
+    /// Record the session for review (`crate::record`): its events and the objects' shown
+    /// states, while this peer hosts.
+    pub record: bool,
+    /// Delete recordings older than this when the store opens (recordings of people are
+    /// personal data); `None`: keep them.
+    pub keep_recordings: Option<Duration>,
 }
 
 impl StoreOptions {
@@ -43,6 +49,8 @@ impl StoreOptions {
             reset: false,
             checkpoint: Duration::from_secs(1),
             flush: Duration::from_millis(100),
+            record: false,
+            keep_recordings: None,
         }
     }
 }
@@ -66,6 +74,13 @@ pub fn open_store(
     store
         .begin(&id, &bundle, opts.reset)
         .map_err(|e| e.to_string())?;
+    if let Some(keep) = opts.keep_recordings {
+        let now_ms = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_millis() as i64);
+        crate::prune_recordings(store.as_mut(), now_ms - keep.as_millis() as i64)
+            .map_err(|e| e.to_string())?;
+    }
     let image = store.load().map_err(|e| e.to_string())?;
     let kept = (!image.objects.is_empty() || !image.retained.is_empty()).then_some(image);
     Ok((StoreWriter::spawn(store), kept))
@@ -82,6 +97,8 @@ pub struct Keeper {
     unreachable: bool,
     /// The last error said (each said once).
     said: Option<String>,
+    /// The session's recording, with `record`.
+    recorder: Option<crate::recorder::Recorder>,
 }
 
 impl std::fmt::Debug for Keeper {
@@ -104,6 +121,7 @@ impl Keeper {
     /// A keeper for a joiner: it opens the store if it becomes host.
     pub fn joining(opts: StoreOptions) -> Self {
         Keeper {
+            recorder: opts.record.then(crate::recorder::Recorder::new),
             opts,
             writer: None,
             tracker: Tracker::new(),
@@ -133,9 +151,12 @@ impl Keeper {
 
     /// Called each frame: when hosting, look at the room every `flush` and hand what changed
     /// to the writer (every `checkpoint`, the states too).
-    pub fn tick(&mut self, now: Instant, peer: &Peer, events: &mut Vec<Event>) {
+    pub fn tick(&mut self, now: Instant, peer: &mut Peer, events: &mut Vec<Event>) {
         if !peer.session().is_host() || self.unreachable {
             return;
+        }
+        if let (Some(r), true) = (&mut self.recorder, self.writer.is_some()) {
+            r.sample(now, peer);
         }
         if self.last_look.is_some_and(|t| now < t + self.opts.flush) {
             return;
@@ -183,14 +204,41 @@ impl Keeper {
             .last_checkpoint
             .is_none_or(|t| now >= t + self.opts.checkpoint);
         let image = peer.room_image(now);
-        if let Some(batch) = self.tracker.diff(&image, checkpoint) {
-            if checkpoint {
-                self.last_checkpoint = Some(now);
+        let room = self.tracker.diff(&image, checkpoint);
+        if room.as_ref().is_some_and(|b| b.checkpoint) {
+            self.last_checkpoint = Some(now);
+        }
+        let record = self
+            .recorder
+            .as_mut()
+            .and_then(crate::recorder::Recorder::take);
+        let batch = match (room, record) {
+            (Some(mut b), r) => {
+                b.record = r;
+                b
             }
-            if writer.submit(batch).is_err() {
-                // the writer is behind: the next batch carries the whole room
-                self.tracker.resync();
+            (None, Some(r)) => crate::Batch {
+                record: Some(r),
+                room_time: image.room_time,
+                ..Default::default()
+            },
+            (None, None) => return,
+        };
+        if let Err(b) = writer.submit(batch) {
+            // the writer is behind: the next batch carries the whole room, and the recording
+            // goes with it
+            self.tracker.resync();
+            if let (Some(r), Some(rec)) = (&mut self.recorder, b.record) {
+                r.give_back(rec);
             }
+        }
+    }
+
+    /// One of the peer's events (the room calls this for each): recorded, while we host a
+    /// recorded session.
+    pub fn observe(&mut self, now: Instant, peer: &Peer, e: &Event) {
+        if let (Some(r), true) = (&mut self.recorder, peer.session().is_host()) {
+            r.observe(now, peer, e);
         }
     }
 
@@ -199,7 +247,11 @@ impl Keeper {
         let writer = self.writer.take()?;
         if peer.session().is_host() {
             let image = peer.room_image(now);
-            if let Some(b) = self.tracker.diff(&image, true) {
+            if let Some(mut b) = self.tracker.diff(&image, true) {
+                b.record = self
+                    .recorder
+                    .as_mut()
+                    .and_then(crate::recorder::Recorder::take);
                 if writer.submit(b).is_err() {
                     self.tracker.resync();
                     if let Some(b) = self.tracker.diff(&image, true) {

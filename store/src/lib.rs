@@ -23,6 +23,7 @@ mod db;
 pub mod keeper;
 mod postgres;
 pub mod record;
+mod recorder;
 mod rows;
 pub mod schema;
 mod sql;
@@ -279,6 +280,14 @@ pub trait RoomStore: Send {
         &mut self,
         id: i64,
         t_us: u64,
+    ) -> Result<Vec<record::RecState>, StoreError>;
+
+    /// Recording `id`'s recorded states with `from_us <= room time < to_us` (an export).
+    fn recording_states(
+        &mut self,
+        id: i64,
+        from_us: u64,
+        to_us: u64,
     ) -> Result<Vec<record::RecState>, StoreError>;
 
     /// Delete recording `id`; false if there was none. The room's state stays.

@@ -305,6 +305,27 @@ pub(crate) fn events(
     .collect()
 }
 
+/// Recording `id`'s recorded states with `from_us <= room_us < to_us`, by time then object.
+pub(crate) fn states(
+    db: &mut dyn Sql,
+    id: i64,
+    from_us: u64,
+    to_us: u64,
+) -> Result<Vec<RecState>, StoreError> {
+    db.rows(
+        "SELECT object, class, px, py, pz, qx, qy, qz, qw, particles, room_us FROM record_states
+         WHERE recording = ?1 AND room_us >= ?2 AND room_us < ?3 ORDER BY room_us, object",
+        &[
+            V::I(id),
+            V::I(from_us as i64),
+            V::I(to_us.min(i64::MAX as u64) as i64),
+        ],
+    )?
+    .iter()
+    .map(|r| state_row(r, us(&r[10], "room_us")?))
+    .collect()
+}
+
 /// Every object's state at room time `t_us` in recording `id`: between its last recorded
 /// state at or before `t_us` and its next one, interpolated (positions and particles
 /// linearly, rotations by slerp); an object gone (a `gone` event) before `t_us` after its

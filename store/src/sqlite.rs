@@ -451,6 +451,20 @@ impl RoomStore for SqliteStore {
         crate::record::state_at(&mut crate::db::Lite(&self.conn, &self.path), id, t_us)
     }
 
+    fn recording_states(
+        &mut self,
+        id: i64,
+        from_us: u64,
+        to_us: u64,
+    ) -> Result<Vec<crate::record::RecState>, StoreError> {
+        crate::record::states(
+            &mut crate::db::Lite(&self.conn, &self.path),
+            id,
+            from_us,
+            to_us,
+        )
+    }
+
     fn delete_recording(&mut self, id: i64) -> Result<bool, StoreError> {
         crate::record::delete(&mut crate::db::Lite(&self.conn, &self.path), id)
     }

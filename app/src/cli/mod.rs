@@ -9,8 +9,10 @@ use std::time::Duration;
 use clap::{Args, Parser, Subcommand};
 use softsync_net::ConditionerConfig;
 
+mod keep;
 mod values;
 mod view;
+pub use keep::{ReplayArgs, StoreAction};
 use values::*;
 pub use view::ViewArgs;
 use view::ViewOpts;
@@ -88,6 +90,14 @@ enum Sub {
         signal: Option<String>,
         #[command(flatten)]
         peer: PeerOpts,
+    },
+    /// Play back a session a host recorded (`host --store FILE --record`): its events at
+    /// their times, its objects' states (--dump), a seek (--from), CSV (--export).
+    Replay(ReplayArgs),
+    /// A store's recorded sessions: list them, delete one, prune old ones.
+    Store {
+        #[command(subcommand)]
+        action: StoreAction,
     },
     /// Enter a room as a headless peer (a bot when --bot is given), a desktop peer
     /// (--desktop) or a VR peer (--vr).
@@ -228,6 +238,15 @@ struct PeerOpts {
     /// Start the room afresh from the scene, dropping what the store kept.
     #[arg(long, requires = "store", help_heading = "Keeping the room")]
     store_reset: bool,
+    /// Record the session into the store while this peer hosts (`softsync replay` plays it
+    /// back): every join, leave, migration, grab, authority change, tear, cut and message
+    /// with its room time, and every object's shown state at 20 Hz when it changed.
+    #[arg(long, requires = "store", help_heading = "Keeping the room")]
+    record: bool,
+    /// Delete recordings older than D (e.g. 30d) when the store opens: recordings of people
+    /// are personal data.
+    #[arg(long, value_name = "D", requires = "store", value_parser = keep::age, help_heading = "Keeping the room")]
+    keep_recordings: Option<Duration>,
     /// Seconds between checkpoints of every moved state.
     #[arg(long, value_name = "S", default_value_t = 1.0, value_parser = positive::<3600>, help_heading = "Keeping the room")]
     store_checkpoint: f64,
@@ -288,6 +307,10 @@ pub enum Command {
         /// Seconds valid.
         valid: f64,
     },
+    /// Play a recording back.
+    Replay(ReplayArgs),
+    /// Manage a store's recordings.
+    Store(StoreAction),
     /// Print this (help, or the version).
     Help(String),
 }
@@ -482,6 +505,8 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
             room_key_file,
             valid,
         },
+        Sub::Replay(r) => Command::Replay(r),
+        Sub::Store { action } => Command::Store(action),
         Sub::Host { bind, signal, peer } => {
             let bind = bind.unwrap_or(SocketAddr::from(([127, 0, 0, 1], 3536)));
             Command::Peer(Box::new(peer_args(true, bind, signal, peer)?))
@@ -567,6 +592,8 @@ fn peer_args(
         store: p.store.map(|target| softsync_bevy::StoreOptions {
             reset: p.store_reset,
             checkpoint: Duration::from_secs_f64(p.store_checkpoint.max(0.05)),
+            record: p.record,
+            keep_recordings: p.keep_recordings,
             ..softsync_bevy::StoreOptions::new(target)
         }),
         quiet: p.quiet,

@@ -1,0 +1,84 @@
+//! The command lines of `softsync replay` and `softsync store` (recorded sessions).
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use clap::{Args, Subcommand};
+
+/// `softsync replay`'s options.
+#[derive(Args, Debug, Clone)]
+pub struct ReplayArgs {
+    /// The store the session was recorded in (a SQLite file or a postgresql:// URL).
+    pub store: String,
+    /// Which recording (an id `--list` prints; default: the newest).
+    #[arg(long)]
+    pub recording: Option<i64>,
+    /// Start this many seconds into the recording (a seek).
+    #[arg(long, value_name = "S", default_value_t = 0.0, value_parser = super::values::seconds)]
+    pub from: f64,
+    /// Stop this many seconds into it (default: its end).
+    #[arg(long, value_name = "S", value_parser = super::values::seconds)]
+    pub to: Option<f64>,
+    /// Playback speed: 1 in real time, 4 four times as fast, 0 as fast as it reads.
+    #[arg(long, default_value_t = 1.0, value_parser = super::values::seconds)]
+    pub speed: f64,
+    /// JSON lines of every object's state as recorded, --dump-hz times a recorded second
+    /// (the same lines as a peer's --dump).
+    #[arg(long, value_name = "FILE")]
+    pub dump: Option<PathBuf>,
+    /// Dump rate.
+    #[arg(long, value_name = "HZ", default_value_t = 5.0, value_parser = super::values::positive::<240>)]
+    pub dump_hz: f64,
+    /// List the store's recordings and stop.
+    #[arg(long)]
+    pub list: bool,
+    /// Write the recording as CSV into DIR (events.csv; tracks.csv: every object's recorded
+    /// states) and stop.
+    #[arg(long, value_name = "DIR")]
+    pub export: Option<PathBuf>,
+}
+
+/// What `softsync store` does.
+#[derive(Subcommand, Debug, Clone)]
+pub enum StoreAction {
+    /// List the recorded sessions.
+    List {
+        /// The store.
+        store: String,
+    },
+    /// Delete one recorded session (the room's state stays).
+    Delete {
+        /// The store.
+        store: String,
+        /// The recording's id (`softsync store list`).
+        #[arg(long)]
+        session: i64,
+    },
+    /// Delete every recorded session older than D (e.g. 30d, 12h, 90m); the room's state
+    /// stays.
+    Prune {
+        /// The store.
+        store: String,
+        /// The age: a number and d, h, m or s.
+        #[arg(long, value_name = "D", value_parser = age)]
+        older_than: Duration,
+    },
+}
+
+/// `30d`, `12h`, `90m`, `45s`.
+pub fn age(s: &str) -> Result<Duration, String> {
+    let (n, unit) = s.split_at(s.len().saturating_sub(1));
+    let secs = match unit {
+        "d" => 86_400.0,
+        "h" => 3_600.0,
+        "m" => 60.0,
+        "s" => 1.0,
+        _ => return Err(format!("{s:?}: a number then d, h, m or s (e.g. 30d)")),
+    };
+    match n.parse::<f64>() {
+        Ok(x) if x.is_finite() && x >= 0.0 && x * secs < 1e10 => {
+            Ok(Duration::from_secs_f64(x * secs))
+        }
+        _ => Err(format!("{s:?}: a number then d, h, m or s (e.g. 30d)")),
+    }
+}
