@@ -66,6 +66,8 @@ pub struct FramePlan {
     /// Keep the room in this store while it runs (`softsync_store::keeper`: the host writes,
     /// and its heir after the migration); `None`: not kept.
     pub store: Option<String>,
+    /// With `store`: record the session too (`--record`).
+    pub record: bool,
 }
 
 impl FramePlan {
@@ -80,6 +82,7 @@ impl FramePlan {
             assets: assets.to_owned(),
             real_time: true,
             store: None,
+            record: false,
         }
     }
 
@@ -178,6 +181,7 @@ impl Node {
         seed: u64,
         scene: Scene,
         store: Option<&str>,
+        record: bool,
     ) -> Result<Self, String> {
         let policy = SendPolicy::default();
         let cfg = scene.session_config(policy.clone(), policy.clone(), policy);
@@ -202,12 +206,16 @@ impl Node {
             (Some(target), true) => {
                 let opts = StoreOptions {
                     reset: true,
+                    record,
                     ..StoreOptions::new(target)
                 };
                 let (writer, _) = open_store(&opts, &scene, session.config())?;
                 Some(Keeper::hosting(opts, writer))
             }
-            (Some(target), false) => Some(Keeper::joining(StoreOptions::new(target))),
+            (Some(target), false) => Some(Keeper::joining(StoreOptions {
+                record,
+                ..StoreOptions::new(target)
+            })),
             (None, _) => None,
         };
         let mut peer =
@@ -331,6 +339,7 @@ pub fn run(plan: &FramePlan) -> Result<FrameReport, String> {
             plan.seed + i as u64,
             scene.clone(),
             plan.store.as_deref(),
+            plan.record,
         )?);
     }
     let mut report = FrameReport::default();

@@ -42,6 +42,7 @@ fn run_store(
     let backends: store::Backends =
         vec![("sqlite", sqlite.display().to_string()), ("postgres", pg)];
     let mut lines = store::reopen(&assets, &backends, runs, out)?;
+    lines.extend(store::seek(&assets, &backends, 10.0, 200, out)?);
     lines.extend(store::write(&assets, &backends, rounds, seconds, out)?);
     let text: Vec<String> = lines.iter().map(ToString::to_string).collect();
     for l in &text {

@@ -4,9 +4,12 @@
 //!   two, kept, then opened again as a host does: the store opened and read, every body
 //!   rebuilt through its log and placed ([`Peer::reopen`]). Median of several opens
 //!   (`RESULT store.reopen`).
+//! - **seek**: a 10-minute recording with a soft ball squeezed and turned throughout and two
+//!   avatars moving, the room read at times spread over it (`RESULT replay.seek`).
 //! - **write**: the frame-budget room ([`crate::frame`]: four peers, tears, cuts, a host
 //!   migration) run without a store and with each back end, interleaved round by round; the
-//!   host's frames (where the keeper runs) compared (`RESULT store.write`).
+//!   host's frames (where the keeper runs) compared (`RESULT store.write`); and once more on
+//!   SQLite with the session recorded (`RESULT store.record`: the recording's overhead).
 //!
 //! PostgreSQL is a cluster of the bench's own ([`softsync_store::testing::PgCluster`]: as the
 //! `postgres` user on a unix socket in a scratch folder), unless `--postgres URL` names one.
@@ -16,7 +19,7 @@ use std::time::Duration;
 
 use glam::Vec3;
 use softsync_benchkit::{percentile, Csv, ResultLine};
-use softsync_net::{Instant, PeerId, RoomImage, SendPolicy, Session};
+use softsync_net::{Instant, NetId, PeerId, RoomImage, SendPolicy, Session};
 use softsync_peer::{Peer, PeerConfig, Scene};
 use softsync_store::{RoomIdentity, Tracker};
 
@@ -197,18 +200,21 @@ pub fn write(
     type Acc = (Vec<f64>, Vec<f64>, Vec<f64>, u64, u64, f64);
     let mut acc: Vec<(&str, Acc)> = std::iter::once("none")
         .chain(backends.iter().map(|(n, _)| *n))
+        .chain(std::iter::once("sqlite+record"))
         .map(|n| (n, Default::default()))
         .collect();
     for round in 0..rounds {
         for (label, a) in acc.iter_mut() {
+            let record = *label == "sqlite+record";
             let store = backends
                 .iter()
-                .find(|(n, _)| n == label)
+                .find(|(n, _)| *n == label.trim_end_matches("+record"))
                 .map(|(_, t)| t.clone());
             let plan = FramePlan {
                 seconds,
                 kill_host_at_s: Some(seconds / 2.0),
                 store,
+                record,
                 ..FramePlan::full(assets)
             };
             eprintln!("store.write: round {} of {rounds}, {label}", round + 1);
@@ -265,8 +271,12 @@ pub fn write(
         .iter()
         .skip(1)
         .map(|(label, a)| {
-            ResultLine::new("store.write")
-                .field("backend", label)
+            let (name, backend) = match label.strip_suffix("+record") {
+                Some(b) => ("store.record", b),
+                None => ("store.write", *label),
+            };
+            ResultLine::new(name)
+                .field("backend", backend)
                 .field("peers", 4)
                 .fixed("events_per_s", a.3 as f64 / a.5, 1)
                 .fixed("bytes_per_min", a.4 as f64 / a.5 * 60.0, 0)
@@ -278,6 +288,151 @@ pub fn write(
                 .field("rounds", rounds)
         })
         .collect())
+}
+
+/// `RESULT replay.seek` per back end: a recording of `minutes` minutes — the thesis room
+/// torn and cut, the soft ball squeezed and turned the whole time (its 60 particles and pose
+/// change at every 20 Hz sample), two avatars (head and hands) moving, a tear segment every
+/// second — written through the store, then `seeks` seeks to times spread over it (a fixed
+/// sequence): each the room at that time (`RoomStore::recording_state_at`).
+pub fn seek(
+    assets: &Path,
+    backends: &Backends,
+    minutes: f64,
+    seeks: usize,
+    out: &Path,
+) -> Result<Vec<ResultLine>, String> {
+    use softsync_store::record::{RecEvent, RecStart, RecState, RecordBatch};
+    let (_, image, _) = torn_room(assets, 10)?;
+    let ball = image
+        .objects
+        .iter()
+        .find(|o| o.state.particles.len() == 60)
+        .ok_or("no 60-particle soft ball in the thesis room")?
+        .clone();
+    let avatar = |k: u32| (NetId(1000 + k), softsync_net::ClassId(0));
+    let samples = (minutes * 60.0 * 20.0) as u64;
+    let mut csv = Csv::new(&["backend", "seek", "t_s", "objects", "ms"]);
+    let mut lines = Vec::new();
+    for (name, target) in backends {
+        let mut store = softsync_store::open(target).map_err(|e| e.to_string())?;
+        let id = 7;
+        let _ = store.delete_recording(id);
+        let t_write = wall_s();
+        let mut n = 0;
+        for second in 0..samples.div_ceil(20) {
+            let mut b = RecordBatch {
+                recording: id,
+                first_n: n,
+                ..Default::default()
+            };
+            if second == 0 {
+                b.start = Some(RecStart {
+                    id,
+                    room_us: 0,
+                    host: 1,
+                    image: image.clone(),
+                });
+                for o in &image.objects {
+                    b.states.push(RecState {
+                        room_us: 0,
+                        object: o.id,
+                        class: o.class,
+                        state: o.state.clone(),
+                    });
+                }
+            }
+            for k in 0..20 {
+                let i = second * 20 + k;
+                if i >= samples {
+                    break;
+                }
+                let t = i * 50_000;
+                let a = i as f32 * 0.05;
+                let squeeze = 1.0 - 0.1 * (a * 2.0).sin().abs();
+                let rot = glam::Quat::from_rotation_y(a * 0.3);
+                let mut st = ball.state.clone();
+                for p in &mut st.particles {
+                    let d = *p - ball.state.pos;
+                    *p = ball.state.pos + rot * Vec3::new(d.x, d.y * squeeze, d.z);
+                }
+                st.rot = rot;
+                b.states.push(RecState {
+                    room_us: t,
+                    object: ball.id,
+                    class: ball.class,
+                    state: st,
+                });
+                for part in 0..6 {
+                    let (oid, class) = avatar(part);
+                    let w = a + part as f32;
+                    b.states.push(RecState {
+                        room_us: t,
+                        object: oid,
+                        class,
+                        state: softsync_net::ObjectState::rigid(
+                            Vec3::new(w.sin() * 0.3, 1.2, w.cos() * 0.3),
+                            glam::Quat::from_rotation_y(w),
+                        ),
+                    });
+                }
+            }
+            b.events.push(RecEvent {
+                room_us: second * 1_000_000,
+                kind: "tear".into(),
+                peer: None,
+                object: Some(3),
+                data: "{\"seq\":0}".into(),
+            });
+            n += 1;
+            b.end_us = (second + 1) * 1_000_000;
+            store
+                .write(&softsync_store::Batch {
+                    record: Some(b),
+                    ..Default::default()
+                })
+                .map_err(|e| e.to_string())?;
+        }
+        let write_s = wall_s() - t_write;
+        let info = store
+            .recordings()
+            .map_err(|e| e.to_string())?
+            .into_iter()
+            .find(|r| r.id == id)
+            .ok_or("the recording was not kept")?;
+        let mut ms = Vec::new();
+        for k in 0..seeks {
+            // spread over the recording, in an order no cache follows
+            let f = ((k * 37) % seeks) as f64 / seeks as f64;
+            let t = (f * info.end_us as f64) as u64;
+            let t0 = wall_s();
+            let states = store.recording_state_at(id, t).map_err(|e| e.to_string())?;
+            let took = (wall_s() - t0) * 1e3;
+            csv.row(vec![
+                name.to_string(),
+                k.to_string(),
+                format!("{:.3}", t as f64 / 1e6),
+                states.len().to_string(),
+                format!("{took:.3}"),
+            ]);
+            ms.push(took);
+        }
+        lines.push(
+            ResultLine::new("replay.seek")
+                .field("backend", name)
+                .fixed("minutes", minutes, 1)
+                .field("states", info.states)
+                .field("objects", image.objects.len() + 6)
+                .fixed("seek_p50_ms", percentile(&ms, 0.5), 2)
+                .fixed("seek_p95_ms", percentile(&ms, 0.95), 2)
+                .fixed("write_s", write_s, 1)
+                .field("seeks", seeks),
+        );
+        let _ = store.delete_recording(id);
+    }
+    csv.write(out.join("seek.csv"))
+        .map_err(|e| format!("seek.csv: {e}"))?;
+    Ok(lines)
 }
 
 /// A scratch SQLite file for the benches (removed first).
