@@ -405,19 +405,13 @@ impl Room {
         let clock = Clock::start();
         let mut peer = Peer::new(clock.now(), session, contact, scene, opts.peer.clone())
             .map_err(|e| OpenError::Config(e.to_string()))?;
-        let mut reopened = None;
-        match (opts.host, &kept) {
-            (true, Some(image)) => {
-                let done = peer
-                    .reopen(clock.now(), image)
-                    .map_err(|e| OpenError::Peer(e.to_string()))?;
-                reopened = Some(done);
-            }
-            (true, None) => peer
-                .open(clock.now())
-                .map_err(|e| OpenError::Peer(e.to_string()))?,
-            (false, _) => {}
+        let reopened = match (opts.host, &kept) {
+            (true, Some(image)) => Some(peer.reopen(clock.now(), image)),
+            (true, None) => peer.open(clock.now()).err().map(Err),
+            (false, _) => None,
         }
+        .transpose()
+        .map_err(|e| OpenError::Peer(e.to_string()))?;
         // Data channels that opened while we fetched the scene: contacts for the join.
         for e in link_news {
             peer.handle_link_event(e);
