@@ -24,6 +24,7 @@ pub mod keeper;
 mod postgres;
 pub mod record;
 mod recorder;
+mod room;
 mod rows;
 pub mod schema;
 mod sql;

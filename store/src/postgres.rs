@@ -9,14 +9,14 @@
 use std::str::FromStr;
 use std::time::Duration;
 
-use postgres::types::ToSql;
-use postgres::{Client, Config, NoTls, Transaction};
-use softsync_net::{NetId, RoomImage};
+use postgres::{Client, Config, NoTls};
+use softsync_net::RoomImage;
 
-use crate::codec::{encode_event, encode_particles, EVENT_FORMAT};
+use crate::codec::EVENT_FORMAT;
+use crate::db::Pg;
+use crate::room;
 use crate::schema::{migration_sql, SCHEMA_VERSION};
-use crate::sql::{self, numbered};
-use crate::{rows, Batch, LogChange, ObjectRow, RoomIdentity, RoomStore, StoreError, StoreInfo};
+use crate::{Batch, RoomIdentity, RoomStore, StoreError, StoreInfo};
 
 /// The advisory lock key that marks a database as held by a host ("softsync" in ASCII).
 const LOCK_KEY: i64 = 0x736f_6674_7379_6e63;
@@ -159,16 +159,15 @@ impl PgStore {
                 .ok_or_else(|| StoreError::Foreign(format!("no migration from version {k}")))?;
             tx.batch_execute(&sql).map_err(&err)?;
         }
-        set_meta(&mut tx, "schema_version", &SCHEMA_VERSION.to_string()).map_err(&err)?;
-        set_meta(&mut tx, "event_format", &EVENT_FORMAT.to_string()).map_err(&err)?;
+        let target = self.target.clone();
+        let mut db = Pg(&mut tx, &target);
+        room::set_meta(&mut db, "schema_version", &SCHEMA_VERSION.to_string())?;
+        room::set_meta(&mut db, "event_format", &EVENT_FORMAT.to_string())?;
         tx.commit().map_err(&err)
     }
 
     fn meta(&mut self, key: &str) -> Result<Option<String>, StoreError> {
-        self.client
-            .query_opt(&numbered(sql::GET_META), &[&key])
-            .and_then(|r| r.map(|r| r.try_get(0)).transpose())
-            .map_err(db_err(&self.target))
+        room::get_meta(&mut Pg(&mut self.client, &self.target), key)
     }
 
     /// Run `sql` on the database directly (tests: an older schema, a forged version).
@@ -185,48 +184,6 @@ impl PgStore {
     }
 }
 
-fn set_meta(tx: &mut Transaction<'_>, key: &str, value: &str) -> Result<u64, postgres::Error> {
-    tx.execute(&numbered(sql::SET_META), &[&key, &value])
-}
-
-fn write_object(
-    tx: &mut Transaction<'_>,
-    row: &ObjectRow,
-    room_us: i64,
-) -> Result<u64, postgres::Error> {
-    let (p, q) = (row.state.pos, row.state.rot);
-    let params: [&(dyn ToSql + Sync); 11] = [
-        &i64::from(row.id.0),
-        &i64::from(row.class.0),
-        &f64::from(p.x),
-        &f64::from(p.y),
-        &f64::from(p.z),
-        &f64::from(q.x),
-        &f64::from(q.y),
-        &f64::from(q.z),
-        &f64::from(q.w),
-        &encode_particles(&row.state.particles),
-        &room_us,
-    ];
-    tx.execute(&numbered(sql::PUT_OBJECT), &params)
-}
-
-fn write_events(
-    tx: &mut Transaction<'_>,
-    id: NetId,
-    from: u32,
-    events: &[softsync_net::wire::TopologyEvent],
-) -> Result<(), postgres::Error> {
-    let object = i64::from(id.0);
-    tx.execute(&numbered(sql::CUT_LOG), &[&object, &i64::from(from)])?;
-    let st = tx.prepare(&numbered(sql::PUT_EVENT))?;
-    for (k, e) in events.iter().enumerate() {
-        let (kind, json) = encode_event(e);
-        tx.execute(&st, &[&object, &(i64::from(from) + k as i64), &kind, &json])?;
-    }
-    Ok(())
-}
-
 impl RoomStore for PgStore {
     fn info(&self) -> StoreInfo {
         StoreInfo {
@@ -237,16 +194,7 @@ impl RoomStore for PgStore {
     }
 
     fn identity(&mut self) -> Result<Option<RoomIdentity>, StoreError> {
-        let scene = self.meta("scene_sha256")?;
-        let messages = self.meta("messages_digest")?;
-        match (scene, messages) {
-            (Some(scene_sha256), Some(m)) => Ok(Some(RoomIdentity {
-                scene_sha256,
-                messages_digest: u64::from_str_radix(&m, 16)
-                    .map_err(|_| StoreError::Row(format!("messages_digest {m:?}")))?,
-            })),
-            _ => Ok(None),
-        }
+        room::identity(&mut Pg(&mut self.client, &self.target))
     }
 
     fn begin(
@@ -255,176 +203,38 @@ impl RoomStore for PgStore {
         bundle: &[u8],
         reset: bool,
     ) -> Result<(), StoreError> {
-        if let Some(kept) = self.identity()? {
-            if kept != *identity && !reset {
-                return Err(StoreError::OtherScene {
-                    stored_scene: kept.scene_sha256,
-                    stored_messages: kept.messages_digest,
-                    given_scene: identity.scene_sha256.clone(),
-                    given_messages: identity.messages_digest,
-                });
-            }
-        }
         let err = db_err(&self.target);
         let mut tx = self.client.transaction().map_err(&err)?;
-        if reset {
-            for s in sql::EMPTY_ROOM {
-                tx.execute(s, &[]).map_err(&err)?;
-            }
-            tx.execute(sql::FORGET_TIMES, &[]).map_err(&err)?;
-        }
-        tx.execute(
-            &numbered(sql::PUT_SCENE),
-            &[&identity.scene_sha256, &bundle],
-        )
-        .map_err(&err)?;
-        set_meta(&mut tx, "scene_sha256", &identity.scene_sha256).map_err(&err)?;
-        set_meta(
-            &mut tx,
-            "messages_digest",
-            &format!("{:016x}", identity.messages_digest),
-        )
-        .map_err(&err)?;
+        room::begin(&mut Pg(&mut tx, &self.target), identity, bundle, reset)?;
         tx.commit().map_err(&err)
     }
 
     fn load(&mut self) -> Result<RoomImage, StoreError> {
-        let format: u32 = self
-            .meta("event_format")?
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(EVENT_FORMAT);
-        if format > EVENT_FORMAT {
-            return Err(StoreError::Newer {
-                found: format,
-                known: EVENT_FORMAT,
-            });
-        }
-        let room_us: u64 = self
-            .meta("room_time_us")?
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(0);
         let err = db_err(&self.target);
         let mut tx = self.client.transaction().map_err(&err)?;
-        let mut objects = Vec::new();
-        for r in tx.query(sql::LOAD_OBJECTS, &[]).map_err(&err)? {
-            let p = [
-                r.try_get(2).map_err(&err)?,
-                r.try_get(3).map_err(&err)?,
-                r.try_get(4).map_err(&err)?,
-            ];
-            let q = [
-                r.try_get(5).map_err(&err)?,
-                r.try_get(6).map_err(&err)?,
-                r.try_get(7).map_err(&err)?,
-                r.try_get(8).map_err(&err)?,
-            ];
-            let particles: Vec<u8> = r.try_get(9).map_err(&err)?;
-            objects.push(rows::object(
-                r.try_get(0).map_err(&err)?,
-                r.try_get(1).map_err(&err)?,
-                p,
-                q,
-                &particles,
-            )?);
-        }
-        for r in tx.query(sql::LOAD_TOPOLOGY, &[]).map_err(&err)? {
-            let (kind, json): (String, String) =
-                (r.try_get(2).map_err(&err)?, r.try_get(3).map_err(&err)?);
-            rows::push_event(
-                &mut objects,
-                r.try_get(0).map_err(&err)?,
-                r.try_get(1).map_err(&err)?,
-                &kind,
-                &json,
-            )?;
-        }
-        let mut retained = Vec::new();
-        for r in tx.query(sql::LOAD_RETAINED, &[]).map_err(&err)? {
-            let delivery: String = r.try_get(4).map_err(&err)?;
-            retained.push(rows::retained(
-                r.try_get(0).map_err(&err)?,
-                r.try_get(1).map_err(&err)?,
-                r.try_get(2).map_err(&err)?,
-                r.try_get(3).map_err(&err)?,
-                &delivery,
-                r.try_get(5).map_err(&err)?,
-            )?);
-        }
+        let image = room::load(&mut Pg(&mut tx, &self.target))?;
         tx.commit().map_err(&err)?;
-        Ok(RoomImage {
-            room_time: Duration::from_micros(room_us),
-            objects,
-            retained,
-        })
+        Ok(image)
     }
 
     fn write(&mut self, b: &Batch) -> Result<(), StoreError> {
         self.reconnect_if_closed()?;
         let err = db_err(&self.target);
-        let room_us = i64::try_from(b.room_time.as_micros()).unwrap_or(i64::MAX);
         let mut tx = self.client.transaction().map_err(&err)?;
-        if b.full {
-            for s in sql::EMPTY_ROOM {
-                tx.execute(s, &[]).map_err(&err)?;
-            }
-        }
-        for id in &b.remove {
-            for s in sql::DROP_OBJECT {
-                tx.execute(&numbered(s), &[&i64::from(id.0)])
-                    .map_err(&err)?;
-            }
-        }
-        for row in &b.objects {
-            write_object(&mut tx, row, room_us).map_err(&err)?;
-        }
-        for (id, change) in &b.logs {
-            match change {
-                LogChange::Append { from, events } => write_events(&mut tx, *id, *from, events),
-                LogChange::Replace(events) => write_events(&mut tx, *id, 0, events),
-            }
-            .map_err(&err)?;
-        }
-        if let Some(msgs) = &b.retained {
-            tx.execute(sql::EMPTY_RETAINED, &[]).map_err(&err)?;
-            for m in msgs {
-                let params: [&(dyn ToSql + Sync); 6] = [
-                    &i64::from(m.kind.0),
-                    &rows::retained_object(m),
-                    &(m.origin.0 as i64),
-                    &i64::from(m.seq),
-                    &rows::delivery_text(m.delivery),
-                    &m.payload,
-                ];
-                tx.execute(&numbered(sql::PUT_RETAINED), &params)
-                    .map_err(&err)?;
-            }
-        }
-        if let Some(r) = &b.record {
-            crate::record::write(&mut crate::db::Pg(&mut tx, &self.target), r)?;
-        }
-        // a batch with no room time (a recording's alone) leaves the room's
-        if room_us > 0 {
-            set_meta(&mut tx, "room_time_us", &room_us.to_string()).map_err(&err)?;
-        }
-        if b.checkpoint {
-            set_meta(&mut tx, "checkpoint_room_time_us", &room_us.to_string()).map_err(&err)?;
-        }
+        room::write(&mut Pg(&mut tx, &self.target), b)?;
         tx.commit().map_err(&err)
     }
 
     fn scene(&mut self, sha256: &str) -> Result<Option<Vec<u8>>, StoreError> {
-        self.client
-            .query_opt(&numbered(sql::GET_SCENE), &[&sha256])
-            .and_then(|r| r.map(|r| r.try_get(0)).transpose())
-            .map_err(db_err(&self.target))
+        room::scene(&mut Pg(&mut self.client, &self.target), sha256)
     }
 
     fn recordings(&mut self) -> Result<Vec<crate::record::RecordingInfo>, StoreError> {
-        crate::record::list(&mut crate::db::Pg(&mut self.client, &self.target))
+        crate::record::list(&mut Pg(&mut self.client, &self.target))
     }
 
     fn recording(&mut self, id: i64) -> Result<Option<crate::record::Recording>, StoreError> {
-        crate::record::open(&mut crate::db::Pg(&mut self.client, &self.target), id)
+        crate::record::open(&mut Pg(&mut self.client, &self.target), id)
     }
 
     fn recording_events(
@@ -433,12 +243,7 @@ impl RoomStore for PgStore {
         from_us: u64,
         to_us: u64,
     ) -> Result<Vec<crate::record::RecEvent>, StoreError> {
-        crate::record::events(
-            &mut crate::db::Pg(&mut self.client, &self.target),
-            id,
-            from_us,
-            to_us,
-        )
+        crate::record::events(&mut Pg(&mut self.client, &self.target), id, from_us, to_us)
     }
 
     fn recording_state_at(
@@ -446,7 +251,7 @@ impl RoomStore for PgStore {
         id: i64,
         t_us: u64,
     ) -> Result<Vec<crate::record::RecState>, StoreError> {
-        crate::record::state_at(&mut crate::db::Pg(&mut self.client, &self.target), id, t_us)
+        crate::record::state_at(&mut Pg(&mut self.client, &self.target), id, t_us)
     }
 
     fn recording_states(
@@ -455,16 +260,11 @@ impl RoomStore for PgStore {
         from_us: u64,
         to_us: u64,
     ) -> Result<Vec<crate::record::RecState>, StoreError> {
-        crate::record::states(
-            &mut crate::db::Pg(&mut self.client, &self.target),
-            id,
-            from_us,
-            to_us,
-        )
+        crate::record::states(&mut Pg(&mut self.client, &self.target), id, from_us, to_us)
     }
 
     fn delete_recording(&mut self, id: i64) -> Result<bool, StoreError> {
-        crate::record::delete(&mut crate::db::Pg(&mut self.client, &self.target), id)
+        crate::record::delete(&mut Pg(&mut self.client, &self.target), id)
     }
 }
 

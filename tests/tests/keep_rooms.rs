@@ -4,7 +4,8 @@
 //! the bot are SIGKILLed together. The store then holds the whole tear (four segments and the
 //! lift) and the note; the host reopens the room from it, a late joiner comes, and both show
 //! the same torn bunny (topology hashes), the bunny where and as it was kept (within 1 mm),
-//! the same objects under the same ids, and the note.
+//! the same objects under the same ids, and the note. And a room whose host dies goes on being
+//! kept: the member that takes over opens the same store and writes what happens after.
 #![allow(clippy::unwrap_used, clippy::disallowed_methods, missing_docs)]
 
 use std::time::Duration;
@@ -154,5 +155,66 @@ fn a_room_whose_every_process_was_killed_mid_squeeze_reopens_from_its_store_as_i
     assert!(
         worst < 1e-3,
         "the bunny's shape is {worst} m from the kept one"
+    );
+}
+
+#[test]
+fn the_member_that_takes_over_from_a_dead_host_keeps_writing_the_store() {
+    require_netns();
+    let dir = scratch("keep-heir");
+    let db = dir.join("room.db");
+    let db_arg = db.to_str().unwrap().to_owned();
+    let (_signal, url) = standalone_signal(&dir);
+    let mut host = peer_on(
+        &dir,
+        "host",
+        "host",
+        &url,
+        "heir",
+        &["--bot", "idle", "--store", &db_arg],
+    );
+    host.wait_line("keeping the room in", Duration::from_secs(20));
+    host.peer_id();
+    // the heir tears the bunny only once it hosts
+    let script = "wait 4; own bunny; \
+                  tear right bunny -0.05 0.03 0 -0.025 0.03 0.005 0 0.03 0 in 0.1; wait 20";
+    let mut heir = peer_on(
+        &dir,
+        "heir",
+        "join",
+        &url,
+        "heir",
+        &["--bot", script, "--store", &db_arg],
+    );
+    heir.wait_line("joined", Duration::from_secs(20));
+    std::thread::sleep(Duration::from_millis(1500));
+    host.kill();
+    heir.wait_line("host-changed", Duration::from_secs(10));
+    let t0 = std::time::Instant::now();
+    while !heir.logs().contains("hosting now: keeping the room in") {
+        assert!(
+            t0.elapsed() < Duration::from_secs(10),
+            "the heir never kept the room: {}",
+            heir.logs()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    heir.wait_line("tore object", Duration::from_secs(20));
+    std::thread::sleep(Duration::from_millis(1000));
+    heir.kill();
+    let kept = SqliteStore::open(&db).unwrap().load().unwrap();
+    let torn: Vec<_> = kept
+        .objects
+        .iter()
+        .filter(|o| o.topology.len() == 3)
+        .collect();
+    assert_eq!(
+        torn.len(),
+        1,
+        "the tear made after the migration is not in the store: {:?}",
+        kept.objects
+            .iter()
+            .map(|o| (o.id, o.topology.len()))
+            .collect::<Vec<_>>()
     );
 }
