@@ -319,11 +319,11 @@ pub fn seek(
         let id = 7;
         let _ = store.delete_recording(id);
         let t_write = wall_s();
-        let mut n = 0;
         for second in 0..samples.div_ceil(20) {
+            // one event a second: the second numbers them
             let mut b = RecordBatch {
                 recording: id,
-                first_n: n,
+                first_n: second,
                 ..Default::default()
             };
             if second == 0 {
@@ -384,7 +384,6 @@ pub fn seek(
                 object: Some(3),
                 data: "{\"seq\":0}".into(),
             });
-            n += 1;
             b.end_us = (second + 1) * 1_000_000;
             store
                 .write(&softsync_store::Batch {

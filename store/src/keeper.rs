@@ -75,6 +75,8 @@ pub fn open_store(
         .begin(&id, &bundle, opts.reset)
         .map_err(|e| e.to_string())?;
     if let Some(keep) = opts.keep_recordings {
+        // recordings are aged on the wall clock (their ids are their start, Unix ms)
+        #[allow(clippy::disallowed_methods)]
         let now_ms = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_millis() as i64);
@@ -224,7 +226,7 @@ impl Keeper {
             },
             (None, None) => return,
         };
-        if let Err(b) = writer.submit(batch) {
+        if let Err(b) = writer.submit(batch).map_err(|b| *b) {
             // the writer is behind: the next batch carries the whole room, and the recording
             // goes with it
             self.tracker.resync();

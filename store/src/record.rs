@@ -6,7 +6,7 @@
 //! shown state each time it changed, at the replication rate (20 Hz). Written by the host
 //! with the room (`Keeper`, `--record`), in the same transactions.
 //!
-//! Reading: [`Recording::state_at`] is the room at any time — each object's state
+//! Reading: [`crate::RoomStore::recording_state_at`] is the room at any time — each object's state
 //! interpolated between its recorded states around it (none past the time it was gone) — in
 //! two indexed queries per object, so a seek costs the same at minute 1 and minute 10.
 

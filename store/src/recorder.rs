@@ -57,6 +57,9 @@ pub(crate) struct Recorder {
     owners: BTreeMap<NetId, softsync_net::PeerId>,
 }
 
+/// The wall clock, Unix ms: a recording's id and start (when a person recorded it, for
+/// retention), never the room's time.
+#[allow(clippy::disallowed_methods)]
 fn unix_ms() -> i64 {
     std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)

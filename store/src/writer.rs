@@ -108,13 +108,13 @@ impl StoreWriter {
 
     /// Hand `batch` to the writer. `Err(batch)` when the queue is full (or the writer is
     /// gone): keep it and try again.
-    pub fn submit(&self, batch: Batch) -> Result<(), Batch> {
+    pub fn submit(&self, batch: Batch) -> Result<(), Box<Batch>> {
         let Some(tx) = &self.tx else {
-            return Err(batch);
+            return Err(Box::new(batch));
         };
         match tx.try_send(batch) {
             Ok(()) => Ok(()),
-            Err(TrySendError::Full(b) | TrySendError::Disconnected(b)) => Err(b),
+            Err(TrySendError::Full(b) | TrySendError::Disconnected(b)) => Err(Box::new(b)),
         }
     }
 
