@@ -8,8 +8,9 @@
 //!   (`holders`: every hand on an object, local and remote), the host's own grabs and
 //!   releases; and, noticed at sampling, authority changes and objects gone.
 //! - States: every [`SAMPLE`] (the replication rate, 20 Hz) each object's shown state, when
-//!   it changed since the last one recorded (a quarter of the objects at a time, so no frame
-//!   reads the whole room). An object that starts to move after resting
+//!   it changed since the last one recorded (a quarter of the objects every 12.5 ms, so a
+//!   frame at 90 Hz reads a quarter of the room; a slow frame takes every quarter that came
+//!   due, so no object is sampled later than its 50 ms plus a frame). An object that starts to move after resting
 //!   gets its resting state again at the sample before, so reading between two samples never
 //!   drifts through a rest.
 //!
@@ -30,9 +31,10 @@ use crate::record::{RecEvent, RecStart, RecState, RecordBatch};
 pub const SAMPLE: Duration = Duration::from_millis(50);
 
 /// Objects are sampled a slice at a time (id modulo this), one slice every
-/// `SAMPLE / SLICES`: each object every [`SAMPLE`], and a frame reads a quarter of the room
-/// at most (the whole room in one frame cost a hosting frame 0.7 ms at p99 in the frame
-/// bench).
+/// `SAMPLE / SLICES`: each object every [`SAMPLE`], and a frame at 90 Hz reads a quarter of
+/// the room (the whole room in one frame cost a hosting frame 0.7 ms at p99 in the frame
+/// bench). A frame that comes late takes every slice that came due (a loaded machine's
+/// frames once sampled a moved object 400 ms late: `tests/tests/replay_rooms.rs`).
 const SLICES: u32 = 4;
 
 /// What the recorder remembers of an object's last sample.
@@ -198,12 +200,26 @@ impl Recorder {
                 image: peer.room_image(now),
             });
         }
-        if self.next_sample.is_some_and(|s| now < s) {
+        // every slice whose time has come (a slow frame takes several, up to the whole room:
+        // no object is sampled later than its 50 ms and a frame)
+        let mut due = [false; SLICES as usize];
+        let mut any = false;
+        for _ in 0..SLICES {
+            if self.next_sample.is_some_and(|s| now < s) {
+                break;
+            }
+            due[self.slice as usize] = true;
+            any = true;
+            self.slice = (self.slice + 1) % SLICES;
+            self.next_sample = Some(self.next_sample.unwrap_or(now) + SAMPLE / SLICES);
+        }
+        if !any {
             return;
         }
-        self.next_sample = Some(now + SAMPLE / SLICES);
-        let slice = self.slice;
-        self.slice = (self.slice + 1) % SLICES;
+        if self.next_sample.is_some_and(|s| s <= now) {
+            // a whole round late: every slice was taken; start the next from now
+            self.next_sample = Some(now + SAMPLE / SLICES);
+        }
         let ids: Vec<NetId> = peer.objects().keys().copied().collect();
         let gone: Vec<NetId> = self
             .seen
@@ -228,7 +244,7 @@ impl Recorder {
                 self.push(t, "authority", Some(owner.0), Some(*id), data.to_string());
             }
         }
-        for id in ids.into_iter().filter(|id| id.0 % SLICES == slice) {
+        for id in ids.into_iter().filter(|id| due[(id.0 % SLICES) as usize]) {
             let (Some(class), Some(state)) =
                 (peer.session().class_of(id), peer.shown_state(now, id))
             else {
