@@ -33,9 +33,10 @@ fn run_store(
     use softsync_bench::store;
     let assets = assets.unwrap_or_else(softsync_bench::assets_dir);
     std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
-    let cluster = postgres
-        .is_none()
-        .then(|| softsync_store::testing::PgCluster::start("bench"));
+    let cluster = match postgres {
+        Some(_) => None,
+        None => Some(softsync_store::testing::PgCluster::start("bench")?),
+    };
     let pg =
         postgres.unwrap_or_else(|| cluster.as_ref().map(|c| c.url.clone()).unwrap_or_default());
     let sqlite = store::scratch_sqlite("store");

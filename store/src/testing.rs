@@ -3,7 +3,7 @@
 //! `postgres` user (PostgreSQL refuses to run as root, and CI runs as root), stopped and
 //! removed when the guard goes.
 
-#![allow(clippy::unwrap_used, clippy::disallowed_methods)]
+#![allow(clippy::disallowed_methods)]
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -19,7 +19,7 @@ pub struct PgCluster {
     pub url: String,
 }
 
-fn bin_dir() -> PathBuf {
+fn bin_dir() -> Result<PathBuf, String> {
     let mut dirs: Vec<PathBuf> = std::fs::read_dir("/usr/lib/postgresql")
         .map(|r| {
             r.filter_map(|e| e.ok())
@@ -29,8 +29,9 @@ fn bin_dir() -> PathBuf {
         .unwrap_or_default();
     dirs.retain(|d| d.join("initdb").exists());
     dirs.sort();
-    dirs.pop()
-        .expect("PostgreSQL is not installed (Debian's postgresql package; .ci/run installs it)")
+    dirs.pop().ok_or_else(|| {
+        "PostgreSQL is not installed (Debian's postgresql package; .ci/run installs it)".into()
+    })
 }
 
 fn as_postgres(bin: &Path, program: &str) -> Command {
@@ -40,30 +41,34 @@ fn as_postgres(bin: &Path, program: &str) -> Command {
 }
 
 impl PgCluster {
-    /// initdb, start, wait for the socket, create the database `room`. Panics with the reason
-    /// if PostgreSQL is not installed or will not start (a test's or a bench's setup).
-    pub fn start(name: &str) -> PgCluster {
-        let bin = bin_dir();
+    /// initdb, start, wait for the socket, create the database `room`; the reason if
+    /// PostgreSQL is not installed or will not start.
+    pub fn start(name: &str) -> Result<PgCluster, String> {
+        let bin = bin_dir()?;
         let dir = std::env::temp_dir().join(format!("softsync-pg-{name}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(dir.join("sock")).unwrap();
+        let io = |what: &str| {
+            let what = what.to_owned();
+            move |e: std::io::Error| format!("{what}: {e}")
+        };
+        std::fs::create_dir_all(dir.join("sock")).map_err(io("the cluster's folder"))?;
         let ok = Command::new("chown")
             .args(["-R", "postgres:postgres"])
             .arg(&dir)
             .status()
-            .unwrap()
+            .map_err(io("chown"))?
             .success();
-        assert!(ok, "chown {} to postgres", dir.display());
+        if !ok {
+            return Err(format!("chown {} to postgres failed", dir.display()));
+        }
         let out = as_postgres(&bin, "initdb")
             .args(["-A", "trust", "-U", "postgres", "--no-sync", "-D"])
             .arg(dir.join("data"))
             .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "initdb: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+            .map_err(io("initdb"))?;
+        if !out.status.success() {
+            return Err(format!("initdb: {}", String::from_utf8_lossy(&out.stderr)));
+        }
         let mut s = PgCluster {
             url: format!(
                 "postgresql://postgres@/room?host={}",
@@ -73,18 +78,21 @@ impl PgCluster {
             bin,
             child: None,
         };
-        s.run();
+        s.run()?;
         let admin = format!(
             "postgresql://postgres@/postgres?host={}",
             s.dir.join("sock").display()
         );
-        let mut c = postgres::Client::connect(&admin, postgres::NoTls).unwrap();
-        c.batch_execute("CREATE DATABASE room").unwrap();
-        s
+        postgres::Client::connect(&admin, postgres::NoTls)
+            .and_then(|mut c| c.batch_execute("CREATE DATABASE room"))
+            .map_err(|e| format!("creating the database: {e}"))?;
+        Ok(s)
     }
 
     /// Start (again) on the same cluster and wait until it takes connections.
-    pub fn run(&mut self) {
+    pub fn run(&mut self) -> Result<(), String> {
+        let log = std::fs::File::create(self.dir.join("server.log"))
+            .map_err(|e| format!("server.log: {e}"))?;
         let child = as_postgres(&self.bin, "postgres")
             .arg("-D")
             .arg(self.dir.join("data"))
@@ -92,9 +100,9 @@ impl PgCluster {
             .arg(self.dir.join("sock"))
             .args(["-c", "listen_addresses=", "-c", "fsync=off"])
             .stdout(Stdio::null())
-            .stderr(std::fs::File::create(self.dir.join("server.log")).unwrap())
+            .stderr(log)
             .spawn()
-            .unwrap();
+            .map_err(|e| format!("postgres: {e}"))?;
         self.child = Some(child);
         let admin = format!(
             "postgresql://postgres@/postgres?host={}",
@@ -103,13 +111,14 @@ impl PgCluster {
         let t0 = Instant::now();
         loop {
             if postgres::Client::connect(&admin, postgres::NoTls).is_ok() {
-                return;
+                return Ok(());
             }
-            assert!(
-                t0.elapsed() < Duration::from_secs(30),
-                "PostgreSQL did not start: {}",
-                std::fs::read_to_string(self.dir.join("server.log")).unwrap_or_default()
-            );
+            if t0.elapsed() > Duration::from_secs(30) {
+                return Err(format!(
+                    "PostgreSQL did not start: {}",
+                    std::fs::read_to_string(self.dir.join("server.log")).unwrap_or_default()
+                ));
+            }
             std::thread::sleep(Duration::from_millis(50));
         }
     }

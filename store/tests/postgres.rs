@@ -17,7 +17,7 @@ use softsync_store::{PgStore, RoomStore, StoreError, StoreWriter, Tracker};
 
 #[test]
 fn a_room_round_trips_through_postgres_and_what_it_refuses() {
-    let pg = PgServer::start("roundtrip");
+    let pg = PgServer::start("roundtrip").unwrap();
     let r = room();
     {
         let mut s = PgStore::open(&pg.url).unwrap();
@@ -48,7 +48,7 @@ fn a_room_round_trips_through_postgres_and_what_it_refuses() {
 
 #[test]
 fn a_server_stopped_mid_session_costs_only_the_writes_while_it_is_down() {
-    let mut pg = PgServer::start("stopped");
+    let mut pg = PgServer::start("stopped").unwrap();
     let mut s = PgStore::open(&pg.url).unwrap();
     s.begin(&identity(), b"bundle", false).unwrap();
     let writer = StoreWriter::spawn(Box::new(s));
@@ -83,7 +83,7 @@ fn a_server_stopped_mid_session_costs_only_the_writes_while_it_is_down() {
     let e = writer.status().error.unwrap();
     assert!(e.contains("postgres"), "{e}");
     t.resync();
-    pg.run();
+    pg.run().unwrap();
     grow(&mut r, 2);
     writer.submit(t.diff(&r, false).unwrap()).unwrap();
     settle(&writer, 3);
@@ -99,7 +99,7 @@ fn a_server_stopped_mid_session_costs_only_the_writes_while_it_is_down() {
 
 #[test]
 fn a_postgres_store_of_the_previous_schema_is_migrated_and_records() {
-    let pg = PgServer::start("migrate");
+    let pg = PgServer::start("migrate").unwrap();
     {
         let mut s = PgStore::open(&pg.url).unwrap();
         s.begin(&identity(), b"bundle", false).unwrap();
