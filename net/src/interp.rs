@@ -81,6 +81,13 @@ pub struct SnapshotBuffer {
 
 const MAX_SAMPLES: usize = 64;
 
+/// The shortest span between the last two samples that a velocity is read from to
+/// extrapolate. A peer whose frame runs several fixed steps back to back (a slow renderer, a
+/// starved machine) sends their states a fraction of a millisecond apart: a step's motion over
+/// such a span reads as metres a second, and 50 ms of it threw a held body's particles half a
+/// metre out (and, on the host, the props they struck off the table).
+pub const MIN_EXTRAPOLATION_SPAN: Duration = Duration::from_millis(8);
+
 impl SnapshotBuffer {
     /// Add a sample (older-than-newest samples are inserted in order; duplicates replace).
     pub fn push(&mut self, s: Snapshot, cfg: &InterpolationConfig) {
@@ -143,7 +150,7 @@ impl SnapshotBuffer {
             if let Some(prev) = self.samples.get(n - 2) {
                 let span = (last.time - prev.time).as_secs_f32();
                 let ahead = (t - last.time).min(cfg.max_extrapolation).as_secs_f32();
-                if span > 0.0 && span < 0.5 {
+                if span >= MIN_EXTRAPOLATION_SPAN.as_secs_f32() && span < 0.5 {
                     let f = 1.0 + ahead / span;
                     return Some(lerp(prev, last, f, t));
                 }
@@ -215,5 +222,31 @@ mod tests {
         let s = b.sample(Instant::from_millis(150), &cfg).unwrap();
         let err = s.rot.angle_between(Quat::from_rotation_y(0.15));
         assert!(err < 1e-3, "extrapolated {:?}, {err} rad off", s.rot);
+    }
+
+    fn held(ms: u64, x: f32) -> Snapshot {
+        Snapshot {
+            offsets: vec![Vec3::ZERO, Vec3::X * x],
+            ..snap(ms, Quat::IDENTITY)
+        }
+    }
+
+    /// A bursty sender's last two states a millisecond apart, a particle 1.4 cm further in
+    /// the newer: 40 ms past it, the particle stays where it was last put (a velocity read
+    /// over 1 ms would throw it 56 cm). Two states 16 ms apart still extrapolate.
+    #[test]
+    fn states_sent_back_to_back_are_not_extrapolated_from() {
+        let cfg = InterpolationConfig::default();
+        let mut b = SnapshotBuffer::default();
+        b.push(held(0, 0.0), &cfg);
+        b.push(held(16, 0.014), &cfg);
+        b.push(held(17, 0.028), &cfg);
+        let s = b.sample(Instant::from_millis(57), &cfg).unwrap();
+        assert!((s.offsets[1].x - 0.028).abs() < 1e-6, "{:?}", s.offsets);
+        let mut b = SnapshotBuffer::default();
+        b.push(held(0, 0.0), &cfg);
+        b.push(held(16, 0.014), &cfg);
+        let s = b.sample(Instant::from_millis(24), &cfg).unwrap();
+        assert!((s.offsets[1].x - 0.021).abs() < 1e-4, "{:?}", s.offsets);
     }
 }

@@ -637,7 +637,7 @@ fn two_desktop_hands_stretch_the_bunny_and_a_cut_between_them_splits_it_in_their
     require_netns();
     let dir = scratch("pixels-stretch");
     let x = Xvfb::start(&dir);
-    let (_host, url) = host(&dir, "stretch");
+    let (host, url) = host(&dir, "stretch");
     let mut desktop = desktop_peer_with(
         &dir,
         &x,
@@ -671,9 +671,10 @@ fn two_desktop_hands_stretch_the_bunny_and_a_cut_between_them_splits_it_in_their
         }
         assert!(
             start.elapsed() < Duration::from_secs(60),
-            "the desktop peer never drew the bunny stretched\n{:?}\n{}",
+            "the desktop peer never drew the bunny stretched\n{:?}\n{}\n{}",
             f.last(),
-            desktop.logs()
+            desktop.logs(),
+            host.logs()
         );
         std::thread::sleep(Duration::from_millis(100));
     };
@@ -749,10 +750,11 @@ fn two_desktop_hands_stretch_the_bunny_and_a_cut_between_them_splits_it_in_their
         }
         assert!(
             start.elapsed() < Duration::from_secs(40),
-            "the desktop peer never drew the bunny split in its hands\n{:?}\n{}\n{}",
+            "the desktop peer never drew the bunny split in its hands\n{:?}\n{}\n{}\n{}",
             f.last(),
             desktop.logs(),
-            bot.logs()
+            bot.logs(),
+            host.logs()
         );
         std::thread::sleep(Duration::from_millis(100));
     };

@@ -146,11 +146,32 @@ impl Proc {
         std::fs::read_to_string(&self.out).unwrap_or_default()
     }
 
+    /// Its stdout and the tail of its stderr, for a failure message. A desktop peer's
+    /// `screenshot` lines (one every half second) are cut to the last four, so that what a
+    /// CI log keeps of a failure shows its events.
     pub fn logs(&self) -> String {
+        let out = self.stdout();
+        let shots = out.lines().filter(|l| l.starts_with("screenshot ")).count();
+        let mut seen = 0;
+        let kept: Vec<&str> = out
+            .lines()
+            .filter(|l| {
+                if !l.starts_with("screenshot ") {
+                    return true;
+                }
+                seen += 1;
+                seen + 4 > shots
+            })
+            .collect();
+        let cut = if shots > 4 {
+            format!(" ({} earlier screenshot lines left out)", shots - 4)
+        } else {
+            String::new()
+        };
         format!(
-            "--- {} stdout\n{}\n--- {} stderr (tail)\n{}",
+            "--- {} stdout{cut}\n{}\n--- {} stderr (tail)\n{}",
             self.name,
-            self.stdout(),
+            kept.join("\n"),
             self.name,
             std::fs::read_to_string(&self.err)
                 .unwrap_or_default()
