@@ -9,6 +9,7 @@ mod desktop;
 mod driver;
 mod plugins;
 mod replay;
+mod replay_room;
 mod report;
 mod rollback;
 mod stderr_log;
@@ -301,7 +302,7 @@ fn random_nonce() -> Option<[u8; 16]> {
     Some(n)
 }
 
-fn room_key(file: Option<&Path>) -> Result<Option<softsync_net::RoomKey>, Failure> {
+pub(crate) fn room_key(file: Option<&Path>) -> Result<Option<softsync_net::RoomKey>, Failure> {
     let secret = match file {
         Some(f) => std::fs::read(f)
             .map_err(|e| Failure::usage(format!("--room-key-file {}: {e}", f.display())))?,

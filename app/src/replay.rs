@@ -1,11 +1,13 @@
 //! `softsync replay` and `softsync store`: recorded sessions played back, exported, listed,
 //! deleted and pruned (`softsync_store::record`).
 //!
-//! Playback is headless: the recording's events are printed at their times (`replay t=… kind=…`,
+//! Playback is headless (`--serve ROOM` plays it as a room instead: [`crate::replay_room`]):
+//! the recording's events are printed at their times (`replay t=… kind=…`,
 //! `t` in seconds from the recording's start), scaled by `--speed`, and `--dump` writes every
 //! object's state (between its recorded states, interpolated) at `--dump-hz` recorded times —
 //! the same lines at any speed. `--from` seeks: the room at that time is read in one go
-//! (`seek t=… objects=… ms=…`), then playback goes on from there.
+//! (`seek t=… objects=… ms=…`), then playback goes on from there. `--as PEER` adds that
+//! peer's head and hands to every dump line: the session from its point of view.
 
 // The I/O layer: playback is paced on this machine's clock.
 #![allow(clippy::disallowed_methods)]
@@ -80,7 +82,44 @@ pub fn store(action: StoreAction) -> Result<ExitCode, Failure> {
     Ok(ExitCode::SUCCESS)
 }
 
-fn dump_line(t_s: f64, room_us: u64, states: &[RecState]) -> String {
+/// The avatar parts (object ids) of peer `p` in recording `id`, from its `appear` events;
+/// an error names the peers it has avatars of.
+fn avatar_of(s: &mut dyn RoomStore, info: &RecordingInfo, p: u64) -> Result<Vec<u32>, Failure> {
+    let events = s
+        .recording_events(info.id, info.start_us, info.end_us.saturating_add(1))
+        .map_err(|e| Failure::runtime(e.to_string()))?;
+    let mut parts: std::collections::BTreeMap<u64, Vec<u32>> = Default::default();
+    for e in events.iter().filter(|e| e.kind == "appear") {
+        let class = serde_json::from_str::<serde_json::Value>(&e.data)
+            .ok()
+            .and_then(|v| v.get("class").and_then(serde_json::Value::as_u64))
+            .and_then(|c| u16::try_from(c).ok());
+        let avatar = class.is_some_and(|c| {
+            softsync_peer::scene::Kind::of_class(softsync_net::ClassId(c)).is_avatar()
+        });
+        if let (true, Some(peer), Some(object)) = (avatar, e.peer, e.object) {
+            parts.entry(peer).or_default().push(object);
+        }
+    }
+    match parts.remove(&p) {
+        Some(v) => Ok(v),
+        None => Err(Failure::usage(format!(
+            "--as {p}: recording {} has no avatar of that peer (it has avatars of {})",
+            info.id,
+            if parts.is_empty() {
+                "nobody: recorded before avatars were named, or with none".to_owned()
+            } else {
+                parts
+                    .keys()
+                    .map(u64::to_string)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            }
+        ))),
+    }
+}
+
+fn dump_line(t_s: f64, room_us: u64, states: &[RecState], view: Option<(u64, &[u32])>) -> String {
     let objects: Vec<serde_json::Value> = states
         .iter()
         .map(|s| {
@@ -93,7 +132,25 @@ fn dump_line(t_s: f64, room_us: u64, states: &[RecState]) -> String {
             })
         })
         .collect();
-    serde_json::json!({"t": t_s, "room_s": room_us as f64 / 1e6, "objects": objects}).to_string()
+    let mut line =
+        serde_json::json!({"t": t_s, "room_s": room_us as f64 / 1e6, "objects": objects});
+    if let Some((peer, parts)) = view {
+        // the point of view: that peer's head and hands, as recorded at this moment
+        let parts: Vec<serde_json::Value> = states
+            .iter()
+            .filter(|s| parts.contains(&s.object.0))
+            .map(|s| {
+                serde_json::json!({
+                    "id": s.object.0,
+                    "class": s.class.0,
+                    "pos": s.state.pos.to_array(),
+                    "rot": s.state.rot.to_array(),
+                })
+            })
+            .collect();
+        line["as"] = serde_json::json!({"peer": peer, "parts": parts});
+    }
+    line.to_string()
 }
 
 fn csv_field(s: &str) -> String {
@@ -130,6 +187,9 @@ pub fn replay(a: ReplayArgs) -> Result<ExitCode, Failure> {
     let from = us(a.from).min(info.end_us);
     let to = a.to.map_or(info.end_us, us).min(info.end_us);
     let rel = |t: u64| t.saturating_sub(info.start_us) as f64 / 1e6;
+    if let Some(room) = &a.serve {
+        return crate::replay_room::serve(&a, room, s, info.id, from);
+    }
     if let Some(dir) = &a.export {
         std::fs::create_dir_all(dir)
             .map_err(|e| Failure::usage(format!("--export {}: {e}", dir.display())))?;
@@ -177,6 +237,21 @@ pub fn replay(a: ReplayArgs) -> Result<ExitCode, Failure> {
         None => None,
     };
     println!("{}", describe(&info));
+    let view = match a.as_peer {
+        Some(p) => {
+            let parts = avatar_of(s.as_mut(), &info, p)?;
+            println!(
+                "as peer {p}: avatar objects {}",
+                parts
+                    .iter()
+                    .map(u32::to_string)
+                    .collect::<Vec<_>>()
+                    .join(",")
+            );
+            Some((p, parts))
+        }
+        None => None,
+    };
     let t0 = std::time::Instant::now();
     let at_start = s.recording_state_at(info.id, from).map_err(fail)?;
     println!(
@@ -218,7 +293,8 @@ pub fn replay(a: ReplayArgs) -> Result<ExitCode, Failure> {
                 (_, true) => {
                     let states = s.recording_state_at(info.id, next_dump).map_err(fail)?;
                     if let Some(f) = &mut dump {
-                        writeln!(f, "{}", dump_line(rel(next_dump), next_dump, &states))
+                        let v = view.as_ref().map(|(p, parts)| (*p, parts.as_slice()));
+                        writeln!(f, "{}", dump_line(rel(next_dump), next_dump, &states, v))
                             .map_err(|e| Failure::runtime(format!("--dump: {e}")))?;
                     }
                     dumps += 1;

@@ -131,6 +131,10 @@ pub struct RoomOptions {
     /// Keep the room in a store ([`softsync_store::keeper`]): a host reopens the room kept there and
     /// writes it as it runs; a joiner writes it if it becomes host. `None`: not kept.
     pub store: Option<StoreOptions>,
+    /// A host spawns its scene's objects when it opens the room (true, the default); false
+    /// leaves the room empty for the application to fill (a recorded session played back:
+    /// `softsync replay --serve`).
+    pub spawn_scene: bool,
 }
 
 impl RoomOptions {
@@ -166,6 +170,7 @@ impl RoomOptions {
             state_route: softsync_net::StateRoute::Relay,
             max_members: softsync_net::SessionConfig::default().max_members,
             store: None,
+            spawn_scene: true,
         }
     }
 
@@ -407,7 +412,8 @@ impl Room {
             .map_err(|e| OpenError::Config(e.to_string()))?;
         let reopened = match (opts.host, &kept) {
             (true, Some(image)) => Some(peer.reopen(clock.now(), image)),
-            (true, None) => peer.open(clock.now()).err().map(Err),
+            (true, None) if opts.spawn_scene => peer.open(clock.now()).err().map(Err),
+            (true, None) => None,
             (false, _) => None,
         }
         .transpose()

@@ -48,6 +48,8 @@
 //!                               [`Say`](crate::messages::Say) message; at most 200 bytes)
 //! note TEXT                     as `say`, retained: the room keeps the latest note (a late
 //!                               joiner gets it; a kept room keeps it between sessions)
+//! replay pause|play|seek S|speed X   a spectator of a played-back recording steers it
+//!                               (`softsync replay --serve`: a `ReplayControl` to the host)
 //! kick PEER [REASON]            the host kicks PEER out and bans it for the room's life
 //!                               (`Session::kick`); PEER is an id as the peer printed it
 //!                               (decimal, or hex with 0x) or `newest` (the member that
@@ -107,6 +109,8 @@ pub enum Cmd {
     Slice(usize, Option<String>, Vec3, Vec3, f64),
     /// Send a line of text to the room (retained: a note the room keeps).
     Say(String, bool),
+    /// A spectator of a played-back recording steers it (`softsync replay --serve`).
+    Replay(crate::messages::ReplayControl),
     /// Host: kick a peer (`None`: the member that joined last) and ban it, with a reason.
     Kick(Option<u64>, String),
     /// Restart.
@@ -271,6 +275,32 @@ pub fn parse(text: &str) -> Result<Vec<Cmd>, ScriptError> {
                         return Err(format!("{} needs a text of 1 to 200 bytes", w[0]));
                     }
                     Cmd::Say(text.to_owned(), w[0] == "note")
+                }
+                "replay" => {
+                    let num = |i: usize| -> Result<f64, String> {
+                        arg(i)?
+                            .parse::<f64>()
+                            .ok()
+                            .filter(|v| v.is_finite() && *v >= 0.0)
+                            .ok_or_else(|| format!("replay {}: a number of 0 or more", w[1]))
+                    };
+                    let mut c = crate::messages::ReplayControl {
+                        pause: None,
+                        seek_s: None,
+                        speed: None,
+                    };
+                    match arg(1)? {
+                        "pause" => c.pause = Some(true),
+                        "play" => c.pause = Some(false),
+                        "seek" => c.seek_s = Some(num(2)?),
+                        "speed" => c.speed = Some(num(2)?),
+                        other => {
+                            return Err(format!(
+                                "replay {other}: pause, play, seek SECONDS or speed X"
+                            ))
+                        }
+                    }
+                    Cmd::Replay(c)
                 }
                 "kick" => {
                     let who = match arg(1)? {
@@ -733,6 +763,13 @@ impl Bot {
                 match peer.send(now, MessageTarget::Everyone, how, &msg) {
                     Ok(seq) => self.say(format!("said {text:?} (message {seq})")),
                     Err(e) => self.say(format!("say: {e}")),
+                }
+                None
+            }
+            Cmd::Replay(c) => {
+                match peer.send(now, MessageTarget::Host, Delivery::Reliable, &c) {
+                    Ok(seq) => self.say(format!("replay control sent (message {seq})")),
+                    Err(e) => self.say(format!("replay: {e}")),
                 }
                 None
             }

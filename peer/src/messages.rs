@@ -150,8 +150,44 @@ impl Message for BladeRequest {
 /// The most blade actions one [`BladeRequest`] carries.
 pub const MAX_BLADE_ACTIONS: usize = 32;
 
+/// A recorded session played back as a room (`softsync replay --serve`): a spectator asks
+/// its host to pause or go on, to seek, or to play at another speed. Sent reliably to the
+/// host; what is not set stays as it is.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ReplayControl {
+    /// Pause (true) or play on (false).
+    pub pause: Option<bool>,
+    /// Go to this many seconds into the recording.
+    pub seek_s: Option<f64>,
+    /// Play at this speed (1 real time; 0.1 to 16).
+    pub speed: Option<f64>,
+}
+
+impl Message for ReplayControl {
+    const NAME: &'static str = "softsync.replay_control";
+}
+
+/// Where a played-back recording stands, from its host, retained (a joiner has it at once)
+/// and sent again at every change and once a second: for a spectator's timeline.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ReplayClock {
+    /// Seconds into the recording shown now.
+    pub t_s: f64,
+    /// The recording's length, seconds.
+    pub length_s: f64,
+    /// Paused.
+    pub paused: bool,
+    /// The playback speed.
+    pub speed: f64,
+}
+
+impl Message for ReplayClock {
+    const NAME: &'static str = "softsync.replay_clock";
+}
+
 /// The built-in message types ([`Say`], [`SignalingMoved`], [`RemoteHand`], [`HandAnswer`],
-/// [`Holders`], [`BladeRequest`]), in their fixed order; register yours after them.
+/// [`Holders`], [`BladeRequest`], [`ReplayControl`], [`ReplayClock`]), in their fixed order;
+/// register yours after them.
 pub fn builtin() -> MessageTypes {
     let mut t = MessageTypes::new();
     // A fresh table holds no name yet, so these cannot collide.
@@ -161,6 +197,8 @@ pub fn builtin() -> MessageTypes {
     let _ = t.register::<HandAnswer>();
     let _ = t.register::<Holders>();
     let _ = t.register::<BladeRequest>();
+    let _ = t.register::<ReplayControl>();
+    let _ = t.register::<ReplayClock>();
     t
 }
 
@@ -181,7 +219,8 @@ mod tests {
         assert_eq!(t.kind::<SignalingMoved>().map(|k| k.0), Some(1));
         assert_eq!(t.kind::<Holders>().map(|k| k.0), Some(4));
         assert_eq!(t.kind::<BladeRequest>().map(|k| k.0), Some(5));
-        assert_eq!(t.register::<Valve>().unwrap().0, 6);
+        assert_eq!(t.kind::<ReplayClock>().map(|k| k.0), Some(7));
+        assert_eq!(t.register::<Valve>().unwrap().0, 8);
         assert!(t.register::<Say>().is_err());
     }
 }

@@ -157,6 +157,23 @@ impl Mirror {
         );
     }
 
+    /// Object `from` is object `to` from now on (a body built before the session named it).
+    pub(crate) fn rename(&mut self, from: NetId, to: NetId) {
+        let Some(o) = self.objects.remove(&from) else {
+            return;
+        };
+        match o.body {
+            LocalBody::Rigid(h) => {
+                self.by_ref.insert(ObjectRef::Rigid(h), to);
+            }
+            LocalBody::Soft(h) => {
+                self.by_ref.insert(ObjectRef::Soft(h), to);
+            }
+            LocalBody::Pose | LocalBody::Building => {}
+        }
+        self.objects.insert(to, o);
+    }
+
     /// Drop object `id` and its body from the world.
     pub(crate) fn remove(&mut self, id: NetId) {
         let Some(o) = self.objects.remove(&id) else {

@@ -18,6 +18,7 @@ pub mod cost;
 pub(crate) mod cutter;
 pub mod keep;
 mod orphans;
+pub mod replay;
 mod show;
 pub(crate) mod topology;
 
@@ -133,6 +134,9 @@ pub struct Peer {
     last_step_at: Instant,
     /// A lent clock measuring where frames go (`cost.rs`).
     stopwatch: cost::Stopwatch,
+    /// A recorded session played back (`replay`): bodies are shown, not simulated, and
+    /// nobody else's blade cuts them.
+    replaying: bool,
 }
 
 /// The hands' answer to "may this peer move that object": its session says who owns it.
@@ -198,6 +202,7 @@ impl Peer {
             steps: 0,
             last_step_at: Instant::ZERO,
             stopwatch: cost::Stopwatch::default(),
+            replaying: false,
         })
     }
 

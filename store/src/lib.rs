@@ -21,6 +21,7 @@
 pub mod codec;
 mod db;
 pub mod keeper;
+pub mod playback;
 mod postgres;
 pub mod record;
 mod recorder;

@@ -2,7 +2,8 @@
 //! keeper's batches ([`crate::record`] says what a recording holds).
 //!
 //! - Events: the peer's own, as the app sees them ([`Recorder::observe`]): members joining,
-//!   leaving and kicked, migrations, authority changes, every topology entry (tears, lifts,
+//!   leaving and kicked, migrations, authority changes, each object's first appearance with
+//!   its first owner (whose avatar a part is), every topology entry (tears, lifts,
 //!   cuts, resolution changes), application messages (a `Say` with its text) from every
 //!   peer but the host itself (its own sends are not among its events), who holds what
 //!   (`holders`: every hand on an object, local and remote), the host's own grabs and
@@ -236,12 +237,21 @@ impl Recorder {
             let Some(owner) = peer.session().owner(*id) else {
                 continue;
             };
-            if self.owners.insert(*id, owner).is_some_and(|o| o != owner) {
-                let epoch = peer.session().epoch(*id);
-                let data = serde_json::json!({
-                    "term": epoch.map(|e| e.term), "grant": epoch.map(|e| e.grant)
-                });
-                self.push(t, "authority", Some(owner.0), Some(*id), data.to_string());
+            match self.owners.insert(*id, owner) {
+                Some(o) if o != owner => {
+                    let epoch = peer.session().epoch(*id);
+                    let data = serde_json::json!({
+                        "term": epoch.map(|e| e.term), "grant": epoch.map(|e| e.grant)
+                    });
+                    self.push(t, "authority", Some(owner.0), Some(*id), data.to_string());
+                }
+                // first seen: its class and first owner (whose avatar a part is)
+                None => {
+                    let class = peer.session().class_of(*id).map(|c| c.0);
+                    let data = serde_json::json!({ "class": class });
+                    self.push(t, "appear", Some(owner.0), Some(*id), data.to_string());
+                }
+                Some(_) => {}
             }
         }
         for id in ids.into_iter().filter(|id| due[(id.0 % SLICES) as usize]) {

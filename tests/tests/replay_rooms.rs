@@ -3,8 +3,10 @@
 //! leaves. `softsync replay` then plays the recording at 1× and at 4× and from a seek: the
 //! same event lines at every speed (the seek's are the tail of the whole), the same dumps at
 //! the same recorded times, and every resting object within 1 mm of what the host itself
-//! showed at that room time (its own `--dump`). The export and the retention commands run on
-//! the same store.
+//! showed at that room time (its own `--dump`). `--as` adds the host's head and hands to the
+//! dump. Served as a room (`--serve`), a spectator joins, is refused the bunny, seeks and
+//! pauses, and then shows every object where the recording has it. The export and the
+//! retention commands run on the same store.
 #![allow(clippy::unwrap_used, clippy::disallowed_methods, missing_docs)]
 
 use std::collections::BTreeMap;
@@ -15,7 +17,7 @@ use serde_json::Value;
 
 mod common;
 use common::dump::read_dump;
-use common::{binary, peer_on, require_netns, scratch, standalone_signal};
+use common::{binary, peer_on, require_netns, scratch, standalone_signal, Proc};
 
 fn run(args: &[&str]) -> String {
     let out = Command::new(binary()).args(args).output().unwrap();
@@ -239,6 +241,132 @@ fn a_recorded_session_replays_the_same_at_any_speed_and_from_a_seek() {
     eprintln!(
         "{checked} resting objects compared, worst {:.3} mm",
         worst * 1e3
+    );
+
+    // from the host's point of view: its head and hands in every dump line; a peer the
+    // recording has no avatar of is refused, naming those it has
+    let host_id = host.peer_id();
+    let asd = dir.join("as.jsonl");
+    let out = run(&[
+        "replay",
+        &db_arg,
+        "--speed",
+        "0",
+        "--to",
+        "2",
+        "--as",
+        &host_id.to_string(),
+        "--dump",
+        asd.to_str().unwrap(),
+    ]);
+    assert!(out.contains(&format!("as peer {host_id}")), "{out}");
+    let view = read_dump(&asd);
+    assert!(!view.is_empty());
+    for line in &view {
+        assert_eq!(line["as"]["peer"].as_u64(), Some(host_id));
+        // every part once each has been sampled (a quarter of the room every 12.5 ms)
+        if line["t"].as_f64().unwrap() >= 0.1 {
+            let parts = line["as"]["parts"].as_array().map(Vec::len);
+            assert_eq!(parts, Some(3), "{line}");
+        }
+    }
+    let bad = Command::new(binary())
+        .args(["replay", &db_arg, "--as", "12345"])
+        .output()
+        .unwrap();
+    let why = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        !bad.status.success() && why.contains(&host_id.to_string()),
+        "{why}"
+    );
+
+    // served as a room: a spectator joins, cannot take the bunny, pauses and seeks to 9 s
+    // (the bot gone, everything at rest); then every object it shows is where the recording
+    // has it at 9 s (within 1 mm; ids differ, so each recorded object is matched to the
+    // nearest shown one with as many particles)
+    let served = Proc::spawn(
+        &dir,
+        "served",
+        &[
+            "replay",
+            &db_arg,
+            "--serve",
+            "spect",
+            "--bind",
+            "127.0.0.1:0",
+            "--linger",
+            "1",
+        ],
+    );
+    let line = served.wait_line("serving recording", Duration::from_secs(30));
+    let served_url = line
+        .split_whitespace()
+        .find(|w| w.starts_with("ws://"))
+        .unwrap()
+        .to_owned();
+    let spd = dir.join("spectator.jsonl");
+    let spd_arg = spd.to_str().unwrap().to_owned();
+    let mut spectator = peer_on(
+        &dir,
+        "spectator",
+        "join",
+        &served_url,
+        "spect",
+        &[
+            "--bot",
+            "wait 0.5; own bunny timeout 1; replay pause; replay seek 9; wait 2.5",
+            "--dump",
+            &spd_arg,
+            "--dump-hz",
+            "10",
+            "--duration",
+            "7",
+        ],
+    );
+    assert_eq!(
+        spectator.wait_exit(Duration::from_secs(40)),
+        0,
+        "{}",
+        spectator.logs()
+    );
+    let slog = spectator.stdout();
+    assert!(slog.contains("authority-denied"), "{slog}");
+    served.wait_line("paused=true", Duration::from_secs(5));
+    drop(served);
+    let at9 = d1
+        .iter()
+        .find(|l| (l["t"].as_f64().unwrap() - 9.0).abs() < 1e-6)
+        .unwrap();
+    let shown = read_dump(&spd);
+    let last = shown.last().unwrap();
+    let centre = |o: &([f64; 3], Vec<[f64; 3]>)| -> [f64; 3] {
+        if o.1.is_empty() {
+            return o.0;
+        }
+        let n = o.1.len() as f64;
+        [0, 1, 2].map(|i| o.1.iter().map(|p| p[i]).sum::<f64>() / n)
+    };
+    let theirs = shapes(last);
+    let (mut matched, mut spectator_worst) = (0, 0.0f64);
+    for (id, rec) in shapes(at9) {
+        let (d, near) = theirs
+            .values()
+            .filter(|o| o.1.len() == rec.1.len())
+            .map(|o| (dist(centre(o), centre(&rec)), o))
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .unwrap();
+        let worst = farthest(near, &rec).max(d);
+        assert!(
+            worst < 1e-3,
+            "recorded object {id} at 9 s: the spectator shows it {worst} m away"
+        );
+        spectator_worst = spectator_worst.max(worst);
+        matched += 1;
+    }
+    assert!(matched >= 10, "only {matched} objects at 9 s");
+    eprintln!(
+        "served replay: {matched} objects at 9 s, worst {:.3} mm from the recording",
+        spectator_worst * 1e3
     );
 
     // export; then deleting the recording keeps the room

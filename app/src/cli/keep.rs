@@ -36,6 +36,25 @@ pub struct ReplayArgs {
     /// states) and stop.
     #[arg(long, value_name = "DIR")]
     pub export: Option<PathBuf>,
+    /// From this peer's point of view (an id the recording's `join` events name): its head
+    /// and hands go into every dump line, as `as`.
+    #[arg(long = "as", value_name = "PEER")]
+    pub as_peer: Option<u64>,
+    /// Serve the replay as room ROOM, which spectators join (`softsync join --room ROOM
+    /// --signal URL`, a desktop or VR peer, or a bot): the recording's objects, locked, move
+    /// as recorded; a spectator's `ReplayControl` message pauses, seeks and sets the speed.
+    #[arg(long, value_name = "ROOM")]
+    pub serve: Option<String>,
+    /// Where the served room's signaling listens (port 0 picks a free one).
+    #[arg(long, default_value = "127.0.0.1:3536")]
+    pub bind: std::net::SocketAddr,
+    /// The served room's key (spectators need it, or a token): a file with the secret, or
+    /// SOFTSYNC_ROOM_KEY.
+    #[arg(long, value_name = "FILE")]
+    pub room_key_file: Option<PathBuf>,
+    /// Keep serving this long after the recording's end (spectators may seek back).
+    #[arg(long, value_name = "S", default_value_t = 5.0, value_parser = super::values::seconds)]
+    pub linger: f64,
 }
 
 /// What `softsync store` does.

@@ -11,10 +11,12 @@ use std::time::Duration;
 use super::{Role, Session};
 use crate::error::NetError;
 use crate::ids::{AuthorityEpoch, ClassId, NetId};
+use crate::policy::AuthorityPolicy;
+
 use crate::session::topology::MAX_TOPOLOGY_LOG;
 use crate::session::ObjectState;
 use crate::time::Instant;
-use crate::wire::{self, AppMessage, SpawnInfo, TopologyEvent};
+use crate::wire::{self, AppMessage, Control, SpawnInfo, TopologyEvent};
 
 /// One object as a room keeps it between sessions: nothing about who owned it.
 #[derive(Clone, Debug, PartialEq)]
@@ -110,6 +112,100 @@ impl Session {
     pub fn resume_room_time(&mut self, now: Instant, room_time: Duration) -> Result<(), NetError> {
         self.restoring()?;
         self.clock.resume(now, room_time);
+        Ok(())
+    }
+
+    /// Host, at any time (a recorded session played back as a room, `softsync replay
+    /// --serve`): object `o` appears under a fresh id (ids of the recording are the
+    /// caller's to map: spectators' avatars take ids meanwhile), owned by us, locked
+    /// ([`AuthorityPolicy::Locked`]: nobody else may take it), with its class, state and log;
+    /// every member is told (its `Spawn`, then each entry of its log), as for a cut's pieces.
+    /// Build its body first.
+    ///
+    /// Errors: not hosting, an unknown class, a state that is not finite or has more
+    /// particles than the wire carries, a log over [`MAX_TOPOLOGY_LOG`], ids used up.
+    pub fn replay_object(&mut self, now: Instant, o: KeptObject) -> Result<NetId, NetError> {
+        if self.role != Role::Host {
+            return Err(NetError::NotConnected);
+        }
+        self.class(o.class)
+            .ok_or(NetError::UnknownClass(o.class.0))?;
+        let rot = o.state.checked_rotation()?;
+        if o.state.particles.len() > wire::MAX_PARTICLES as usize {
+            return Err(NetError::InvalidState("too many particles"));
+        }
+        if o.topology.len() > MAX_TOPOLOGY_LOG {
+            return Err(NetError::Restore("topology log too long"));
+        }
+        let id = self.objects.alloc_id().ok_or(NetError::IdsExhausted)?;
+        let info = SpawnInfo {
+            id,
+            class: o.class,
+            owner: self.local,
+            epoch: AuthorityEpoch {
+                term: self.term.0,
+                grant: 0,
+            },
+            held: false,
+            policy: AuthorityPolicy::Locked,
+            particles: o.state.particles.len() as u32,
+            pos: o.state.pos.to_array(),
+            rot: rot.to_array(),
+            request: None,
+            topology: o.topology.len() as u32,
+        };
+        self.insert_object(now, info.clone(), None);
+        if let Some(obj) = self.objects.get_mut(id) {
+            obj.topology.set_entries(o.topology.clone());
+        }
+        self.broadcast(now, &Control::Spawn(info), None);
+        for (seq, e) in o.topology.iter().enumerate() {
+            let msg = Control::Topology {
+                id,
+                seq: seq as u32,
+                event: *e,
+            };
+            self.broadcast(now, &msg, None);
+        }
+        self.publish_state(now, id, &ObjectState { rot, ..o.state })?;
+        Ok(id)
+    }
+
+    /// Host, at any time: entry `event` is appended to the log of our object `id` (a tear, a
+    /// lift or a resolution change of a recorded session played back) and every member is
+    /// told; `Event::Topology` follows. A cut is not an entry here: its pieces are objects of
+    /// their own ([`Session::replay_object`]).
+    pub fn replay_entry(
+        &mut self,
+        now: Instant,
+        id: NetId,
+        event: TopologyEvent,
+    ) -> Result<(), NetError> {
+        if self.role != Role::Host {
+            return Err(NetError::NotConnected);
+        }
+        if matches!(event, TopologyEvent::Cut { .. }) || !event.valid() {
+            return Err(NetError::Restore("not an entry a replay appends"));
+        }
+        let local = self.local;
+        let o = self
+            .objects
+            .get_mut(id)
+            .ok_or(NetError::UnknownObject(id))?;
+        if o.info.owner != local {
+            return Err(NetError::NotOwner(id, o.info.owner));
+        }
+        if o.topology.entries.len() + 1 > MAX_TOPOLOGY_LOG {
+            return Err(NetError::Restore("topology log too long"));
+        }
+        let seq = o.topology.entries.len() as u32;
+        o.topology.push(event);
+        self.broadcast(now, &Control::Topology { id, seq, event }, None);
+        if let TopologyEvent::Resolution { particles, .. } = event {
+            self.relayout(id, particles);
+        }
+        self.events
+            .push_back(super::Event::Topology { id, seq, event });
         Ok(())
     }
 

@@ -94,7 +94,7 @@ impl TopologyLog {
         self.resolutions as u8
     }
 
-    fn push(&mut self, event: TopologyEvent) {
+    pub(super) fn push(&mut self, event: TopologyEvent) {
         self.resolutions += u32::from(matches!(event, TopologyEvent::Resolution { .. }));
         self.entries.push(event);
     }

@@ -110,7 +110,8 @@ impl Peer {
                 Blade::Cut { point, normal } => finite(point) && finite(normal),
             })
             && self.session.owner(m.object) == Some(self.me())
-            && self.may_share(m.object);
+            && self.may_share(m.object)
+            && !self.replaying;
         if !ok {
             self.counters.blade_requests_refused += 1;
             return;

@@ -87,13 +87,19 @@ impl Peer {
     }
 
     /// The state this peer shows for an object now: simulated if we own it, interpolated
-    /// otherwise (what the dump writes).
+    /// otherwise (what the dump writes); none for a body of ours still being built.
     pub fn shown_state(&mut self, now: Instant, id: NetId) -> Option<ObjectState> {
         if !self.mirror.objects.contains_key(&id) {
             return None;
         }
         if self.session.owner(id) == Some(self.me()) {
-            self.mirror.state(id)
+            // a body still being built (a cut's piece) has nothing to show yet
+            let building = self
+                .mirror
+                .objects
+                .get(&id)
+                .is_some_and(|o| matches!(o.body, crate::mirror::LocalBody::Building));
+            (!building).then(|| self.mirror.state(id)).flatten()
         } else {
             self.session
                 .display_state(now, id)
