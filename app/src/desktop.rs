@@ -189,10 +189,19 @@ fn desktop_input(
             (orbit.target, orbit.yaw, orbit.pitch, orbit.distance_m) = (t, y, p, d);
         }
     }
+    replay_keys(&mut room, &driver, &keys);
     let Ok((camera, gt, mut tf)) = cam.single_mut() else {
         return;
     };
     *tf = orbit.transform();
+    // a played-back recording seen from one of its people (`softsync replay --as PEER`):
+    // the view is that peer's head
+    let follow = driver.replay_clock.as_ref().and_then(|(c, _)| c.follow);
+    let now = room.now();
+    if let Some(s) = follow.and_then(|id| room.peer.shown_state(now, id)) {
+        tf.translation = to_bevy(s.pos);
+        tf.rotation = to_bevy_quat(s.rot);
+    }
     // Hands: the active one on the cursor's ray, the other resting below the view.
     let head = pose_from_bevy(&tf);
     let rest = |side: f32| {
@@ -241,4 +250,42 @@ fn desktop_input(
         trigger,
         tool,
     });
+}
+
+/// In a played-back recording's room: space pauses and plays, left and right seek 5 s, up
+/// and down double and halve the speed (a `ReplayControl` to its host).
+fn replay_keys(room: &mut Room, driver: &Driver, keys: &ButtonInput<KeyCode>) {
+    use softsync_peer::messages::ReplayControl;
+    let Some(clock) = &driver.replay_clock else {
+        return;
+    };
+    let (c, _) = clock;
+    let t = crate::driver::replay_position(clock, room.now());
+    let mut ask = ReplayControl {
+        pause: None,
+        seek_s: None,
+        speed: None,
+    };
+    if keys.just_pressed(KeyCode::Space) {
+        ask.pause = Some(!c.paused);
+    }
+    if keys.just_pressed(KeyCode::ArrowLeft) {
+        ask.seek_s = Some((t - 5.0).max(0.0));
+    }
+    if keys.just_pressed(KeyCode::ArrowRight) {
+        ask.seek_s = Some(t + 5.0);
+    }
+    if keys.just_pressed(KeyCode::ArrowUp) {
+        ask.speed = Some(c.speed * 2.0);
+    }
+    if keys.just_pressed(KeyCode::ArrowDown) {
+        ask.speed = Some(c.speed / 2.0);
+    }
+    if ask.pause.is_none() && ask.seek_s.is_none() && ask.speed.is_none() {
+        return;
+    }
+    let to = softsync_net::MessageTarget::Host;
+    if let Err(e) = room.send(to, softsync_net::Delivery::Reliable, &ask) {
+        eprintln!("replay control not sent: {e}");
+    }
 }

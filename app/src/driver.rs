@@ -44,6 +44,23 @@ pub struct Driver {
     pub throw: Option<(SqueezeThrow, i32)>,
     /// A joiner's timeline, printed once it shows the room's first state.
     pub join_timeline: Option<JoinTimeline>,
+    /// In a played-back recording's room (`softsync replay --serve`): where it stands, as
+    /// its host last said, and when we heard it (the HUD's timeline, the desktop's keys).
+    pub replay_clock: Option<(softsync_peer::messages::ReplayClock, softsync_net::Instant)>,
+}
+
+/// Where a played-back recording stands now, seconds into it: its host's last word, moved on
+/// by the time since at its speed (unless paused).
+#[cfg_attr(not(feature = "desktop"), allow(dead_code))]
+pub fn replay_position(
+    clock: &(softsync_peer::messages::ReplayClock, softsync_net::Instant),
+    now: softsync_net::Instant,
+) -> f64 {
+    let (c, at) = clock;
+    if c.paused {
+        return c.t_s;
+    }
+    (c.t_s + now.saturating_since(*at).as_secs_f64() * c.speed).min(c.length_s)
 }
 
 /// Where a joiner's time went, in milliseconds since the process started (the clock the
@@ -133,6 +150,7 @@ impl Driver {
             next_stats: Duration::from_secs(1),
             next_dump: Duration::ZERO,
             exiting: false,
+            replay_clock: None,
         }
     }
 
@@ -150,6 +168,12 @@ impl Driver {
 
     /// A peer event: its log line and the HUD's list (warnings to stderr as they are).
     pub fn log_event(&mut self, room: &Room, e: &Event) {
+        if let Event::Room(softsync_net::Event::Message(m)) = e {
+            if let Some(Ok(c)) = room.peer.decode::<softsync_peer::messages::ReplayClock>(m) {
+                self.replay_clock = Some((c, room.now()));
+                return;
+            }
+        }
         let Some(line) = event_line(e, room.peer.message_types()) else {
             if let Event::Warning(w) = e {
                 eprintln!("{w}");

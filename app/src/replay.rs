@@ -82,23 +82,27 @@ pub fn store(action: StoreAction) -> Result<ExitCode, Failure> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// The avatar parts (object ids) of peer `p` in recording `id`, from its `appear` events;
-/// an error names the peers it has avatars of.
-fn avatar_of(s: &mut dyn RoomStore, info: &RecordingInfo, p: u64) -> Result<Vec<u32>, Failure> {
+/// The avatar parts (object ids and classes) of peer `p` in a recording, from its `appear`
+/// events; an error names the peers it has avatars of.
+pub(crate) fn avatar_of(
+    s: &mut dyn RoomStore,
+    info: &RecordingInfo,
+    p: u64,
+) -> Result<Vec<(u32, u16)>, Failure> {
     let events = s
         .recording_events(info.id, info.start_us, info.end_us.saturating_add(1))
         .map_err(|e| Failure::runtime(e.to_string()))?;
-    let mut parts: std::collections::BTreeMap<u64, Vec<u32>> = Default::default();
+    let mut parts: std::collections::BTreeMap<u64, Vec<(u32, u16)>> = Default::default();
     for e in events.iter().filter(|e| e.kind == "appear") {
         let class = serde_json::from_str::<serde_json::Value>(&e.data)
             .ok()
             .and_then(|v| v.get("class").and_then(serde_json::Value::as_u64))
             .and_then(|c| u16::try_from(c).ok());
-        let avatar = class.is_some_and(|c| {
-            softsync_peer::scene::Kind::of_class(softsync_net::ClassId(c)).is_avatar()
+        let avatar = class.filter(|c| {
+            softsync_peer::scene::Kind::of_class(softsync_net::ClassId(*c)).is_avatar()
         });
-        if let (true, Some(peer), Some(object)) = (avatar, e.peer, e.object) {
-            parts.entry(peer).or_default().push(object);
+        if let (Some(class), Some(peer), Some(object)) = (avatar, e.peer, e.object) {
+            parts.entry(peer).or_default().push((object, class));
         }
     }
     match parts.remove(&p) {
@@ -187,8 +191,9 @@ pub fn replay(a: ReplayArgs) -> Result<ExitCode, Failure> {
     let from = us(a.from).min(info.end_us);
     let to = a.to.map_or(info.end_us, us).min(info.end_us);
     let rel = |t: u64| t.saturating_sub(info.start_us) as f64 / 1e6;
-    if let Some(room) = &a.serve {
-        return crate::replay_room::serve(&a, room, s, info.id, from);
+    if a.serve.is_some() || a.desktop {
+        let room = a.serve.clone().unwrap_or_else(|| "replay".to_owned());
+        return crate::replay_room::serve(&a, &room, s, &info, from);
     }
     if let Some(dir) = &a.export {
         std::fs::create_dir_all(dir)
@@ -239,7 +244,10 @@ pub fn replay(a: ReplayArgs) -> Result<ExitCode, Failure> {
     println!("{}", describe(&info));
     let view = match a.as_peer {
         Some(p) => {
-            let parts = avatar_of(s.as_mut(), &info, p)?;
+            let parts: Vec<u32> = avatar_of(s.as_mut(), &info, p)?
+                .into_iter()
+                .map(|(id, _)| id)
+                .collect();
             println!(
                 "as peer {p}: avatar objects {}",
                 parts

@@ -23,7 +23,7 @@ use softsync_bevy::{Room, RoomOptions};
 use softsync_net::wire::TopologyEvent;
 use softsync_net::{Delivery, Instant, KeptObject, MessageTarget, NetId};
 use softsync_peer::messages::{ReplayClock, ReplayControl};
-use softsync_peer::scene::Scene;
+use softsync_peer::scene::{Kind, Scene};
 use softsync_store::playback::Playback;
 use softsync_store::RoomStore;
 
@@ -68,15 +68,27 @@ pub fn serve(
     a: &ReplayArgs,
     room_name: &str,
     mut store: Box<dyn RoomStore>,
-    recording: i64,
+    info: &softsync_store::record::RecordingInfo,
     from_us: u64,
 ) -> Result<ExitCode, Failure> {
     let fail = |e: softsync_store::StoreError| Failure::runtime(e.to_string());
-    let playback = Playback::open(store.as_mut(), recording).map_err(fail)?;
+    let playback = Playback::open(store.as_mut(), info.id).map_err(fail)?;
     let info = playback.info().clone();
+    // `--as PEER`: the recorded id of that peer's head, which a spectator's view follows
+    let follow_head = match a.as_peer {
+        Some(p) => crate::replay::avatar_of(store.as_mut(), &info, p)?
+            .into_iter()
+            .find(|(_, class)| Kind::of_class(softsync_net::ClassId(*class)) == Kind::HEAD)
+            .map(|(id, _)| NetId(id)),
+        None => None,
+    };
     let scene = stored_scene(store.as_mut())?;
     let mut opts = RoomOptions::host(room_name.to_owned());
-    opts.bind = a.bind;
+    opts.bind = if a.desktop && a.serve.is_none() {
+        std::net::SocketAddr::from(([127, 0, 0, 1], 0))
+    } else {
+        a.bind
+    };
     opts.room_key = crate::room_key(a.room_key_file.as_deref())?;
     opts.spawn_scene = false;
     opts.peer.avatar = false;
@@ -93,6 +105,25 @@ pub fn serve(
         (info.end_us.saturating_sub(info.start_us)) as f64 / 1e6,
         from_us.saturating_sub(info.start_us) as f64 / 1e6
     );
+    // `--desktop`: a desktop peer of ours joins and shows it; serving ends with its window
+    let mut viewer = if a.desktop {
+        let exe =
+            std::env::current_exe().map_err(|e| Failure::runtime(format!("--desktop: {e}")))?;
+        let mut cmd = std::process::Command::new(exe);
+        cmd.args(["join", "--desktop", "--room", room_name, "--signal"])
+            .arg(room.signal_url())
+            .args(["--no-avatar", "--quiet"])
+            .args(&a.viewer_arg);
+        if let Some(k) = &a.room_key_file {
+            cmd.arg("--room-key-file").arg(k);
+        }
+        Some(
+            cmd.spawn()
+                .map_err(|e| Failure::runtime(format!("--desktop: the viewer: {e}")))?,
+        )
+    } else {
+        None
+    };
     let mut pos = Position {
         at_us: from_us,
         since: std::time::Instant::now(),
@@ -124,7 +155,13 @@ pub fn serve(
             let t = pos.now_us(info.end_us);
             let want = playback.room_at(store.as_mut(), t).map_err(fail)?;
             sync(&mut room, now, &mut live, want);
-            if t >= info.end_us && !pos.paused {
+            if let Some(v) = viewer.as_mut() {
+                if let Ok(Some(status)) = v.try_wait() {
+                    println!("replay-room the viewer closed ({status})");
+                    break;
+                }
+            }
+            if t >= info.end_us && !pos.paused && viewer.is_none() {
                 let end = *ended_at.get_or_insert_with(|| {
                     println!("replay-room ended t={:.3}", rel(&info, t));
                     std::time::Instant::now()
@@ -144,6 +181,7 @@ pub fn serve(
                 length_s: rel(&info, info.end_us),
                 paused: pos.paused,
                 speed: pos.speed,
+                follow: follow_head.and_then(|h| live.get(&h)).map(|l| l.id),
             };
             if let Err(e) = room.send(MessageTarget::Everyone, Delivery::Retained, &clock) {
                 eprintln!("replay clock not sent: {e}");

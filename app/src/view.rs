@@ -495,6 +495,24 @@ pub fn hud_text(room: &Room, driver: &Driver) -> String {
     if !torn.is_empty() {
         s.push_str(&format!("torn: {}\n", torn.join(", ")));
     }
+    if let Some(clock) = &driver.replay_clock {
+        // a played-back recording: its timeline, and the keys that steer it
+        let (c, _) = clock;
+        let t = crate::driver::replay_position(clock, room.now());
+        let filled = if c.length_s > 0.0 {
+            ((t / c.length_s).clamp(0.0, 1.0) * 30.0).round() as usize
+        } else {
+            0
+        };
+        s.push_str(&format!(
+            "replay {t:.1} / {:.1} s {} {}x [{}{}]\nspace pause | left/right 5 s | up/down speed\n",
+            c.length_s,
+            if c.paused { "paused" } else { "playing" },
+            c.speed,
+            "=".repeat(filled),
+            "-".repeat(30 - filled),
+        ));
+    }
     for e in driver.recent_events.iter() {
         s.push_str(e);
         s.push('\n');

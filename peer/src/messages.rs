@@ -179,6 +179,9 @@ pub struct ReplayClock {
     pub paused: bool,
     /// The playback speed.
     pub speed: f64,
+    /// The object a spectator's view follows (`softsync replay --as PEER`: that peer's
+    /// head, as this room names it), if any.
+    pub follow: Option<NetId>,
 }
 
 impl Message for ReplayClock {

@@ -45,6 +45,16 @@ pub struct ReplayArgs {
     /// as recorded; a spectator's `ReplayControl` message pauses, seeks and sets the speed.
     #[arg(long, value_name = "ROOM")]
     pub serve: Option<String>,
+    /// Watch it in a window (a desktop peer joined to the served replay, `--serve`'s room or
+    /// one named `replay` on a free port): a timeline to pause (space), seek (left, right)
+    /// and set the speed (up, down); with `--as`, the view is that peer's head. Serving
+    /// stops when the window closes.
+    #[arg(long)]
+    pub desktop: bool,
+    /// An argument for `--desktop`'s viewer (`softsync join --desktop …`), e.g.
+    /// `--viewer-arg=--window --viewer-arg=1280x720`; repeat it for several.
+    #[arg(long, value_name = "ARG", allow_hyphen_values = true)]
+    pub viewer_arg: Vec<String>,
     /// Where the served room's signaling listens (port 0 picks a free one).
     #[arg(long, default_value = "127.0.0.1:3536")]
     pub bind: std::net::SocketAddr,
