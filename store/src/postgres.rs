@@ -41,6 +41,17 @@ impl std::fmt::Debug for PgStore {
     }
 }
 
+impl Drop for PgStore {
+    /// The lock is given back before the connection closes: the server ends a closed
+    /// connection's backend (and frees its locks) a moment later, and a host reopening the
+    /// store at once (a restart, the next test) found it still held.
+    fn drop(&mut self) {
+        let _ = self
+            .client
+            .execute("SELECT pg_advisory_unlock($1)", &[&LOCK_KEY]);
+    }
+}
+
 pub(crate) fn db_err(target: &str) -> impl Fn(postgres::Error) -> StoreError + '_ {
     move |e| {
         let what = match e.as_db_error() {
