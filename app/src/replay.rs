@@ -123,19 +123,23 @@ pub(crate) fn avatar_of(
     }
 }
 
+/// One recorded object of a dump line (its particles too, or only its pose).
+fn object_json(s: &RecState, particles: bool) -> serde_json::Value {
+    let mut v = serde_json::json!({
+        "id": s.object.0,
+        "class": s.class.0,
+        "pos": s.state.pos.to_array(),
+        "rot": s.state.rot.to_array(),
+    });
+    if particles {
+        let ps: Vec<[f32; 3]> = s.state.particles.iter().map(|p| p.to_array()).collect();
+        v["particles"] = serde_json::json!(ps);
+    }
+    v
+}
+
 fn dump_line(t_s: f64, room_us: u64, states: &[RecState], view: Option<(u64, &[u32])>) -> String {
-    let objects: Vec<serde_json::Value> = states
-        .iter()
-        .map(|s| {
-            serde_json::json!({
-                "id": s.object.0,
-                "class": s.class.0,
-                "pos": s.state.pos.to_array(),
-                "rot": s.state.rot.to_array(),
-                "particles": s.state.particles.iter().map(|p| p.to_array()).collect::<Vec<_>>(),
-            })
-        })
-        .collect();
+    let objects: Vec<serde_json::Value> = states.iter().map(|s| object_json(s, true)).collect();
     let mut line =
         serde_json::json!({"t": t_s, "room_s": room_us as f64 / 1e6, "objects": objects});
     if let Some((peer, parts)) = view {
@@ -143,14 +147,7 @@ fn dump_line(t_s: f64, room_us: u64, states: &[RecState], view: Option<(u64, &[u
         let parts: Vec<serde_json::Value> = states
             .iter()
             .filter(|s| parts.contains(&s.object.0))
-            .map(|s| {
-                serde_json::json!({
-                    "id": s.object.0,
-                    "class": s.class.0,
-                    "pos": s.state.pos.to_array(),
-                    "rot": s.state.rot.to_array(),
-                })
-            })
+            .map(|s| object_json(s, false))
             .collect();
         line["as"] = serde_json::json!({"peer": peer, "parts": parts});
     }

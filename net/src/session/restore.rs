@@ -60,29 +60,7 @@ impl Session {
         if o.id.0 == 0 || self.objects.contains(o.id) {
             return Err(NetError::Restore("object id 0 or in use"));
         }
-        let rot = o.state.checked_rotation()?;
-        if o.state.particles.len() > wire::MAX_PARTICLES as usize {
-            return Err(NetError::InvalidState("too many particles"));
-        }
-        if o.topology.len() > MAX_TOPOLOGY_LOG {
-            return Err(NetError::Restore("topology log too long"));
-        }
-        let info = SpawnInfo {
-            id: o.id,
-            class: o.class,
-            owner: self.local,
-            epoch: AuthorityEpoch {
-                term: self.term.0,
-                grant: 0,
-            },
-            held: false,
-            policy,
-            particles: o.state.particles.len() as u32,
-            pos: o.state.pos.to_array(),
-            rot: rot.to_array(),
-            request: None,
-            topology: o.topology.len() as u32,
-        };
+        let (info, rot) = self.kept_info(&o, o.id, policy)?;
         self.objects.skip_ids_through(o.id);
         self.insert_object(now, info, None);
         if let Some(obj) = self.objects.get_mut(o.id) {
@@ -130,30 +108,10 @@ impl Session {
         }
         self.class(o.class)
             .ok_or(NetError::UnknownClass(o.class.0))?;
-        let rot = o.state.checked_rotation()?;
-        if o.state.particles.len() > wire::MAX_PARTICLES as usize {
-            return Err(NetError::InvalidState("too many particles"));
-        }
-        if o.topology.len() > MAX_TOPOLOGY_LOG {
-            return Err(NetError::Restore("topology log too long"));
-        }
+        // checked before an id is spent
+        let (mut info, rot) = self.kept_info(&o, NetId(0), AuthorityPolicy::Locked)?;
         let id = self.objects.alloc_id().ok_or(NetError::IdsExhausted)?;
-        let info = SpawnInfo {
-            id,
-            class: o.class,
-            owner: self.local,
-            epoch: AuthorityEpoch {
-                term: self.term.0,
-                grant: 0,
-            },
-            held: false,
-            policy: AuthorityPolicy::Locked,
-            particles: o.state.particles.len() as u32,
-            pos: o.state.pos.to_array(),
-            rot: rot.to_array(),
-            request: None,
-            topology: o.topology.len() as u32,
-        };
+        info.id = id;
         self.insert_object(now, info.clone(), None);
         if let Some(obj) = self.objects.get_mut(id) {
             obj.topology.set_entries(o.topology.clone());
@@ -207,6 +165,41 @@ impl Session {
         self.events
             .push_back(super::Event::Topology { id, seq, event });
         Ok(())
+    }
+
+    /// The `Spawn` of kept object `o` under `id`, ours, with `policy`, and its rotation made
+    /// a unit; refused for a state that is not finite or has more particles than the wire
+    /// carries, or a log over [`MAX_TOPOLOGY_LOG`].
+    fn kept_info(
+        &self,
+        o: &KeptObject,
+        id: NetId,
+        policy: AuthorityPolicy,
+    ) -> Result<(SpawnInfo, glam::Quat), NetError> {
+        let rot = o.state.checked_rotation()?;
+        if o.state.particles.len() > wire::MAX_PARTICLES as usize {
+            return Err(NetError::InvalidState("too many particles"));
+        }
+        if o.topology.len() > MAX_TOPOLOGY_LOG {
+            return Err(NetError::Restore("topology log too long"));
+        }
+        let info = SpawnInfo {
+            id,
+            class: o.class,
+            owner: self.local,
+            epoch: AuthorityEpoch {
+                term: self.term.0,
+                grant: 0,
+            },
+            held: false,
+            policy,
+            particles: o.state.particles.len() as u32,
+            pos: o.state.pos.to_array(),
+            rot: rot.to_array(),
+            request: None,
+            topology: o.topology.len() as u32,
+        };
+        Ok((info, rot))
     }
 
     fn restoring(&self) -> Result<(), NetError> {
