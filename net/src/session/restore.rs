@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use super::{Role, Session};
 use crate::error::NetError;
-use crate::ids::{AuthorityEpoch, ClassId, NetId};
+use crate::ids::{ClassId, NetId};
 use crate::policy::AuthorityPolicy;
 
 use crate::session::topology::MAX_TOPOLOGY_LOG;
@@ -183,22 +183,14 @@ impl Session {
         if o.topology.len() > MAX_TOPOLOGY_LOG {
             return Err(NetError::Restore("topology log too long"));
         }
-        let info = SpawnInfo {
+        let info = self.own_spawn(
             id,
-            class: o.class,
-            owner: self.local,
-            epoch: AuthorityEpoch {
-                term: self.term.0,
-                grant: 0,
-            },
-            held: false,
+            o.class,
             policy,
-            particles: o.state.particles.len() as u32,
-            pos: o.state.pos.to_array(),
-            rot: rot.to_array(),
-            request: None,
-            topology: o.topology.len() as u32,
-        };
+            (o.state.pos, rot),
+            o.state.particles.len(),
+            o.topology.len(),
+        );
         Ok((info, rot))
     }
 

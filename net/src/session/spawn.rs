@@ -8,6 +8,7 @@ use std::collections::BTreeMap;
 use super::{Event, Role, Session};
 use crate::error::NetError;
 use crate::ids::{AuthorityEpoch, ClassId, NetId, PeerId};
+use crate::policy::AuthorityPolicy;
 use crate::session::ObjectState;
 use crate::time::Instant;
 use crate::wire::{self, Control, SpawnInfo};
@@ -123,7 +124,33 @@ impl Session {
             .ok_or(NetError::UnknownClass(class.0))?
             .authority;
         let id = self.objects.alloc_id().ok_or(NetError::IdsExhausted)?;
-        let info = SpawnInfo {
+        let info = self.own_spawn(
+            id,
+            class,
+            policy,
+            (state.pos, state.rot),
+            state.particles.len(),
+            0,
+        );
+        self.insert_object(now, info.clone(), Some(request));
+        let _ = self.publish_state(now, id, state);
+        self.broadcast(now, &Control::Spawn(info), None);
+        Ok(id)
+    }
+
+    /// The `Spawn` of an object of ours made now (this term, no grant yet, not held): `id` of
+    /// `class` with `policy`, at `pose`, of `particles` particles, its log `topology` entries
+    /// long.
+    pub(super) fn own_spawn(
+        &self,
+        id: NetId,
+        class: ClassId,
+        policy: AuthorityPolicy,
+        pose: (glam::Vec3, glam::Quat),
+        particles: usize,
+        topology: usize,
+    ) -> SpawnInfo {
+        SpawnInfo {
             id,
             class,
             owner: self.local,
@@ -133,16 +160,12 @@ impl Session {
             },
             held: false,
             policy,
-            particles: state.particles.len() as u32,
-            pos: state.pos.to_array(),
-            rot: state.rot.to_array(),
+            particles: particles as u32,
+            pos: pose.0.to_array(),
+            rot: pose.1.to_array(),
             request: None,
-            topology: 0,
-        };
-        self.insert_object(now, info.clone(), Some(request));
-        let _ = self.publish_state(now, id, state);
-        self.broadcast(now, &Control::Spawn(info), None);
-        Ok(id)
+            topology: topology as u32,
+        }
     }
 
     /// Host: a member asks for an object it will own.
