@@ -131,9 +131,8 @@ pub struct RoomOptions {
     /// Keep the room in a store ([`softsync_store::keeper`]): a host reopens the room kept there and
     /// writes it as it runs; a joiner writes it if it becomes host. `None`: not kept.
     pub store: Option<StoreOptions>,
-    /// A host spawns its scene's objects when it opens the room (true, the default); false
-    /// leaves the room empty for the application to fill (a recorded session played back:
-    /// `softsync replay --serve`).
+    /// A host spawns its scene's objects at open (the default); false leaves the room empty
+    /// for the application to fill (a recording played back: `softsync replay --serve`).
     pub spawn_scene: bool,
 }
 
