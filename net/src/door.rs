@@ -2,10 +2,10 @@
 //! into the protocol that registered that byte ([`REGISTRY`]). Nothing else in the library
 //! looks at a datagram's first byte to decide whose it is.
 //!
-//! Four protocols share one channel pair per peer: the room session (its first byte is the
+//! Five protocols share one channel pair per peer: the room session (its first byte is the
 //! protocol version, or 0 for the version-independent refusal), the scene share (`0xF5`,
 //! [`crate::share`]), a rollback room's ggrs and snapshot datagrams (`0xF7`,
-//! `softsync_rollback::socket`) and the transport's channel identification (`0xFF`, consumed by
+//! `softsync_rollback::socket`), voice (`0xF9`, [`crate::voice`]) and the transport's channel identification (`0xFF`, consumed by
 //! the WebRTC transport before anything else sees it). Session versions own `1..=0x7F`; the
 //! markers of other protocols live in `0x80..=0xFF`, so a session of another version is told
 //! it speaks another version, and a datagram of a protocol this build does not know (a newer
@@ -36,6 +36,8 @@ pub enum Door {
     Share,
     /// A rollback room's ggrs and snapshot datagrams (`softsync_rollback::socket`).
     Rollback,
+    /// Voice frames and listeners' reports ([`crate::voice`]).
+    Voice,
     /// The transport's channel identification (the WebRTC transport consumes it).
     Ident,
     /// Empty, or a marker no protocol of this build registered: dropped.
@@ -61,6 +63,8 @@ pub struct Protocol {
 pub const SHARE: u8 = 0xF5;
 /// First byte of a rollback room's datagrams.
 pub const ROLLBACK: u8 = 0xF7;
+/// First byte of voice datagrams.
+pub const VOICE: u8 = 0xF9;
 /// First byte of the transport's channel identification.
 pub const IDENT: u8 = CHANNEL_IDENT[0];
 /// Session protocol versions (first bytes) a session may ever speak.
@@ -99,6 +103,13 @@ pub const REGISTRY: &[Protocol] = &[
         carries: "a rollback room's ggrs messages and epoch snapshots, by epoch",
     },
     Protocol {
+        door: Door::Voice,
+        first: (VOICE, VOICE),
+        name: "voice",
+        module: "net/src/voice.rs",
+        carries: "Opus voice frames (direct, to relay, relayed) and listeners' reception reports",
+    },
+    Protocol {
         door: Door::Ident,
         first: (IDENT, IDENT),
         name: "channel ident",
@@ -130,7 +141,7 @@ pub fn classify(datagram: &[u8]) -> Door {
 #[derive(Clone, Debug, Default)]
 pub struct FrontDoor {
     /// Datagrams per door, in [`Door`]'s order (see [`count`](Self::count)).
-    counts: [u64; 7],
+    counts: [u64; 8],
     /// Datagrams a front end had no use for (a door it does not serve: a rollback datagram
     /// in a state-sync room, an ident past the transport, an unknown marker).
     pub dropped: u64,
@@ -208,6 +219,7 @@ mod tests {
         assert_eq!(classify(&[PROTOCOL_VERSION + 1]), Door::OtherVersion);
         assert_eq!(classify(&CHANNEL_IDENT), Door::Ident);
         assert_eq!(classify(&[ROLLBACK, 1]), Door::Rollback);
+        assert_eq!(classify(&[VOICE, 1]), Door::Voice);
         assert_eq!(classify(&[]), Door::Unknown);
         assert_eq!(classify(&[0xF6, 1, 2]), Door::Unknown);
         assert_eq!(classify(&[0x80]), Door::Unknown);

@@ -32,6 +32,7 @@ pub mod share;
 pub mod stats;
 pub mod time;
 pub mod transport;
+pub mod voice;
 pub mod wire;
 
 pub use error::NetError;

@@ -442,6 +442,26 @@ impl Session {
         true
     }
 
+    /// Each link's share of the uplink budget, bytes a second (`None`: no budget).
+    pub fn uplink_share(&self) -> Option<f64> {
+        self.cfg
+            .uplink_bytes_per_s
+            .map(|cap| f64::from(cap) / self.links.len().max(1) as f64)
+    }
+
+    /// A datagram of `payload` bytes that went to `to` outside the session (a voice frame):
+    /// under an uplink budget it is paid from that link's bucket, so it goes first and the
+    /// state waits (the bucket may go into debt, as for control).
+    pub fn charge_uplink(&mut self, now: Instant, to: PeerId, payload: usize) {
+        let (Some(rate), mtu) = (self.uplink_share(), self.cfg.mtu) else {
+            return;
+        };
+        if let Some(link) = self.links.get_mut(&to) {
+            link.bucket.refill(now, rate, mtu);
+            link.bucket.spend(payload);
+        }
+    }
+
     /// Everything due for `to` in one datagram: acks, pong, ping, keyframe requests, reliable
     /// control messages, then as many state entries as fit.
     pub(super) fn build_datagram(&mut self, now: Instant, to: PeerId) -> Option<Transmit> {
