@@ -1,0 +1,126 @@
+//! How a recording lines up with what was said: the delay by cross-correlation (coarse on
+//! 1 ms envelopes, then fine on the samples) and how alike they are there. Used by the live
+//! voice test and the voice benchmark (PESQ, the quality score, is the bench script's:
+//! `scripts/bench-voice`).
+
+use crate::SAMPLE_RATE;
+
+/// Where `said` is found in `heard`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Alignment {
+    /// Samples from the start of `heard` to the start of `said` in it.
+    pub lag: i64,
+    /// The normalised correlation of the 1 ms envelopes there (1 = the same loudness contour).
+    pub envelope_corr: f64,
+    /// The normalised correlation of the samples there.
+    pub sample_corr: f64,
+}
+
+impl Alignment {
+    /// The lag in milliseconds.
+    pub fn lag_ms(&self) -> f64 {
+        self.lag as f64 * 1000.0 / f64::from(SAMPLE_RATE)
+    }
+}
+
+const ENV: usize = (SAMPLE_RATE / 1000) as usize;
+
+fn envelope(x: &[i16]) -> Vec<f64> {
+    x.chunks(ENV)
+        .map(|c| c.iter().map(|s| f64::from(*s).abs()).sum::<f64>() / c.len() as f64)
+        .collect()
+}
+
+/// Normalised correlation of `a` against `b` shifted by `lag` (b's index = a's + lag), over
+/// the overlap; mean removed.
+fn ncc(a: &[f64], b: &[f64], lag: i64) -> f64 {
+    let (a0, b0) = if lag >= 0 {
+        (0usize, lag as usize)
+    } else {
+        ((-lag) as usize, 0usize)
+    };
+    let n = a.len().saturating_sub(a0).min(b.len().saturating_sub(b0));
+    if n < 8 {
+        return 0.0;
+    }
+    let (a, b) = (&a[a0..a0 + n], &b[b0..b0 + n]);
+    let ma = a.iter().sum::<f64>() / n as f64;
+    let mb = b.iter().sum::<f64>() / n as f64;
+    let (mut ab, mut aa, mut bb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        let (x, y) = (x - ma, y - mb);
+        ab += x * y;
+        aa += x * x;
+        bb += y * y;
+    }
+    if aa <= 0.0 || bb <= 0.0 {
+        0.0
+    } else {
+        ab / (aa * bb).sqrt()
+    }
+}
+
+/// Find `said` in `heard`, starting at most `max_lag_s` in (and not before its start).
+pub fn align(said: &[i16], heard: &[i16], max_lag_s: f64) -> Option<Alignment> {
+    let (es, eh) = (envelope(said), envelope(heard));
+    if es.len() < 50 || eh.len() < 50 {
+        return None;
+    }
+    let max = ((max_lag_s * 1000.0) as i64).min(eh.len() as i64);
+    let (mut best, mut best_lag) = (f64::MIN, 0i64);
+    for lag in 0..=max {
+        let c = ncc(&es, &eh, lag);
+        if c > best {
+            best = c;
+            best_lag = lag;
+        }
+    }
+    // fine: ±2 ms around the coarse lag, on the samples over the first 2 s of speech
+    let n = said.len().min(2 * SAMPLE_RATE as usize);
+    let s: Vec<f64> = said[..n].iter().map(|v| f64::from(*v)).collect();
+    let h: Vec<f64> = heard.iter().map(|v| f64::from(*v)).collect();
+    let centre = best_lag * ENV as i64;
+    let (mut fine, mut fine_lag) = (f64::MIN, centre);
+    for lag in (centre - 2 * ENV as i64)..=(centre + 2 * ENV as i64) {
+        if lag < 0 {
+            continue;
+        }
+        let c = ncc(&s, &h, lag);
+        if c > fine {
+            fine = c;
+            fine_lag = lag;
+        }
+    }
+    Some(Alignment {
+        lag: fine_lag,
+        envelope_corr: best,
+        sample_corr: fine,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_delayed_noisy_copy_is_found_at_its_delay() {
+        let mut x = 99u64;
+        let said: Vec<i16> = (0..96_000)
+            .map(|i| {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                let syl = ((i as f64 / 48_000.0) * 9.0).sin().max(0.0);
+                ((x % 20_000) as f64 - 10_000.0) as i16 / 2
+                    + (syl * 8000.0 * ((i as f64) * 0.05).sin()) as i16
+            })
+            .collect();
+        let mut heard = vec![0i16; 10_000];
+        heard.extend(said.iter().map(|v| v / 2));
+        heard.extend(vec![0i16; 5000]);
+        let a = align(&said, &heard, 1.0).unwrap();
+        assert_eq!(a.lag, 10_000, "{a:?}");
+        assert!(a.sample_corr > 0.99 && a.envelope_corr > 0.9, "{a:?}");
+        assert!(align(&said[..10], &heard, 1.0).is_none());
+    }
+}
