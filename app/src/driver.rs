@@ -195,6 +195,35 @@ impl Driver {
             .push_back(format!("{t:.1}s {}", hud_event(&line)));
     }
 
+    /// The voice's news as event lines: `voice_said room_ms=…` (our --voice-in started, its
+    /// first sample at that room time), `voice_speaking peer=… on=…`; its warnings to stderr.
+    pub fn log_voice(&mut self, room: &mut Room) {
+        let me = room.peer.me().0;
+        let t = room.now().as_secs_f64();
+        let Some(v) = room.voice() else {
+            return;
+        };
+        for e in v.drain_events().collect::<Vec<_>>() {
+            let line = match e {
+                softsync_bevy::voice::VoiceEvent::Said { room_ms } => {
+                    format!("voice_said room_ms={room_ms:.1}")
+                }
+                softsync_bevy::voice::VoiceEvent::Speaking { peer, on } => {
+                    format!("voice_speaking peer={} on={on}", peer.0)
+                }
+                softsync_bevy::voice::VoiceEvent::Warning(w) => {
+                    eprintln!("{w}");
+                    continue;
+                }
+            };
+            println!("event peer={me} t={t:.2} {line}");
+            if self.recent_events.len() >= 6 {
+                self.recent_events.pop_front();
+            }
+            self.recent_events.push_back(format!("{t:.1}s {line}"));
+        }
+    }
+
     /// Before a fixed step: the bot and/or the device set the hands.
     pub fn drive_hands(&mut self, room: &mut Room) {
         if !room.peer.joined() || self.exiting || room.has_left() {

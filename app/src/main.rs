@@ -465,6 +465,7 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     opts.bind = a.bind;
     opts.takeover_bind = a.takeover_bind;
     opts.uplink_bytes_per_s = a.uplink_bytes_per_s;
+    opts.voice = a.voice.clone();
     opts.state_route = a.state_route;
     opts.ice_servers = a.ice.clone();
     opts.ice_username = a.ice_user.clone();

@@ -26,13 +26,14 @@ use softsync_bevy::{Room, RoomEvent, RoomFailed, SoftsyncSet};
 use crate::driver::Driver;
 
 fn log_events(
-    room: NonSendMut<Room>,
+    mut room: NonSendMut<Room>,
     mut driver: NonSendMut<Driver>,
     mut events: MessageReader<RoomEvent>,
 ) {
     for RoomEvent(e) in events.read() {
         driver.log_event(&room, e);
     }
+    driver.log_voice(&mut room);
 }
 
 fn on_failure(

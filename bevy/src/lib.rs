@@ -63,11 +63,13 @@
 pub mod connect;
 pub mod glue;
 mod keep;
+pub mod options;
 pub mod plugin;
 pub mod pump;
 pub mod room;
 mod scene_fetch;
 mod signal_move;
+pub mod voice;
 
 pub use connect::{connect, first_contact, scene_server, ConnectTimes, Connected};
 pub use plugin::{

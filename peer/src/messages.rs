@@ -188,9 +188,23 @@ impl Message for ReplayClock {
     const NAME: &'static str = "softsync.replay_clock";
 }
 
+/// A peer's voice state (retained: a joiner learns at once who is muted and who speaks), sent
+/// by the peer whenever it changes (`softsync_bevy::voice`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct VoiceState {
+    /// Its microphone is muted.
+    pub muted: bool,
+    /// It is speaking now.
+    pub speaking: bool,
+}
+
+impl Message for VoiceState {
+    const NAME: &'static str = "softsync.voice_state";
+}
+
 /// The built-in message types ([`Say`], [`SignalingMoved`], [`RemoteHand`], [`HandAnswer`],
-/// [`Holders`], [`BladeRequest`], [`ReplayControl`], [`ReplayClock`]), in their fixed order;
-/// register yours after them.
+/// [`Holders`], [`BladeRequest`], [`ReplayControl`], [`ReplayClock`], [`VoiceState`]), in
+/// their fixed order; register yours after them.
 pub fn builtin() -> MessageTypes {
     let mut t = MessageTypes::new();
     // A fresh table holds no name yet, so these cannot collide.
@@ -202,6 +216,7 @@ pub fn builtin() -> MessageTypes {
     let _ = t.register::<BladeRequest>();
     let _ = t.register::<ReplayControl>();
     let _ = t.register::<ReplayClock>();
+    let _ = t.register::<VoiceState>();
     t
 }
 
@@ -223,7 +238,8 @@ mod tests {
         assert_eq!(t.kind::<Holders>().map(|k| k.0), Some(4));
         assert_eq!(t.kind::<BladeRequest>().map(|k| k.0), Some(5));
         assert_eq!(t.kind::<ReplayClock>().map(|k| k.0), Some(7));
-        assert_eq!(t.register::<Valve>().unwrap().0, 8);
+        assert_eq!(t.kind::<VoiceState>().map(|k| k.0), Some(8));
+        assert_eq!(t.register::<Valve>().unwrap().0, 9);
         assert!(t.register::<Say>().is_err());
     }
 }

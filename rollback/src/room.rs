@@ -378,7 +378,7 @@ impl RollbackPeer {
                 self.session.handle_packet(now, from, bytes);
                 return;
             }
-            Door::Share | Door::Ident | Door::Unknown => {
+            Door::Share | Door::Voice | Door::Ident | Door::Unknown => {
                 self.stats.dropped += 1;
                 return;
             }

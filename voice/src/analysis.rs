@@ -98,6 +98,47 @@ pub fn align(said: &[i16], heard: &[i16], max_lag_s: f64) -> Option<Alignment> {
     })
 }
 
+/// What a listener heard of one saying, from its `--voice-out` folder.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Heard {
+    /// Mouth to ear: when the listener played the first sample, less when it was said
+    /// (both on the room clock), ms.
+    pub mouth_to_ear_ms: f64,
+    /// The alignment in the recording.
+    pub alignment: Alignment,
+}
+
+/// Find the saying that started at room time `said_room_ms` (`voice_said` in the speaker's
+/// log) in the listener's recording of `speaker` under `dir` (`peer-ID.wav`, `voice.json`),
+/// searching from `said_room_ms` to `max_delay_ms` after it.
+pub fn heard_in(
+    said: &[i16],
+    said_room_ms: f64,
+    dir: &std::path::Path,
+    speaker: u64,
+    max_delay_ms: f64,
+) -> Result<Heard, String> {
+    let meta = std::fs::read_to_string(dir.join("voice.json"))
+        .map_err(|e| format!("{}: {e}", dir.join("voice.json").display()))?;
+    let meta: serde_json::Value = serde_json::from_str(&meta).map_err(|e| e.to_string())?;
+    let start = meta["start_room_ms"]
+        .as_f64()
+        .ok_or_else(|| format!("{}: no start_room_ms", dir.display()))?;
+    let rec = crate::files::read_wav(&dir.join(format!("peer-{speaker}.wav"))).map_err(|e| e.to_string())?;
+    let rate = f64::from(SAMPLE_RATE) / 1000.0;
+    let from = ((said_room_ms - start) * rate).max(0.0) as usize;
+    let len = ((max_delay_ms + said.len() as f64 / rate) * rate) as usize;
+    let part = rec
+        .get(from..(from + len).min(rec.len()))
+        .ok_or_else(|| format!("the recording in {} ends before the saying", dir.display()))?;
+    let a = align(said, part, max_delay_ms / 1000.0)
+        .ok_or_else(|| format!("the recording in {} is too short", dir.display()))?;
+    Ok(Heard {
+        mouth_to_ear_ms: start + (from as f64 + a.lag as f64) / rate - said_room_ms,
+        alignment: a,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

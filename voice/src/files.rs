@@ -161,6 +161,7 @@ pub struct WavSink {
     speakers: BTreeMap<PeerId, Writer>,
     blocks: u64,
     start_room_ms: Option<f64>,
+    heads: std::io::BufWriter<File>,
 }
 
 impl std::fmt::Debug for WavSink {
@@ -180,12 +181,18 @@ impl WavSink {
         let path = dir.join("mix.wav");
         let mix = hound::WavWriter::create(&path, spec(2))
             .map_err(|source| FileError::Wav { path, source })?;
+        let heads = File::create(dir.join("heads.csv"))
+            .map_err(|e| FileError::Other(format!("{}: {e}", dir.join("heads.csv").display())))?;
+        let mut heads = std::io::BufWriter::new(heads);
+        use std::io::Write;
+        writeln!(heads, "room_ms,peer,x,y,z").map_err(|e| FileError::Other(e.to_string()))?;
         Ok(WavSink {
             dir: dir.to_path_buf(),
             mix,
             speakers: BTreeMap::new(),
             blocks: 0,
             start_room_ms: None,
+            heads,
         })
     }
 
@@ -240,10 +247,25 @@ impl WavSink {
         Ok(())
     }
 
+    /// Where each speaker's head was shown at the block played at `room_ms` (`heads.csv`: how
+    /// the voice bench measures lip-sync from outside).
+    pub fn write_heads(&mut self, room_ms: f64, heads: &[(PeerId, glam::Vec3)]) -> Result<(), FileError> {
+        use std::io::Write;
+        for (p, at) in heads {
+            writeln!(self.heads, "{room_ms:.1},{},{:.5},{:.5},{:.5}", p.0, at.x, at.y, at.z)
+                .map_err(|e| FileError::Other(format!("heads.csv: {e}")))?;
+        }
+        Ok(())
+    }
+
     /// Headers and `voice.json` brought up to date (every half second anyway: a killed
     /// listener leaves readable files).
     pub fn flush(&mut self) -> Result<(), FileError> {
         let dir = self.dir.clone();
+        {
+            use std::io::Write;
+            self.heads.flush().map_err(|e| FileError::Other(format!("heads.csv: {e}")))?;
+        }
         self.mix.flush().map_err(|source| FileError::Wav {
             path: dir.join("mix.wav"),
             source,

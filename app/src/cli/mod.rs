@@ -12,6 +12,7 @@ use softsync_net::ConditionerConfig;
 mod keep;
 mod values;
 mod view;
+mod voice;
 pub use keep::{ReplayArgs, StoreAction};
 use values::*;
 pub use view::ViewArgs;
@@ -266,6 +267,8 @@ struct PeerOpts {
     vr: bool,
     #[command(flatten)]
     view: ViewOpts,
+    #[command(flatten)]
+    voice: voice::VoiceOpts,
 }
 
 /// A usage error (exit code 2).
@@ -374,6 +377,8 @@ pub struct PeerArgs {
     pub no_net_thread: bool,
     /// Uplink cap, bytes a second.
     pub uplink_bytes_per_s: Option<u32>,
+    /// Voice, if on.
+    pub voice: Option<softsync_bevy::voice::VoiceOptions>,
     /// Which way object state travels.
     pub state_route: softsync_net::StateRoute,
     /// Rollback (ggrs) rather than state sync.
@@ -584,6 +589,7 @@ fn peer_args(
         max_members: usize::from(p.max_members),
         no_net_thread: p.no_net_thread,
         uplink_bytes_per_s: p.uplink_kbps.map(|k| (k * 125.0).round().max(1.0) as u32),
+        voice: p.voice.options(),
         state_route: match p.state_route {
             Route::Relay => softsync_net::StateRoute::Relay,
             Route::Direct => softsync_net::StateRoute::Direct,

@@ -86,6 +86,12 @@ impl Peer {
         self.avatar.parts
     }
 
+    /// A datagram of `payload` bytes went to `to` beside the session (voice): it is paid from
+    /// that link's uplink budget ([`Session::charge_uplink`]).
+    pub fn charge_uplink(&mut self, now: Instant, to: PeerId, payload: usize) {
+        self.session.charge_uplink(now, to, payload);
+    }
+
     /// The state this peer shows for an object now: simulated if we own it, interpolated
     /// otherwise (what the dump writes); none for a body of ours still being built.
     pub fn shown_state(&mut self, now: Instant, id: NetId) -> Option<ObjectState> {

@@ -1,0 +1,87 @@
+//! `host`'s and `join`'s voice flags (`--voice-in`, `--voice-out`, …).
+
+use std::path::PathBuf;
+
+use clap::{Args, ValueEnum};
+use softsync_bevy::voice::VoiceOptions;
+use softsync_net::voice::RoutePolicy;
+use softsync_voice::VoiceConfig;
+
+/// How voice frames travel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum VoiceRoute {
+    /// Relay through the host when a link to another member goes through TURN, else mesh.
+    Auto,
+    /// Directly to every member.
+    Mesh,
+    /// One copy to the host, which relays it.
+    Relay,
+}
+
+/// Voice in the room.
+#[derive(Args, Debug, Clone)]
+pub struct VoiceOpts {
+    /// Voice on without files: hear the room (nothing is played on a headless peer) and
+    /// announce our state. --voice-in or --voice-out turn it on too.
+    #[arg(long, help_heading = "Voice")]
+    pub voice: bool,
+    /// Say this WAV file into the room (any rate and channels; 48 kHz mono Opus on the wire):
+    /// a bot's voice, for tests and benchmarks.
+    #[arg(long, value_name = "FILE", help_heading = "Voice")]
+    pub voice_in: Option<PathBuf>,
+    /// Seconds after joining before --voice-in is first said.
+    #[arg(long, value_name = "S", default_value_t = 1.0, value_parser = super::values::seconds, help_heading = "Voice")]
+    pub voice_after: f64,
+    /// Say --voice-in again every S seconds from each start (0: once).
+    #[arg(long, value_name = "S", default_value_t = 0.0, value_parser = super::values::seconds, help_heading = "Voice")]
+    pub voice_every: f64,
+    /// Write what this peer plays into DIR: mix.wav (stereo, each speaker placed at their
+    /// head), peer-ID.wav (each speaker alone) and voice.json (the room time of the first
+    /// sample).
+    #[arg(long, value_name = "DIR", help_heading = "Voice")]
+    pub voice_out: Option<PathBuf>,
+    /// How our frames travel.
+    #[arg(long, value_enum, default_value = "auto", help_heading = "Voice")]
+    pub voice_route: VoiceRoute,
+    /// The Opus bitrate with no loss, kilobits a second (8-40; loss reports raise it a
+    /// quarter for FEC, the uplink budget caps it).
+    #[arg(long, value_name = "KBPS", default_value_t = 24.0, value_parser = super::values::positive::<40>, help_heading = "Voice")]
+    pub voice_kbps: f64,
+    /// Start with the microphone muted.
+    #[arg(long, help_heading = "Voice")]
+    pub mute: bool,
+    /// Play each speaker as soon as the jitter buffer allows, not held back to the delay its
+    /// avatar is shown at.
+    #[arg(long, help_heading = "Voice")]
+    pub no_lip_sync: bool,
+    /// Our head rises with our voice (a bot's mouth; the voice bench sees lip-sync by it).
+    #[arg(long, help_heading = "Voice")]
+    pub voice_nod: bool,
+}
+
+impl VoiceOpts {
+    /// The room's voice options, if voice is on.
+    pub fn options(&self) -> Option<VoiceOptions> {
+        if !(self.voice || self.voice_in.is_some() || self.voice_out.is_some()) {
+            return None;
+        }
+        Some(VoiceOptions {
+            input: self.voice_in.clone(),
+            say_after: self.voice_after,
+            say_every: self.voice_every,
+            output: self.voice_out.clone(),
+            route: match self.voice_route {
+                VoiceRoute::Auto => RoutePolicy::Auto,
+                VoiceRoute::Mesh => RoutePolicy::Mesh,
+                VoiceRoute::Relay => RoutePolicy::Relay,
+            },
+            muted: self.mute,
+            config: VoiceConfig {
+                bitrate: (self.voice_kbps.clamp(8.0, 40.0) * 1000.0) as i32,
+                lip_sync: !self.no_lip_sync,
+                ..VoiceConfig::default()
+            },
+            nod: self.voice_nod,
+        })
+    }
+}

@@ -1,0 +1,407 @@
+//! [`RoomVoice`]: a room's voice, driven by the room on its clock — capture every 20 ms from
+//! the source (a WAV file for bots: `--voice-in`; no sound card is needed or opened), frames
+//! to the room along the route ([`softsync_net::voice`]), frames heard into the jitter
+//! buffers ([`softsync_voice::VoiceChat`]), a block played every 20 ms to the sink (WAV files:
+//! `--voice-out`), reports to speakers once a second, and the room's message API told when
+//! this peer mutes or starts and stops speaking ([`VoiceState`]).
+//!
+//! Timing: the capture and playback clocks tick every 20 ms of this machine's clock, caught
+//! up when a frame or pump ran late (a late block is still played at its own room time, so
+//! recordings stay on one timeline). A frame is stamped with the room time of its first
+//! sample, so every listener plays it at a known delay from when it was said.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use glam::{Quat, Vec3};
+use softsync_net::voice::{Heard, RoutePolicy, VoiceDrops, VoiceRouter};
+use softsync_net::{Delivery, Instant, MessageTarget, PeerId, Transmit, Transport};
+use softsync_peer::messages::VoiceState;
+use softsync_peer::scene::Kind;
+use softsync_peer::Peer;
+use softsync_voice::files::{WavSink, WavSource};
+use softsync_voice::{SpeakerStatus, VoiceChat, VoiceConfig, FRAME_SAMPLES};
+
+const FRAME: Duration = Duration::from_millis(20);
+const REPORT_EVERY: Duration = Duration::from_secs(1);
+/// Blocks caught up at most after a stall (more are skipped: 200 ms).
+const MAX_CATCH_UP: u32 = 10;
+
+/// How a peer speaks and listens (`softsync join … --voice-in F --voice-out D`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct VoiceOptions {
+    /// A WAV file this peer says (a bot's voice), at [`say_after`](Self::say_after) and then
+    /// every [`say_every`](Self::say_every).
+    pub input: Option<PathBuf>,
+    /// Seconds after joining before it is first said.
+    pub say_after: f64,
+    /// Say it again this many seconds after each start (0: once).
+    pub say_every: f64,
+    /// A folder to write what this peer plays (`mix.wav`, `peer-ID.wav`, `voice.json`).
+    pub output: Option<PathBuf>,
+    /// How frames travel.
+    pub route: RoutePolicy,
+    /// Start muted.
+    pub muted: bool,
+    /// Codec and buffer settings.
+    pub config: VoiceConfig,
+    /// Move this peer's head with its voice (a bot's "mouth": the head rises with the level),
+    /// which is how the benchmark sees lip-sync from outside.
+    pub nod: bool,
+}
+
+impl Default for VoiceOptions {
+    fn default() -> Self {
+        VoiceOptions {
+            input: None,
+            say_after: 1.0,
+            say_every: 0.0,
+            output: None,
+            route: RoutePolicy::Auto,
+            muted: false,
+            config: VoiceConfig::default(),
+            nod: false,
+        }
+    }
+}
+
+/// What the voice did, for the front end's log.
+#[derive(Clone, Debug, PartialEq)]
+pub enum VoiceEvent {
+    /// The input file started, its first sample at this room time (ms).
+    Said {
+        /// Room time of the first sample, ms.
+        room_ms: f64,
+    },
+    /// A speaker started or stopped being heard here.
+    Speaking {
+        /// Who.
+        peer: PeerId,
+        /// Speaking now.
+        on: bool,
+    },
+    /// Something went wrong that does not stop the room (a file that cannot be written).
+    Warning(String),
+}
+
+/// A room's voice (see the module's doc).
+pub struct RoomVoice {
+    opts: VoiceOptions,
+    chat: VoiceChat,
+    router: VoiceRouter,
+    source: Option<WavSource>,
+    sink: Option<WavSink>,
+    capture_next: Option<Instant>,
+    play_next: Option<Instant>,
+    report_next: Option<Instant>,
+    say_next: Option<Instant>,
+    /// The first saying was scheduled.
+    scheduled: bool,
+    speaking: BTreeMap<PeerId, bool>,
+    announced: Option<VoiceState>,
+    events: Vec<VoiceEvent>,
+    out: Vec<Transmit>,
+    /// Room time of the newest block played, ms.
+    last_block_ms: Option<f64>,
+    /// Our head's rest height, when it nods.
+    nod_base: Option<(Vec3, Quat)>,
+}
+
+impl std::fmt::Debug for RoomVoice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RoomVoice").field("opts", &self.opts).finish()
+    }
+}
+
+/// Room time in ms at local time `at`, from the room's clock read at `now`.
+fn room_ms(peer: &Peer, now: Instant, at: Instant) -> Option<f64> {
+    let r = peer.session().room_time(now)?;
+    let back = now.saturating_since(at);
+    Some((r.as_secs_f64() - back.as_secs_f64()) * 1000.0)
+}
+
+impl RoomVoice {
+    /// Voice with these options: the input file read, the output folder made.
+    pub fn new(opts: VoiceOptions) -> Result<Self, String> {
+        let chat = VoiceChat::new(opts.config).map_err(|e| e.to_string())?;
+        let source = match &opts.input {
+            Some(p) => Some(WavSource::open(p).map_err(|e| format!("--voice-in: {e}"))?),
+            None => None,
+        };
+        let sink = match &opts.output {
+            Some(d) => Some(WavSink::create(d).map_err(|e| format!("--voice-out: {e}"))?),
+            None => None,
+        };
+        let mut chat = chat;
+        chat.set_muted(opts.muted);
+        Ok(RoomVoice {
+            opts,
+            chat,
+            router: VoiceRouter::default(),
+            source,
+            sink,
+            capture_next: None,
+            play_next: None,
+            report_next: None,
+            say_next: None,
+            scheduled: false,
+            speaking: BTreeMap::new(),
+            announced: None,
+            events: Vec::new(),
+            out: Vec::new(),
+            last_block_ms: None,
+            nod_base: None,
+        })
+    }
+
+    /// The voice engine (mute, push-to-talk, volumes, who is speaking).
+    pub fn chat(&mut self) -> &mut VoiceChat {
+        &mut self.chat
+    }
+
+    /// What we hear of `peer`.
+    pub fn status(&self, peer: PeerId) -> Option<SpeakerStatus> {
+        self.chat.status(peer)
+    }
+
+    /// Voice datagrams dropped, by reason.
+    pub fn drops(&self) -> VoiceDrops {
+        self.router.drops()
+    }
+
+    /// Voice bytes sent, and frames relayed as host.
+    pub fn traffic(&self) -> (u64, u64) {
+        (self.router.sent_bytes(), self.router.relayed())
+    }
+
+    /// The events since the last call.
+    pub fn drain_events(&mut self) -> std::vec::Drain<'_, VoiceEvent> {
+        self.events.drain(..)
+    }
+
+    /// Room time of the newest block played, ms.
+    pub fn last_block_ms(&self) -> Option<f64> {
+        self.last_block_ms
+    }
+
+    /// A voice datagram from `from`.
+    pub fn handle(
+        &mut self,
+        now: Instant,
+        peer: &mut Peer,
+        transport: &mut dyn Transport,
+        from: PeerId,
+        bytes: &[u8],
+    ) {
+        let heard = self
+            .router
+            .handle(now, peer.session(), from, bytes, &mut self.out);
+        self.send_out(now, peer, transport);
+        match heard {
+            Some(Heard::Frame { speaker, frame }) => {
+                if let Some(t) = room_ms(peer, now, now) {
+                    self.chat.hear(t, speaker, frame);
+                }
+            }
+            Some(Heard::Report { listener, report }) => self.chat.on_report(listener, report),
+            None => {}
+        }
+    }
+
+    fn send_out(&mut self, now: Instant, peer: &mut Peer, transport: &mut dyn Transport) {
+        for t in self.out.drain(..) {
+            peer.charge_uplink(now, t.to, t.payload.len());
+            transport.send(now, &t);
+        }
+    }
+
+    /// Capture, play and report what is due by `now`; announce our state when it changed.
+    pub fn tick(&mut self, now: Instant, peer: &mut Peer, transport: &mut dyn Transport) {
+        if !peer.joined() || peer.session().room_time(now).is_none() {
+            return;
+        }
+        let capture_next = *self.capture_next.get_or_insert(now + FRAME);
+        let play_next = *self.play_next.get_or_insert(now);
+        let report_next = *self.report_next.get_or_insert(now + REPORT_EVERY);
+        if !self.scheduled && self.source.is_some() {
+            self.scheduled = true;
+            self.say_next = Some(now + Duration::from_secs_f64(self.opts.say_after.max(0.0)));
+        }
+        // nothing to capture without a source (no sound card is opened here)
+        if self.source.is_some() {
+            self.capture(now, capture_next, peer, transport);
+        }
+        self.play(now, play_next, peer);
+        if now >= report_next {
+            self.report_next = Some(now + REPORT_EVERY);
+            for (to, r) in self.chat.reports() {
+                self.router.send_report(to, r, &mut self.out);
+            }
+            self.send_out(now, peer, transport);
+            // voice goes first in the uplink budget: half a link's share at most
+            let cap = peer
+                .session()
+                .uplink_share()
+                .map(|bytes| (bytes * 8.0 / 2.0) as i32);
+            self.chat.set_cap(cap);
+        }
+        self.announce(now, peer);
+    }
+
+    fn capture(&mut self, now: Instant, mut due: Instant, peer: &mut Peer, transport: &mut dyn Transport) {
+        // the room's route: relay when any link to a member other than the host is TURNed
+        let session = peer.session();
+        let me = session.local_id();
+        let host = session.host_id();
+        let turned = session
+            .members()
+            .keys()
+            .filter(|p| **p != me && Some(**p) != host)
+            .any(|p| transport.relayed(*p) != Some(false));
+        let route = self.opts.route.route(turned);
+        let mut n = 0;
+        while now >= due && n < MAX_CATCH_UP {
+            n += 1;
+            if let (Some(src), Some(say)) = (&mut self.source, self.say_next) {
+                if due >= say {
+                    src.start();
+                    self.say_next = (self.opts.say_every > 0.0)
+                        .then(|| say + Duration::from_secs_f64(self.opts.say_every));
+                }
+            }
+            let (pcm, first) = match &mut self.source {
+                Some(s) => s.next_frame(),
+                None => ([0i16; FRAME_SAMPLES], false),
+            };
+            // the frame that completes at `due` began 20 ms before
+            let begun = Instant::from_micros(due.as_micros().saturating_sub(20_000));
+            if let Some(t) = room_ms(peer, now, begun) {
+                if first {
+                    self.events.push(VoiceEvent::Said { room_ms: t });
+                }
+                if let Some(f) = self.chat.capture(t, &pcm) {
+                    self.router.send_frame(peer.session(), route, &f, &mut self.out);
+                }
+            }
+            due = due + FRAME;
+        }
+        if now >= due {
+            // a stall longer than the catch-up: start again from now
+            due = now + FRAME;
+        }
+        self.capture_next = Some(due);
+        self.send_out(now, peer, transport);
+        if self.opts.nod {
+            self.nod(peer);
+        }
+    }
+
+    /// A bot's head rises with its voice (up to 5 cm at full scale).
+    fn nod(&mut self, peer: &mut Peer) {
+        let Some(head) = peer.avatar_parts()[0] else {
+            return;
+        };
+        let Some(o) = peer.objects().get(&head) else {
+            return;
+        };
+        let (pos, rot) = *self.nod_base.get_or_insert(o.pose);
+        let db = self.chat.own().level_db;
+        let lift = ((db - softsync_voice::level::FLOOR_DB) / -softsync_voice::level::FLOOR_DB).clamp(0.0, 1.0) * 0.05;
+        peer.set_avatar_pose(0, pos + Vec3::Y * lift, rot);
+    }
+
+    fn play(&mut self, now: Instant, mut due: Instant, peer: &mut Peer) {
+        if now < due {
+            return;
+        }
+        // the listener's head, and every speaker's, as shown here
+        let me = peer.me();
+        let mut listener = None;
+        let mut heads = BTreeMap::new();
+        let ids: Vec<_> = peer
+            .objects()
+            .iter()
+            .filter(|(_, o)| o.kind == Kind::HEAD)
+            .filter_map(|(id, o)| Some((*id, o.avatar_of?)))
+            .collect();
+        for (id, who) in ids {
+            if let Some(s) = peer.shown_state(now, id) {
+                if who == me {
+                    listener = Some((s.pos, s.rot));
+                } else {
+                    heads.insert(who, s.pos);
+                }
+            }
+        }
+        let mut n = 0;
+        while now >= due && n < MAX_CATCH_UP {
+            n += 1;
+            let Some(t) = room_ms(peer, now, due) else {
+                break;
+            };
+            let block = self.chat.play(t, listener, &heads);
+            self.last_block_ms = Some(t);
+            if let Some(sink) = &mut self.sink {
+                let shown: Vec<(PeerId, Vec3)> = heads.iter().map(|(p, v)| (*p, *v)).collect();
+                let written = sink
+                    .write(t, &block.stereo, &block.speakers)
+                    .and_then(|()| sink.write_heads(t, &shown));
+                if let Err(e) = written {
+                    self.events.push(VoiceEvent::Warning(format!("voice out: {e}")));
+                    self.sink = None;
+                }
+            }
+            due = due + FRAME;
+        }
+        if now >= due {
+            due = now + FRAME;
+        }
+        self.play_next = Some(due);
+        for p in self.chat.speakers() {
+            let on = self.chat.status(p).is_some_and(|s| s.speaking);
+            if self.speaking.insert(p, on).unwrap_or(false) != on {
+                self.events.push(VoiceEvent::Speaking { peer: p, on });
+            }
+        }
+        // a speaker who left: forgotten
+        let members = peer.session().members();
+        let gone: Vec<PeerId> = self
+            .chat
+            .speakers()
+            .into_iter()
+            .filter(|p| !members.contains_key(p))
+            .collect();
+        for p in gone {
+            self.chat.forget(p);
+            if self.speaking.remove(&p) == Some(true) {
+                self.events.push(VoiceEvent::Speaking { peer: p, on: false });
+            }
+        }
+    }
+
+    fn announce(&mut self, now: Instant, peer: &mut Peer) {
+        let state = VoiceState {
+            muted: self.chat.muted(),
+            speaking: self.chat.own().speaking(),
+        };
+        if self.announced == Some(state) {
+            return;
+        }
+        if peer
+            .send(now, MessageTarget::Everyone, Delivery::Retained, &state)
+            .is_ok()
+        {
+            self.announced = Some(state);
+        }
+    }
+
+    /// Write what the sink holds (headers, `voice.json`).
+    pub fn finish(&mut self) {
+        if let Some(s) = &mut self.sink {
+            if let Err(e) = s.flush() {
+                self.events.push(VoiceEvent::Warning(format!("voice out: {e}")));
+            }
+        }
+    }
+}
