@@ -4,6 +4,7 @@
 //! fixed steps, leaving — is `softsync-bevy`'s, run by its plugin as any user's app runs it;
 //! the systems in `plugins.rs` call into the driver at their places around it.
 
+use std::fmt::Write as _;
 use std::collections::VecDeque;
 use std::time::Duration;
 
@@ -210,6 +211,30 @@ impl Driver {
                 }
                 softsync_bevy::voice::VoiceEvent::Speaking { peer, on } => {
                     format!("voice_speaking peer={} on={on}", peer.0)
+                }
+                softsync_bevy::voice::VoiceEvent::Stats {
+                    sent_bytes,
+                    frames,
+                    bitrate,
+                    relayed,
+                    drops,
+                    heard,
+                } => {
+                    let mut line = format!(
+                        "voice_stats sent_bytes={sent_bytes} frames={} silent={} bitrate={bitrate} relayed={relayed} dropped={} malformed={} not_member={} wrong_speaker={} not_host={} flood={}",
+                        frames.0, frames.1, drops.total(), drops.malformed, drops.not_member,
+                        drops.wrong_speaker, drops.not_host, drops.flood
+                    );
+                    for (p, s) in heard {
+                        let st = s.stats;
+                        let _ = write!(
+                            line,
+                            " heard={}:played={},fec={},concealed={},late={},delay_ms={:.1},target_ms={:.1}",
+                            p.0, st.played, st.fec, st.concealed, st.late,
+                            s.delay_ms.unwrap_or(f64::NAN), s.target_ms
+                        );
+                    }
+                    line
                 }
                 softsync_bevy::voice::VoiceEvent::Warning(w) => {
                     eprintln!("{w}");

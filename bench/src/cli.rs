@@ -87,6 +87,18 @@ pub enum Sub {
         #[arg(long, default_value_t = 10.0)]
         seconds: f64,
     },
+    /// Voice live: mouth to ear, PESQ, bitrate and lip-sync skew at 0/50/150 ms one-way and
+    /// 0/5/20 % loss (`RESULT voice.live`), and a room of 8 with two talking, mesh against
+    /// relay (`RESULT voice.room`). Needs espeak-ng; PESQ through scripts/pesq. Run it in a
+    /// network namespace (scripts/netns-run).
+    Voice {
+        /// Output directory.
+        #[arg(long, default_value = "docs/results/voice")]
+        out: PathBuf,
+        /// One condition (50 ms, 5 %), two sayings, and shorter rooms of 8.
+        #[arg(long)]
+        quick: bool,
+    },
     /// The room store, SQLite and PostgreSQL side by side: reopening the thesis room with 100
     /// tear segments (`RESULT store.reopen`), and the frame-budget room written as it runs
     /// against the same room unkept, interleaved (`RESULT store.write`). PostgreSQL is a

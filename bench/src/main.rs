@@ -126,6 +126,7 @@ fn run(bench: Sub) -> Result<bool, String> {
             assets,
         } => run_store(&out, postgres, rounds.into(), seconds, runs.into(), assets)?,
         Sub::RoomClock { out, seconds } => live::room_clock(&out, seconds)?,
+        Sub::Voice { out, quick } => live::voice(&out, quick)?,
         Sub::Abuse {
             out,
             seconds,

@@ -25,6 +25,18 @@ use softsync_voice::{SpeakerStatus, VoiceChat, VoiceConfig, FRAME_SAMPLES};
 
 const FRAME: Duration = Duration::from_millis(20);
 const REPORT_EVERY: Duration = Duration::from_secs(1);
+const STATS_EVERY: u32 = 5;
+/// How far the voice may run ahead of the lips, ms (audio that leads is noticed sooner than
+/// audio that lags; ITU-R BT.1359 puts detection at about 45 ms lead).
+const LIP_LEAD_MS: f64 = 20.0;
+/// A speaking avatar's head is shown one send interval late (not two), with the usual jitter
+/// allowance: the voice buffer can then match it without adding much delay.
+const HEAD_INTERPOLATION: softsync_net::InterpolationConfig = softsync_net::InterpolationConfig {
+    intervals: 1.0,
+    jitter_factor: 2.0,
+    max_extrapolation: Duration::from_millis(50),
+    snap_distance_m: 2.0,
+};
 /// Blocks caught up at most after a stall (more are skipped: 200 ms).
 const MAX_CATCH_UP: u32 = 10;
 
@@ -81,6 +93,21 @@ pub enum VoiceEvent {
         /// Speaking now.
         on: bool,
     },
+    /// Every 5 s: what we sent and what we heard of each speaker.
+    Stats {
+        /// Voice bytes sent (frames, relays, reports).
+        sent_bytes: u64,
+        /// Frames sent, and frames not sent for silence.
+        frames: (u64, u64),
+        /// The encoder's bitrate now.
+        bitrate: i32,
+        /// Frames relayed as host.
+        relayed: u64,
+        /// Voice datagrams dropped, by reason.
+        drops: VoiceDrops,
+        /// Each speaker as heard here.
+        heard: Vec<(PeerId, SpeakerStatus)>,
+    },
     /// Something went wrong that does not stop the room (a file that cannot be written).
     Warning(String),
 }
@@ -106,6 +133,10 @@ pub struct RoomVoice {
     last_block_ms: Option<f64>,
     /// Our head's rest height, when it nods.
     nod_base: Option<(Vec3, Quat)>,
+    /// Report rounds, for the stats every [`STATS_EVERY`].
+    rounds: u32,
+    /// Remote heads given [`HEAD_INTERPOLATION`].
+    heads_set: std::collections::BTreeSet<softsync_net::NetId>,
 }
 
 impl std::fmt::Debug for RoomVoice {
@@ -152,6 +183,8 @@ impl RoomVoice {
             out: Vec::new(),
             last_block_ms: None,
             nod_base: None,
+            rounds: 0,
+            heads_set: Default::default(),
         })
     }
 
@@ -245,6 +278,23 @@ impl RoomVoice {
                 .uplink_share()
                 .map(|bytes| (bytes * 8.0 / 2.0) as i32);
             self.chat.set_cap(cap);
+            self.rounds += 1;
+            if self.rounds % STATS_EVERY == 0 {
+                let heard = self
+                    .chat
+                    .speakers()
+                    .into_iter()
+                    .filter_map(|p| Some((p, self.chat.status(p)?)))
+                    .collect();
+                self.events.push(VoiceEvent::Stats {
+                    sent_bytes: self.router.sent_bytes(),
+                    frames: self.chat.sent(),
+                    bitrate: self.chat.bitrate(),
+                    relayed: self.router.relayed(),
+                    drops: self.router.drops(),
+                    heard,
+                });
+            }
         }
         self.announce(now, peer);
     }
@@ -325,12 +375,19 @@ impl RoomVoice {
             .filter(|(_, o)| o.kind == Kind::HEAD)
             .filter_map(|(id, o)| Some((*id, o.avatar_of?)))
             .collect();
+        let lip_sync = self.opts.config.lip_sync;
         for (id, who) in ids {
+            if lip_sync && who != me && self.heads_set.insert(id) {
+                peer.set_object_interpolation(id, Some(HEAD_INTERPOLATION));
+            }
             if let Some(s) = peer.shown_state(now, id) {
                 if who == me {
                     listener = Some((s.pos, s.rot));
                 } else {
                     heads.insert(who, s.pos);
+                    if lip_sync {
+                        self.lip_sync(now, peer, who, id);
+                    }
                 }
             }
         }
@@ -378,6 +435,31 @@ impl RoomVoice {
                 self.events.push(VoiceEvent::Speaking { peer: p, on: false });
             }
         }
+    }
+
+    /// Hold `who`'s voice back to about when its head is shown: the head's interpolation delay
+    /// plus its path (the voice's own fastest transit less the frame, and one more hop when
+    /// state goes through the host and neither of us is it), less [`LIP_LEAD_MS`].
+    fn lip_sync(&mut self, now: Instant, peer: &mut Peer, who: PeerId, head: softsync_net::NetId) {
+        let Some(fastest) = self.chat.status(who).and_then(|s| s.fastest_transit_ms) else {
+            return;
+        };
+        let Some(delay) = peer.display_delay(now, head) else {
+            return;
+        };
+        let session = peer.session();
+        let host = session.host_id();
+        let relayed = session.config().state_route == softsync_net::StateRoute::Relay
+            && !session.is_host()
+            && host != Some(who);
+        let hop = if relayed {
+            host.and_then(|h| session.stats().links.get(&h)?.rtt)
+                .map_or(0.0, |r| r.as_secs_f64() * 500.0)
+        } else {
+            0.0
+        };
+        let avatar_ms = delay.as_secs_f64() * 1000.0 + (fastest - 20.0).max(0.0) + hop;
+        self.chat.set_lip_sync(who, avatar_ms - LIP_LEAD_MS);
     }
 
     fn announce(&mut self, now: Instant, peer: &mut Peer) {

@@ -73,6 +73,8 @@ pub struct SpeakerStatus {
     pub delay_ms: Option<f64>,
     /// The delay the buffer aims at.
     pub target_ms: f64,
+    /// The fastest transit seen lately (capture to arrival, the frame's 20 ms included).
+    pub fastest_transit_ms: Option<f64>,
     /// Its counts.
     pub stats: JitterStats,
 }
@@ -271,6 +273,7 @@ impl VoiceChat {
             level_db: s.activity.level_db,
             delay_ms: s.delay,
             target_ms: s.jitter.target_delay(),
+            fastest_transit_ms: s.jitter.fastest_transit(),
             stats: s.jitter.stats(),
         })
     }

@@ -196,6 +196,12 @@ impl JitterBuffer {
         self.playing.map(|p| p.delay)
     }
 
+    /// The fastest transit of the last window (capture to arrival, the frame's 20 ms
+    /// included), ms.
+    pub fn fastest_transit(&self) -> Option<f64> {
+        self.transit.iter().copied().reduce(f64::min)
+    }
+
     /// The transit jitter (95th percentile less the fastest), ms.
     pub fn jitter(&self) -> f64 {
         let fastest = self.transit.iter().copied().fold(f64::INFINITY, f64::min);

@@ -32,6 +32,7 @@ mod load;
 mod soak;
 mod soak_check;
 mod views;
+mod voice;
 
 pub use abuse::{abuse, ATTACKS};
 pub use auto::auto;
@@ -40,6 +41,7 @@ pub use comanip::comanip;
 pub use lb::{signal_lb, LbPlan};
 pub use load::room_load;
 pub use soak::{soak, SoakPlan};
+pub use voice::voice;
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;

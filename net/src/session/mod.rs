@@ -357,6 +357,20 @@ impl Session {
         &self.members
     }
 
+    /// Interpolate object `id` with its own settings (`None`: the session's again), e.g. a
+    /// speaking avatar's head with one send interval of delay instead of two, so that what is
+    /// seen of a mouth keeps up with what is heard (`softsync_bevy::voice`). Local: nothing is
+    /// sent. False for an unknown object.
+    pub fn set_object_interpolation(&mut self, id: NetId, cfg: Option<InterpolationConfig>) -> bool {
+        match self.objects.get_mut(id) {
+            Some(o) => {
+                o.interp = cfg.map(InterpolationConfig::sanitized);
+                true
+            }
+            None => false,
+        }
+    }
+
     /// Known objects.
     pub fn object_ids(&self) -> Vec<NetId> {
         self.objects.ids()
@@ -419,8 +433,8 @@ impl Session {
     /// What this peer displays at `now`: the owner's published state for our own objects,
     /// otherwise the interpolated remote state.
     pub fn display_state(&mut self, now: Instant, id: NetId) -> Option<DisplayedState> {
-        let interp = self.interp;
         let o = self.objects.get(id)?;
+        let interp = o.interp.unwrap_or(self.interp);
         if o.info.owner == self.local {
             if let Some(p) = &o.published {
                 return Some(DisplayedState {

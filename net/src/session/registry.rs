@@ -96,6 +96,9 @@ pub(crate) struct Object {
     pub released: bool,
     /// Until when a released or thrown object goes before resting ones (`session::budget`).
     pub boost_until: Option<Instant>,
+    /// Its own interpolation settings, if it has any (a speaking avatar's head, shown with
+    /// less delay so that lips and voice line up: [`crate::Session::set_object_interpolation`]).
+    pub interp: Option<crate::interp::InterpolationConfig>,
 }
 
 impl Object {
@@ -128,6 +131,7 @@ impl Object {
             topology: Default::default(),
             released: false,
             boost_until: None,
+            interp: None,
         }
     }
 

@@ -86,6 +86,21 @@ impl Peer {
         self.avatar.parts
     }
 
+    /// How late a remote object is shown now (its interpolation delay; zero for our own).
+    pub fn display_delay(&mut self, now: Instant, id: NetId) -> Option<std::time::Duration> {
+        self.session.display_state(now, id).map(|d| d.delay)
+    }
+
+    /// Interpolate a remote object with its own settings
+    /// ([`Session::set_object_interpolation`]).
+    pub fn set_object_interpolation(
+        &mut self,
+        id: NetId,
+        cfg: Option<softsync_net::InterpolationConfig>,
+    ) -> bool {
+        self.session.set_object_interpolation(id, cfg)
+    }
+
     /// A datagram of `payload` bytes went to `to` beside the session (voice): it is paid from
     /// that link's uplink budget ([`Session::charge_uplink`]).
     pub fn charge_uplink(&mut self, now: Instant, to: PeerId, payload: usize) {
