@@ -4,8 +4,8 @@
 //! fixed steps, leaving — is `softsync-bevy`'s, run by its plugin as any user's app runs it;
 //! the systems in `plugins.rs` call into the driver at their places around it.
 
-use std::fmt::Write as _;
 use std::collections::VecDeque;
+use std::fmt::Write as _;
 use std::time::Duration;
 
 use softsync_bevy::{ConnectTimes, Room};

@@ -141,7 +141,9 @@ pub struct RoomVoice {
 
 impl std::fmt::Debug for RoomVoice {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("RoomVoice").field("opts", &self.opts).finish()
+        f.debug_struct("RoomVoice")
+            .field("opts", &self.opts)
+            .finish()
     }
 }
 
@@ -299,7 +301,13 @@ impl RoomVoice {
         self.announce(now, peer);
     }
 
-    fn capture(&mut self, now: Instant, mut due: Instant, peer: &mut Peer, transport: &mut dyn Transport) {
+    fn capture(
+        &mut self,
+        now: Instant,
+        mut due: Instant,
+        peer: &mut Peer,
+        transport: &mut dyn Transport,
+    ) {
         // the room's route: relay when any link to a member other than the host is TURNed
         let session = peer.session();
         let me = session.local_id();
@@ -331,7 +339,8 @@ impl RoomVoice {
                     self.events.push(VoiceEvent::Said { room_ms: t });
                 }
                 if let Some(f) = self.chat.capture(t, &pcm) {
-                    self.router.send_frame(peer.session(), route, &f, &mut self.out);
+                    self.router
+                        .send_frame(peer.session(), route, &f, &mut self.out);
                 }
             }
             due = due + FRAME;
@@ -357,7 +366,9 @@ impl RoomVoice {
         };
         let (pos, rot) = *self.nod_base.get_or_insert(o.pose);
         let db = self.chat.own().level_db;
-        let lift = ((db - softsync_voice::level::FLOOR_DB) / -softsync_voice::level::FLOOR_DB).clamp(0.0, 1.0) * 0.05;
+        let lift = ((db - softsync_voice::level::FLOOR_DB) / -softsync_voice::level::FLOOR_DB)
+            .clamp(0.0, 1.0)
+            * 0.05;
         peer.set_avatar_pose(0, pos + Vec3::Y * lift, rot);
     }
 
@@ -405,7 +416,8 @@ impl RoomVoice {
                     .write(t, &block.stereo, &block.speakers)
                     .and_then(|()| sink.write_heads(t, &shown));
                 if let Err(e) = written {
-                    self.events.push(VoiceEvent::Warning(format!("voice out: {e}")));
+                    self.events
+                        .push(VoiceEvent::Warning(format!("voice out: {e}")));
                     self.sink = None;
                 }
             }
@@ -432,7 +444,8 @@ impl RoomVoice {
         for p in gone {
             self.chat.forget(p);
             if self.speaking.remove(&p) == Some(true) {
-                self.events.push(VoiceEvent::Speaking { peer: p, on: false });
+                self.events
+                    .push(VoiceEvent::Speaking { peer: p, on: false });
             }
         }
     }
@@ -482,7 +495,8 @@ impl RoomVoice {
     pub fn finish(&mut self) {
         if let Some(s) = &mut self.sink {
             if let Err(e) = s.flush() {
-                self.events.push(VoiceEvent::Warning(format!("voice out: {e}")));
+                self.events
+                    .push(VoiceEvent::Warning(format!("voice out: {e}")));
             }
         }
     }

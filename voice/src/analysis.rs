@@ -124,7 +124,8 @@ pub fn heard_in(
     let start = meta["start_room_ms"]
         .as_f64()
         .ok_or_else(|| format!("{}: no start_room_ms", dir.display()))?;
-    let rec = crate::files::read_wav(&dir.join(format!("peer-{speaker}.wav"))).map_err(|e| e.to_string())?;
+    let rec = crate::files::read_wav(&dir.join(format!("peer-{speaker}.wav")))
+        .map_err(|e| e.to_string())?;
     let rate = f64::from(SAMPLE_RATE) / 1000.0;
     let from = ((said_room_ms - start) * rate).max(0.0) as usize;
     let len = ((max_delay_ms + said.len() as f64 / rate) * rate) as usize;
@@ -137,6 +138,23 @@ pub fn heard_in(
         mouth_to_ear_ms: start + (from as f64 + a.lag as f64) / rate - said_room_ms,
         alignment: a,
     })
+}
+
+/// The longest stretch (ms) where `said` speaks (a 20 ms block over −40 dBFS) but `heard`,
+/// lined up with it, is silent there (30 dB quieter or more): audio lost, not concealed.
+pub fn longest_dropout_ms(said: &[i16], heard: &[i16]) -> f64 {
+    let block = (SAMPLE_RATE / 50) as usize;
+    let (mut run, mut longest) = (0usize, 0usize);
+    for (s, h) in said.chunks_exact(block).zip(heard.chunks_exact(block)) {
+        let (ls, lh) = (crate::level::level_db(s), crate::level::level_db(h));
+        if ls > -40.0 && lh < ls - 30.0 {
+            run += 1;
+            longest = longest.max(run);
+        } else if ls > -40.0 {
+            run = 0;
+        }
+    }
+    longest as f64 * 20.0
 }
 
 #[cfg(test)]
@@ -163,5 +181,12 @@ mod tests {
         assert_eq!(a.lag, 10_000, "{a:?}");
         assert!(a.sample_corr > 0.99 && a.envelope_corr > 0.9, "{a:?}");
         assert!(align(&said[..10], &heard, 1.0).is_none());
+        // a 200 ms hole in the copy is found; the copy itself has none
+        let copy = &heard[10_000..10_000 + said.len()];
+        assert_eq!(longest_dropout_ms(&said, copy), 0.0);
+        let mut holed = copy.to_vec();
+        holed[24_000..33_600].fill(0);
+        let d = longest_dropout_ms(&said, &holed);
+        assert!((180.0..=200.0).contains(&d), "{d}");
     }
 }

@@ -249,11 +249,19 @@ impl WavSink {
 
     /// Where each speaker's head was shown at the block played at `room_ms` (`heads.csv`: how
     /// the voice bench measures lip-sync from outside).
-    pub fn write_heads(&mut self, room_ms: f64, heads: &[(PeerId, glam::Vec3)]) -> Result<(), FileError> {
+    pub fn write_heads(
+        &mut self,
+        room_ms: f64,
+        heads: &[(PeerId, glam::Vec3)],
+    ) -> Result<(), FileError> {
         use std::io::Write;
         for (p, at) in heads {
-            writeln!(self.heads, "{room_ms:.1},{},{:.5},{:.5},{:.5}", p.0, at.x, at.y, at.z)
-                .map_err(|e| FileError::Other(format!("heads.csv: {e}")))?;
+            writeln!(
+                self.heads,
+                "{room_ms:.1},{},{:.5},{:.5},{:.5}",
+                p.0, at.x, at.y, at.z
+            )
+            .map_err(|e| FileError::Other(format!("heads.csv: {e}")))?;
         }
         Ok(())
     }
@@ -264,7 +272,9 @@ impl WavSink {
         let dir = self.dir.clone();
         {
             use std::io::Write;
-            self.heads.flush().map_err(|e| FileError::Other(format!("heads.csv: {e}")))?;
+            self.heads
+                .flush()
+                .map_err(|e| FileError::Other(format!("heads.csv: {e}")))?;
         }
         self.mix.flush().map_err(|source| FileError::Wav {
             path: dir.join("mix.wav"),

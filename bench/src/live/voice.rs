@@ -140,10 +140,7 @@ fn skew(dir: &Path, speaker: u64, from_ms: f64, to_ms: f64) -> Option<f64> {
         ab / (aa * bb).sqrt().max(1e-12)
     };
     let lags: Vec<(i64, f64)> = (-15..=15).map(|l| (l, ncc(l))).collect();
-    let (best, c) = lags
-        .iter()
-        .copied()
-        .max_by(|a, b| a.1.total_cmp(&b.1))?;
+    let (best, c) = lags.iter().copied().max_by(|a, b| a.1.total_cmp(&b.1))?;
     if c < 0.3 {
         return None;
     }
@@ -158,10 +155,13 @@ fn skew(dir: &Path, speaker: u64, from_ms: f64, to_ms: f64) -> Option<f64> {
 
 /// The last `voice_stats` line of a process's output: its fields.
 fn last_stats(out: &str) -> Option<(f64, String)> {
-    out.lines().rev().find(|l| l.contains("voice_stats")).map(|l| {
-        let t = field(l, "t").and_then(|t| t.parse().ok()).unwrap_or(0.0);
-        (t, l.to_owned())
-    })
+    out.lines()
+        .rev()
+        .find(|l| l.contains("voice_stats"))
+        .map(|l| {
+            let t = field(l, "t").and_then(|t| t.parse().ok()).unwrap_or(0.0);
+            (t, l.to_owned())
+        })
 }
 
 /// The first `voice_stats` line.
@@ -184,7 +184,13 @@ fn up_rate(out: &str) -> Option<f64> {
 }
 
 /// One condition's room.
-fn live_room(dir: &Path, sentence: &(PathBuf, Vec<i16>), lat_ms: u32, loss_pct: u32, sayings: u32) -> Result<Live, String> {
+fn live_room(
+    dir: &Path,
+    sentence: &(PathBuf, Vec<i16>),
+    lat_ms: u32,
+    loss_pct: u32,
+    sayings: u32,
+) -> Result<Live, String> {
     let tag = format!("l{lat_ms}-p{loss_pct}");
     let dir = dir.join(&tag);
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
@@ -192,7 +198,14 @@ fn live_room(dir: &Path, sentence: &(PathBuf, Vec<i16>), lat_ms: u32, loss_pct: 
     let room = "voice";
     let total = 3.0 + EVERY_S * f64::from(sayings) + 2.0;
     let dur = format!("{total:.0}");
-    let mut host = Proc::peer(&dir, "host", "host", room, &url, &["--voice", "--duration", &dur])?;
+    let mut host = Proc::peer(
+        &dir,
+        "host",
+        "host",
+        room,
+        &url,
+        &["--voice", "--duration", &dur],
+    )?;
     host.line("hosting", Duration::from_secs(20))?;
     let cond = format!("lat={lat_ms},loss={},seed=7", f64::from(loss_pct) / 100.0);
     let said = sentence.0.to_string_lossy().to_string();
@@ -204,15 +217,32 @@ fn live_room(dir: &Path, sentence: &(PathBuf, Vec<i16>), lat_ms: u32, loss_pct: 
         room,
         &url,
         &[
-            "--voice-in", &said, "--voice-after", "2.5", "--voice-every", &every, "--voice-nod",
-            "--net-condition", &cond, "--duration", &dur,
+            "--voice-in",
+            &said,
+            "--voice-after",
+            "2.5",
+            "--voice-every",
+            &every,
+            "--voice-nod",
+            "--net-condition",
+            &cond,
+            "--duration",
+            &dur,
         ],
     )?;
-    let spk = field(&speaker.line("joining", Duration::from_secs(20))?, "peer").ok_or("no speaker id")?;
+    let spk =
+        field(&speaker.line("joining", Duration::from_secs(20))?, "peer").ok_or("no speaker id")?;
     let mut listeners = Vec::new();
     for k in ["l1", "l2"] {
         let out = dir.join(k).to_string_lossy().to_string();
-        listeners.push(Proc::peer(&dir, k, "join", room, &url, &["--voice-out", &out, "--duration", &dur])?);
+        listeners.push(Proc::peer(
+            &dir,
+            k,
+            "join",
+            room,
+            &url,
+            &["--voice-out", &out, "--duration", &dur],
+        )?);
     }
     let mut speaker = speaker;
     speaker.wait(Duration::from_secs_f64(total + 30.0))?;
@@ -244,7 +274,8 @@ fn live_room(dir: &Path, sentence: &(PathBuf, Vec<i16>), lat_ms: u32, loss_pct: 
                 continue;
             };
             // a saying cut by the end of the run is not scored
-            let rec = read_wav(&ldir.join(format!("peer-{spk_id}.wav"))).map_err(|e| e.to_string())?;
+            let rec =
+                read_wav(&ldir.join(format!("peer-{spk_id}.wav"))).map_err(|e| e.to_string())?;
             let meta: serde_json::Value = serde_json::from_str(
                 &std::fs::read_to_string(ldir.join("voice.json")).map_err(|e| e.to_string())?,
             )
@@ -269,33 +300,59 @@ fn live_room(dir: &Path, sentence: &(PathBuf, Vec<i16>), lat_ms: u32, loss_pct: 
     // the speaker's payload rate per copy while it speaks: bytes over frames sent (3 copies:
     // the host and two listeners in a mesh)
     if let Some((_, l)) = last_stats(&spk_out) {
-        let bytes: f64 = field(&l, "sent_bytes").and_then(|v| v.parse().ok()).unwrap_or(0.0);
-        let frames: f64 = field(&l, "frames").and_then(|v| v.parse().ok()).unwrap_or(0.0);
+        let bytes: f64 = field(&l, "sent_bytes")
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(0.0);
+        let frames: f64 = field(&l, "frames")
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(0.0);
         if frames > 0.0 {
             live.bitrate_kbps = bytes / 3.0 / (frames * 0.02) * 8.0 / 1000.0;
         }
     }
     if live.m2e.is_empty() {
-        return Err(format!("{tag}: no saying was found in the listeners' recordings ({})", dir.display()));
+        return Err(format!(
+            "{tag}: no saying was found in the listeners' recordings ({})",
+            dir.display()
+        ));
     }
     Ok(live)
 }
 
 /// A room of 8, two talking, along `route`: (host kbps, each speaker's kbps, each listener's).
-fn crowd(dir: &Path, sentence: &Path, route: &str, seconds: f64) -> Result<(f64, f64, f64), String> {
+fn crowd(
+    dir: &Path,
+    sentence: &Path,
+    route: &str,
+    seconds: f64,
+) -> Result<(f64, f64, f64), String> {
     let dir = dir.join(format!("room-{route}"));
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
     let (_signal, url) = Proc::signal(&dir, "signal")?;
     let dur = format!("{:.0}", seconds + 6.0);
     let said = sentence.to_string_lossy().to_string();
-    let mut host = Proc::peer(&dir, "host", "host", "crowd", &url, &["--voice", "--voice-route", route, "--duration", &dur])?;
+    let mut host = Proc::peer(
+        &dir,
+        "host",
+        "host",
+        "crowd",
+        &url,
+        &["--voice", "--voice-route", route, "--duration", &dur],
+    )?;
     host.line("hosting", Duration::from_secs(20))?;
     let mut peers = Vec::new();
     for k in 0..7 {
         let name = format!("p{k}");
         let mut args = vec!["--voice-route", route, "--duration", &dur];
         if k < 2 {
-            args.extend(["--voice-in", &said, "--voice-after", "1", "--voice-every", "5"]);
+            args.extend([
+                "--voice-in",
+                &said,
+                "--voice-after",
+                "1",
+                "--voice-every",
+                "5",
+            ]);
         } else {
             args.push("--voice");
         }
@@ -308,7 +365,8 @@ fn crowd(dir: &Path, sentence: &Path, route: &str, seconds: f64) -> Result<(f64,
     }
     let _ = host.wait(Duration::from_secs(30));
     let rate = |name: &str| -> Result<f64, String> {
-        let out = std::fs::read_to_string(dir.join(format!("{name}.out"))).map_err(|e| e.to_string())?;
+        let out =
+            std::fs::read_to_string(dir.join(format!("{name}.out"))).map_err(|e| e.to_string())?;
         up_rate(&out).ok_or_else(|| format!("{route}: {name} printed no voice stats"))
     };
     let host_up = rate("host")? * 8.0 / 1000.0;
@@ -334,7 +392,14 @@ pub fn voice(out: &Path, quick: bool) -> Result<(), String> {
     };
     let sayings = if quick { 2 } else { 3 };
     let mut lines = Vec::new();
-    let mut csv = Csv::new(&["lat_ms", "loss_pct", "mouth_to_ear_ms", "pesq_wb", "sample_corr", "lipsync_skew_ms"]);
+    let mut csv = Csv::new(&[
+        "lat_ms",
+        "loss_pct",
+        "mouth_to_ear_ms",
+        "pesq_wb",
+        "sample_corr",
+        "lipsync_skew_ms",
+    ]);
     for (lat, loss) in conditions {
         let l = live_room(&dir, &s, lat, loss, sayings)?;
         for (i, m) in l.m2e.iter().enumerate() {
@@ -352,9 +417,25 @@ pub fn voice(out: &Path, quick: bool) -> Result<(), String> {
             .field("loss_pct", l.loss_pct)
             .fixed("mouth_to_ear_p50_ms", median(&l.m2e), 1)
             .fixed("mouth_to_ear_p95_ms", percentile(&l.m2e, 0.95), 1)
-            .fixed("pesq_wb", if l.pesq.is_empty() { f64::NAN } else { median(&l.pesq) }, 2)
+            .fixed(
+                "pesq_wb",
+                if l.pesq.is_empty() {
+                    f64::NAN
+                } else {
+                    median(&l.pesq)
+                },
+                2,
+            )
             .fixed("bitrate_kbps", l.bitrate_kbps, 1)
-            .fixed("lipsync_skew_ms", if l.skew.is_empty() { f64::NAN } else { median(&l.skew) }, 1)
+            .fixed(
+                "lipsync_skew_ms",
+                if l.skew.is_empty() {
+                    f64::NAN
+                } else {
+                    median(&l.skew)
+                },
+                1,
+            )
             .field("sayings", l.m2e.len());
         println!("{line}");
         lines.push(line.to_string());

@@ -361,7 +361,11 @@ impl Session {
     /// speaking avatar's head with one send interval of delay instead of two, so that what is
     /// seen of a mouth keeps up with what is heard (`softsync_bevy::voice`). Local: nothing is
     /// sent. False for an unknown object.
-    pub fn set_object_interpolation(&mut self, id: NetId, cfg: Option<InterpolationConfig>) -> bool {
+    pub fn set_object_interpolation(
+        &mut self,
+        id: NetId,
+        cfg: Option<InterpolationConfig>,
+    ) -> bool {
         match self.objects.get_mut(id) {
             Some(o) => {
                 o.interp = cfg.map(InterpolationConfig::sanitized);
