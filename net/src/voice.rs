@@ -28,9 +28,11 @@
 //!
 //! # Layout (all integers little-endian)
 //! ```text
-//! F9 01 seq:u32 capture_ms:u32 level:u8 len:u16 opus[len]           a frame, speaker → listener
-//! F9 02 seq:u32 capture_ms:u32 level:u8 len:u16 opus[len]           a frame for the host to relay
-//! F9 03 speaker:u64 seq:u32 capture_ms:u32 level:u8 len:u16 opus    a frame the host relays
+//! F9 01 seq:u32 capture_ms:u32 level:u8 len:u16 opus[len] [rlen:u16 red[rlen]]
+//!                                                  a frame, speaker → listener (`red`: frame
+//!                                                  seq − 1 again, when redundancy is on)
+//! F9 02 (as 01)                                    a frame for the host to relay
+//! F9 03 speaker:u64 (then as 01)                   a frame the host relays
 //! F9 04 loss_permille:u16 late_permille:u16 jitter_ms:u16           a listener's report to a speaker
 //! ```
 //! `seq` counts the frames a speaker sent (frames not sent during silence are not counted, so
@@ -69,6 +71,10 @@ pub struct VoiceFrame {
     pub level: u8,
     /// The Opus packet.
     pub opus: Vec<u8>,
+    /// The previous frame's packet again (`seq − 1`), when the speaker sends redundancy
+    /// (RFC 2198 style, on when listeners report loss): a lost frame is rebuilt whole from the
+    /// next datagram. Empty: none.
+    pub redundant: Vec<u8>,
 }
 
 /// What a listener tells a speaker about its frames, about once a second.
@@ -109,9 +115,9 @@ pub enum VoiceWireError {
     /// A kind this build does not know.
     #[error("unknown voice datagram kind {0}")]
     UnknownKind(u8),
-    /// The Opus payload is longer than [`MAX_OPUS_BYTES`], or its length disagrees with the
-    /// datagram's.
-    #[error("voice frame of {0} bytes (at most {MAX_OPUS_BYTES}, and exactly the rest)")]
+    /// An Opus payload is empty or longer than [`MAX_OPUS_BYTES`], or the lengths disagree
+    /// with the datagram's.
+    #[error("voice frame of {0} bytes (1 to {MAX_OPUS_BYTES}, and exactly the rest)")]
     BadLength(usize),
 }
 
@@ -122,6 +128,11 @@ fn put_frame(out: &mut Vec<u8>, f: &VoiceFrame) {
     let len = f.opus.len().min(MAX_OPUS_BYTES);
     out.extend_from_slice(&(len as u16).to_le_bytes());
     out.extend_from_slice(&f.opus[..len]);
+    if !f.redundant.is_empty() {
+        let r = f.redundant.len().min(MAX_OPUS_BYTES);
+        out.extend_from_slice(&(r as u16).to_le_bytes());
+        out.extend_from_slice(&f.redundant[..r]);
+    }
 }
 
 fn take<const N: usize>(b: &[u8], at: usize) -> Result<[u8; N], VoiceWireError> {
@@ -136,14 +147,27 @@ fn read_frame(b: &[u8]) -> Result<VoiceFrame, VoiceWireError> {
     let [level] = take(b, 8)?;
     let len = usize::from(u16::from_le_bytes(take(b, 9)?));
     let rest = &b[FRAME_HEADER..];
-    if len > MAX_OPUS_BYTES || len != rest.len() || len == 0 {
+    if len > MAX_OPUS_BYTES || len > rest.len() || len == 0 {
         return Err(VoiceWireError::BadLength(len.max(rest.len())));
     }
+    let (opus, tail) = rest.split_at(len);
+    let redundant = match tail.len() {
+        0 => Vec::new(),
+        _ => {
+            let r = usize::from(u16::from_le_bytes(take(tail, 0)?));
+            let red = &tail[2..];
+            if r == 0 || r > MAX_OPUS_BYTES || r != red.len() {
+                return Err(VoiceWireError::BadLength(r.max(red.len())));
+            }
+            red.to_vec()
+        }
+    };
     Ok(VoiceFrame {
         seq,
         capture_ms,
         level,
-        opus: rest.to_vec(),
+        opus: opus.to_vec(),
+        redundant,
     })
 }
 
@@ -512,6 +536,7 @@ mod tests {
             capture_ms: seq.wrapping_mul(FRAME_MS).wrapping_add(1000),
             level: 77,
             opus: vec![0xAB; n],
+            redundant: Vec::new(),
         }
     }
 
@@ -520,6 +545,17 @@ mod tests {
         for d in [
             VoiceDatagram::Frame(frame(1, 60)),
             VoiceDatagram::ToRelay(frame(u32::MAX, MAX_OPUS_BYTES)),
+            VoiceDatagram::Frame(VoiceFrame {
+                redundant: vec![0x11; 55],
+                ..frame(2, 60)
+            }),
+            VoiceDatagram::Relayed {
+                speaker: PeerId(9),
+                frame: VoiceFrame {
+                    redundant: vec![0x22; MAX_OPUS_BYTES],
+                    ..frame(3, MAX_OPUS_BYTES)
+                },
+            },
             VoiceDatagram::Relayed {
                 speaker: PeerId(u64::MAX),
                 frame: frame(7, 1),
@@ -549,6 +585,23 @@ mod tests {
         let mut long = good.clone();
         long.push(0);
         assert!(VoiceDatagram::decode(&long).is_err());
+        // a redundant copy whose length lies, or that is empty
+        let red = VoiceDatagram::Frame(VoiceFrame {
+            redundant: vec![1; 30],
+            ..frame(4, 20)
+        })
+        .encode();
+        for n in 0..red.len() {
+            assert!(
+                VoiceDatagram::decode(&red[..n])
+                    .map_or(true, |d| d == VoiceDatagram::Frame(frame(4, 20))
+                        && n == red.len() - 32),
+                "prefix {n}"
+            );
+        }
+        let mut empty_red = VoiceDatagram::Frame(frame(4, 20)).encode();
+        empty_red.extend_from_slice(&[0, 0]);
+        assert!(VoiceDatagram::decode(&empty_red).is_err());
         // a length field claiming 65535 bytes
         let mut lie = VoiceDatagram::Frame(frame(1, 10)).encode();
         lie[11] = 0xFF;

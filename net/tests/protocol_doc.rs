@@ -553,6 +553,35 @@ fn render() -> String {
     .unwrap();
     writeln!(w, "Beside the session's datagrams, a rollback room's peers send datagrams that start with `0xF7` (never a protocol version, `0xF5` or `0xFF`), then a kind byte and the epoch (u32 LE) they belong to: kind `01` a ggrs message (`ggrs::Message`, bincode 2 `standard()` with a 4096-byte limit; one of another epoch is dropped), kind `02` a share datagram as above (`F5 …`) about the epoch's snapshot (the portable world state a joiner pulls; bincode, at most 8 MiB). The per-frame input inside ggrs's messages is `PlayerInput`: three parts (head, left, right) of position in millimetres (3 × i16), the dropped rotation component's index with bit 7 set when tracked (u8) and the three kept components (3 × u16, 11-bit grid), then grip and trigger per hand (u8 each, 1/255). Epochs are announced as a retained application message of type `softsync.rollback.epoch` (`Epoch {{ n, frame, players, digest, host }}`), which also makes a rollback room's configuration digest differ from a state-sync room's.\n").unwrap();
 
+    writeln!(w, "## Voice (`softsync_net::voice`, `softsync-voice`)\n").unwrap();
+    writeln!(w, "Voice datagrams start with `0xF9` and go on the unreliable channel, beside the session's. A frame is 20 ms of 48 kHz mono Opus (libopus, VoIP mode, in-band FEC, DTX: nothing is sent in silence). Its speaker is the transport's verified peer; only a relayed frame names one, believed only from the host and only for a member. Integers little-endian; `seq` counts frames sent (a gap is loss), `capture_ms` is the room time of the frame's first sample (wrapping u32), `level` 0 (−70 dBFS or less) … 255 (0 dBFS); the Opus payload is 1–{} bytes and exactly the rest of the datagram.\n", softsync_net::voice::MAX_OPUS_BYTES).unwrap();
+    {
+        use softsync_net::voice::{VoiceDatagram, VoiceFrame, VoiceReport};
+        let f = VoiceFrame {
+            seq: 7,
+            capture_ms: 123_456,
+            level: 200,
+            opus: vec![0x4B, 0x41, 0x10],
+            redundant: Vec::new(),
+        };
+        let with_red = VoiceFrame {
+            redundant: vec![0x4B, 0x40],
+            ..f.clone()
+        };
+        writeln!(w, "| datagram | layout | example |\n|---|---|---|").unwrap();
+        let rows = [
+            ("a frame (speaker → listener, mesh)", "`F9 01` seq:u32 capture_ms:u32 level:u8 len:u16 opus[len]", VoiceDatagram::Frame(f.clone())),
+            ("the same with the previous frame again (redundancy, on while listeners report loss)", "… then rlen:u16 red[rlen] (frame seq − 1)", VoiceDatagram::Frame(with_red)),
+            ("a frame for the host to relay", "`F9 02`, then as `01`", VoiceDatagram::ToRelay(f.clone())),
+            ("a frame the host relays", "`F9 03` speaker:u64, then as `01`", VoiceDatagram::Relayed { speaker: PeerId(0x0102030405060708), frame: f }),
+            ("a listener's report (about once a second)", "`F9 04` loss_permille:u16 late_permille:u16 jitter_ms:u16", VoiceDatagram::Report(VoiceReport { loss_permille: 50, late_permille: 3, jitter_ms: 12 })),
+        ];
+        for (what, layout, d) in rows {
+            writeln!(w, "| {what} | {layout} | `{}` |", hex(&d.encode())).unwrap();
+        }
+        writeln!(w).unwrap();
+    }
+
     writeln!(w, "## Refusal datagram (version-independent)\n").unwrap();
     let r = encode_refusal(
         "protocol version mismatch: host speaks 1, you speak 2",

@@ -16,6 +16,7 @@ fn frame(seq: u32, n: usize) -> VoiceFrame {
         capture_ms: 1000 + seq * 20,
         level: 90,
         opus: vec![0x48; n],
+        redundant: Vec::new(),
     }
 }
 

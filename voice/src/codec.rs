@@ -45,7 +45,7 @@ impl Encoder {
             loss_pct: 0,
             fec,
         };
-        e.set(bitrate, if fec { 5 } else { 0 })?;
+        e.set(bitrate, 0)?;
         Ok(e)
     }
 

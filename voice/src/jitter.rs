@@ -97,6 +97,8 @@ pub struct JitterStats {
     pub shrunk: u64,
     /// Spurts started.
     pub spurts: u64,
+    /// Lost frames rebuilt whole from the next datagram's redundant copy.
+    pub redundant: u64,
 }
 
 #[derive(Clone, Debug)]
@@ -139,6 +141,10 @@ pub struct JitterBuffer {
     floor: f64,
     stats: JitterStats,
     window: Window,
+    /// The newest frame number that arrived, and the recent loss (frames missing in the
+    /// numbering, a moving average over about 100 frames).
+    newest: Option<u32>,
+    loss: f64,
 }
 
 /// `a` is after `b` in wrapping frame numbers.
@@ -185,7 +191,10 @@ impl JitterBuffer {
             return (FRAME * 3.0).max(self.floor);
         };
         let fastest = self.transit.iter().copied().fold(f64::INFINITY, f64::min);
-        (q + self.cfg.margin_ms)
+        // while frames are being lost, wait one frame more: the next frame, whose FEC
+        // rebuilds a lost one, is then here when the lost one is due
+        let fec_wait = if self.loss > 0.005 { FRAME } else { 0.0 };
+        (q + self.cfg.margin_ms + fec_wait)
             .max(fastest + FRAME)
             .max(self.floor)
             .min(self.cfg.max_delay_ms)
@@ -194,6 +203,11 @@ impl JitterBuffer {
     /// The delay of the last block played, if a spurt is playing.
     pub fn playout_delay(&self) -> Option<f64> {
         self.playing.map(|p| p.delay)
+    }
+
+    /// The recent loss (0–1), a moving average over about 100 frames.
+    pub fn recent_loss(&self) -> f64 {
+        self.loss
     }
 
     /// The fastest transit of the last window (capture to arrival, the frame's 20 ms
@@ -244,6 +258,15 @@ impl JitterBuffer {
             self.stats.duplicates += 1;
             return;
         }
+        match self.newest {
+            Some(n) if after(seq, n) => {
+                let missing = f64::from(seq.wrapping_sub(n).saturating_sub(1).min(50));
+                self.loss = self.loss * 0.99 + missing * 0.01;
+                self.newest = Some(seq);
+            }
+            Some(_) => {}
+            None => self.newest = Some(seq),
+        }
         self.stats.received += 1;
         let w = &mut self.window;
         w.received += 1;
@@ -252,6 +275,23 @@ impl JitterBuffer {
         }
         if w.last.is_none_or(|l| after(seq, l)) {
             w.last = Some(seq);
+        }
+        // the previous frame again (redundancy): rebuild it if it was lost and is still due
+        let prev = seq.wrapping_sub(1);
+        if !frame.redundant.is_empty()
+            && !self.frames.contains_key(&prev)
+            && self.last_played.is_none_or(|l| after(prev, l))
+            && self.playing.is_none_or(|p| !after(p.next, prev))
+        {
+            self.frames.insert(
+                prev,
+                Arrived {
+                    capture: capture - FRAME,
+                    level: frame.level,
+                    opus: frame.redundant,
+                },
+            );
+            self.stats.redundant += 1;
         }
         self.frames.insert(
             seq,
@@ -335,7 +375,10 @@ impl JitterBuffer {
                 }
             }
             None => {
-                let waiting = now - p.next_capture < target - FRAME / 2.0;
+                // below target with nothing later here: the frame is more likely late than
+                // lost, so wait for it (the delay grows a frame); with a later frame here it
+                // is lost, and waiting would only shift the rest of the spurt
+                let waiting = now - p.next_capture < target - FRAME / 2.0 && self.frames.is_empty();
                 let next = self.frames.get(&p.next.wrapping_add(1));
                 if waiting && p.concealed_run < MAX_CONCEAL {
                     // below target: wait a frame for it (the delay grows by one frame)
@@ -395,6 +438,7 @@ mod tests {
             capture_ms: capture as u64 as u32,
             level: 100,
             opus: vec![seq as u8; 3],
+            redundant: Vec::new(),
         }
     }
 
@@ -514,6 +558,32 @@ mod tests {
         assert_eq!(s.late, 0);
         let (loss, late, _) = jb.take_report();
         assert_eq!((loss, late), (0.0, 0.0));
+    }
+
+    #[test]
+    fn a_lost_frame_comes_back_whole_from_the_next_datagrams_copy() {
+        let mut jb = JitterBuffer::new(JitterConfig::default());
+        let mut played = Vec::new();
+        let mut t = 1003.0;
+        for k in 0..60u32 {
+            let c = 1000.0 + f64::from(k) * FRAME;
+            if k != 30 {
+                let mut fr = f(k, c);
+                if k > 0 {
+                    fr.redundant = vec![k.wrapping_sub(1) as u8; 3];
+                }
+                jb.push(c + 40.0, fr);
+            }
+            while t <= c + 40.0 {
+                if let Play::Frame { opus, .. } = jb.pop(t) {
+                    played.push(opus[0]);
+                }
+                t += FRAME;
+            }
+        }
+        assert!(played.contains(&30), "{played:?}");
+        assert_eq!(jb.stats().redundant, 1);
+        assert_eq!(jb.stats().fec + jb.stats().concealed, 0, "{:?}", jb.stats());
     }
 
     #[test]

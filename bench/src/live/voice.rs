@@ -207,7 +207,7 @@ fn live_room(
         &["--voice", "--duration", &dur],
     )?;
     host.line("hosting", Duration::from_secs(20))?;
-    let cond = format!("lat={lat_ms},loss={},seed=7", f64::from(loss_pct) / 100.0);
+    let cond = format!("lat={lat_ms}ms,loss={loss_pct}%,seed=7");
     let said = sentence.0.to_string_lossy().to_string();
     let every = format!("{EVERY_S}");
     let speaker = Proc::peer(
