@@ -362,16 +362,62 @@ fn sync_objects(
 }
 
 /// Particles and neighbour links (thesis Figure 1.1), when switched on (P).
+/// How high above a speaker's head its speaking indicator floats, metres.
+const INDICATOR_LIFT: f32 = 0.2;
+
+/// Each peer heard speaking now: where its indicator is drawn (above its head as shown) and
+/// its radius (larger when louder).
+fn speaking_indicators(
+    room: &Room,
+    ents: &NetEntities,
+    tfs: &Query<&GlobalTransform>,
+) -> Vec<(u64, Vec3, f32)> {
+    let Some(voice) = room.voice_view() else {
+        return Vec::new();
+    };
+    let peer = &room.peer;
+    voice
+        .speaking()
+        .into_iter()
+        .filter_map(|(who, db)| {
+            let (id, _) = peer
+                .objects()
+                .iter()
+                .find(|(_, o)| o.kind == Kind::HEAD && o.avatar_of == Some(who))?;
+            let at = tfs.get(ents.get(*id)?).ok()?.translation();
+            let loud = ((db + 70.0) / 70.0).clamp(0.0, 1.0);
+            Some((who.0, at + Vec3::Y * INDICATOR_LIFT, 0.03 + 0.04 * loud))
+        })
+        .collect()
+}
+
+#[allow(clippy::too_many_arguments)]
 fn draw_overlay(
-    room: NonSend<Room>,
+    mut room: NonSendMut<Room>,
     mut gizmos: Gizmos,
     mut cfg: ResMut<ViewConfig>,
     keys: Option<Res<ButtonInput<KeyCode>>>,
     mut hud: Query<&mut Visibility, With<Hud>>,
+    ents: Res<NetEntities>,
+    tfs: Query<&GlobalTransform>,
 ) {
+    // who is speaking: lime-green rings above the speaker's head, larger when louder
+    for (_, at, r) in speaking_indicators(&room, &ents, &tfs) {
+        for k in 0..4 {
+            let rr = r * (1.0 - 0.2 * k as f32);
+            gizmos.sphere(Isometry3d::from_translation(at), rr, css::LIME);
+        }
+    }
     if let Some(k) = &keys {
         if k.just_pressed(KeyCode::KeyP) {
             cfg.particles = !cfg.particles;
+        }
+        // M mutes and unmutes our microphone
+        if k.just_pressed(KeyCode::KeyM) {
+            if let Some(v) = room.voice() {
+                let muted = !v.muted();
+                v.chat().set_muted(muted);
+            }
         }
         if k.just_pressed(KeyCode::KeyH) {
             cfg.hud = !cfg.hud;
@@ -484,6 +530,23 @@ pub fn hud_text(room: &Room, driver: &Driver) -> String {
         .count();
     if building > 0 {
         s.push_str(&format!("building {building} pieces off the frame\n"));
+    }
+    // voice: muted or not, and who is speaking (with their level)
+    if let Some(v) = room.voice_view() {
+        let talking: Vec<String> = v
+            .speaking()
+            .iter()
+            .map(|(p, db)| format!("{} {db:.0} dB", short(p.0)))
+            .collect();
+        s.push_str(&format!(
+            "voice{}{}\n",
+            if v.muted() { " (muted)" } else { "" },
+            if talking.is_empty() {
+                String::new()
+            } else {
+                format!(" | speaking: {}", talking.join(", "))
+            }
+        ));
     }
     // Torn and cut soft bodies: how many log entries each has, and the pieces of a cut.
     let torn: Vec<String> = peer
@@ -607,6 +670,7 @@ fn take_screenshots(
     cams: Query<(&Camera, &GlobalTransform)>,
     warm: Res<RenderWarm>,
     (ents, objs, meshes): (Res<NetEntities>, Query<&ObjView>, Res<Assets<Mesh>>),
+    tfs: Query<&GlobalTransform>,
 ) {
     let Some(plan) = &cfg.screenshots else {
         return;
@@ -659,6 +723,17 @@ fn take_screenshots(
             if let Some(cam) = cam {
                 fields.push_str(&screen_box(cam, &format!("{name}_rim_px"), rim.into_iter()));
             }
+        }
+    }
+    // speaking indicators: who, and the screen box of the indicator
+    if let Some(cam) = cam {
+        for (who, at, r) in speaking_indicators(&room, &ents, &tfs) {
+            fields.push_str(&format!(" speaking={who}"));
+            let pts = [-1.0f32, 1.0]
+                .into_iter()
+                .flat_map(|x| [-1.0f32, 1.0].map(|y| (x, y)))
+                .flat_map(|(x, y)| [-1.0f32, 1.0].map(|z| at + Vec3::new(x, y, z) * r));
+            fields.push_str(&screen_box(cam, "speaking_px", pts));
         }
     }
     for (name, (count, points)) in classes {

@@ -269,6 +269,11 @@ impl Room {
         self.voice.as_mut()
     }
 
+    /// The room's voice to read (who speaks, levels, drops).
+    pub fn voice_view(&self) -> Option<&RoomVoice> {
+        self.voice.as_ref()
+    }
+
     /// The datagrams received, per protocol ([`softsync_net::door`]), and those dropped unread.
     pub fn front_door(&self) -> &FrontDoor {
         &self.door

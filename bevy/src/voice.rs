@@ -200,6 +200,23 @@ impl RoomVoice {
         self.chat.status(peer)
     }
 
+    /// Our microphone is muted.
+    pub fn muted(&self) -> bool {
+        self.chat.muted()
+    }
+
+    /// The speakers heard speaking now, with their level (dBFS): for indicators and mouths.
+    pub fn speaking(&self) -> Vec<(PeerId, f32)> {
+        self.chat
+            .speakers()
+            .into_iter()
+            .filter_map(|p| {
+                let s = self.chat.status(p)?;
+                s.speaking.then_some((p, s.level_db))
+            })
+            .collect()
+    }
+
     /// Voice datagrams dropped, by reason.
     pub fn drops(&self) -> VoiceDrops {
         self.router.drops()
@@ -451,8 +468,9 @@ impl RoomVoice {
     }
 
     /// Hold `who`'s voice back to about when its head is shown: the head's interpolation delay
-    /// plus its path (the voice's own fastest transit less the frame, and one more hop when
-    /// state goes through the host and neither of us is it), less [`LIP_LEAD_MS`].
+    /// plus its path (the voice's own fastest transit less the frame, and when state goes
+    /// through the host and neither of us is it, one more hop and half the host's send
+    /// interval), less [`LIP_LEAD_MS`].
     fn lip_sync(&mut self, now: Instant, peer: &mut Peer, who: PeerId, head: softsync_net::NetId) {
         let Some(fastest) = self.chat.status(who).and_then(|s| s.fastest_transit_ms) else {
             return;
@@ -465,9 +483,17 @@ impl RoomVoice {
         let relayed = session.config().state_route == softsync_net::StateRoute::Relay
             && !session.is_host()
             && host != Some(who);
+        // a relayed state is stamped when the host relays it (at its send tick, half an
+        // interval late on average), so the head's interpolation does not see that wait
         let hop = if relayed {
-            host.and_then(|h| session.stats().links.get(&h)?.rtt)
-                .map_or(0.0, |r| r.as_secs_f64() * 500.0)
+            let to_host = host
+                .and_then(|h| session.stats().links.get(&h)?.rtt)
+                .map_or(0.0, |r| r.as_secs_f64() * 500.0);
+            let tick = session
+                .class_of(head)
+                .and_then(|c| session.config().classes.get(usize::from(c.0)))
+                .map_or(0.0, |c| c.send.interval().as_secs_f64() * 500.0);
+            to_host + tick
         } else {
             0.0
         };

@@ -779,3 +779,148 @@ fn two_desktop_hands_stretch_the_bunny_and_a_cut_between_them_splits_it_in_their
         "the cut does not show where the halves meet: {n} pixels changed"
     );
 }
+
+/// Pure green (the speaking indicator's gizmo lines, unlit): nothing else in the room is.
+fn is_green(c: [u8; 3]) -> bool {
+    c[1] > 170 && c[0] < 90 && c[2] < 90
+}
+
+#[test]
+fn the_speaking_indicator_floats_over_the_talking_bots_head() {
+    require_netns();
+    let dir = scratch("pixels-voice");
+    let raw = dir.join("said.wav");
+    let st = Command::new("espeak-ng")
+        .args(["-s", "140", "-w"])
+        .arg(&raw)
+        .arg("Hold the clamp steady while I cut along the line, then lift it gently.")
+        .status()
+        .expect("espeak-ng is needed (Debian's espeak-ng; .ci/run installs it)");
+    assert!(st.success());
+    let x = Xvfb::start(&dir);
+    let (_host, url) = host(&dir, "pixels-voice");
+    let said = raw.to_str().unwrap().to_owned();
+    let speaker = Proc::spawn(
+        &dir,
+        "speaker",
+        &[
+            "join",
+            "--room",
+            "pixels-voice",
+            "--signal",
+            &url,
+            "--quiet",
+            "--voice-in",
+            &said,
+            "--voice-after",
+            "12",
+            "--voice-every",
+            "7",
+            "--duration",
+            "60",
+            // its head over the middle of the table, where the desktop peer looks
+            "--bot",
+            "move head 0 0.9 0 in 1; wait 100",
+        ],
+    );
+    let spk = speaker.peer_id();
+    let shots = dir.join("shots");
+    let shots_s = shots.to_str().unwrap().to_owned();
+    let mut desktop = Proc::spawn_env(
+        &dir,
+        "desktop",
+        &[
+            "join",
+            "--room",
+            "pixels-voice",
+            "--signal",
+            &url,
+            "--desktop",
+            "--window",
+            "320x240",
+            "--no-hud",
+            "--voice",
+            "--screenshot-dir",
+            &shots_s,
+            "--screenshot-every",
+            "0.5",
+            "--screenshots",
+            "200",
+            "--duration",
+            "60",
+            "--quiet",
+        ],
+        &x.env(&[]),
+    );
+    // frames without speech first, then frames that name the speaker
+    let start = Instant::now();
+    let lines = |p: &Proc| -> Vec<String> {
+        p.stdout()
+            .lines()
+            .filter(|l| l.starts_with("screenshot "))
+            .map(str::to_owned)
+            .collect()
+    };
+    loop {
+        let l = lines(&desktop);
+        if l.iter()
+            .filter(|l| l.contains(&format!("speaking={spk}")))
+            .count()
+            >= 3
+        {
+            break;
+        }
+        if let Some(s) = desktop.child.try_wait().unwrap() {
+            panic!("the desktop peer exited ({s})\n{}", desktop.logs());
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(110),
+            "no frame showed peer {spk} speaking within 110 s\n{}\n{}",
+            desktop.logs(),
+            speaker.logs()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let all = lines(&desktop);
+    let quiet: Vec<&String> = all.iter().filter(|l| !l.contains("speaking=")).collect();
+    let talking: Vec<&String> = all
+        .iter()
+        .filter(|l| l.contains(&format!("speaking={spk}")))
+        .collect();
+    assert!(!quiet.is_empty(), "no frame before the bot spoke");
+    // before: no green anywhere
+    for l in &quiet {
+        let img = Rgb::load(Path::new(field(l, "path")));
+        let green = img
+            .region([0.0, 0.0, 319.0, 239.0], 0.0)
+            .filter(|(x, y)| is_green(img.at(*x, *y)))
+            .count();
+        assert!(green < 5, "{green} green pixels while nobody spoke: {l}");
+    }
+    // while it speaks: green inside the indicator's box, above where its head is drawn
+    let mut seen = 0;
+    for l in &talking {
+        let Some(bx) = l
+            .split_whitespace()
+            .find_map(|w| w.strip_prefix("speaking_px="))
+        else {
+            continue;
+        };
+        let b = px_box(bx);
+        let img = Rgb::load(Path::new(field(l, "path")));
+        let inside = img
+            .region(b, 2.0)
+            .filter(|(x, y)| is_green(img.at(*x, *y)))
+            .count();
+        println!("{}: {inside} green pixels in {b:?}", field(l, "n"));
+        if inside >= 10 {
+            seen += 1;
+        }
+    }
+    assert!(
+        seen >= 2,
+        "the indicator was not drawn where the peer said\n{}",
+        desktop.logs()
+    );
+    drop(speaker);
+}

@@ -24,7 +24,7 @@ A bot script also runs on a desktop or VR peer: it then moves the hands relative
 tracked ones and its grip adds to the device's. Desktop controls: the right hand on the mouse
 cursor; left button grips (Ctrl: left hand), wheel reaches (Shift: zoom), E trigger (the
 scalpel tears), X the cutter (sweep it across a body to cut it), right-drag orbits,
-middle-drag/WASDQZ pans, P particles, H HUD, R reset. VR: the tool button (X/A on Touch)
+middle-drag/WASDQZ pans, P particles, H HUD, M mutes the voice, R reset. VR: the tool button (X/A on Touch)
 switches a hand's trigger between scalpel and cutter.
 
 Every peer prints a stats line per second on stderr: peers, host, term, bytes/s up and down,
