@@ -7,6 +7,8 @@ mod cli;
 #[cfg(feature = "desktop")]
 mod desktop;
 mod driver;
+#[cfg(feature = "desktop")]
+mod labels;
 mod plugins;
 mod replay;
 mod replay_room;
@@ -466,6 +468,7 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
     opts.takeover_bind = a.takeover_bind;
     opts.uplink_bytes_per_s = a.uplink_bytes_per_s;
     opts.voice = a.voice.clone();
+    opts.presence = a.presence.clone();
     opts.state_route = a.state_route;
     opts.ice_servers = a.ice.clone();
     opts.ice_username = a.ice_user.clone();

@@ -75,7 +75,13 @@ impl Plugin for ViewPlugin {
             .init_resource::<RenderWarm>()
             .add_systems(
                 Update,
-                (sync_objects, draw_overlay, update_hud, take_screenshots)
+                (
+                    sync_objects,
+                    crate::labels::update_labels,
+                    draw_overlay,
+                    update_hud,
+                    take_screenshots,
+                )
                     .chain()
                     .after(SoftsyncSet::Mirror),
             );
@@ -311,6 +317,19 @@ fn sync_objects(
         let Some(o) = peer.objects().get(&id) else {
             continue;
         };
+        // an avatar in the colour its peer chose (`--colour`), once its presence arrives
+        if let Some(c) = o
+            .avatar_of
+            .and_then(|p| room.presences().get(&p))
+            .and_then(|p| crate::labels::presence_colour(p.colour))
+        {
+            if view.base != c {
+                view.base = c;
+                if let Some(mut m) = materials.get_mut(&view.material) {
+                    m.base_color = c;
+                }
+            }
+        }
         let hidden = (o.kind.is_avatar() && cfg.hide_avatars)
             || (o.kind == Kind::HEAD && cfg.hide_own_head && o.avatar_of == Some(me));
         // Soft bodies: rewrite positions and normals (world space, identity transform), and
@@ -722,6 +741,28 @@ fn take_screenshots(
             fields.push_str(&format!(" {name}_tris={tris}"));
             if let Some(cam) = cam {
                 fields.push_str(&screen_box(cam, &format!("{name}_rim_px"), rim.into_iter()));
+            }
+        }
+    }
+    // names: who, and where the label is anchored on screen
+    if let Some((c, gt)) = cam {
+        for (id, o) in peer.objects() {
+            let Some(who) = o
+                .avatar_of
+                .filter(|p| *p != peer.me() && o.kind == Kind::HEAD)
+            else {
+                continue;
+            };
+            if !room.presences().contains_key(&who) {
+                continue;
+            }
+            let Some(at) = ents.get(*id).and_then(|e| tfs.get(e).ok()) else {
+                continue;
+            };
+            if let Ok(s) =
+                c.world_to_viewport(gt, at.translation() + Vec3::Y * crate::labels::LABEL_LIFT)
+            {
+                fields.push_str(&format!(" label={} label_at={:.0},{:.0}", who.0, s.x, s.y));
             }
         }
     }

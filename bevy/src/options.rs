@@ -97,6 +97,9 @@ pub struct RoomOptions {
     /// Voice in the room ([`crate::voice`]): `None` sends and plays none (voice datagrams
     /// that arrive are dropped, counted by the front door).
     pub voice: Option<crate::voice::VoiceOptions>,
+    /// Our name and colour for the others (`softsync_peer::messages::Presence`), sent with
+    /// our head (again whenever it is spawned anew); `None`: others show our id.
+    pub presence: Option<softsync_peer::messages::Presence>,
 }
 
 impl RoomOptions {
@@ -134,6 +137,7 @@ impl RoomOptions {
             store: None,
             spawn_scene: true,
             voice: None,
+            presence: None,
         }
     }
 

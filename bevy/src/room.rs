@@ -22,7 +22,7 @@ use softsync_net::{
     Transport,
 };
 use softsync_net_matchbox::{MatchboxTransport, SignalServer, TlsIdentity};
-use softsync_peer::messages::SignalingMoved;
+use softsync_peer::messages::{Presence, SignalingMoved};
 use softsync_peer::{Event, Peer, PeerError, Scene};
 use softsync_store::keeper::Keeper;
 
@@ -91,6 +91,10 @@ pub struct Room {
     keeper: Option<Keeper>,
     reopened: Option<softsync_peer::Reopened>,
     voice: Option<RoomVoice>,
+    /// Our presence, and the head it was last sent with.
+    presence: Option<(Presence, Option<softsync_net::NetId>)>,
+    /// The others' presences, as received (sanitized).
+    presences: std::collections::BTreeMap<PeerId, Presence>,
 }
 
 impl Room {
@@ -231,6 +235,8 @@ impl Room {
             keeper,
             reopened,
             voice,
+            presence: opts.presence.map(|p| (p.sanitized(), None)),
+            presences: Default::default(),
         })
     }
 
@@ -261,6 +267,8 @@ impl Room {
             keeper: None,
             reopened: None,
             voice: None,
+            presence: None,
+            presences: Default::default(),
         }
     }
 
@@ -395,6 +403,9 @@ impl Room {
         while let Some(e) = self.peer.poll_event() {
             match &e {
                 Event::Room(softsync_net::Event::Message(m)) => {
+                    if let Some(Ok(p)) = self.peer.decode::<Presence>(m) {
+                        self.presences.insert(m.from, p.sanitized());
+                    }
                     if let Some(moved) = self.peer.decode::<SignalingMoved>(m) {
                         let host = self.peer.session().host_id();
                         match signaling_move(moved, m.from, host) {
@@ -525,11 +536,40 @@ impl Room {
         }
         let now = self.now();
         self.peer.fixed_step(now);
+        self.send_presence(now);
         self.flush();
         self.take_events(now);
         if let Some(k) = &mut self.keeper {
             k.tick(now, &mut self.peer, &mut self.events);
         }
+    }
+
+    /// Our presence with our head, once it exists and whenever it is spawned anew.
+    fn send_presence(&mut self, now: Instant) {
+        let head = self.peer.avatar_parts()[0];
+        let Some((p, sent)) = &mut self.presence else {
+            return;
+        };
+        if head.is_none() || *sent == head {
+            return;
+        }
+        if let Some(h) = head {
+            let p = p.clone();
+            if self
+                .peer
+                .send(now, MessageTarget::Everyone, Delivery::ObjectState(h), &p)
+                .is_ok()
+            {
+                if let Some((_, sent)) = &mut self.presence {
+                    *sent = Some(h);
+                }
+            }
+        }
+    }
+
+    /// The others' names and colours, by peer, as they announced them.
+    pub fn presences(&self) -> &std::collections::BTreeMap<PeerId, Presence> {
+        &self.presences
     }
 
     /// The room's store, if it is kept (what it has written: [`Keeper::status`]).

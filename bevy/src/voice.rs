@@ -126,7 +126,7 @@ pub struct RoomVoice {
     /// The first saying was scheduled.
     scheduled: bool,
     speaking: BTreeMap<PeerId, bool>,
-    announced: Option<VoiceState>,
+    announced: Option<(VoiceState, softsync_net::NetId)>,
     events: Vec<VoiceEvent>,
     out: Vec<Transmit>,
     /// Room time of the newest block played, ms.
@@ -506,14 +506,23 @@ impl RoomVoice {
             muted: self.chat.muted(),
             speaking: self.chat.own().speaking(),
         };
-        if self.announced == Some(state) {
+        // kept with our head (a joiner learns it with the head; it goes when we go)
+        let Some(head) = peer.avatar_parts()[0] else {
+            return;
+        };
+        if self.announced == Some((state, head)) {
             return;
         }
         if peer
-            .send(now, MessageTarget::Everyone, Delivery::Retained, &state)
+            .send(
+                now,
+                MessageTarget::Everyone,
+                Delivery::ObjectState(head),
+                &state,
+            )
             .is_ok()
         {
-            self.announced = Some(state);
+            self.announced = Some((state, head));
         }
     }
 

@@ -202,9 +202,43 @@ impl Message for VoiceState {
     const NAME: &'static str = "softsync.voice_state";
 }
 
+/// Who a peer is to the others: the name and colour it chose at join (`softsync join --name
+/// … --colour …`), sent as its head's object state (a joiner gets it with the head; it goes
+/// with the head). Front ends draw the name above the head and the avatar in the colour.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Presence {
+    /// A display name (at most [`Presence::MAX_NAME`] characters, no control characters).
+    pub name: String,
+    /// sRGB colour.
+    pub colour: [u8; 3],
+}
+
+impl Message for Presence {
+    const NAME: &'static str = "softsync.presence";
+}
+
+impl Presence {
+    /// The longest name kept, in characters.
+    pub const MAX_NAME: usize = 32;
+
+    /// The same with the name cut to [`Presence::MAX_NAME`] characters and control
+    /// characters dropped (what a receiver shows, whatever a sender wrote).
+    pub fn sanitized(mut self) -> Self {
+        self.name = self
+            .name
+            .chars()
+            .filter(|c| !c.is_control())
+            .take(Self::MAX_NAME)
+            .collect::<String>()
+            .trim()
+            .to_owned();
+        self
+    }
+}
+
 /// The built-in message types ([`Say`], [`SignalingMoved`], [`RemoteHand`], [`HandAnswer`],
-/// [`Holders`], [`BladeRequest`], [`ReplayControl`], [`ReplayClock`], [`VoiceState`]), in
-/// their fixed order; register yours after them.
+/// [`Holders`], [`BladeRequest`], [`ReplayControl`], [`ReplayClock`], [`VoiceState`],
+/// [`Presence`]), in their fixed order; register yours after them.
 pub fn builtin() -> MessageTypes {
     let mut t = MessageTypes::new();
     // A fresh table holds no name yet, so these cannot collide.
@@ -217,6 +251,7 @@ pub fn builtin() -> MessageTypes {
     let _ = t.register::<ReplayControl>();
     let _ = t.register::<ReplayClock>();
     let _ = t.register::<VoiceState>();
+    let _ = t.register::<Presence>();
     t
 }
 
@@ -239,7 +274,14 @@ mod tests {
         assert_eq!(t.kind::<BladeRequest>().map(|k| k.0), Some(5));
         assert_eq!(t.kind::<ReplayClock>().map(|k| k.0), Some(7));
         assert_eq!(t.kind::<VoiceState>().map(|k| k.0), Some(8));
-        assert_eq!(t.register::<Valve>().unwrap().0, 9);
+        assert_eq!(t.kind::<Presence>().map(|k| k.0), Some(9));
+        assert_eq!(t.register::<Valve>().unwrap().0, 10);
+        let p = Presence {
+            name: format!("  Dr\u{7}. Lee{}", "x".repeat(100)),
+            colour: [1, 2, 3],
+        }
+        .sanitized();
+        assert!(p.name.starts_with("Dr. Lee") && p.name.chars().count() <= Presence::MAX_NAME);
         assert!(t.register::<Say>().is_err());
     }
 }

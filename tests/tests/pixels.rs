@@ -821,6 +821,10 @@ fn the_speaking_indicator_floats_over_the_talking_bots_head() {
             // its head over the middle of the table, where the desktop peer looks
             "--bot",
             "move head 0 0.9 0 in 1; wait 100",
+            "--name",
+            "Dr Lee",
+            "--colour",
+            "ff20ff",
         ],
     );
     let spk = speaker.peer_id();
@@ -920,6 +924,46 @@ fn the_speaking_indicator_floats_over_the_talking_bots_head() {
     assert!(
         seen >= 2,
         "the indicator was not drawn where the peer said\n{}",
+        desktop.logs()
+    );
+    // its name above its head, in its colour (magenta text on the label's dark ground)
+    let named: Vec<&String> = all
+        .iter()
+        .filter(|l| l.contains(&format!("label={spk}")))
+        .collect();
+    assert!(
+        !named.is_empty(),
+        "no frame labelled peer {spk}\n{}",
+        desktop.logs()
+    );
+    let mut labelled = 0;
+    for l in named.iter().rev().take(4) {
+        let at: Vec<f64> = field(l, "label_at")
+            .split(',')
+            .map(|v| v.parse().unwrap())
+            .collect();
+        let img = Rgb::load(Path::new(field(l, "path")));
+        let magenta = img
+            .region(
+                [at[0] - 40.0, at[1] - 14.0, at[0] + 40.0, at[1] + 14.0],
+                0.0,
+            )
+            .filter(|(x, y)| {
+                let c = img.at(*x, *y);
+                c[0] > 170 && c[2] > 170 && c[1] < 110
+            })
+            .count();
+        println!(
+            "{}: {magenta} magenta pixels around the label at {at:?}",
+            field(l, "n")
+        );
+        if magenta >= 8 {
+            labelled += 1;
+        }
+    }
+    assert!(
+        labelled >= 2,
+        "the name was not drawn above the head\n{}",
         desktop.logs()
     );
     drop(speaker);

@@ -379,6 +379,8 @@ pub struct PeerArgs {
     pub uplink_bytes_per_s: Option<u32>,
     /// Voice, if on.
     pub voice: Option<softsync_bevy::voice::VoiceOptions>,
+    /// Our name and colour, if given.
+    pub presence: Option<softsync_peer::messages::Presence>,
     /// Which way object state travels.
     pub state_route: softsync_net::StateRoute,
     /// Rollback (ggrs) rather than state sync.
@@ -590,6 +592,7 @@ fn peer_args(
         no_net_thread: p.no_net_thread,
         uplink_bytes_per_s: p.uplink_kbps.map(|k| (k * 125.0).round().max(1.0) as u32),
         voice: p.voice.options(),
+        presence: p.voice.presence(),
         state_route: match p.state_route {
             Route::Relay => softsync_net::StateRoute::Relay,
             Route::Direct => softsync_net::StateRoute::Direct,

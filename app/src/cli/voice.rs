@@ -1,4 +1,4 @@
-//! `host`'s and `join`'s voice flags (`--voice-in`, `--voice-out`, …).
+//! `host`'s and `join`'s voice and presence flags (`--voice-in`, `--voice-out`, `--name`, …).
 
 use std::path::PathBuf;
 
@@ -57,9 +57,55 @@ pub struct VoiceOpts {
     /// Our head rises with our voice (a bot's mouth; the voice bench sees lip-sync by it).
     #[arg(long, help_heading = "Voice")]
     pub voice_nod: bool,
+    /// Our name, shown above our head on the others' desktop peers (at most 32 characters).
+    #[arg(long, value_name = "NAME", value_parser = name, help_heading = "Voice")]
+    pub name: Option<String>,
+    /// Our avatar's colour, as hex RRGGBB (default: one from our peer id).
+    #[arg(long, value_name = "RRGGBB", value_parser = colour, requires = "name", help_heading = "Voice")]
+    pub colour: Option<[u8; 3]>,
+}
+
+fn name(v: &str) -> Result<String, String> {
+    let p = softsync_peer::messages::Presence {
+        name: v.to_owned(),
+        colour: [0; 3],
+    }
+    .sanitized();
+    if p.name.is_empty() {
+        return Err(format!("{v:?} has no printable characters"));
+    }
+    if v.chars().count() > softsync_peer::messages::Presence::MAX_NAME {
+        return Err(format!(
+            "{v:?} is longer than {} characters",
+            softsync_peer::messages::Presence::MAX_NAME
+        ));
+    }
+    Ok(p.name)
+}
+
+fn colour(v: &str) -> Result<[u8; 3], String> {
+    let h = v.trim_start_matches('#');
+    let byte = |i: usize| {
+        h.get(i..i + 2)
+            .and_then(|b| u8::from_str_radix(b, 16).ok())
+            .ok_or_else(|| format!("{v:?} is not a colour RRGGBB (e.g. e03c8a)"))
+    };
+    if h.len() != 6 {
+        return Err(format!("{v:?} is not a colour RRGGBB (e.g. e03c8a)"));
+    }
+    Ok([byte(0)?, byte(2)?, byte(4)?])
 }
 
 impl VoiceOpts {
+    /// Our presence, if we have a name: the colour given, or one from `peer`'s id later
+    /// (`[0, 0, 0]` stands for "from the id" until the peer id is known).
+    pub fn presence(&self) -> Option<softsync_peer::messages::Presence> {
+        Some(softsync_peer::messages::Presence {
+            name: self.name.clone()?,
+            colour: self.colour.unwrap_or([0, 0, 0]),
+        })
+    }
+
     /// The room's voice options, if voice is on.
     pub fn options(&self) -> Option<VoiceOptions> {
         if !(self.voice || self.voice_in.is_some() || self.voice_out.is_some()) {
