@@ -681,6 +681,15 @@ fn rim_of(m: &Mesh) -> (usize, Vec<Vec3>) {
     (corners.len() / 3, rim)
 }
 
+/// What a screenshot's line reads of the drawn scene: entities, their views and meshes, and
+/// where things are.
+type Drawn<'w, 's, 'a, 'b> = (
+    Res<'w, NetEntities>,
+    Query<'w, 's, &'a ObjView>,
+    Res<'w, Assets<Mesh>>,
+    Query<'w, 's, &'b GlobalTransform>,
+);
+
 fn take_screenshots(
     mut commands: Commands,
     room: NonSend<Room>,
@@ -688,8 +697,7 @@ fn take_screenshots(
     cfg: Res<ViewConfig>,
     cams: Query<(&Camera, &GlobalTransform)>,
     warm: Res<RenderWarm>,
-    (ents, objs, meshes): (Res<NetEntities>, Query<&ObjView>, Res<Assets<Mesh>>),
-    tfs: Query<&GlobalTransform>,
+    (ents, objs, meshes, tfs): Drawn,
 ) {
     let Some(plan) = &cfg.screenshots else {
         return;

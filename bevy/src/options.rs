@@ -31,7 +31,7 @@ pub struct RoomOptions {
     /// Where a host's embedded signaling server listens.
     pub bind: SocketAddr,
     /// A joiner's address for the room's signaling should it become host after the host that
-    /// served signaling died (see [`Room`]'s docs on signaling). None: it serves none.
+    /// served signaling died (see [`Room`](crate::Room)'s docs on signaling). None: it serves none.
     pub takeover_bind: Option<SocketAddr>,
     /// The embedded signaling server's certificate and key: it then speaks `wss://` (a host's
     /// own, or a new host's after a takeover).
@@ -61,11 +61,11 @@ pub struct RoomOptions {
     /// The application's message types beyond the built-in ones and the scene's `messages`
     /// (every peer of the room must register the same, in the same order).
     pub messages: MessageTypes,
-    /// Start pumping the network at once (true), or only after [`Room::set_ready`] (a front
+    /// Start pumping the network at once (true), or only after [`Room::set_ready`](crate::Room::set_ready) (a front
     /// end whose first frames stall — a window, an XR session — would otherwise be timed out
     /// by the host while it warms up).
     pub start_ready: bool,
-    /// Where a joiner without the scene ([`Room::open_fetching_scene`]) keeps the scene it
+    /// Where a joiner without the scene ([`Room::open_fetching_scene`](crate::Room::open_fetching_scene)) keeps the scene it
     /// receives (a folder per scene, named by its digest). Default: this user's private cache
     /// ([`softsync_peer::scene::cache::default_scene_cache`]), checked and cleaned at each use.
     pub scene_cache: PathBuf,

@@ -360,7 +360,7 @@ impl RoomVoice {
                         .send_frame(peer.session(), route, &f, &mut self.out);
                 }
             }
-            due = due + FRAME;
+            due += FRAME;
         }
         if now >= due {
             // a stall longer than the catch-up: start again from now
@@ -438,7 +438,7 @@ impl RoomVoice {
                     self.sink = None;
                 }
             }
-            due = due + FRAME;
+            due += FRAME;
         }
         if now >= due {
             due = now + FRAME;

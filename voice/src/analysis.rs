@@ -159,6 +159,7 @@ pub fn longest_dropout_ms(said: &[i16], heard: &[i16]) -> f64 {
 
 #[cfg(test)]
 mod tests {
+    #![allow(clippy::unwrap_used)]
     use super::*;
 
     #[test]

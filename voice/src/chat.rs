@@ -369,6 +369,7 @@ impl VoiceChat {
 
 #[cfg(test)]
 mod tests {
+    #![allow(clippy::unwrap_used)]
     use super::*;
 
     fn speech(k: usize) -> [i16; FRAME_SAMPLES] {

@@ -164,6 +164,7 @@ impl Decoder {
 
 #[cfg(test)]
 mod tests {
+    #![allow(clippy::unwrap_used)]
     use super::*;
 
     /// A voiced sound: a 200 Hz pulse train with breath noise, in syllables.

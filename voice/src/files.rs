@@ -299,6 +299,7 @@ impl WavSink {
 
 #[cfg(test)]
 mod tests {
+    #![allow(clippy::unwrap_used)]
     use super::*;
 
     #[test]
@@ -322,7 +323,7 @@ mod tests {
         let s = read_wav(&path).unwrap();
         assert!((s.len() as i64 - 48_000).abs() <= 1, "{}", s.len());
         let mut src = WavSource::from_samples(s);
-        assert_eq!(src.next_frame().1, false);
+        assert!(!src.next_frame().1);
         src.start();
         let (_, first) = src.next_frame();
         assert!(first);

@@ -415,13 +415,14 @@ impl JitterBuffer {
         p.next = p.next.wrapping_add(1);
         p.next_capture += FRAME;
         // too deep: skip one waiting frame
-        if p.delay > target + 2.0 * FRAME && self.frames.len() >= 2 {
-            if self.frames.remove(&p.next).is_some() {
-                self.last_played = Some(p.next);
-                p.next = p.next.wrapping_add(1);
-                p.next_capture += FRAME;
-                self.stats.shrunk += 1;
-            }
+        if p.delay > target + 2.0 * FRAME
+            && self.frames.len() >= 2
+            && self.frames.remove(&p.next).is_some()
+        {
+            self.last_played = Some(p.next);
+            p.next = p.next.wrapping_add(1);
+            p.next_capture += FRAME;
+            self.stats.shrunk += 1;
         }
         self.playing = Some(p);
         out
@@ -430,6 +431,7 @@ impl JitterBuffer {
 
 #[cfg(test)]
 mod tests {
+    #![allow(clippy::unwrap_used)]
     use super::*;
 
     fn f(seq: u32, capture: f64) -> VoiceFrame {

@@ -68,6 +68,7 @@ const _: () = assert!(FRAME_SAMPLES == 960);
 
 #[cfg(test)]
 mod tests {
+    #![allow(clippy::unwrap_used)]
     use super::*;
 
     #[test]
