@@ -188,8 +188,8 @@ impl Message for ReplayClock {
     const NAME: &'static str = "softsync.replay_clock";
 }
 
-/// A peer's voice state (retained: a joiner learns at once who is muted and who speaks), sent
-/// by the peer whenever it changes (`softsync_bevy::voice`).
+/// A peer's voice state, sent by the peer whenever it changes (`softsync_bevy::voice`) as its
+/// head's object state: a joiner learns with the head who is muted and who speaks.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct VoiceState {
     /// Its microphone is muted.

@@ -59,7 +59,7 @@ fn two_listeners_hear_a_bot_at_its_delay_and_a_host_kill_costs_no_audio() {
             "--voice-every",
             "6",
             "--duration",
-            "18",
+            "24",
         ],
     );
     let spk = speaker.peer_id();
@@ -105,11 +105,22 @@ fn two_listeners_hear_a_bot_at_its_delay_and_a_host_kill_costs_no_audio() {
     wait_said(&speaker, 2);
     std::thread::sleep(Duration::from_millis(1000));
     host.kill();
+    // a late joiner, through the new host: it hears the room within a second of being in it
+    let l3_dir = dir.join("l3").to_string_lossy().to_string();
+    let mut late = peer_on(
+        &dir,
+        "l3",
+        "join",
+        &url,
+        "voice",
+        &["--voice-out", &l3_dir, "--duration", "10"],
+    );
     let mut speaker = speaker;
     speaker.wait_exit(Duration::from_secs(60));
     for l in &mut listeners {
         l.wait_exit(Duration::from_secs(60));
     }
+    late.wait_exit(Duration::from_secs(60));
     let said_at = wait_said(&speaker, 2);
     let logs = || {
         format!(
@@ -167,4 +178,46 @@ fn two_listeners_hear_a_bot_at_its_delay_and_a_host_kill_costs_no_audio() {
             .unwrap_or_else(|| panic!("{name}: no voice stats\n{}", logs()));
         assert_eq!(field(stats, "dropped"), "0", "{stats}");
     }
+
+    // the late joiner: from when it started playing (just after its welcome and the room
+    // clock) to the first speech it played, less any silence the speaker was in then
+    let ldir = dir.join("l3");
+    let said_at = wait_said(&speaker, 3);
+    let meta: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(ldir.join("voice.json"))
+            .unwrap_or_else(|e| panic!("l3: {e}\n{}", late.logs())),
+    )
+    .unwrap();
+    let start = meta["start_room_ms"].as_f64().unwrap();
+    let rec = read_wav(&ldir.join(format!("peer-{spk}.wav")))
+        .unwrap_or_else(|e| panic!("l3: {e}\n{}", late.logs()));
+    let speech = |x: &[i16]| softsync_voice::level::level_db(x) > -40.0;
+    let heard = rec
+        .chunks_exact(960)
+        .position(speech)
+        .map(|k| start + k as f64 * 20.0)
+        .unwrap_or_else(|| panic!("l3 heard no speech\n{}", late.logs()));
+    // when the speaker next said something from `start` on (in a saying, or the next one)
+    let len_ms = said.len() as f64 / 48.0;
+    let expected = said_at
+        .iter()
+        .find_map(|at| {
+            let from = ((start - at).max(0.0) * 48.0) as usize;
+            if from >= said.len() {
+                return None;
+            }
+            let k = said[from..].chunks_exact(960).position(speech)?;
+            Some(at.max(start) + k as f64 * 20.0)
+        })
+        .unwrap_or(start);
+    println!(
+        "l3: playing from room time {start:.0} ms; speech from {expected:.0} ms; heard at {heard:.0} ms ({:.0} ms later; sayings of {len_ms:.0} ms at {said_at:?})",
+        heard - expected
+    );
+    assert!(
+        heard - expected <= 1000.0,
+        "the late joiner heard the room {:.0} ms after it could have\n{}",
+        heard - expected,
+        late.logs()
+    );
 }
