@@ -1,7 +1,7 @@
 //! Who is who on a desktop peer: a label with each other peer's name (`--name`, its
 //! `Presence`) floating above its head, in its colour, and its avatar drawn in that colour.
-//! A peer that gave no name is labelled by its short id only while it speaks (the speaking
-//! indicator is `view.rs`'s). The labels are screen-space text placed each frame where the
+//! The speaking indicator's place is reckoned here too ([`speaking_indicators`]; `view.rs`
+//! draws it). The labels are screen-space text placed each frame where the
 //! head is seen; a head behind the camera hides its label. (In a headset they do not show:
 //! OpenXR draws no bevy UI.)
 
@@ -90,4 +90,33 @@ pub fn update_labels(
             Visibility::Hidden,
         ));
     }
+}
+
+/// How high above a speaker's head its speaking indicator floats, metres.
+const INDICATOR_LIFT: f32 = 0.2;
+
+/// Each peer heard speaking now: where its indicator is drawn (above its head as shown) and
+/// its radius (larger when louder).
+pub fn speaking_indicators(
+    room: &Room,
+    ents: &NetEntities,
+    tfs: &Query<&GlobalTransform>,
+) -> Vec<(u64, Vec3, f32)> {
+    let Some(voice) = room.voice_view() else {
+        return Vec::new();
+    };
+    let peer = &room.peer;
+    voice
+        .speaking()
+        .into_iter()
+        .filter_map(|(who, db)| {
+            let (id, _) = peer
+                .objects()
+                .iter()
+                .find(|(_, o)| o.kind == Kind::HEAD && o.avatar_of == Some(who))?;
+            let at = tfs.get(ents.get(*id)?).ok()?.translation();
+            let loud = ((db + 70.0) / 70.0).clamp(0.0, 1.0);
+            Some((who.0, at + Vec3::Y * INDICATOR_LIFT, 0.03 + 0.04 * loud))
+        })
+        .collect()
 }

@@ -381,35 +381,6 @@ fn sync_objects(
 }
 
 /// Particles and neighbour links (thesis Figure 1.1), when switched on (P).
-/// How high above a speaker's head its speaking indicator floats, metres.
-const INDICATOR_LIFT: f32 = 0.2;
-
-/// Each peer heard speaking now: where its indicator is drawn (above its head as shown) and
-/// its radius (larger when louder).
-fn speaking_indicators(
-    room: &Room,
-    ents: &NetEntities,
-    tfs: &Query<&GlobalTransform>,
-) -> Vec<(u64, Vec3, f32)> {
-    let Some(voice) = room.voice_view() else {
-        return Vec::new();
-    };
-    let peer = &room.peer;
-    voice
-        .speaking()
-        .into_iter()
-        .filter_map(|(who, db)| {
-            let (id, _) = peer
-                .objects()
-                .iter()
-                .find(|(_, o)| o.kind == Kind::HEAD && o.avatar_of == Some(who))?;
-            let at = tfs.get(ents.get(*id)?).ok()?.translation();
-            let loud = ((db + 70.0) / 70.0).clamp(0.0, 1.0);
-            Some((who.0, at + Vec3::Y * INDICATOR_LIFT, 0.03 + 0.04 * loud))
-        })
-        .collect()
-}
-
 #[allow(clippy::too_many_arguments)]
 fn draw_overlay(
     mut room: NonSendMut<Room>,
@@ -421,7 +392,7 @@ fn draw_overlay(
     tfs: Query<&GlobalTransform>,
 ) {
     // who is speaking: lime-green rings above the speaker's head, larger when louder
-    for (_, at, r) in speaking_indicators(&room, &ents, &tfs) {
+    for (_, at, r) in crate::labels::speaking_indicators(&room, &ents, &tfs) {
         for k in 0..4 {
             let rr = r * (1.0 - 0.2 * k as f32);
             gizmos.sphere(Isometry3d::from_translation(at), rr, css::LIME);
@@ -776,7 +747,7 @@ fn take_screenshots(
     }
     // speaking indicators: who, and the screen box of the indicator
     if let Some(cam) = cam {
-        for (who, at, r) in speaking_indicators(&room, &ents, &tfs) {
+        for (who, at, r) in crate::labels::speaking_indicators(&room, &ents, &tfs) {
             fields.push_str(&format!(" speaking={who}"));
             let pts = [-1.0f32, 1.0]
                 .into_iter()

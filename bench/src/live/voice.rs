@@ -23,7 +23,10 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use softsync_benchkit::{median, percentile, Csv, ResultLine};
+use softsync_benchkit::plotters::style::RGBColor;
+use softsync_benchkit::{
+    median, percentile, write_svg, ChartStyle, Csv, LineChart, ResultLine, Series,
+};
 use softsync_voice::analysis::{align, heard_in};
 use softsync_voice::files::{read_wav, write_wav};
 use softsync_voice::level::{level_db, FLOOR_DB};
@@ -376,6 +379,75 @@ fn crowd(
     Ok((host_up, each, listen))
 }
 
+/// `voice.svg`: mouth to ear (p50) and lip-sync skew against the one-way latency, a line per
+/// loss, with the targets' lines.
+fn chart(out: &Path, lives: &[Live]) -> Result<(), String> {
+    let colours = [
+        RGBColor(30, 110, 200),
+        RGBColor(230, 130, 20),
+        RGBColor(200, 40, 40),
+    ];
+    let mut m2e = Vec::new();
+    let mut skew = Vec::new();
+    for (k, loss) in [0u32, 5, 20].iter().enumerate() {
+        let pts = |f: &dyn Fn(&Live) -> f64| -> Vec<(f64, f64)> {
+            lives
+                .iter()
+                .filter(|l| l.loss_pct == *loss)
+                .map(|l| (f64::from(l.lat_ms), f(l)))
+                .collect()
+        };
+        let a = pts(&|l| median(&l.m2e));
+        if a.is_empty() {
+            continue;
+        }
+        m2e.push(Series::new(format!("{loss} % loss"), colours[k], a));
+        skew.push(Series::new(
+            format!("{loss} % loss"),
+            colours[k],
+            pts(&|l| {
+                if l.skew.is_empty() {
+                    f64::NAN
+                } else {
+                    median(&l.skew)
+                }
+            }),
+        ));
+    }
+    let target = |pts: Vec<(f64, f64)>| Series::new("target", RGBColor(120, 120, 120), pts);
+    m2e.push(target(vec![(0.0, 60.0), (150.0, 210.0)]));
+    let mut skew_band = skew;
+    skew_band.push(target(vec![(0.0, -40.0), (150.0, -40.0)]));
+    skew_band.push(Series::new(
+        "",
+        RGBColor(120, 120, 120),
+        vec![(0.0, 40.0), (150.0, 40.0)],
+    ));
+    let charts = [
+        LineChart {
+            title: "mouth to ear, p50 (target: latency + 60 ms)".into(),
+            x_desc: "one-way latency, ms".into(),
+            y_desc: "ms".into(),
+            x_range: 0.0..160.0,
+            x_log: false,
+            y_range: 0.0..260.0,
+            series: m2e,
+            style: ChartStyle::PANEL,
+        },
+        LineChart {
+            title: "lip-sync skew (voice after lips; target ±40 ms)".into(),
+            x_desc: "one-way latency, ms".into(),
+            y_desc: "ms".into(),
+            x_range: 0.0..160.0,
+            x_log: false,
+            y_range: -80.0..80.0,
+            series: skew_band,
+            style: ChartStyle::PANEL,
+        },
+    ];
+    write_svg(out.join("voice.svg"), (1000, 380), &charts).map_err(|e| e.to_string())
+}
+
 /// Runs the rooms and writes `docs/results/voice/`.
 pub fn voice(out: &Path, quick: bool) -> Result<(), String> {
     std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
@@ -392,6 +464,7 @@ pub fn voice(out: &Path, quick: bool) -> Result<(), String> {
     };
     let sayings = if quick { 2 } else { 3 };
     let mut lines = Vec::new();
+    let mut lives: Vec<Live> = Vec::new();
     let mut csv = Csv::new(&[
         "lat_ms",
         "loss_pct",
@@ -439,7 +512,9 @@ pub fn voice(out: &Path, quick: bool) -> Result<(), String> {
             .field("sayings", l.m2e.len());
         println!("{line}");
         lines.push(line.to_string());
+        lives.push(l);
     }
+    chart(out, &lives)?;
     let seconds = if quick { 10.0 } else { 20.0 };
     for route in ["mesh", "relay"] {
         let (host, each, listen) = crowd(&dir, &s.0, route, seconds)?;
