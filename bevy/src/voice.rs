@@ -291,11 +291,13 @@ impl RoomVoice {
                 self.router.send_report(to, r, &mut self.out);
             }
             self.send_out(now, peer, transport);
-            // voice goes first in the uplink budget: half a link's share at most
-            let cap = peer
-                .session()
-                .uplink_share()
-                .map(|bytes| (bytes * 8.0 / 2.0) as i32);
+            // voice goes first in the uplink budget, its bitrate at most half a link's share
+            // less its 50 packets' headers and transport overhead (at low caps that overhead
+            // is most of it: the encoder then runs at its floor, 8 kb/s)
+            let cap = peer.session().uplink_share().map(|bytes| {
+                let overhead = 50.0 * (softsync_net::stats::TRANSPORT_OVERHEAD_BYTES + 13) as f64;
+                ((bytes / 2.0 - overhead).max(0.0) * 8.0) as i32
+            });
             self.chat.set_cap(cap);
             self.rounds += 1;
             if self.rounds % STATS_EVERY == 0 {
