@@ -28,7 +28,7 @@ const REPORT_EVERY: Duration = Duration::from_secs(1);
 const STATS_EVERY: u32 = 5;
 /// How far the voice may run ahead of the lips, ms (audio that leads is noticed sooner than
 /// audio that lags; ITU-R BT.1359 puts detection at about 45 ms lead).
-const LIP_LEAD_MS: f64 = 20.0;
+const LIP_LEAD_MS: f64 = 30.0;
 /// A speaking avatar's head is shown one send interval late (not two), with the usual jitter
 /// allowance: the voice buffer can then match it without adding much delay.
 const HEAD_INTERPOLATION: softsync_net::InterpolationConfig = softsync_net::InterpolationConfig {

@@ -790,13 +790,12 @@ fn the_speaking_indicator_floats_over_the_talking_bots_head() {
     require_netns();
     let dir = scratch("pixels-voice");
     let raw = dir.join("said.wav");
-    let st = Command::new("espeak-ng")
-        .args(["-s", "140", "-w"])
-        .arg(&raw)
-        .arg("Hold the clamp steady while I cut along the line, then lift it gently.")
-        .status()
-        .expect("espeak-ng is needed (Debian's espeak-ng; .ci/run installs it)");
-    assert!(st.success());
+    softsync_voice::files::speak(
+        "Hold the clamp steady while I cut along the line, then lift it gently.",
+        140,
+        &raw,
+    )
+    .unwrap_or_else(|e| panic!("{e} (.ci/run installs it)"));
     let x = Xvfb::start(&dir);
     let (_host, url) = host(&dir, "pixels-voice");
     let said = raw.to_str().unwrap().to_owned();

@@ -12,7 +12,7 @@ use std::time::Duration;
 
 use common::*;
 use softsync_voice::analysis::{heard_in, longest_dropout_ms};
-use softsync_voice::files::{read_wav, write_wav};
+use softsync_voice::files::{read_wav, speak};
 
 const SENTENCE: &str = "The surgeon lifts the liver and cuts along the marked line.";
 
@@ -20,17 +20,9 @@ const SENTENCE: &str = "The surgeon lifts the liver and cuts along the marked li
 fn two_listeners_hear_a_bot_at_its_delay_and_a_host_kill_costs_no_audio() {
     require_netns();
     let dir = scratch("voice");
-    let raw = dir.join("said-22k.wav");
-    let st = std::process::Command::new("espeak-ng")
-        .args(["-s", "160", "-w"])
-        .arg(&raw)
-        .arg(SENTENCE)
-        .status()
-        .expect("espeak-ng is needed (Debian's espeak-ng; .ci/run installs it)");
-    assert!(st.success());
-    let said = read_wav(&raw).unwrap();
     let said_path = dir.join("said.wav");
-    write_wav(&said_path, 1, &said).unwrap();
+    let said =
+        speak(SENTENCE, 160, &said_path).unwrap_or_else(|e| panic!("{e} (.ci/run installs it)"));
     let len_s = said.len() as f64 / 48_000.0;
     assert!((2.0..6.0).contains(&len_s), "{len_s}");
 

@@ -100,6 +100,25 @@ fn spec(channels: u16) -> hound::WavSpec {
     }
 }
 
+/// `text` spoken by espeak-ng (Debian's `espeak-ng`) at `words_per_min`, written to `path` as
+/// 48 kHz mono, and its samples: the test and bench voice of bots.
+pub fn speak(text: &str, words_per_min: u32, path: &Path) -> Result<Vec<i16>, FileError> {
+    let raw = path.with_extension("espeak.wav");
+    let st = std::process::Command::new("espeak-ng")
+        .args(["-s", &words_per_min.to_string(), "-w"])
+        .arg(&raw)
+        .arg(text)
+        .status()
+        .map_err(|e| FileError::Other(format!("espeak-ng: {e} (install Debian's espeak-ng)")))?;
+    if !st.success() {
+        return Err(FileError::Other(format!("espeak-ng exited with {st}")));
+    }
+    let said = read_wav(&raw)?;
+    write_wav(path, 1, &said)?;
+    let _ = std::fs::remove_file(&raw);
+    Ok(said)
+}
+
 /// A speech file in 20 ms frames: played once each time it is started.
 #[derive(Clone, Debug)]
 pub struct WavSource {

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use softsync_net::PeerId;
 use softsync_voice::analysis::align;
-use softsync_voice::files::{read_wav, write_wav};
+use softsync_voice::files::{speak, write_wav};
 use softsync_voice::{VoiceChat, VoiceConfig, FRAME_SAMPLES};
 
 fn repo() -> PathBuf {
@@ -17,15 +17,12 @@ fn repo() -> PathBuf {
 }
 
 fn sentence(dir: &Path) -> Vec<i16> {
-    let raw = dir.join("said-22k.wav");
-    let st = std::process::Command::new("espeak-ng")
-        .args(["-s", "150", "-w"])
-        .arg(&raw)
-        .arg("Hold the clamp steady while I cut along the line, then lift it gently.")
-        .status()
-        .expect("espeak-ng is needed (Debian's espeak-ng; .ci/run installs it)");
-    assert!(st.success());
-    read_wav(&raw).unwrap()
+    speak(
+        "Hold the clamp steady while I cut along the line, then lift it gently.",
+        150,
+        &dir.join("said.wav"),
+    )
+    .unwrap_or_else(|e| panic!("{e} (.ci/run installs it)"))
 }
 
 /// The sentence through a speaker and a listener over a link of `transit` ms (capture to

@@ -28,7 +28,7 @@ use softsync_benchkit::{
     median, percentile, write_svg, ChartStyle, Csv, LineChart, ResultLine, Series,
 };
 use softsync_voice::analysis::{align, heard_in};
-use softsync_voice::files::{read_wav, write_wav};
+use softsync_voice::files::{read_wav, speak, write_wav};
 use softsync_voice::level::{level_db, FLOOR_DB};
 use softsync_voice::{FRAME_SAMPLES, SAMPLE_RATE};
 
@@ -54,19 +54,8 @@ struct Live {
 
 /// espeak-ng's sentence as a 48 kHz WAV under `dir`.
 fn sentence(dir: &Path) -> Result<(PathBuf, Vec<i16>), String> {
-    let raw = dir.join("sentence-22k.wav");
-    let st = std::process::Command::new("espeak-ng")
-        .args(["-s", "150", "-w"])
-        .arg(&raw)
-        .arg(SENTENCE)
-        .status()
-        .map_err(|e| format!("espeak-ng: {e} (install Debian's espeak-ng)"))?;
-    if !st.success() {
-        return Err(format!("espeak-ng exited with {st}"));
-    }
-    let said = read_wav(&raw).map_err(|e| e.to_string())?;
     let path = dir.join("sentence.wav");
-    write_wav(&path, 1, &said).map_err(|e| e.to_string())?;
+    let said = speak(SENTENCE, 150, &path).map_err(|e| e.to_string())?;
     Ok((path, said))
 }
 
