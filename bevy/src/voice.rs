@@ -327,6 +327,9 @@ impl RoomVoice {
         peer: &mut Peer,
         transport: &mut dyn Transport,
     ) {
+        if now < due {
+            return; // the pump runs every 4 ms: most calls have nothing due
+        }
         // the room's route: relay when any link to a member other than the host is TURNed
         let session = peer.session();
         let me = session.local_id();
