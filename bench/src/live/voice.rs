@@ -520,8 +520,9 @@ pub fn voice(out: &Path, quick: bool) -> Result<(), String> {
     let mut md = String::new();
     let _ = writeln!(
         md,
-        "# Voice in live rooms\n\n`scripts/netns-run target/release/softsync-bench voice{}` \
-         (real `softsync` processes on WebRTC on one machine; see `bench/src/live/voice.rs`). \
+        "# Voice in live rooms\n\n`scripts/netns-run target/debug/softsync-bench voice{}` \
+         (a debug build; real `softsync` processes on WebRTC on one machine; see \
+         `bench/src/live/voice.rs`; every saying in `voice.csv`, the chart in `voice.svg`). \
          The sentence is espeak-ng's; latency and loss are the speaker's seeded link \
          conditioner (one way). Mouth to ear on the room clock; PESQ wide-band \
          (`scripts/pesq`); the skew is the lag of the voice behind the speaker's head as the \
