@@ -95,7 +95,7 @@ fn pesq(dir: &Path, said: &[i16], played: &[i16], tag: &str) -> f64 {
         .expect("scripts/pesq");
     assert!(
         out.status.success(),
-        "scripts/pesq: {}",
+        "scripts/pesq (its virtualenv comes from PyPI: run `scripts/pesq --install` outside a network namespace first): {}",
         String::from_utf8_lossy(&out.stderr)
     );
     String::from_utf8_lossy(&out.stdout).trim().parse().unwrap()
