@@ -282,7 +282,10 @@ impl Default for VoiceLimits {
     fn default() -> Self {
         VoiceLimits {
             frames_per_s: 60.0,
-            burst: 15.0,
+            // a second of speech at once: a speaker whose process stalled catches up its
+            // capture clock (up to 10 frames), and a link that stalled delivers a burst; both
+            // are speech, not a flood (15 dropped such bursts under load)
+            burst: 50.0,
             reports_per_s: 4.0,
         }
     }
@@ -660,8 +663,8 @@ mod tests {
         // 1000 frames at once: the burst, then nothing
         let at = Instant::from_micros(20_000_000);
         let flood = (0..1000).filter(|_| r.admit(at, PeerId(3))).count();
-        assert_eq!(flood, 15);
-        assert_eq!(r.drops().flood, 985);
+        assert_eq!(flood, 50);
+        assert_eq!(r.drops().flood, 950);
         let _ = t0;
     }
 }
