@@ -249,6 +249,8 @@ fn desktop_input(
         grip,
         trigger,
         tool,
+        // V: push-to-talk (used only with --push-to-talk)
+        talk: keys.pressed(KeyCode::KeyV),
     });
 }
 

@@ -219,6 +219,10 @@ impl Driver {
                     relayed,
                     drops,
                     heard,
+                    mic,
+                    speaker,
+                    echo_ref_ms,
+                    echo_found,
                 } => {
                     let mut line = format!(
                         "voice_stats sent_bytes={sent_bytes} frames={} silent={} bitrate={bitrate} relayed={relayed} dropped={} malformed={} not_member={} wrong_speaker={} not_host={} flood={}",
@@ -234,7 +238,38 @@ impl Driver {
                             s.delay_ms.unwrap_or(f64::NAN), s.target_ms
                         );
                     }
+                    if let Some(ms) = echo_ref_ms {
+                        let _ = write!(line, " echo_ref_ms={ms:.0}");
+                    }
+                    if let Some((ms, r)) = echo_found {
+                        let _ = write!(line, " echo_found_ms={ms:.0} echo_r={r:.2}");
+                    }
+                    for (side, d) in [("mic", mic), ("speaker", speaker)] {
+                        if let Some(d) = d {
+                            let _ = write!(
+                                line,
+                                " {side}=samples:{},underruns:{},overruns:{},glitches:{}",
+                                d.samples, d.underruns, d.overruns, d.glitches
+                            );
+                        }
+                    }
                     line
+                }
+                softsync_bevy::voice::VoiceEvent::Devices {
+                    input,
+                    output,
+                    processing,
+                } => {
+                    let name =
+                        |d: Option<String>| d.map_or_else(|| "-".to_owned(), |n| format!("{n:?}"));
+                    format!(
+                        "voice_devices input={} output={} echo_cancel={} noise_suppress={} gain_control={}",
+                        name(input),
+                        name(output),
+                        processing.echo_cancel,
+                        processing.noise_suppress,
+                        processing.gain_control
+                    )
                 }
                 softsync_bevy::voice::VoiceEvent::Warning(w) => {
                     eprintln!("{w}");
@@ -256,6 +291,9 @@ impl Driver {
         }
         let now = room.now();
         let me = room.peer.me().0;
+        if let (Some(d), Some(v)) = (&self.device, room.voice()) {
+            v.set_talk_held(d.talk);
+        }
         match (&mut self.bot, &self.device) {
             (Some(bot), device) => {
                 bot.step(now, &mut room.peer, device.as_ref());

@@ -112,6 +112,21 @@ fn run(args: &[String]) -> Result<ExitCode, Failure> {
         Command::Peer(p) => peer(*p),
         Command::Replay(r) => replay::replay(r),
         Command::Store(a) => replay::store(a),
+        Command::AudioDevices => {
+            let (inputs, outputs) = softsync_voice::device::list();
+            println!("inputs:");
+            for d in &inputs {
+                println!("  {d}");
+            }
+            println!("outputs:");
+            for d in &outputs {
+                println!("  {d}");
+            }
+            if inputs.is_empty() && outputs.is_empty() {
+                println!("(none: voice can still hear the room through --voice-out files)");
+            }
+            Ok(ExitCode::SUCCESS)
+        }
         Command::Token {
             room,
             room_key_file,
@@ -263,6 +278,7 @@ fn view_config(a: &PeerArgs, desktop: bool) -> view::ViewConfig {
         hide_avatars: a.view.hide_avatars,
         hud: !a.view.no_hud && desktop,
         hide_own_head: true,
+        world_labels: !desktop,
         screenshots: a
             .view
             .screenshot_dir

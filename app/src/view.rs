@@ -42,6 +42,9 @@ pub struct ViewConfig {
     pub hud: bool,
     /// Hide our own head (the camera is in it on the desktop and in VR).
     pub hide_own_head: bool,
+    /// Names in the world (a headset: OpenXR draws no screen-space UI) rather than on the
+    /// screen (the desktop).
+    pub world_labels: bool,
     /// Screenshots: folder, period, how many at most.
     pub screenshots: Option<ScreenshotPlan>,
 }
@@ -77,7 +80,8 @@ impl Plugin for ViewPlugin {
                 Update,
                 (
                     sync_objects,
-                    crate::labels::update_labels,
+                    crate::labels::update_labels.run_if(|c: Res<ViewConfig>| !c.world_labels),
+                    crate::labels::update_world_labels.run_if(|c: Res<ViewConfig>| c.world_labels),
                     draw_overlay,
                     update_hud,
                     take_screenshots,

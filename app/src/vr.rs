@@ -164,6 +164,8 @@ struct Actions {
     trigger: [openxr::Action<f32>; 2],
     /// A press switches the hand's tool between the scalpel and the cutter.
     tool: [openxr::Action<bool>; 2],
+    /// Held: push-to-talk (the left hand's second face button, see [`TALK`]).
+    talk: openxr::Action<bool>,
 }
 
 /// The grip space of a hand (0 left, 1 right).
@@ -208,6 +210,7 @@ fn create_actions(instance: Res<OxrInstance>, mut commands: Commands) {
                 set.create_action::<bool>("left_tool", "Left tool (scalpel or cutter)", &[])?,
                 set.create_action::<bool>("right_tool", "Right tool (scalpel or cutter)", &[])?,
             ],
+            talk: set.create_action::<bool>("talk", "Push to talk (hold)", &[])?,
             set,
         })
     })();
@@ -258,11 +261,39 @@ const PROFILES: [Profile; 5] = [
     ),
 ];
 
+/// Push-to-talk's binding per interaction profile (the left hand), where the profile has a
+/// button left over (the simple controller has two, both taken).
+const TALK: [(&str, &str); 4] = [
+    (
+        "/interaction_profiles/oculus/touch_controller",
+        "input/y/click",
+    ),
+    (
+        "/interaction_profiles/valve/index_controller",
+        "input/b/click",
+    ),
+    (
+        "/interaction_profiles/htc/vive_controller",
+        "input/menu/click",
+    ),
+    (
+        "/interaction_profiles/microsoft/motion_controller",
+        "input/menu/click",
+    ),
+];
+
 fn suggest_bindings(
     actions: Option<Res<Actions>>,
     mut out: MessageWriter<OxrSuggestActionBinding>,
 ) {
     let Some(a) = actions else { return };
+    for (profile, button) in TALK {
+        out.write(OxrSuggestActionBinding {
+            action: a.talk.as_raw(),
+            interaction_profile: profile.into(),
+            bindings: vec![format!("/user/hand/left/{button}").into()],
+        });
+    }
     for (profile, squeeze, trigger, tool) in PROFILES {
         for (h, side) in [(0, "left"), (1, "right")] {
             let hand = |p: &str| format!("/user/hand/{side}/{p}");
@@ -369,6 +400,10 @@ fn read_device(
         }
     }
     if let Some(a) = actions {
+        frame.talk = a
+            .talk
+            .state(&session, openxr::Path::NULL)
+            .is_ok_and(|s| s.is_active && s.current_state);
         for h in 0..2 {
             frame.grip[h] = float_state(&session, &a.squeeze[h]);
             frame.trigger[h] = float_state(&session, &a.trigger[h]);

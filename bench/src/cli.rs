@@ -99,6 +99,14 @@ pub enum Sub {
         #[arg(long)]
         quick: bool,
     },
+    /// The microphone's processing (libspeexdsp) on speech: echo cancellation (an 80 ms +
+    /// 60 ms echo path), double talk, noise suppression, gain control and the cost per frame
+    /// (`RESULT voice.processing`, over five runs, medians). Needs espeak-ng; no network.
+    VoiceProcessing {
+        /// Output directory (writes processing.txt and processing.csv).
+        #[arg(long, default_value = "docs/results/voice")]
+        out: PathBuf,
+    },
     /// The room store, SQLite and PostgreSQL side by side: reopening the thesis room with 100
     /// tear segments (`RESULT store.reopen`), and the frame-budget room written as it runs
     /// against the same room unkept, interleaved (`RESULT store.write`). PostgreSQL is a

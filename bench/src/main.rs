@@ -127,6 +127,7 @@ fn run(bench: Sub) -> Result<bool, String> {
         } => run_store(&out, postgres, rounds.into(), seconds, runs.into(), assets)?,
         Sub::RoomClock { out, seconds } => live::room_clock(&out, seconds)?,
         Sub::Voice { out, quick } => live::voice(&out, quick)?,
+        Sub::VoiceProcessing { out } => live::voice_processing(&out)?,
         Sub::Abuse {
             out,
             seconds,

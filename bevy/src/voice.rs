@@ -1,14 +1,19 @@
 //! [`RoomVoice`]: a room's voice, driven by the room on its clock — capture every 20 ms from
-//! the source (a WAV file for bots: `--voice-in`; no sound card is needed or opened), frames
+//! the microphone (a sound device through `cpal`, echo-cancelled, denoised and levelled by
+//! [`softsync_voice::processing`]) and/or a WAV file (a bot's voice: `--voice-in`), frames
 //! to the room along the route ([`softsync_net::voice`]), frames heard into the jitter
-//! buffers ([`softsync_voice::VoiceChat`]), a block played every 20 ms to the sink (WAV files:
-//! `--voice-out`), reports to speakers once a second, and the room's message API told when
+//! buffers ([`softsync_voice::VoiceChat`]), a block played every 20 ms to the loudspeaker
+//! and/or the sink (WAV files: `--voice-out`), reports to speakers once a second, and the room's message API told when
 //! this peer mutes or starts and stops speaking ([`VoiceState`]).
 //!
 //! Timing: the capture and playback clocks tick every 20 ms of this machine's clock, caught
 //! up when a frame or pump ran late (a late block is still played at its own room time, so
 //! recordings stay on one timeline). A frame is stamped with the room time of its first
 //! sample, so every listener plays it at a known delay from when it was said.
+//!
+//! Devices: a peer opens only what its options name (desktop and VR peers the system's
+//! default; bots none). One that is absent or fails, at the start or later, gives a
+//! [`VoiceEvent::Warning`] and the peer goes on silent on that side.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -20,7 +25,9 @@ use softsync_net::{Delivery, Instant, MessageTarget, PeerId, Transmit, Transport
 use softsync_peer::messages::VoiceState;
 use softsync_peer::scene::Kind;
 use softsync_peer::Peer;
+use softsync_voice::device::{AudioIn, AudioOut, DeviceChoice, DeviceStats};
 use softsync_voice::files::{WavSink, WavSource};
+use softsync_voice::processing::{MicProcessor, ProcessingConfig};
 use softsync_voice::{SpeakerStatus, VoiceChat, VoiceConfig, FRAME_SAMPLES};
 
 const FRAME: Duration = Duration::from_millis(20);
@@ -61,6 +68,15 @@ pub struct VoiceOptions {
     /// Move this peer's head with its voice (a bot's "mouth": the head rises with the level),
     /// which is how the benchmark sees lip-sync from outside.
     pub nod: bool,
+    /// The microphone to open, if any.
+    pub input_device: Option<DeviceChoice>,
+    /// The loudspeaker or headset to open, if any.
+    pub output_device: Option<DeviceChoice>,
+    /// The microphone's processing (echo cancellation only runs when something is played on
+    /// a device too).
+    pub processing: ProcessingConfig,
+    /// Send only while the talk key or button is held ([`RoomVoice::set_talk_held`]).
+    pub push_to_talk: bool,
 }
 
 impl Default for VoiceOptions {
@@ -74,6 +90,10 @@ impl Default for VoiceOptions {
             muted: false,
             config: VoiceConfig::default(),
             nod: false,
+            input_device: None,
+            output_device: None,
+            processing: ProcessingConfig::default(),
+            push_to_talk: false,
         }
     }
 }
@@ -107,8 +127,27 @@ pub enum VoiceEvent {
         drops: VoiceDrops,
         /// Each speaker as heard here.
         heard: Vec<(PeerId, SpeakerStatus)>,
+        /// The microphone's ring, if one is open.
+        mic: Option<DeviceStats>,
+        /// The loudspeaker's ring, if one is open.
+        speaker: Option<DeviceStats>,
+        /// How far back the echo canceller's reference is taken, ms (the devices' round
+        /// trip), when it runs.
+        echo_ref_ms: Option<f64>,
+        /// Where the echo was found by correlation (ms back, Pearson's r), once it was.
+        echo_found: Option<(f64, f64)>,
     },
-    /// Something went wrong that does not stop the room (a file that cannot be written).
+    /// The sound devices opened: their names.
+    Devices {
+        /// The microphone.
+        input: Option<String>,
+        /// The loudspeaker or headset.
+        output: Option<String>,
+        /// The microphone's processing.
+        processing: ProcessingConfig,
+    },
+    /// Something went wrong that does not stop the room (a file that cannot be written, a
+    /// sound device absent or lost).
     Warning(String),
 }
 
@@ -119,6 +158,11 @@ pub struct RoomVoice {
     router: VoiceRouter,
     source: Option<WavSource>,
     sink: Option<WavSink>,
+    mic: Option<AudioIn>,
+    speaker: Option<AudioOut>,
+    processor: Option<MicProcessor>,
+    /// The loudspeaker's latency when the last block was queued.
+    out_latency: Duration,
     capture_next: Option<Instant>,
     play_next: Option<Instant>,
     report_next: Option<Instant>,
@@ -168,12 +212,55 @@ impl RoomVoice {
         };
         let mut chat = chat;
         chat.set_muted(opts.muted);
+        if opts.push_to_talk {
+            chat.set_push_to_talk(Some(false));
+        }
+        let mut events = Vec::new();
+        let mut warn = |side: &str, e: &dyn std::fmt::Display, then: &str| {
+            events.push(VoiceEvent::Warning(format!(
+                "voice: no {side} ({e}): {then}"
+            )));
+        };
+        let mic = opts.input_device.as_ref().and_then(|c| {
+            AudioIn::open(c)
+                .map_err(|e| warn("microphone", &e, "this peer is silent"))
+                .ok()
+        });
+        let speaker = opts.output_device.as_ref().and_then(|c| {
+            AudioOut::open(c)
+                .map_err(|e| warn("loudspeaker", &e, "this peer plays nothing aloud"))
+                .ok()
+        });
+        // echo cancellation needs both ends on devices (a file's voice has no echo)
+        let mut processing = opts.processing;
+        processing.echo_cancel &= speaker.is_some();
+        let processor = match mic.as_ref().map(|_| MicProcessor::new(processing)) {
+            Some(Ok(p)) => p,
+            Some(Err(e)) => {
+                warn("voice processing", &e, "the microphone is sent as it is");
+                None
+            }
+            None => None,
+        };
+        if mic.is_some() || speaker.is_some() {
+            events.push(VoiceEvent::Devices {
+                input: mic.as_ref().map(|m| m.name().to_owned()),
+                output: speaker.as_ref().map(|s| s.name().to_owned()),
+                processing: processor
+                    .as_ref()
+                    .map_or(ProcessingConfig::OFF, MicProcessor::config),
+            });
+        }
         Ok(RoomVoice {
             opts,
             chat,
             router: VoiceRouter::default(),
             source,
             sink,
+            mic,
+            speaker,
+            processor,
+            out_latency: Duration::ZERO,
             capture_next: None,
             play_next: None,
             report_next: None,
@@ -181,7 +268,7 @@ impl RoomVoice {
             scheduled: false,
             speaking: BTreeMap::new(),
             announced: None,
-            events: Vec::new(),
+            events,
             out: Vec::new(),
             last_block_ms: None,
             nod_base: None,
@@ -193,6 +280,32 @@ impl RoomVoice {
     /// The voice engine (mute, push-to-talk, volumes, who is speaking).
     pub fn chat(&mut self) -> &mut VoiceChat {
         &mut self.chat
+    }
+
+    /// The talk key or button, held or not (the front end calls this every frame): with
+    /// push-to-talk on, frames are sent only while it is held; otherwise it does nothing.
+    pub fn set_talk_held(&mut self, held: bool) {
+        if self.opts.push_to_talk {
+            self.chat.set_push_to_talk(Some(held));
+        }
+    }
+
+    /// Whether this peer talks only while a key is held.
+    pub fn push_to_talk(&self) -> bool {
+        self.opts.push_to_talk
+    }
+
+    /// Whether our frames go out now (not muted, and the talk key held under push-to-talk).
+    pub fn transmitting(&self) -> bool {
+        self.chat.transmitting()
+    }
+
+    /// The microphone's and the loudspeaker's names, when open.
+    pub fn devices(&self) -> (Option<&str>, Option<&str>) {
+        (
+            self.mic.as_ref().map(AudioIn::name),
+            self.speaker.as_ref().map(AudioOut::name),
+        )
     }
 
     /// What we hear of `peer`.
@@ -280,8 +393,9 @@ impl RoomVoice {
             self.scheduled = true;
             self.say_next = Some(now + Duration::from_secs_f64(self.opts.say_after.max(0.0)));
         }
-        // nothing to capture without a source (no sound card is opened here)
-        if self.source.is_some() {
+        self.device_errors();
+        // nothing to capture without a source or a microphone
+        if self.source.is_some() || self.mic.is_some() {
             self.capture(now, capture_next, peer, transport);
         }
         self.play(now, play_next, peer);
@@ -314,6 +428,18 @@ impl RoomVoice {
                     relayed: self.router.relayed(),
                     drops: self.router.drops(),
                     heard,
+                    mic: self.mic.as_ref().map(AudioIn::stats),
+                    speaker: self.speaker.as_ref().map(AudioOut::stats),
+                    echo_ref_ms: self
+                        .processor
+                        .as_ref()
+                        .filter(|p| p.config().echo_cancel)
+                        .map(|p| p.reference_delay_blocks() as f64 * 20.0),
+                    echo_found: self
+                        .processor
+                        .as_ref()
+                        .and_then(MicProcessor::echo_estimate)
+                        .map(|(b, r)| (b as f64 * 20.0, r)),
                 });
             }
         }
@@ -350,10 +476,28 @@ impl RoomVoice {
                         .then(|| say + Duration::from_secs_f64(self.opts.say_every));
                 }
             }
-            let (pcm, first) = match &mut self.source {
-                Some(s) => s.next_frame(),
+            let (mut pcm, first) = match &mut self.mic {
+                Some(m) => {
+                    let mut f = m.next_frame();
+                    if let Some(p) = &mut self.processor {
+                        // a block queued now is heard after `out_latency`; this frame ended
+                        // `latency` ago and began a frame before that
+                        let trip = self.out_latency + m.latency() + FRAME;
+                        p.set_device_delay(trip.as_secs_f64() * 1000.0);
+                        p.process(&mut f);
+                    }
+                    (f, false)
+                }
                 None => ([0i16; FRAME_SAMPLES], false),
             };
+            // a file's voice is mixed over the microphone
+            let (file, first) = match &mut self.source {
+                Some(s) => s.next_frame(),
+                None => ([0i16; FRAME_SAMPLES], first),
+            };
+            for (p, f) in pcm.iter_mut().zip(file) {
+                *p = p.saturating_add(f);
+            }
             // the frame that completes at `due` began 20 ms before
             let begun = Instant::from_micros(due.as_micros().saturating_sub(20_000));
             if let Some(t) = room_ms(peer, now, begun) {
@@ -375,6 +519,23 @@ impl RoomVoice {
         self.send_out(now, peer, transport);
         if self.opts.nod {
             self.nod(peer);
+        }
+    }
+
+    /// A device that failed while running is dropped, with a warning.
+    fn device_errors(&mut self) {
+        if let Some(e) = self.mic.as_mut().and_then(AudioIn::error) {
+            self.events.push(VoiceEvent::Warning(format!(
+                "voice: the microphone failed ({e}): this peer is silent"
+            )));
+            self.mic = None;
+            self.processor = None;
+        }
+        if let Some(e) = self.speaker.as_mut().and_then(AudioOut::error) {
+            self.events.push(VoiceEvent::Warning(format!(
+                "voice: the loudspeaker failed ({e}): nothing is played aloud"
+            )));
+            self.speaker = None;
         }
     }
 
@@ -432,6 +593,13 @@ impl RoomVoice {
             };
             let block = self.chat.play(t, listener, &heads);
             self.last_block_ms = Some(t);
+            if let Some(out) = &mut self.speaker {
+                self.out_latency = out.latency();
+                out.play(&block.stereo);
+                if let Some(p) = &mut self.processor {
+                    p.played(&block.stereo);
+                }
+            }
             if let Some(sink) = &mut self.sink {
                 let shown: Vec<(PeerId, Vec3)> = heads.iter().map(|(p, v)| (*p, *v)).collect();
                 let written = sink
@@ -539,5 +707,39 @@ impl RoomVoice {
                     .push(VoiceEvent::Warning(format!("voice out: {e}")));
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn an_absent_device_is_a_warning_and_a_silent_peer_not_an_error() {
+        let mut v = RoomVoice::new(VoiceOptions {
+            input_device: Some(DeviceChoice::Named("no-such-microphone-softsync".into())),
+            output_device: Some(DeviceChoice::Named("no-such-speaker-softsync".into())),
+            push_to_talk: true,
+            ..VoiceOptions::default()
+        })
+        .unwrap();
+        let warnings: Vec<String> = v
+            .drain_events()
+            .filter_map(|e| match e {
+                VoiceEvent::Warning(w) => Some(w),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(warnings.len(), 2, "{warnings:?}");
+        assert!(warnings[0].contains("no microphone") && warnings[0].contains("silent"));
+        assert!(warnings[1].contains("no loudspeaker"));
+        assert_eq!(v.devices(), (None, None));
+        // push-to-talk: nothing goes out until the key is held
+        assert!(!v.transmitting());
+        v.set_talk_held(true);
+        assert!(v.transmitting());
+        v.set_talk_held(false);
+        assert!(!v.transmitting());
     }
 }

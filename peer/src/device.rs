@@ -21,6 +21,8 @@ pub struct DeviceFrame {
     pub trigger: [f32; 2],
     /// What each hand's trigger does (the scalpel tears, the cutter cuts).
     pub tool: [HandTool; 2],
+    /// The talk key or button is held (voice's push-to-talk).
+    pub talk: bool,
 }
 
 impl DeviceFrame {

@@ -112,8 +112,10 @@ impl PlayerInput {
                 f32::from(self.trigger[0]) / 255.0,
                 f32::from(self.trigger[1]) / 255.0,
             ],
-            // rollback rooms do not cut: the input carries no tool
+            // rollback rooms do not cut: the input carries no tool (nor the talk key: voice
+            // is not part of the game's input)
             tool: Default::default(),
+            talk: false,
         }
     }
 }
@@ -145,6 +147,7 @@ mod tests {
             grip: [f32::NAN, 2.0],
             trigger: [-1.0, f32::INFINITY],
             tool: Default::default(),
+            talk: false,
         };
         let i = PlayerInput::from_device(&d);
         assert!(!i.parts[0].tracked() && !i.parts[1].tracked() && !i.parts[2].tracked());

@@ -108,6 +108,7 @@ impl SqueezeThrow {
             grip: [0.0, grip],
             trigger: [0.0, 0.0],
             tool: Default::default(),
+            talk: false,
         }
     }
 }

@@ -54,6 +54,8 @@ fn vr_room(test: &str, room: &str) -> (PathBuf, PathBuf, Proc, String) {
     let dir = scratch(test);
     let dump = dir.join("host.jsonl");
     let args = [
+        "--name",
+        "Dr Lee",
         "--duration",
         "150",
         "--dump",
@@ -127,6 +129,15 @@ fn vr_peer_under_a_simulated_headset_shows_its_avatar_and_grabs_with_a_squeeze()
     .parse()
     .unwrap();
     println!("{joined} (VR peer {me})");
+    // the host's name floats over its head in the headset (a card in the world)
+    let label = vr.wait_line("view label peer=", Duration::from_secs(30));
+    assert_eq!(
+        field(&label, "peer"),
+        field(&joined, "host"),
+        "{label}\n{}",
+        vr.logs()
+    );
+    assert!(label.contains("world=true"), "{label}");
     let tracked = vr.wait_line("xr tracked ", Duration::from_secs(60));
     println!("{tracked}");
     let (head, left, right) = (

@@ -7,6 +7,8 @@
 //! - [`spatial`]: each speaker at their avatar's head (distance, panning, interaural delay).
 //! - [`level`]: levels and "is speaking".
 //! - [`chat`]: [`VoiceChat`], one peer's voice, sans-IO.
+//! - [`device`]: the system's microphone and loudspeaker (cpal over ALSA), in 20 ms frames.
+//! - [`processing`]: echo cancellation, noise suppression and gain control (libspeexdsp).
 //! - [`files`]: WAV sources and sinks for bots (`--voice-in`, `--voice-out`).
 //! - [`analysis`]: the delay and similarity of a recording against what was said.
 //!
@@ -16,9 +18,11 @@
 pub mod analysis;
 pub mod chat;
 pub mod codec;
+pub mod device;
 pub mod files;
 pub mod jitter;
 pub mod level;
+pub mod processing;
 pub mod spatial;
 
 pub use chat::{Block, SpeakerStatus, VoiceChat, VoiceConfig};

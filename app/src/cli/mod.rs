@@ -95,6 +95,8 @@ enum Sub {
     /// Play back a session a host recorded (`host --store FILE --record`): its events at
     /// their times, its objects' states (--dump), a seek (--from), CSV (--export).
     Replay(ReplayArgs),
+    /// List the sound devices voice can use (`--voice-device NAME`), inputs and outputs.
+    AudioDevices,
     /// A store's recorded sessions: list them, delete one, prune old ones.
     Store {
         #[command(subcommand)]
@@ -314,6 +316,8 @@ pub enum Command {
     Replay(ReplayArgs),
     /// Manage a store's recordings.
     Store(StoreAction),
+    /// List the sound devices.
+    AudioDevices,
     /// Print this (help, or the version).
     Help(String),
 }
@@ -514,6 +518,7 @@ pub fn parse(args: &[String]) -> Result<Command, UsageError> {
         },
         Sub::Replay(r) => Command::Replay(r),
         Sub::Store { action } => Command::Store(action),
+        Sub::AudioDevices => Command::AudioDevices,
         Sub::Host { bind, signal, peer } => {
             let bind = bind.unwrap_or(SocketAddr::from(([127, 0, 0, 1], 3536)));
             Command::Peer(Box::new(peer_args(true, bind, signal, peer)?))
@@ -549,6 +554,9 @@ fn peer_args(
     if front == FrontEnd::Headless {
         if let Some(f) = p.view.first_given() {
             return err(format!("--{f} needs --desktop or --vr"));
+        }
+        if p.voice.push_to_talk {
+            return err("--push-to-talk needs --desktop or --vr (a key or a button to hold)");
         }
     }
     let v = p.view;
@@ -591,7 +599,7 @@ fn peer_args(
         max_members: usize::from(p.max_members),
         no_net_thread: p.no_net_thread,
         uplink_bytes_per_s: p.uplink_kbps.map(|k| (k * 125.0).round().max(1.0) as u32),
-        voice: p.voice.options(),
+        voice: p.voice.options(front != FrontEnd::Headless),
         presence: p.voice.presence(),
         state_route: match p.state_route {
             Route::Relay => softsync_net::StateRoute::Relay,

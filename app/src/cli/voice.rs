@@ -5,6 +5,8 @@ use std::path::PathBuf;
 use clap::{Args, ValueEnum};
 use softsync_bevy::voice::VoiceOptions;
 use softsync_net::voice::RoutePolicy;
+use softsync_voice::device::DeviceChoice;
+use softsync_voice::processing::ProcessingConfig;
 use softsync_voice::VoiceConfig;
 
 /// How voice frames travel.
@@ -57,6 +59,32 @@ pub struct VoiceOpts {
     /// Our head rises with our voice (a bot's mouth; the voice bench sees lip-sync by it).
     #[arg(long, help_heading = "Voice")]
     pub voice_nod: bool,
+    /// The sound device for both sides: `default` (the system's), a name or part of one as
+    /// `softsync audio-devices` lists it, or `none`. Desktop and VR peers use `default`
+    /// unless told; headless peers open none. A device that is absent or fails gives a
+    /// warning and a peer silent on that side, never an error.
+    #[arg(long, value_name = "DEVICE", help_heading = "Voice")]
+    pub voice_device: Option<String>,
+    /// The microphone alone (overrides --voice-device).
+    #[arg(long, value_name = "DEVICE", help_heading = "Voice")]
+    pub voice_input_device: Option<String>,
+    /// The loudspeaker or headset alone (overrides --voice-device).
+    #[arg(long, value_name = "DEVICE", help_heading = "Voice")]
+    pub voice_output_device: Option<String>,
+    /// No acoustic echo cancellation on the microphone (on by default when a device both
+    /// captures and plays; a headset needs none).
+    #[arg(long, help_heading = "Voice")]
+    pub no_echo_cancel: bool,
+    /// No noise suppression on the microphone.
+    #[arg(long, help_heading = "Voice")]
+    pub no_noise_suppress: bool,
+    /// No automatic gain control on the microphone.
+    #[arg(long, help_heading = "Voice")]
+    pub no_gain_control: bool,
+    /// Send voice only while the talk key is held: V on a desktop peer; in VR the left
+    /// controller's Y (Touch), B (Index) or menu (Vive, Windows MR) button.
+    #[arg(long, help_heading = "Voice")]
+    pub push_to_talk: bool,
     /// Our name, shown above our head on the others' desktop peers (at most 32 characters).
     #[arg(long, value_name = "NAME", value_parser = name, help_heading = "Voice")]
     pub name: Option<String>,
@@ -106,12 +134,53 @@ impl VoiceOpts {
         })
     }
 
-    /// The room's voice options, if voice is on.
-    pub fn options(&self) -> Option<VoiceOptions> {
-        if !(self.voice || self.voice_in.is_some() || self.voice_out.is_some()) {
+    /// The devices asked for, `(input, output)`, on a peer that has a sound card to offer
+    /// (`device_peer`: desktop and VR) or not.
+    fn devices(&self, device_peer: bool) -> (Option<DeviceChoice>, Option<DeviceChoice>) {
+        let pick = |side: &Option<String>| -> Option<DeviceChoice> {
+            match side.as_deref().or(self.voice_device.as_deref()) {
+                Some("none") => None,
+                Some(d) => Some(DeviceChoice::parse(d)),
+                None => device_peer.then_some(DeviceChoice::Default),
+            }
+        };
+        (
+            pick(&self.voice_input_device),
+            pick(&self.voice_output_device),
+        )
+    }
+
+    /// Whether the flags ask for voice at all.
+    fn wanted(&self) -> bool {
+        self.voice
+            || self.voice_in.is_some()
+            || self.voice_out.is_some()
+            || self.push_to_talk
+            || [
+                &self.voice_device,
+                &self.voice_input_device,
+                &self.voice_output_device,
+            ]
+            .iter()
+            .any(|d| d.as_deref().is_some_and(|d| d != "none"))
+    }
+
+    /// The room's voice options, if voice is on; `device_peer`: a desktop or VR peer.
+    pub fn options(&self, device_peer: bool) -> Option<VoiceOptions> {
+        if !self.wanted() {
             return None;
         }
+        let (input_device, output_device) = self.devices(device_peer);
         Some(VoiceOptions {
+            input_device,
+            output_device,
+            processing: ProcessingConfig {
+                echo_cancel: !self.no_echo_cancel,
+                noise_suppress: !self.no_noise_suppress,
+                gain_control: !self.no_gain_control,
+                ..ProcessingConfig::default()
+            },
+            push_to_talk: self.push_to_talk,
             input: self.voice_in.clone(),
             say_after: self.voice_after,
             say_every: self.voice_every,

@@ -41,7 +41,7 @@ pub use comanip::comanip;
 pub use lb::{signal_lb, LbPlan};
 pub use load::room_load;
 pub use soak::{soak, SoakPlan};
-pub use voice::voice;
+pub use voice::{voice, voice_processing};
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;

@@ -437,6 +437,76 @@ fn chart(out: &Path, lives: &[Live]) -> Result<(), String> {
     write_svg(out.join("voice.svg"), (1000, 380), &charts).map_err(|e| e.to_string())
 }
 
+/// The microphone's chain on speech, five times (the cost varies with the machine; the
+/// signal figures do not): `RESULT voice.processing` with medians, `processing.txt` and
+/// `processing.csv` under `out`.
+pub fn voice_processing(out: &Path) -> Result<(), String> {
+    use softsync_voice::processing::measure;
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let dir = std::env::temp_dir().join(format!("softsync-vproc-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+    let say = |text: &str, wpm: u32, name: &str| -> Result<Vec<f64>, String> {
+        let s =
+            softsync_voice::files::speak(text, wpm, &dir.join(name)).map_err(|e| e.to_string())?;
+        Ok(s.iter().map(|v| f64::from(*v) / 32768.0).collect())
+    };
+    let far = say(
+        "The instrument count is correct and the patient is stable.",
+        160,
+        "far.wav",
+    )?;
+    let near = say(
+        "Retract the left lobe a little further, please.",
+        150,
+        "near.wav",
+    )?;
+    let t0 = std::time::Instant::now();
+    let mut clock = || t0.elapsed().as_secs_f64() * 1e6;
+    let mut csv = Csv::new(&[
+        "run",
+        "erle_db",
+        "erle_chain_db",
+        "double_talk_db",
+        "noise_db",
+        "speech_loss_db",
+        "agc_gain_db",
+        "cost_us",
+    ]);
+    let mut runs = Vec::new();
+    for run in 0..5 {
+        let m = measure(&far, &near, &mut clock);
+        csv.row([
+            run.to_string(),
+            format!("{:.2}", m.erle_db),
+            format!("{:.2}", m.erle_chain_db),
+            format!("{:.2}", m.double_talk_db),
+            format!("{:.2}", m.noise_db),
+            format!("{:.2}", m.speech_loss_db),
+            format!("{:.2}", m.agc_gain_db),
+            format!("{:.1}", m.cost_us),
+        ]);
+        runs.push(m);
+    }
+    let med = |f: &dyn Fn(&softsync_voice::processing::ProcessingMeasure) -> f64| {
+        let mut v: Vec<f64> = runs.iter().map(f).collect();
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let line = ResultLine::new("voice.processing")
+        .fixed("erle_db", med(&|m| m.erle_db), 1)
+        .fixed("erle_chain_db", med(&|m| m.erle_chain_db), 1)
+        .fixed("double_talk_db", med(&|m| m.double_talk_db), 1)
+        .fixed("noise_db", med(&|m| m.noise_db), 1)
+        .fixed("speech_loss_db", med(&|m| m.speech_loss_db), 1)
+        .fixed("agc_gain_db", med(&|m| m.agc_gain_db), 1)
+        .fixed("cost_us_per_frame", med(&|m| m.cost_us), 0);
+    println!("{line}");
+    std::fs::write(out.join("processing.csv"), csv.text()).map_err(|e| e.to_string())?;
+    std::fs::write(out.join("processing.txt"), format!("{line}\n")).map_err(|e| e.to_string())?;
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(())
+}
+
 /// Runs the rooms and writes `docs/results/voice/`.
 pub fn voice(out: &Path, quick: bool) -> Result<(), String> {
     std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
