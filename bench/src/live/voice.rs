@@ -596,7 +596,10 @@ pub fn voice(out: &Path, quick: bool) -> Result<(), String> {
          The sentence is espeak-ng's; latency and loss are the speaker's seeded link \
          conditioner (one way). Mouth to ear on the room clock; PESQ wide-band \
          (`scripts/pesq`); the skew is the lag of the voice behind the speaker's head as the \
-         listener shows it (positive: the voice lags).\n\n```\n{}\n```",
+         listener shows it (positive: the voice lags).\n\n```\n{}\n```\n\n\
+         The microphone's processing (echo cancellation, noise suppression, gain control) is \
+         measured offline by `softsync-bench voice-processing`: `processing.txt`, \
+         `processing.csv`.",
         if quick { " --quick" } else { "" },
         lines.join("\n")
     );

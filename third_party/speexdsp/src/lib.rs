@@ -49,7 +49,6 @@ extern "C" {
 const SPEEX_ECHO_SET_SAMPLING_RATE: c_int = 24;
 const SPEEX_PREPROCESS_SET_DENOISE: c_int = 0;
 const SPEEX_PREPROCESS_SET_AGC: c_int = 2;
-const SPEEX_PREPROCESS_SET_VAD: c_int = 4;
 const SPEEX_PREPROCESS_SET_DEREVERB: c_int = 8;
 const SPEEX_PREPROCESS_SET_NOISE_SUPPRESS: c_int = 18;
 const SPEEX_PREPROCESS_SET_ECHO_SUPPRESS: c_int = 20;
@@ -259,7 +258,8 @@ impl Preprocessor {
                 "AGC_MAX_GAIN",
             )?;
         }
-        me.set_int(SPEEX_PREPROCESS_SET_VAD, 0, "VAD")?;
+        // (voice activity detection stays at its default, off: setting it, even to off, makes
+        // libspeexdsp print a warning on stderr)
         me.set_int(SPEEX_PREPROCESS_SET_DEREVERB, 0, "DEREVERB")?;
         me.set_int(
             SPEEX_PREPROCESS_SET_ECHO_SUPPRESS,
