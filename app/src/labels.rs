@@ -36,7 +36,7 @@ pub fn update_labels(
     room: NonSend<Room>,
     ents: Res<NetEntities>,
     tfs: Query<&GlobalTransform>,
-    cams: Query<(&Camera, &GlobalTransform)>,
+    cams: Query<(&Camera, &GlobalTransform), With<Camera3d>>,
     mut labels: Query<(Entity, &Label, &mut Node, &mut Visibility, &mut Text)>,
 ) {
     let cam = cams.iter().find(|(c, _)| c.is_active);

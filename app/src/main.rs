@@ -278,7 +278,7 @@ fn view_config(a: &PeerArgs, desktop: bool) -> view::ViewConfig {
         hide_avatars: a.view.hide_avatars,
         hud: !a.view.no_hud && desktop,
         hide_own_head: true,
-        world_labels: !desktop,
+        world_labels: !desktop || a.view.world_labels,
         screenshots: a
             .view
             .screenshot_dir

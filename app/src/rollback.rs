@@ -185,6 +185,9 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
                 RollbackEvent::Desync { frame, peer } => {
                     println!("desync frame={frame} peer={}", peer.0)
                 }
+                RollbackEvent::Repaired { epoch, ms } => {
+                    println!("desync repaired epoch={epoch} ms={ms:.0}")
+                }
                 RollbackEvent::PlayerDisconnected(p) => println!("player {} disconnected", p.0),
                 RollbackEvent::Warning(w) => eprintln!("warning: {w}"),
                 RollbackEvent::Room(Event::Joined { host, .. }) => {
@@ -270,7 +273,7 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
     ms.sort_by(f32::total_cmp);
     let p95 = ms.get(ms.len() * 95 / 100).copied().unwrap_or(0.0);
     println!(
-        "rollback.summary frames={} resimulated={} rollbacks={} desyncs={} epochs={} epochs_refused={} switch_ms_max={:.0} frame_ms_p95={p95:.2} save_us={:.1} load_us={:.1} ggrs_bytes={}",
+        "rollback.summary frames={} resimulated={} rollbacks={} desyncs={} epochs={} epochs_refused={} switch_ms_max={:.0} frame_ms_p95={p95:.2} save_us={:.1} load_us={:.1} ggrs_bytes={} repairs={} repair_ms_max={:.0}",
         s.frames,
         s.resimulated,
         s.rollbacks,
@@ -280,7 +283,9 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
         s.switch_ms_max,
         s.save_ns as f64 / s.saves.max(1) as f64 / 1e3,
         s.load_ns as f64 / s.rollbacks.max(1) as f64 / 1e3,
-        s.ggrs_bytes
+        s.ggrs_bytes,
+        s.repairs,
+        s.repair_ms_max
     );
     match failure {
         Some(f) => Err(f),

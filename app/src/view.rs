@@ -670,7 +670,7 @@ fn take_screenshots(
     room: NonSend<Room>,
     mut state: ResMut<ScreenshotState>,
     cfg: Res<ViewConfig>,
-    cams: Query<(&Camera, &GlobalTransform)>,
+    cams: Query<(&Camera, &GlobalTransform), With<Camera3d>>,
     warm: Res<RenderWarm>,
     (ents, objs, meshes, tfs): Drawn,
 ) {

@@ -21,6 +21,16 @@
 //! stands still until every player of the new epoch has synchronised (ggrs's handshake: five
 //! round trips, resent every 200 ms). Measured as [`RollbackStats::switch_ms_max`].
 //!
+//! # Desync repair
+//! A desync in the middle of an epoch (ggrs's checksums differ) is repaired by the same means:
+//! the peer that sees it asks the host for a new epoch of the same players (the host notes
+//! its own), once per epoch, again every [`RESYNC_RETRY`] until one comes. The host announces
+//! its newest confirmed frame; whoever's own state of that frame differs from the host's
+//! digest fetches the host's snapshot, and everyone plays on from the same state. The host's
+//! world is the reference: if the host is the odd one out, everyone else is brought to it.
+//! Counted as [`RollbackStats::repairs`], timed as [`RollbackStats::repair_ms_max`] (detection
+//! to the new epoch's ggrs session running), reported as [`RollbackEvent::Repaired`].
+//!
 //! A peer that leaves or dies: ggrs marks it disconnected at a frame every survivor agrees on
 //! and feeds "no input" from there (its hands open); until then the others stall once they
 //! are [`RollbackConfig::max_prediction`] frames ahead of its last input, for at most the
@@ -152,6 +162,13 @@ pub enum RollbackEvent {
         /// The peer whose checksum differs.
         peer: PeerId,
     },
+    /// A desync seen here was repaired: a new epoch runs from the host's state.
+    Repaired {
+        /// The new epoch.
+        epoch: u32,
+        /// From the desync's detection to the new epoch's ggrs session running, ms.
+        ms: f32,
+    },
     /// ggrs disconnected a player (it left or died); its hands open from an agreed frame.
     PlayerDisconnected(PeerId),
     /// Something went wrong but the peer goes on.
@@ -199,8 +216,12 @@ pub struct RollbackStats {
     /// Epochs whose ggrs session failed here (ggrs panicked) and was dropped; the host then
     /// starts a new epoch of the same players.
     pub ggrs_failures: u64,
-    /// Host: epochs started because a member's ggrs session failed.
+    /// Host: epochs started because a member's ggrs session failed or a desync was seen.
     pub resyncs: u64,
+    /// Desyncs seen here and repaired (a new epoch from the host's state running).
+    pub repairs: u64,
+    /// The longest repair here, from detection to the new epoch's ggrs session running, ms.
+    pub repair_ms_max: f32,
 }
 
 /// A pending switch to an announced epoch.
@@ -239,6 +260,11 @@ pub struct RollbackPeer {
     /// Our ggrs session failed: the world frame it had confirmed (our saved states up to it
     /// are right), and when we last asked the host for a new epoch.
     failed: Option<(i32, Option<Instant>)>,
+    /// A desync seen in this epoch (its number), when we last asked the host for a new one,
+    /// and when it was seen.
+    desynced: Option<(u32, Option<Instant>, std::time::Instant)>,
+    /// The epoch that repairs it, switched to and not running yet, and when it was seen.
+    repairing: Option<(u32, std::time::Instant)>,
     /// Host: a member's (or our own) ggrs session of this epoch failed; a new one is due.
     resync: Option<u32>,
     /// A joiner's way in: the next connected peer is asked when a contact stays silent (it
@@ -282,6 +308,8 @@ impl RollbackPeer {
             server: None,
             announced: None,
             failed: None,
+            desynced: None,
+            repairing: None,
             resync: None,
             local_input: PlayerInput::default(),
             outbox: VecDeque::new(),
@@ -472,6 +500,7 @@ impl RollbackPeer {
         }
         self.drain_session(now);
         self.ask_resync(now);
+        self.ask_repair(now);
         self.host_duties(now);
         self.try_switch(now);
         self.run_ggrs();
@@ -571,8 +600,37 @@ impl RollbackPeer {
         }
     }
 
+    /// A desync seen in the running epoch: ask the host for a new epoch of the same players
+    /// (the host notes its own), again every [`RESYNC_RETRY`] until one comes.
+    fn ask_repair(&mut self, now: Instant) {
+        let Some((n, asked, _)) = self.desynced.as_mut() else {
+            return;
+        };
+        let n = *n;
+        if self.epoch.as_ref().map(|e| e.0.n) != Some(n)
+            || self.pending.is_some()
+            || asked.is_some_and(|t| now - t < RESYNC_RETRY)
+        {
+            return;
+        }
+        *asked = Some(now);
+        if self.session.is_host() {
+            self.resync = Some(n);
+        } else if let Err(e) = self.session.send(
+            now,
+            &self.types,
+            MessageTarget::Host,
+            Delivery::Reliable,
+            &Resync { epoch: n },
+        ) {
+            self.events.push_back(RollbackEvent::Warning(format!(
+                "cannot ask the host to repair a desync: {e:?}"
+            )));
+        }
+    }
+
     /// Host: a new epoch when the members are not the running epoch's players, or when a
-    /// player's ggrs session failed.
+    /// player's ggrs session failed or a desync was seen.
     fn host_duties(&mut self, now: Instant) {
         if !self.session.is_host() || self.pending.is_some() {
             return;
@@ -755,6 +813,13 @@ impl RollbackPeer {
                     players: epoch.players.clone(),
                 });
                 self.stats.epochs += 1;
+                // a desync seen in an earlier epoch: this one starts from the host's state (the
+                // repair is done when its ggrs session runs)
+                if let Some((old, _, seen)) = self.desynced.take() {
+                    if old < epoch.n {
+                        self.repairing = Some((epoch.n, seen));
+                    }
+                }
                 if self.switch_started.is_none() {
                     self.switch_started = Some(std::time::Instant::now());
                 }
@@ -780,6 +845,17 @@ impl RollbackPeer {
         ));
     }
 
+    /// Tests: a non-determinism on this peer alone, once (its next step pushes its first
+    /// object's first body aside), to show a desync is detected and repaired. Only with the
+    /// `testing` feature (tests turn it on; the shipped binary does not).
+    #[cfg(feature = "testing")]
+    #[doc(hidden)]
+    pub fn inject_desync(&mut self) {
+        if let Some(w) = self.world.as_mut() {
+            w.kick_once();
+        }
+    }
+
     /// Tests: what a ggrs panic does to this peer (its session dropped at its confirmed
     /// frame). ggrs 0.13's panic cannot be provoked on purpose.
     #[doc(hidden)]
@@ -801,6 +877,11 @@ impl RollbackPeer {
                 GgrsEvent::DesyncDetected { frame, addr, .. } => {
                     self.stats.desyncs += 1;
                     let start = self.epoch.as_ref().map_or(0, |e| e.1);
+                    if let Some(n) = self.epoch.as_ref().map(|e| e.0.n) {
+                        if self.desynced.is_none_or(|d| d.0 != n) {
+                            self.desynced = Some((n, None, std::time::Instant::now()));
+                        }
+                    }
                     self.events.push_back(RollbackEvent::Desync {
                         frame: start.saturating_add(frame),
                         peer: addr,
@@ -816,6 +897,12 @@ impl RollbackPeer {
         if let Some(s) = self.switch_started.take() {
             let ms = s.elapsed().as_secs_f32() * 1000.0;
             self.stats.switch_ms_max = self.stats.switch_ms_max.max(ms);
+        }
+        if let Some((epoch, seen)) = self.repairing.take() {
+            let ms = seen.elapsed().as_secs_f32() * 1000.0;
+            self.stats.repairs += 1;
+            self.stats.repair_ms_max = self.stats.repair_ms_max.max(ms);
+            self.events.push_back(RollbackEvent::Repaired { epoch, ms });
         }
         // Far ahead of the others: skip a tick now and then so they catch up.
         self.ticks += 1;

@@ -96,6 +96,9 @@ pub struct RollbackWorld {
     /// A deliberate non-determinism for the tests that show it is caught: when set, every
     /// step nudges the first object by a value that differs between a step and its re-run.
     debug_noise: Option<u32>,
+    /// Tests: push the first body aside on the next step, once.
+    #[cfg(feature = "testing")]
+    debug_kick: bool,
 }
 
 impl RollbackWorld {
@@ -148,6 +151,8 @@ impl RollbackWorld {
             players: Vec::new(),
             frame: 0,
             debug_noise: None,
+            #[cfg(feature = "testing")]
+            debug_kick: false,
         };
         w.set_players(players)?;
         Ok(w)
@@ -270,6 +275,15 @@ impl RollbackWorld {
                 .update(&mut self.world, &mut self.soft, &AllLocal, dt);
             while p.hands.poll_event().is_some() {}
         }
+        #[cfg(feature = "testing")]
+        if std::mem::take(&mut self.debug_kick) {
+            if let Some(h) = self.objects.first().and_then(|o| o.handles.first()) {
+                if let Some(b) = self.world.bodies.get_mut(*h) {
+                    let v = b.linvel() + Vec3::X * 0.05;
+                    b.set_linvel(v, true);
+                }
+            }
+        }
         if let Some(n) = self.debug_noise.as_mut() {
             *n = n.wrapping_add(1);
             if let Some(h) = self.objects.first().and_then(|o| o.handles.first()) {
@@ -324,6 +338,13 @@ impl RollbackWorld {
     /// The checksum of a saved state.
     pub fn checksum_of(state: &WorldState) -> u128 {
         checksum(state.frame, &state.bodies)
+    }
+
+    /// Tests: a non-determinism once (the next step pushes the first body aside).
+    #[cfg(feature = "testing")]
+    #[doc(hidden)]
+    pub fn kick_once(&mut self) {
+        self.debug_kick = true;
     }
 
     /// Turn the deliberate non-determinism on (tests only show it is caught).

@@ -329,3 +329,48 @@ fn hostile_rollback_datagrams_change_nothing_and_the_room_goes_on_agreeing() {
     assert_eq!(room.desyncs(), 0, "warnings: {:?}", room.warnings());
     assert_agree(&room);
 }
+
+/// Issue 38, desync repair: a one-off non-determinism on one peer mid-epoch is detected by
+/// the checksums, the host starts a new epoch from its state, the odd peer fetches it, and
+/// the worlds agree again — within 2 s of the detection, with no join.
+#[test]
+fn a_desync_in_the_middle_of_an_epoch_is_repaired_within_two_seconds() {
+    let mut room = Room::new(net(20, 0.02));
+    room.add(1);
+    room.add(2);
+    room.add(3);
+    room.run(Duration::from_secs(3));
+    assert_agree(&room);
+    let n0 = room.nodes[0].peer.epoch().map(|e| e.n).unwrap();
+    for (who, round) in [(2usize, 1u32), (0, 2)] {
+        // a member, then the host itself
+        room.nodes[who].peer.inject_desync();
+        room.run(Duration::from_secs(4));
+        let detected: u64 = room.nodes.iter().map(|n| n.peer.stats().desyncs).sum();
+        assert!(detected > 0, "round {round}: the desync was not detected");
+        for n in &room.nodes {
+            let e = n.peer.epoch().unwrap();
+            assert_eq!(
+                e.n,
+                n0 + round,
+                "peer {}: {:?}",
+                n.peer.me().0,
+                n.peer.stats()
+            );
+            assert_eq!(e.players.len(), 3);
+        }
+        // every peer that saw it reports the repair, within 2 s
+        let repaired: Vec<(u64, f32)> = room
+            .nodes
+            .iter()
+            .map(|n| (n.peer.stats().repairs, n.peer.stats().repair_ms_max))
+            .collect();
+        eprintln!("round {round}: repairs (count, longest ms) {repaired:?}");
+        assert!(
+            repaired.iter().any(|(c, _)| *c == u64::from(round)),
+            "{repaired:?}"
+        );
+        assert!(repaired.iter().all(|(_, ms)| *ms <= 2000.0), "{repaired:?}");
+        assert_agree(&room);
+    }
+}

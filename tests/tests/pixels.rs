@@ -967,3 +967,117 @@ fn the_speaking_indicator_floats_over_the_talking_bots_head() {
     );
     drop(speaker);
 }
+
+/// `--world-labels`: a named bot's name as a card in the world above its head (how a headset
+/// shows names; the VR smoke test sees the card made), drawn in its colour where the head is
+/// seen from the desktop camera.
+#[test]
+fn a_name_card_floats_in_the_world_over_a_named_bots_head() {
+    require_netns();
+    let dir = scratch("pixels-card");
+    let x = Xvfb::start(&dir);
+    let (_host, url) = host(&dir, "pixels-card");
+    let bot = Proc::spawn(
+        &dir,
+        "bot",
+        &[
+            "join",
+            "--room",
+            "pixels-card",
+            "--signal",
+            &url,
+            "--quiet",
+            "--duration",
+            "60",
+            "--bot",
+            "move head 0 0.9 0 in 1; wait 100",
+            "--name",
+            "Dr Lee",
+            "--colour",
+            "ff20ff",
+        ],
+    );
+    let who = bot.peer_id();
+    let shots = dir.join("shots");
+    let shots_s = shots.to_str().unwrap().to_owned();
+    let desktop = Proc::spawn_env(
+        &dir,
+        "desktop",
+        &[
+            "join",
+            "--room",
+            "pixels-card",
+            "--signal",
+            &url,
+            "--desktop",
+            "--window",
+            "320x240",
+            "--no-hud",
+            "--world-labels",
+            "--hide-avatars",
+            "--screenshot-dir",
+            &shots_s,
+            "--screenshot-every",
+            "0.5",
+            "--screenshots",
+            "200",
+            "--duration",
+            "60",
+            "--quiet",
+        ],
+        &x.env(&[]),
+    );
+    let start = Instant::now();
+    let mut labelled = 0;
+    let mut checked = std::collections::BTreeSet::new();
+    while labelled < 2 {
+        assert!(
+            start.elapsed() < Duration::from_secs(90),
+            "no frame showed the card over peer {who}'s head\n{}",
+            desktop.logs()
+        );
+        let out = desktop.stdout();
+        for l in out
+            .lines()
+            .filter(|l| l.starts_with("screenshot ") && l.contains(&format!("label={who}")))
+        {
+            if !checked.insert(l.to_owned()) {
+                continue;
+            }
+            let at: Vec<f64> = field(l, "label_at")
+                .split(',')
+                .map(|v| v.parse().unwrap())
+                .collect();
+            if !(0.0..320.0).contains(&at[0]) || !(0.0..240.0).contains(&at[1]) {
+                continue; // the card is off the screen
+            }
+            let img = Rgb::load(Path::new(field(l, "path")));
+            // (the avatars are hidden: the bot's magenta head and hands cannot count)
+            let magenta = img
+                .region(
+                    [at[0] - 40.0, at[1] - 14.0, at[0] + 40.0, at[1] + 14.0],
+                    0.0,
+                )
+                .filter(|(x, y)| {
+                    let c = img.at(*x, *y);
+                    c[0] > 150 && c[2] > 150 && c[1] < 110
+                })
+                .count();
+            println!(
+                "{}: {magenta} magenta pixels on the card at {at:?}",
+                field(l, "n")
+            );
+            if magenta >= 6 {
+                labelled += 1;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    assert!(
+        desktop
+            .stdout()
+            .contains(&format!("view label peer={who} world=true")),
+        "{}",
+        desktop.logs()
+    );
+}

@@ -237,8 +237,9 @@ fn a_peer_on_a_sound_device_plays_the_room_sends_its_microphone_and_cancels_its_
     let a = align(&said, &room, room.len() as f64 / 48_000.0)
         .unwrap_or_else(|| panic!("nothing recorded from the loudspeaker\n{}", logs()));
     println!("loudspeaker: {a:?}");
+    // (0.94-0.97 alone; 0.76 once under a loaded full suite; another sound scores under 0.3)
     assert!(
-        a.envelope_corr > 0.8,
+        a.envelope_corr > 0.6,
         "the loudspeaker did not play the sentence: {a:?}\n{}",
         logs()
     );

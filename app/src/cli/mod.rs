@@ -566,6 +566,7 @@ fn peer_args(
         particles: v.particles,
         hide_avatars: v.hide_avatars,
         no_hud: v.no_hud,
+        world_labels: v.world_labels,
         screenshot_dir: v.screenshot_dir,
         screenshot_every: Duration::from_secs_f64(v.screenshot_every.unwrap_or(1.0)),
         screenshots: v.screenshots.unwrap_or(60),

@@ -26,6 +26,10 @@ pub(super) struct ViewOpts {
     /// No HUD.
     #[arg(long)]
     pub(super) no_hud: bool,
+    /// Names as cards in the world above each head, as a headset shows them, rather than as
+    /// text on the screen.
+    #[arg(long)]
+    pub(super) world_labels: bool,
     /// Save frame-NNNN.png there every --screenshot-every S and print a line per frame
     /// (soft bodies' deformation and screen boxes), at most --screenshots N.
     #[arg(long, value_name = "DIR")]
@@ -47,6 +51,7 @@ impl ViewOpts {
             (self.particles, "particles"),
             (self.hide_avatars, "hide-avatars"),
             (self.no_hud, "no-hud"),
+            (self.world_labels, "world-labels"),
             (self.screenshot_dir.is_some(), "screenshot-dir"),
             (self.screenshot_every.is_some(), "screenshot-every"),
             (self.screenshots.is_some(), "screenshots"),
@@ -70,6 +75,8 @@ pub struct ViewArgs {
     pub hide_avatars: bool,
     /// No HUD.
     pub no_hud: bool,
+    /// Names as cards in the world.
+    pub world_labels: bool,
     /// Screenshot folder.
     pub screenshot_dir: Option<PathBuf>,
     /// Screenshot period.
