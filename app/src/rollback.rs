@@ -8,7 +8,10 @@
 //!   of 60 (two processes agree when their lines for an epoch and frame are equal: a new
 //!   epoch restarts the world at its frame, so a frame past that one has another state in
 //!   each epoch, and a peer may have confirmed it in the old one before it switched);
-//! - a stats line a second, and `rollback.summary …` at the end.
+//! - a stats line a second, and `rollback.summary …` at the end;
+//! - with `--dump FILE`, a dump line at `--dump-hz` and one at the end, in the state-sync
+//!   peer's format (`softsync_peer::dump`): the world as this peer shows it (its newest,
+//!   possibly predicted, frame), objects numbered in the scene's order, owned by nobody.
 
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -18,6 +21,7 @@ use std::time::{Duration, Instant as WallInstant};
 use softsync_bevy::{connect, first_contact, scene_server, Clock, RoomOptions, LEAVE_GRACE};
 use softsync_net::messages::MessageTypes;
 use softsync_net::{Event, LinkConditioner, Session, Transport};
+use softsync_peer::dump::{Dump, DumpLine, DumpObject};
 use softsync_peer::Scene;
 use softsync_rollback::room::register;
 use softsync_rollback::script::SqueezeThrow;
@@ -32,14 +36,87 @@ enum Script {
     Squeeze(SqueezeThrow),
 }
 
+/// Flags a rollback peer cannot honour: refused with the reason, never ignored.
+fn refuse_unhonoured(a: &PeerArgs) -> Result<(), Failure> {
+    let why = if a.voice.is_some() {
+        Some("--voice…: a rollback room has no voice yet (it is the state-sync room's)")
+    } else if a.presence.is_some() {
+        Some("--name/--colour: a rollback room announces no presence yet")
+    } else if a.uplink_bytes_per_s.is_some() {
+        Some("--uplink-kbps: ggrs sends every input to every player; nothing to budget")
+    } else {
+        None
+    };
+    match why {
+        Some(w) => Err(Failure::usage(format!("--sync rollback: {w}"))),
+        None => Ok(()),
+    }
+}
+
+/// One dump line of what a rollback peer shows at `now`.
+fn dump_line(peer: &RollbackPeer, now: softsync_net::Instant) -> Option<DumpLine> {
+    let world = peer.world()?;
+    let session = peer.session();
+    let scene = peer.scene();
+    let objects = world
+        .objects()
+        .iter()
+        .enumerate()
+        .filter_map(|(i, o)| {
+            let (pos, rot) = world.object_pose(i)?;
+            Some(DumpObject {
+                id: u32::try_from(i).ok()?,
+                kind: scene.name_of(o.kind).to_owned(),
+                owner: 0,
+                pos: pos.to_array(),
+                rot: rot.to_array(),
+                particles: world
+                    .particles(i)
+                    .unwrap_or_default()
+                    .iter()
+                    .map(|p| p.to_array())
+                    .collect(),
+                src: None,
+                src_from: None,
+                log: None,
+                topology: None,
+                holders: Vec::new(),
+            })
+        })
+        .collect();
+    let t = now.as_secs_f64();
+    Some(DumpLine {
+        t,
+        state_t: t,
+        wall_ms: std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_millis() as u64),
+        room_s: session.room_time(now).map(|d| d.as_secs_f64()),
+        peer: session.local_id().0,
+        host: session.host_id().map(|h| h.0),
+        term: session.term().0,
+        members: session.members().keys().map(|p| p.0).collect(),
+        up_bytes: session.stats().up.bytes,
+        down_bytes: session.stats().down.bytes,
+        objects,
+        hands: Vec::new(),
+    })
+}
+
 /// Run a rollback peer until `--duration`, a signal, or a refusal.
-pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Failure> {
+pub fn run(
+    a: &PeerArgs,
+    scene: Scene,
+    opts: RoomOptions,
+    mut dump: Option<Dump>,
+) -> Result<ExitCode, Failure> {
     if a.front != FrontEnd::Headless {
         return Err(Failure::usage(
             "--sync rollback: desktop and VR peers are not in rollback rooms yet; run a headless \
              peer (with --bot squeeze or idle)",
         ));
     }
+    refuse_unhonoured(a)?;
     let mut cfg = opts
         .session_config(&scene)
         .map_err(|e| Failure::usage(e.to_string()))?;
@@ -120,6 +197,19 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
     let mut up_bytes = 0u64;
     let mut last_up = (WallInstant::now(), 0u64);
     let mut failure = None;
+    let dump_every = Duration::from_secs_f64(1.0 / a.dump_hz.max(0.01));
+    let mut next_dump = started;
+    let write_dump = |dump: &mut Option<Dump>, peer: &RollbackPeer| {
+        let Some(d) = dump.as_mut() else { return };
+        // nothing to show before the first epoch's world
+        let Some(line) = dump_line(peer, clock.now()) else {
+            return;
+        };
+        if let Err(e) = d.write(&line) {
+            eprintln!("warning: --dump: {e}; no more dump lines");
+            *dump = None;
+        }
+    };
     while !stop.load(Ordering::SeqCst) && a.duration.is_none_or(|d| started.elapsed() < d) {
         let now = clock.now();
         while let Some((from, bytes)) = transport.recv(now) {
@@ -251,6 +341,10 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
                 s.ggrs_bytes
             );
         }
+        if dump.is_some() && WallInstant::now() >= next_dump {
+            next_dump = WallInstant::now() + dump_every;
+            write_dump(&mut dump, &peer);
+        }
         next += step;
         let now = WallInstant::now();
         if next > now {
@@ -259,6 +353,7 @@ pub fn run(a: &PeerArgs, scene: Scene, opts: RoomOptions) -> Result<ExitCode, Fa
             next = now;
         }
     }
+    write_dump(&mut dump, &peer);
     peer.leave(clock.now());
     let end = WallInstant::now() + LEAVE_GRACE;
     while WallInstant::now() < end {

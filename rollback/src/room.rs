@@ -24,7 +24,7 @@
 //! # Desync repair
 //! A desync in the middle of an epoch (ggrs's checksums differ) is repaired by the same means:
 //! the peer that sees it asks the host for a new epoch of the same players (the host notes
-//! its own), once per epoch, again every [`RESYNC_RETRY`] until one comes. The host announces
+//! its own), once per epoch, again every second until one comes. The host announces
 //! its newest confirmed frame; whoever's own state of that frame differs from the host's
 //! digest fetches the host's snapshot, and everyone plays on from the same state. The host's
 //! world is the reference: if the host is the odd one out, everyone else is brought to it.
@@ -329,6 +329,11 @@ impl RollbackPeer {
     /// The session (membership).
     pub fn session(&self) -> &Session {
         &self.session
+    }
+
+    /// The room's scene.
+    pub fn scene(&self) -> &Scene {
+        &self.scene
     }
 
     /// The world, once an epoch runs.

@@ -70,12 +70,14 @@ fn a_two_process_rollback_room_under_50_ms_and_5_percent_loss_agrees_60_s_withou
         "--net-condition",
         NET,
     ];
+    let host_dump = dir.join("host.jsonl");
+    let bot_dump = dir.join("bot.jsonl");
     let mut args = common.to_vec();
-    args.extend(["--duration", "66"]);
+    args.extend(["--duration", "66", "--dump", host_dump.to_str().unwrap()]);
     let (mut host, url) = embedded_host(&dir, "rb", &args);
     let mut bot = peer_on(&dir, "bot", "join", &url, "rb", &{
         let mut a = common.to_vec();
-        a.extend(["--duration", "62"]);
+        a.extend(["--duration", "62", "--dump", bot_dump.to_str().unwrap()]);
         a
     });
     bot.wait_line("epoch n=2", Duration::from_secs(20));
@@ -99,6 +101,62 @@ fn a_two_process_rollback_room_under_50_ms_and_5_percent_loss_agrees_60_s_withou
         summary(&host),
         summary(&bot)
     );
+    // both wrote their dumps (issue 38: a rollback peer's dump was empty): a line a second at
+    // the default rate, every scene object in each, with both peers as members once joined
+    let hid = host.peer_id();
+    let bid = bot.peer_id();
+    for (path, p) in [(&host_dump, &host), (&bot_dump, &bot)] {
+        let lines = softsync_peer::dump::read_dump(path).unwrap();
+        assert!(
+            lines.len() >= 50,
+            "{}: {} lines\n{}",
+            path.display(),
+            lines.len(),
+            p.logs()
+        );
+        let objects = lines[0].objects.len();
+        assert!(objects >= 3, "{:?}", lines[0].objects);
+        for l in &lines {
+            assert_eq!(l.objects.len(), objects);
+            assert!(l
+                .objects
+                .iter()
+                .all(|o| o.pos.iter().all(|v| v.is_finite())));
+        }
+        assert!(
+            lines
+                .iter()
+                .any(|l| l.members.contains(&hid) && l.members.contains(&bid)),
+            "{}",
+            path.display()
+        );
+    }
+}
+
+#[test]
+fn a_rollback_peer_refuses_the_flags_it_cannot_honour_with_the_reason() {
+    let dir = scratch("rollback-refuse");
+    for (flag, words) in [
+        (vec!["--voice"], "no voice"),
+        (vec!["--name", "Dr Lee"], "no presence"),
+        (vec!["--uplink-kbps", "100"], "nothing to budget"),
+    ] {
+        let mut args = vec![
+            "host",
+            "--room",
+            "refuse",
+            "--bind",
+            "127.0.0.1:0",
+            "--sync",
+            "rollback",
+            "--quiet",
+        ];
+        args.extend(flag.iter().copied());
+        let mut p = Proc::spawn(&dir, "refused", &args);
+        let code = p.wait_exit(Duration::from_secs(30));
+        assert_ne!(code, 0, "{flag:?} was accepted\n{}", p.logs());
+        assert!(p.logs().contains(words), "{flag:?}: {}", p.logs());
+    }
 }
 
 #[test]
