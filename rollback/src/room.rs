@@ -590,19 +590,7 @@ impl RollbackPeer {
             return;
         }
         *asked = Some(now);
-        if self.session.is_host() {
-            self.resync = Some(n);
-        } else if let Err(e) = self.session.send(
-            now,
-            &self.types,
-            MessageTarget::Host,
-            Delivery::Reliable,
-            &Resync { epoch: n },
-        ) {
-            self.events.push_back(RollbackEvent::Warning(format!(
-                "cannot ask the host for a new epoch: {e:?}"
-            )));
-        }
+        self.ask_new_epoch(now, n, "for a new epoch");
     }
 
     /// A desync seen in the running epoch: ask the host for a new epoch of the same players
@@ -619,6 +607,11 @@ impl RollbackPeer {
             return;
         }
         *asked = Some(now);
+        self.ask_new_epoch(now, n, "to repair a desync");
+    }
+
+    /// A new epoch to replace epoch `n`: the host notes its own wish, a member asks the host.
+    fn ask_new_epoch(&mut self, now: Instant, n: u32, why: &str) {
         if self.session.is_host() {
             self.resync = Some(n);
         } else if let Err(e) = self.session.send(
@@ -629,7 +622,7 @@ impl RollbackPeer {
             &Resync { epoch: n },
         ) {
             self.events.push_back(RollbackEvent::Warning(format!(
-                "cannot ask the host to repair a desync: {e:?}"
+                "cannot ask the host {why}: {e:?}"
             )));
         }
     }

@@ -937,21 +937,7 @@ fn the_speaking_indicator_floats_over_the_talking_bots_head() {
     );
     let mut labelled = 0;
     for l in named.iter().rev().take(4) {
-        let at: Vec<f64> = field(l, "label_at")
-            .split(',')
-            .map(|v| v.parse().unwrap())
-            .collect();
-        let img = Rgb::load(Path::new(field(l, "path")));
-        let magenta = img
-            .region(
-                [at[0] - 40.0, at[1] - 14.0, at[0] + 40.0, at[1] + 14.0],
-                0.0,
-            )
-            .filter(|(x, y)| {
-                let c = img.at(*x, *y);
-                c[0] > 170 && c[2] > 170 && c[1] < 110
-            })
-            .count();
+        let (at, magenta) = magenta_at_label(l, 170);
         println!(
             "{}: {magenta} magenta pixels around the label at {at:?}",
             field(l, "n")
@@ -1044,25 +1030,11 @@ fn a_name_card_floats_in_the_world_over_a_named_bots_head() {
             if !checked.insert(l.to_owned()) {
                 continue;
             }
-            let at: Vec<f64> = field(l, "label_at")
-                .split(',')
-                .map(|v| v.parse().unwrap())
-                .collect();
+            let (at, magenta) = magenta_at_label(l, 150);
             if !(0.0..320.0).contains(&at[0]) || !(0.0..240.0).contains(&at[1]) {
                 continue; // the card is off the screen
             }
-            let img = Rgb::load(Path::new(field(l, "path")));
             // (the avatars are hidden: the bot's magenta head and hands cannot count)
-            let magenta = img
-                .region(
-                    [at[0] - 40.0, at[1] - 14.0, at[0] + 40.0, at[1] + 14.0],
-                    0.0,
-                )
-                .filter(|(x, y)| {
-                    let c = img.at(*x, *y);
-                    c[0] > 150 && c[2] > 150 && c[1] < 110
-                })
-                .count();
             println!(
                 "{}: {magenta} magenta pixels on the card at {at:?}",
                 field(l, "n")
@@ -1080,4 +1052,25 @@ fn a_name_card_floats_in_the_world_over_a_named_bots_head() {
         "{}",
         desktop.logs()
     );
+}
+
+/// Where a screenshot line says a peer's label is anchored, and the magenta pixels (R and B
+/// over `min`, G under 110) in an 80×28 box around it.
+fn magenta_at_label(line: &str, min: u8) -> (Vec<f64>, usize) {
+    let at: Vec<f64> = field(line, "label_at")
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    let img = Rgb::load(Path::new(field(line, "path")));
+    let n = img
+        .region(
+            [at[0] - 40.0, at[1] - 14.0, at[0] + 40.0, at[1] + 14.0],
+            0.0,
+        )
+        .filter(|(x, y)| {
+            let c = img.at(*x, *y);
+            c[0] > min && c[2] > min && c[1] < 110
+        })
+        .count();
+    (at, n)
 }

@@ -274,23 +274,50 @@ const IN_START: usize = FRAME_SAMPLES * 3 / 2;
 /// Capture ring's most: 100 ms.
 const IN_MAX: usize = FRAME_SAMPLES * 5;
 
-/// A microphone: 48 kHz mono frames of 20 ms.
-pub struct AudioIn {
+/// An open device: its ring, its name and rate, and the thread its stream lives on (ended
+/// and joined on drop).
+struct Device {
     shared: Arc<Mutex<Shared>>,
-    started: bool,
     name: String,
     rate: u32,
-    _stop: mpsc::Sender<()>,
+    stop: Option<mpsc::Sender<()>>,
     thread: Option<JoinHandle<()>>,
 }
 
-impl std::fmt::Debug for AudioIn {
+impl Device {
+    fn stats(&self) -> DeviceStats {
+        lock(&self.shared).stats
+    }
+
+    fn error(&mut self) -> Option<String> {
+        lock(&self.shared).error.take()
+    }
+}
+
+impl Drop for Device {
+    fn drop(&mut self) {
+        // dropping the sender ends the thread's wait; the stream closes there
+        self.stop.take();
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+impl std::fmt::Debug for Device {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("AudioIn")
+        f.debug_struct("Device")
             .field("name", &self.name)
             .field("rate", &self.rate)
             .finish()
     }
+}
+
+/// A microphone: 48 kHz mono frames of 20 ms.
+#[derive(Debug)]
+pub struct AudioIn {
+    dev: Device,
+    started: bool,
 }
 
 /// Open a stream on its own thread (a cpal stream may not move between threads on every
@@ -391,30 +418,32 @@ impl AudioIn {
             Ok((stream, name, rate))
         })?;
         Ok(AudioIn {
-            shared,
+            dev: Device {
+                shared,
+                name,
+                rate,
+                stop: Some(stop),
+                thread: Some(thread),
+            },
             started: false,
-            name,
-            rate,
-            _stop: stop,
-            thread: Some(thread),
         })
     }
 
     /// The device's name.
     pub fn name(&self) -> &str {
-        &self.name
+        &self.dev.name
     }
 
     /// The device's own rate (resampled to 48 kHz here).
     pub fn device_rate(&self) -> u32 {
-        self.rate
+        self.dev.rate
     }
 
     /// The next 20 ms: what the microphone heard, or silence while the ring fills (and after
     /// an underrun, until it has filled again).
     pub fn next_frame(&mut self) -> [i16; FRAME_SAMPLES] {
         let mut out = [0i16; FRAME_SAMPLES];
-        let mut g = lock(&self.shared);
+        let mut g = lock(&self.dev.shared);
         if !self.started {
             if g.ring.len() < IN_START {
                 return out;
@@ -443,30 +472,19 @@ impl AudioIn {
 
     /// What the ring did.
     pub fn stats(&self) -> DeviceStats {
-        lock(&self.shared).stats
+        self.dev.stats()
     }
 
     /// How long ago the last frame taken ended, as sound at the microphone: the device's
     /// latency and what is still in the ring.
     pub fn latency(&self) -> std::time::Duration {
-        let g = lock(&self.shared);
+        let g = lock(&self.dev.shared);
         g.latency + std::time::Duration::from_secs_f64(g.ring.len() as f64 / f64::from(SAMPLE_RATE))
     }
 
     /// An error the device reported while running, taken once.
     pub fn error(&mut self) -> Option<String> {
-        lock(&self.shared).error.take()
-    }
-}
-
-impl Drop for AudioIn {
-    fn drop(&mut self) {
-        // dropping the sender ends the thread's wait; the stream closes there
-        let (tx, _) = mpsc::channel();
-        self._stop = tx;
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
+        self.dev.error()
     }
 }
 
@@ -480,25 +498,13 @@ const OUT_START_MS: usize = 40;
 const OUT_MAX_MS: usize = 150;
 
 /// A loudspeaker or headset: 48 kHz stereo blocks in.
+#[derive(Debug)]
 pub struct AudioOut {
-    shared: Arc<Mutex<Shared>>,
-    name: String,
-    rate: u32,
+    dev: Device,
     channels: usize,
     left: Resampler,
     right: Resampler,
     scratch: (Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>),
-    _stop: mpsc::Sender<()>,
-    thread: Option<JoinHandle<()>>,
-}
-
-impl std::fmt::Debug for AudioOut {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("AudioOut")
-            .field("name", &self.name)
-            .field("rate", &self.rate)
-            .finish()
-    }
 }
 
 impl AudioOut {
@@ -578,33 +584,35 @@ impl AudioOut {
         })?;
         let channels = *channels_seen.lock().unwrap_or_else(PoisonError::into_inner);
         Ok(AudioOut {
-            shared,
-            name,
-            rate,
+            dev: Device {
+                shared,
+                name,
+                rate,
+                stop: Some(stop),
+                thread: Some(thread),
+            },
             channels,
             left: Resampler::new(SAMPLE_RATE, rate),
             right: Resampler::new(SAMPLE_RATE, rate),
             scratch: Default::default(),
-            _stop: stop,
-            thread: Some(thread),
         })
     }
 
     /// The device's name.
     pub fn name(&self) -> &str {
-        &self.name
+        &self.dev.name
     }
 
     /// The device's own rate (resampled from 48 kHz here).
     pub fn device_rate(&self) -> u32 {
-        self.rate
+        self.dev.rate
     }
 
     /// How long until a block queued now is heard: what the ring holds and the device's
     /// latency.
     pub fn latency(&self) -> std::time::Duration {
-        let g = lock(&self.shared);
-        let per_s = f64::from(self.rate) * self.channels as f64;
+        let g = lock(&self.dev.shared);
+        let per_s = f64::from(self.dev.rate) * self.channels as f64;
         g.latency + std::time::Duration::from_secs_f64(g.ring.len() as f64 / per_s)
     }
 
@@ -622,9 +630,9 @@ impl AudioOut {
         self.left.run(l, lo);
         self.right.run(r, ro);
         let ch = self.channels;
-        let max = self.rate as usize * ch * OUT_MAX_MS / 1000;
-        let start = self.rate as usize * ch * OUT_START_MS / 1000;
-        let mut g = lock(&self.shared);
+        let max = self.dev.rate as usize * ch * OUT_MAX_MS / 1000;
+        let start = self.dev.rate as usize * ch * OUT_START_MS / 1000;
+        let mut g = lock(&self.dev.shared);
         for (a, b) in lo.iter().zip(ro.iter()) {
             match ch {
                 1 => g.ring.push_back((a + b) * 0.5),
@@ -647,22 +655,12 @@ impl AudioOut {
 
     /// What the ring did.
     pub fn stats(&self) -> DeviceStats {
-        lock(&self.shared).stats
+        self.dev.stats()
     }
 
     /// An error the device reported while running, taken once.
     pub fn error(&mut self) -> Option<String> {
-        lock(&self.shared).error.take()
-    }
-}
-
-impl Drop for AudioOut {
-    fn drop(&mut self) {
-        let (tx, _) = mpsc::channel();
-        self._stop = tx;
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
+        self.dev.error()
     }
 }
 
