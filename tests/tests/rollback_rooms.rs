@@ -219,7 +219,24 @@ fn a_peer_killed_mid_interaction_leaves_the_others_going_and_a_late_joiner_gets_
     d.kill();
     assert_agree(&host, &d, 3);
     for p in [&host, &b] {
-        assert!(!p.stdout().contains("desync frame="), "{}", p.logs());
+        // The survivors may disagree about the killed peer's last inputs (ggrs decides its
+        // disconnect frame on each of them; seen in about 1 of 6 CI runs): the next epoch's
+        // switch then finds the states of its frame differ, says so, and loads the host's.
+        // Such a desync must be at a switch and repaired by it; none may stand mid-epoch.
+        let out = p.stdout();
+        for l in out.lines().filter(|l| l.starts_with("desync frame=")) {
+            let f = field(l, "frame");
+            let repaired = out
+                .lines()
+                .skip_while(|x| *x != l)
+                .any(|x| x.starts_with("epoch n=") && field(x, "frame") == f);
+            assert!(
+                repaired,
+                "{l}: not at an epoch switch that loaded the host's state\n{}",
+                p.logs()
+            );
+            eprintln!("{}: {l}, repaired by the switch", p.name);
+        }
         // What a member sees at a switch is bounded: the world stood still at most this long.
         let s = summary(p);
         let switch: f64 = field(&s, "switch_ms_max").parse().unwrap();
