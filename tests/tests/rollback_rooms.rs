@@ -220,7 +220,7 @@ fn a_peer_killed_mid_interaction_leaves_the_others_going_and_a_late_joiner_gets_
     assert_agree(&host, &d, 3);
     for p in [&host, &b] {
         // The survivors may disagree about the killed peer's last inputs (ggrs decides its
-        // disconnect frame on each of them; seen in about 1 of 6 CI runs): the next epoch's
+        // disconnect frame on each of them; seen once in 3 CI runs of stop 57): the next epoch's
         // switch then finds the states of its frame differ, says so, and loads the host's.
         // Such a desync must be at a switch and repaired by it; none may stand mid-epoch.
         let out = p.stdout();
