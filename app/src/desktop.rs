@@ -21,7 +21,7 @@ use bevy::window::PrimaryWindow;
 use softsync_peer::scene::TABLE_TOP_Y;
 use softsync_peer::{DeviceFrame, HandTool, Kind};
 
-use softsync_bevy::Room;
+use softsync_bevy::{LocalDevice, RollbackRoom, Room};
 
 use crate::driver::Driver;
 use softsync_bevy::glue::{from_bevy, from_bevy_quat, pose_from_bevy, to_bevy, to_bevy_quat};
@@ -99,8 +99,9 @@ impl Plugin for DesktopPlugin {
 /// Frames rendered before the network starts (window and renderer setup stall the first).
 const WARMUP_FRAMES: u32 = 5;
 
-fn ready_after_first_frames(mut room: NonSendMut<Room>, frames: Res<FrameCount>) {
-    if frames.0 >= WARMUP_FRAMES {
+fn ready_after_first_frames(room: Option<NonSendMut<Room>>, frames: Res<FrameCount>) {
+    // (a rollback room runs on its own thread: no frame holds it up)
+    if let (Some(mut room), true) = (room, frames.0 >= WARMUP_FRAMES) {
         Driver::set_ready(&mut room);
     }
 }
@@ -111,8 +112,10 @@ fn spawn_camera(mut commands: Commands, orbit: Res<OrbitCamera>) {
 
 #[allow(clippy::too_many_arguments)]
 fn desktop_input(
-    mut room: NonSendMut<Room>,
-    mut driver: NonSendMut<Driver>,
+    mut room: Option<NonSendMut<Room>>,
+    driver: Option<NonSend<Driver>>,
+    rollback: Option<Res<RollbackRoom>>,
+    mut device: ResMut<LocalDevice>,
     mut orbit: ResMut<OrbitCamera>,
     mut cam: Query<(&Camera, &GlobalTransform, &mut Transform), With<DesktopCamera>>,
     windows: Query<&Window, With<PrimaryWindow>>,
@@ -125,17 +128,31 @@ fn desktop_input(
     let dt = time.delta_secs().min(0.1);
     // Focus on an object once it is in the room.
     if let (Some(kind), false) = (orbit.focus, orbit.focused) {
-        let now = room.now();
-        let found = room
-            .peer
-            .objects()
-            .iter()
-            .find(|(_, o)| o.kind == kind)
-            .map(|(id, _)| *id);
-        if let Some(s) = found.and_then(|id| room.peer.shown_state(now, id)) {
+        let at = match (&mut room, &rollback) {
+            (Some(room), _) => {
+                let now = room.now();
+                let found = room
+                    .peer
+                    .objects()
+                    .iter()
+                    .find(|(_, o)| o.kind == kind)
+                    .map(|(id, _)| *id);
+                found
+                    .and_then(|id| room.peer.shown_state(now, id))
+                    .map(|s| s.pos)
+            }
+            (None, Some(rb)) => rb.with_view(|v| {
+                v.objects
+                    .iter()
+                    .find(|o| o.kind == kind)
+                    .map(|o| o.pos)
+            }),
+            (None, None) => None,
+        };
+        if let Some(pos) = at {
             // A fixed view of it, from the room's +z side and above, whoever we are: the
             // same picture on every run (the pixel test relies on it).
-            orbit.target = to_bevy(s.pos);
+            orbit.target = to_bevy(pos);
             orbit.yaw = 0.0;
             orbit.pitch = 0.5;
             orbit.distance_m = 0.4;
@@ -189,18 +206,22 @@ fn desktop_input(
             (orbit.target, orbit.yaw, orbit.pitch, orbit.distance_m) = (t, y, p, d);
         }
     }
-    replay_keys(&mut room, &driver, &keys);
+    if let (Some(room), Some(driver)) = (room.as_mut(), driver.as_ref()) {
+        replay_keys(room, driver, &keys);
+    }
     let Ok((camera, gt, mut tf)) = cam.single_mut() else {
         return;
     };
     *tf = orbit.transform();
     // a played-back recording seen from one of its people (`softsync replay --as PEER`):
     // the view is that peer's head
-    let follow = driver.replay_clock.as_ref().and_then(|(c, _)| c.follow);
-    let now = room.now();
-    if let Some(s) = follow.and_then(|id| room.peer.shown_state(now, id)) {
-        tf.translation = to_bevy(s.pos);
-        tf.rotation = to_bevy_quat(s.rot);
+    if let (Some(room), Some(driver)) = (room.as_mut(), driver.as_ref()) {
+        let follow = driver.replay_clock.as_ref().and_then(|(c, _)| c.follow);
+        let now = room.now();
+        if let Some(s) = follow.and_then(|id| room.peer.shown_state(now, id)) {
+            tf.translation = to_bevy(s.pos);
+            tf.rotation = to_bevy_quat(s.rot);
+        }
     }
     // Hands: the active one on the cursor's ray, the other resting below the view.
     let head = pose_from_bevy(&tf);
@@ -243,7 +264,7 @@ fn desktop_input(
                 from_bevy_quat(tf.rotation * Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2));
         }
     }
-    driver.device = Some(DeviceFrame {
+    device.0 = Some(DeviceFrame {
         head: Some(head),
         hands,
         grip,

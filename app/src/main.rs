@@ -14,6 +14,8 @@ mod replay;
 mod replay_room;
 mod report;
 mod rollback;
+#[cfg(feature = "desktop")]
+mod rollback_view;
 mod stderr_log;
 #[cfg(feature = "desktop")]
 mod view;
@@ -279,6 +281,7 @@ fn view_config(a: &PeerArgs, desktop: bool) -> view::ViewConfig {
         hud: !a.view.no_hud && desktop,
         hide_own_head: true,
         world_labels: !desktop || a.view.world_labels,
+        rollback: a.rollback,
         screenshots: a
             .view
             .screenshot_dir
@@ -537,7 +540,7 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
             None => Scene::by_name(DEFAULT_SCENE, &assets_dir(a.assets.as_deref()))
                 .map_err(Failure::usage)?,
         };
-        return rollback::run(&a, scene, opts, dump);
+        return rollback::run(&a, front, scene, opts, dump);
     }
     // A desktop or VR peer enters the room once its front end renders (`Room::set_ready`).
     opts.start_ready = front == FrontEnd::Headless;

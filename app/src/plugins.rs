@@ -21,7 +21,8 @@ use bevy::app::{App, AppExit, FixedUpdate, Last, Plugin, PreUpdate};
 use bevy::ecs::message::{MessageReader, MessageWriter};
 use bevy::ecs::schedule::IntoScheduleConfigs;
 use bevy::ecs::system::NonSendMut;
-use softsync_bevy::{Room, RoomEvent, RoomFailed, SoftsyncSet};
+use bevy::ecs::system::ResMut;
+use softsync_bevy::{LocalDevice, Room, RoomEvent, RoomFailed, SoftsyncSet};
 
 use crate::driver::Driver;
 
@@ -48,7 +49,16 @@ fn on_failure(
     }
 }
 
-fn drive_hands(mut room: NonSendMut<Room>, mut driver: NonSendMut<Driver>) {
+/// The front end's device (desktop or VR) goes to the driver, which composes it with a bot
+/// (taken: the plugin's step does not apply it again).
+fn drive_hands(
+    mut room: NonSendMut<Room>,
+    mut driver: NonSendMut<Driver>,
+    mut device: ResMut<LocalDevice>,
+) {
+    if let Some(d) = device.0.take() {
+        driver.device = Some(d);
+    }
     driver.drive_hands(&mut room);
 }
 

@@ -15,15 +15,13 @@
 
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant as WallInstant};
 
-use softsync_bevy::{connect, first_contact, scene_server, Clock, RoomOptions, LEAVE_GRACE};
-use softsync_net::messages::MessageTypes;
-use softsync_net::{Event, LinkConditioner, Session, Transport};
+use softsync_bevy::{RollbackHooks, RollbackRoom, RoomOptions, TickInfo};
+use softsync_net::Event;
 use softsync_peer::dump::{Dump, DumpLine, DumpObject};
 use softsync_peer::Scene;
-use softsync_rollback::room::register;
 use softsync_rollback::script::SqueezeThrow;
 use softsync_rollback::{PlayerInput, RollbackConfig, RollbackEvent, RollbackPeer};
 
@@ -33,7 +31,8 @@ use crate::Failure;
 /// What a rollback bot does.
 enum Script {
     Idle,
-    Squeeze(SqueezeThrow),
+    /// The squeeze-and-throw motion, starting with this object (default: from our id).
+    Squeeze(Option<usize>),
 }
 
 /// Flags a rollback peer cannot honour: refused with the reason, never ignored.
@@ -103,170 +102,55 @@ fn dump_line(peer: &RollbackPeer, now: softsync_net::Instant) -> Option<DumpLine
     })
 }
 
-/// Run a rollback peer until `--duration`, a signal, or a refusal.
-pub fn run(
-    a: &PeerArgs,
-    scene: Scene,
-    opts: RoomOptions,
-    mut dump: Option<Dump>,
-) -> Result<ExitCode, Failure> {
-    if a.front != FrontEnd::Headless {
-        return Err(Failure::usage(
-            "--sync rollback: desktop and VR peers are not in rollback rooms yet; run a headless \
-             peer (with --bot squeeze or idle)",
-        ));
-    }
-    refuse_unhonoured(a)?;
-    let mut cfg = opts
-        .session_config(&scene)
-        .map_err(|e| Failure::usage(e.to_string()))?;
-    let mut types = MessageTypes::from_config(&cfg)
-        .ok_or_else(|| Failure::usage("the room's message table names a type twice"))?;
-    register(&mut types);
-    types.configure(&mut cfg);
-    let rcfg = RollbackConfig {
-        dt_s: (1.0 / a.sim_hz) as f32,
-        ..RollbackConfig::default()
-    };
-    let mut conn = connect(&opts).map_err(|e| Failure::connect(e.to_string()))?;
-    let me = conn.transport.local_id();
-    let clock = Clock::start();
-    let (session, contact) = if a.host {
-        (Session::host(me, cfg, clock.now()), None)
-    } else {
-        let c = first_contact(&mut conn.transport, &opts, conn.started)
-            .map_err(|e| Failure::connect(e.to_string()))?;
-        println!(
-            "connected to peer {} after {:.0} ms",
-            c.0,
-            conn.started.elapsed().as_secs_f64() * 1e3
-        );
-        (Session::join(me, c, cfg, clock.now()), Some(c))
-    };
-    let mut transport: Box<dyn Transport + Send> = match opts.condition.clone() {
-        Some(c) => Box::new(LinkConditioner::new(conn.transport, c)),
-        None => Box::new(conn.transport),
-    };
-    let scene_copy = scene.clone();
-    let mut share: Option<softsync_net::share::BlobServer> = None;
-    let mut peer = RollbackPeer::new(clock.now(), scene, rcfg, session, contact)
-        .map_err(|e| Failure::runtime(e.to_string()))?;
-    if a.host {
-        peer.open(clock.now())
-            .map_err(|e| Failure::runtime(e.to_string()))?;
-    }
-    if conn.signal.is_some() {
-        println!("signaling on {}", conn.url);
-    }
-    println!(
-        "{} room={} peer={} signal={} sync=rollback",
-        if a.host { "hosting" } else { "joining" },
-        a.room,
-        me.0,
-        conn.url
-    );
-    let mut script = match a.bot.as_deref() {
-        None | Some("idle") => Script::Idle,
-        Some(b) if b == "squeeze" || crate::throw_slot(b).is_some() => {
-            let slot = crate::throw_slot(b).flatten();
-            Script::Squeeze(SqueezeThrow::new(me, slot.unwrap_or((me.0 % 5) as usize)))
-        }
-        Some(other) => {
-            return Err(Failure::usage(format!(
-                "--bot {other:?}: a rollback peer runs the built-in `throw` (also `squeeze`) or \
-                 `idle` (the script language drives a state-sync peer)"
-            )))
-        }
-    };
-    let stop = Arc::new(AtomicBool::new(false));
-    {
-        let stop = stop.clone();
-        if let Err(e) = ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst)) {
-            eprintln!("warning: no signal handler ({e})");
-        }
-    }
-    let step = Duration::from_secs_f64(1.0 / a.sim_hz);
-    let started = WallInstant::now();
-    let mut next = started;
-    let mut last_line = started;
-    let mut checked = -1i32;
-    let mut checked_epoch = 0u32;
-    let mut joined = a.host;
-    let mut holding: Option<usize> = None;
-    // datagram payload bytes sent (session, ggrs, snapshots): the stats line's `up=` rate
-    let mut up_bytes = 0u64;
-    let mut last_up = (WallInstant::now(), 0u64);
-    let mut failure = None;
-    let dump_every = Duration::from_secs_f64(1.0 / a.dump_hz.max(0.01));
-    let mut next_dump = started;
-    let write_dump = |dump: &mut Option<Dump>, peer: &RollbackPeer| {
-        let Some(d) = dump.as_mut() else { return };
+/// The lines a rollback peer prints and its dump, after each tick (on the room's thread).
+struct Reporter {
+    quiet: bool,
+    /// The time of the last tick.
+    now: softsync_net::Instant,
+    checked: i32,
+    checked_epoch: u32,
+    holding: Option<usize>,
+    last_line: WallInstant,
+    last_up: (WallInstant, u64),
+    dump: Option<Dump>,
+    dump_every: Duration,
+    next_dump: WallInstant,
+    /// Why the peer cannot go on, for the main thread.
+    failure: Arc<Mutex<Option<Failure>>>,
+    /// Welcomed (or hosting).
+    joined: Arc<AtomicBool>,
+}
+
+impl Reporter {
+    fn write_dump(&mut self, peer: &RollbackPeer) {
+        let Some(d) = self.dump.as_mut() else { return };
         // nothing to show before the first epoch's world
-        let Some(line) = dump_line(peer, clock.now()) else {
+        let Some(line) = dump_line(peer, self.now) else {
             return;
         };
         if let Err(e) = d.write(&line) {
             eprintln!("warning: --dump: {e}; no more dump lines");
-            *dump = None;
+            self.dump = None;
         }
-    };
-    while !stop.load(Ordering::SeqCst) && a.duration.is_none_or(|d| started.elapsed() < d) {
-        let now = clock.now();
-        while let Some((from, bytes)) = transport.recv(now) {
-            // the front door: the scene share here, the rest to the rollback peer's (which
-            // takes the session's and its own)
-            if softsync_net::door::classify(&bytes) == softsync_net::door::Door::Share {
-                // a joiner takes the scene from the room's host only: a member names it
-                let session = peer.session();
-                if let (false, true, Some(host)) =
-                    (session.is_host(), session.is_connected(), session.host_id())
-                {
-                    if let Some(t) = softsync_net::share::ask_host(from, &bytes, host) {
-                        transport.send(now, &t);
-                    }
-                    continue;
-                }
-                // a joiner without the scene asks for ours (a state-sync one is then refused
-                // at its Hello, told the room syncs by rollback)
-                let server = share
-                    .get_or_insert_with(|| scene_server(&scene_copy, peer.session().config(), me));
-                let session = peer.session();
-                let judged =
-                    server.handle_judged(now, from, &bytes, |t| session.token_admits(t, from, now));
-                if let Some(t) = judged {
-                    transport.send(now, &t);
-                }
-                continue;
-            }
-            peer.handle_datagram(now, from, &bytes);
-        }
-        while let Some(e) = transport.poll_peer_event() {
-            peer.handle_link_event(e);
-        }
-        let input = match (&mut script, peer.world()) {
-            (Script::Squeeze(s), Some(w)) => s.input(w),
-            _ => PlayerInput::default(),
-        };
-        peer.set_input(input);
-        peer.tick(now);
+    }
+
+    fn after_tick(&mut self, peer: &RollbackPeer, info: &TickInfo<'_>) {
+        self.now = info.now;
         // our right hand's grabs and releases, in our own (predicted) view
+        let me = peer.me();
         let held = peer.epoch().and_then(|e| {
             let i = e.players.iter().position(|p| *p == me)?;
             peer.world()?.held(i, 1)
         });
-        if held != holding {
-            match (holding, held) {
+        if held != self.holding {
+            match (self.holding, held) {
                 (_, Some(k)) => println!("grab object={k}"),
                 (Some(k), None) => println!("release object={k}"),
                 (None, None) => {}
             }
-            holding = held;
+            self.holding = held;
         }
-        while let Some(t) = peer.poll_transmit(now) {
-            up_bytes += t.payload.len() as u64;
-            transport.send(now, &t);
-        }
-        while let Some(e) = peer.poll_event() {
+        for e in info.events {
             match e {
                 RollbackEvent::EpochStarted { n, frame, players } => {
                     let p: Vec<String> = players.iter().map(|p| p.0.to_string()).collect();
@@ -281,14 +165,14 @@ pub fn run(
                 RollbackEvent::PlayerDisconnected(p) => println!("player {} disconnected", p.0),
                 RollbackEvent::Warning(w) => eprintln!("warning: {w}"),
                 RollbackEvent::Room(Event::Joined { host, .. }) => {
-                    joined = true;
+                    self.joined.store(true, Ordering::SeqCst);
                     println!("joined: host is peer {}", host.0)
                 }
                 RollbackEvent::Room(Event::Refused { reason }) => {
-                    failure = Some(Failure::connect(refusal(&reason)));
+                    self.fail(Failure::connect(refusal(reason)));
                 }
                 RollbackEvent::Room(Event::Dropped { reason, .. }) => {
-                    failure = Some(Failure::runtime(format!("dropped from the room: {reason}")));
+                    self.fail(Failure::runtime(format!("dropped from the room: {reason}")));
                 }
                 RollbackEvent::Room(Event::PeerJoined(p)) => println!("peer {} joined", p.0),
                 RollbackEvent::Room(Event::PeerLeft(p)) => println!("peer {} left", p.0),
@@ -298,36 +182,30 @@ pub fn run(
                 RollbackEvent::Room(_) => {}
             }
         }
-        if failure.is_some() {
-            break;
-        }
-        if !joined && started.elapsed() > a.connect_timeout {
-            failure = Some(Failure::connect("no welcome from the room's host in time"));
-            break;
-        }
         if let (Some(c), Some((n, start))) =
             (peer.confirmed_frame(), peer.epoch().map(|e| (e.n, e.frame)))
         {
-            if n != checked_epoch {
+            if n != self.checked_epoch {
                 // the new epoch's timeline from its frame on: checked again, under its number
-                checked_epoch = n;
-                checked = checked.min(start);
+                self.checked_epoch = n;
+                self.checked = self.checked.min(start);
             }
-            let mut f = (checked + 1).max(c - 120);
+            let mut f = (self.checked + 1).max(c - 120);
             f = (f + 59) / 60 * 60;
             while f <= c {
                 if let Some(sum) = peer.checksum_at(f) {
                     println!("rollback.check epoch={n} frame={f} checksum={sum:032x}");
                 }
-                checked = f;
+                self.checked = f;
                 f += 60;
             }
         }
-        if !a.quiet && last_line.elapsed() >= Duration::from_secs(1) {
-            last_line = WallInstant::now();
+        if !self.quiet && self.last_line.elapsed() >= Duration::from_secs(1) {
+            self.last_line = WallInstant::now();
             let s = peer.stats();
-            let up = (up_bytes - last_up.1) as f64 / last_up.0.elapsed().as_secs_f64().max(1e-3);
-            last_up = (WallInstant::now(), up_bytes);
+            let up = (info.up_bytes - self.last_up.1) as f64
+                / self.last_up.0.elapsed().as_secs_f64().max(1e-3);
+            self.last_up = (WallInstant::now(), info.up_bytes);
             println!(
                 "stats up={up:.0}B/s frame={} confirmed={} epoch={} players={} rollbacks={} resimulated={} stalled={} desyncs={} ggrs_bytes={}",
                 peer.world().map_or(-1, |w| w.frame()),
@@ -341,51 +219,264 @@ pub fn run(
                 s.ggrs_bytes
             );
         }
-        if dump.is_some() && WallInstant::now() >= next_dump {
-            next_dump = WallInstant::now() + dump_every;
-            write_dump(&mut dump, &peer);
-        }
-        next += step;
-        let now = WallInstant::now();
-        if next > now {
-            std::thread::sleep(next - now);
-        } else if now - next > Duration::from_millis(250) {
-            next = now;
+        if self.dump.is_some() && WallInstant::now() >= self.next_dump {
+            self.next_dump = WallInstant::now() + self.dump_every;
+            self.write_dump(peer);
         }
     }
-    write_dump(&mut dump, &peer);
-    peer.leave(clock.now());
-    let end = WallInstant::now() + LEAVE_GRACE;
-    while WallInstant::now() < end {
-        let now = clock.now();
-        while let Some(t) = peer.poll_transmit(now) {
-            transport.send(now, &t);
-        }
-        std::thread::sleep(Duration::from_millis(5));
+
+    fn fail(&self, f: Failure) {
+        let mut slot = self.failure.lock().unwrap_or_else(|e| e.into_inner());
+        slot.get_or_insert(f);
     }
-    let s = peer.stats();
-    let mut ms = s.frame_ms.clone();
-    ms.sort_by(f32::total_cmp);
-    let p95 = ms.get(ms.len() * 95 / 100).copied().unwrap_or(0.0);
+
+    /// After leaving: the last dump line and the summary.
+    fn at_end(mut self, peer: &RollbackPeer) {
+        self.write_dump(peer);
+        let s = peer.stats();
+        let p95 = |v: &[f32]| {
+            let mut v = v.to_vec();
+            v.sort_by(f32::total_cmp);
+            v.get(v.len() * 95 / 100).copied().unwrap_or(0.0)
+        };
+        let p99 = {
+            let mut v = s.frame_ms.clone();
+            v.sort_by(f32::total_cmp);
+            v.get(v.len() * 99 / 100).copied().unwrap_or(0.0)
+        };
+        println!(
+            "rollback.summary frames={} resimulated={} rollbacks={} desyncs={} epochs={} epochs_refused={} switch_ms_max={:.0} frame_ms_p95={:.2} frame_ms_p99={p99:.2} save_us={:.1} load_us={:.1} ggrs_bytes={} repairs={} repair_ms_max={:.0} corrections={} correction_mm_p95={:.1}",
+            s.frames,
+            s.resimulated,
+            s.rollbacks,
+            s.desyncs,
+            s.epochs,
+            s.epochs_refused,
+            s.switch_ms_max,
+            p95(&s.frame_ms),
+            s.save_ns as f64 / s.saves.max(1) as f64 / 1e3,
+            s.load_ns as f64 / s.rollbacks.max(1) as f64 / 1e3,
+            s.ggrs_bytes,
+            s.repairs,
+            s.repair_ms_max,
+            s.correction_mm.len(),
+            p95(&s.correction_mm),
+        );
+    }
+}
+
+/// Run a rollback peer until `--duration`, a signal, or a refusal: headless, or drawn on the
+/// desktop or in a headset (the same room on its own thread; the front end's device is the
+/// input unless a bot drives it).
+pub fn run(
+    a: &PeerArgs,
+    front: FrontEnd,
+    scene: Scene,
+    opts: RoomOptions,
+    dump: Option<Dump>,
+) -> Result<ExitCode, Failure> {
+    refuse_unhonoured(a)?;
+    let rcfg = RollbackConfig {
+        dt_s: (1.0 / a.sim_hz) as f32,
+        ..RollbackConfig::default()
+    };
+    let script = match a.bot.as_deref() {
+        None => None,
+        Some("idle") => Some(Script::Idle),
+        Some(b) if b == "squeeze" || crate::throw_slot(b).is_some() => {
+            Some(Script::Squeeze(crate::throw_slot(b).flatten()))
+        }
+        Some(other) => {
+            return Err(Failure::usage(format!(
+                "--bot {other:?}: a rollback peer runs the built-in `throw` (also `squeeze`) or \
+                 `idle` (the script language drives a state-sync peer)"
+            )))
+        }
+    };
+    let failure = Arc::new(Mutex::new(None));
+    let joined = Arc::new(AtomicBool::new(a.host));
+    let reporter = Arc::new(Mutex::new(None::<Reporter>));
+    *reporter.lock().unwrap_or_else(|e| e.into_inner()) = Some(Reporter {
+        quiet: a.quiet,
+        now: softsync_net::Instant::ZERO,
+        checked: -1,
+        checked_epoch: 0,
+        holding: None,
+        last_line: WallInstant::now(),
+        last_up: (WallInstant::now(), 0),
+        dump,
+        dump_every: Duration::from_secs_f64(1.0 / a.dump_hz.max(0.01)),
+        next_dump: WallInstant::now(),
+        failure: failure.clone(),
+        joined: joined.clone(),
+    });
+    let mut hooks = RollbackHooks::default();
+    {
+        let r1 = reporter.clone();
+        hooks.after_tick = Some(Box::new(move |peer, info| {
+            if let Some(r) = r1.lock().unwrap_or_else(|e| e.into_inner()).as_mut() {
+                r.after_tick(peer, info);
+            }
+        }));
+        let reporter = reporter.clone();
+        hooks.at_end = Some(Box::new(move |peer| {
+            if let Some(r) = reporter.lock().unwrap_or_else(|e| e.into_inner()).take() {
+                r.at_end(peer);
+            }
+        }));
+    }
+    // the bot's hands (else: the front end's device, or none)
+    let mut bot: Option<SqueezeThrow> = None;
+    let idle = matches!(script, Some(Script::Idle)) || (script.is_none() && front == FrontEnd::Headless);
+    if idle {
+        hooks.input = Some(Box::new(|_, _| PlayerInput::default()));
+    } else if let Some(Script::Squeeze(slot)) = script {
+        let slot_cell = Arc::new(Mutex::new(slot));
+        hooks.input = Some(Box::new(move |peer, _| {
+            let (Some(w), me) = (peer.world(), peer.me()) else {
+                return PlayerInput::default();
+            };
+            let s = bot.get_or_insert_with(|| {
+                let slot = *slot_cell.lock().unwrap_or_else(|e| e.into_inner());
+                SqueezeThrow::new(me, slot.unwrap_or((me.0 % 5) as usize))
+            });
+            s.input(w)
+        }));
+    }
+    let mut room = RollbackRoom::open(scene, opts, rcfg, hooks).map_err(|e| Failure {
+        code: e.exit_code(),
+        msg: e.to_string(),
+    })?;
+    let me = room.me();
+    if let Some((c, after)) = room.contact() {
+        println!(
+            "connected to peer {} after {:.0} ms",
+            c.0,
+            after.as_secs_f64() * 1e3
+        );
+    }
+    if room.runs_signaling() {
+        println!("signaling on {}", room.signal_url());
+    }
     println!(
-        "rollback.summary frames={} resimulated={} rollbacks={} desyncs={} epochs={} epochs_refused={} switch_ms_max={:.0} frame_ms_p95={p95:.2} save_us={:.1} load_us={:.1} ggrs_bytes={} repairs={} repair_ms_max={:.0}",
-        s.frames,
-        s.resimulated,
-        s.rollbacks,
-        s.desyncs,
-        s.epochs,
-        s.epochs_refused,
-        s.switch_ms_max,
-        s.save_ns as f64 / s.saves.max(1) as f64 / 1e3,
-        s.load_ns as f64 / s.rollbacks.max(1) as f64 / 1e3,
-        s.ggrs_bytes,
-        s.repairs,
-        s.repair_ms_max
+        "{} room={} peer={} signal={} sync=rollback",
+        if a.host { "hosting" } else { "joining" },
+        a.room,
+        me.0,
+        room.signal_url()
     );
-    match failure {
+    let started = WallInstant::now();
+    let outcome = match front {
+        FrontEnd::Headless => {
+            let stop = Arc::new(AtomicBool::new(false));
+            {
+                let stop = stop.clone();
+                if let Err(e) = ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst)) {
+                    eprintln!("warning: no signal handler ({e})");
+                }
+            }
+            while !stop.load(Ordering::SeqCst)
+                && a.duration.is_none_or(|d| started.elapsed() < d)
+                && room.running()
+                && failure.lock().unwrap_or_else(|e| e.into_inner()).is_none()
+            {
+                if !joined.load(Ordering::SeqCst) && started.elapsed() > a.connect_timeout {
+                    let f = Failure::connect("no welcome from the room's host in time");
+                    failure.lock().unwrap_or_else(|e| e.into_inner()).get_or_insert(f);
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            room.leave();
+            Ok(ExitCode::SUCCESS)
+        }
+        #[cfg(feature = "desktop")]
+        front => run_front(a, front, room, failure.clone(), joined.clone()),
+        #[cfg(not(feature = "desktop"))]
+        _ => Err(Failure::usage("this front end is not in this build")),
+    };
+    let failed = failure.lock().unwrap_or_else(|e| e.into_inner()).take();
+    match failed {
         Some(f) => Err(f),
-        None => Ok(ExitCode::SUCCESS),
+        None => outcome,
     }
+}
+
+/// A desktop or VR peer of a rollback room: bevy draws the room's newest frame, the front end
+/// writes its device to `LocalDevice`, the plugin passes it to the room's thread.
+#[cfg(feature = "desktop")]
+fn run_front(
+    a: &PeerArgs,
+    front: FrontEnd,
+    room: RollbackRoom,
+    failure: Arc<Mutex<Option<Failure>>>,
+    joined: Arc<AtomicBool>,
+) -> Result<ExitCode, Failure> {
+    use bevy::app::{App, AppExit, Last, TerminalCtrlCHandlerPlugin};
+    use bevy::ecs::message::MessageWriter;
+    use bevy::time::{Fixed, Time};
+
+    if let Err(e) = ctrlc::set_handler(TerminalCtrlCHandlerPlugin::gracefully_exit) {
+        eprintln!("warning: no signal handler ({e})");
+    }
+    let home = softsync_peer::avatar::home(room.me());
+    let mut app = App::new();
+    match front {
+        FrontEnd::Desktop => {
+            let focus = a
+                .view
+                .focus
+                .as_deref()
+                .and_then(|f| room.scene().kind(f));
+            app.add_plugins(crate::desktop_plugins(a))
+                .add_plugins(crate::view::ViewPlugin(crate::view_config(a, true)))
+                .add_plugins(crate::desktop::DesktopPlugin(
+                    crate::desktop::OrbitCamera::at_home(home, focus),
+                ));
+        }
+        #[cfg(feature = "vr")]
+        FrontEnd::Vr => {
+            app.add_plugins(crate::vr::plugins())
+                .add_plugins(crate::view::ViewPlugin(crate::view_config(a, false)))
+                .add_plugins(crate::vr::VrPlugin(crate::vr::StageOrigin {
+                    pos: softsync_bevy::glue::to_bevy(glam::Vec3::new(home.0.x, 0.0, home.0.z)),
+                    rot: softsync_bevy::glue::to_bevy_quat(home.1),
+                }));
+        }
+        _ => return Err(Failure::usage("this front end is not in this build")),
+    }
+    let started = WallInstant::now();
+    let (duration, timeout) = (a.duration, a.connect_timeout);
+    use bevy::ecs::schedule::IntoScheduleConfigs;
+    let end = move |room: bevy::ecs::system::Res<RollbackRoom>,
+                    mut exit: MessageWriter<AppExit>,
+                    mut done: bevy::ecs::system::Local<bool>| {
+        if *done {
+            return;
+        }
+        let failed = failure.lock().unwrap_or_else(|e| e.into_inner()).is_some();
+        if !joined.load(Ordering::SeqCst) && started.elapsed() > timeout {
+            let f = Failure::connect("no welcome from the room's host in time");
+            failure.lock().unwrap_or_else(|e| e.into_inner()).get_or_insert(f);
+        }
+        let failed = failed || failure.lock().unwrap_or_else(|e| e.into_inner()).is_some();
+        if failed || !room.running() || duration.is_some_and(|d| started.elapsed() >= d) {
+            *done = true;
+            exit.write(AppExit::Success);
+        }
+    };
+    let exit = app
+        .add_plugins(softsync_bevy::RollbackPlugin {
+            exit_on_failure: false,
+        })
+        .insert_resource(room)
+        .insert_resource(Time::<Fixed>::from_hz(a.sim_hz))
+        .add_systems(Last, end.before(softsync_bevy::SoftsyncSet::Leave))
+        .run();
+    Ok(match exit {
+        AppExit::Success => ExitCode::SUCCESS,
+        AppExit::Error(code) => ExitCode::from(code.get()),
+    })
 }
 
 /// A refusal said plainly, naming the room's sync mode when that is why.

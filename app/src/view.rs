@@ -47,6 +47,9 @@ pub struct ViewConfig {
     pub world_labels: bool,
     /// Screenshots: folder, period, how many at most.
     pub screenshots: Option<ScreenshotPlan>,
+    /// The room is a rollback room ([`softsync_bevy::RollbackRoom`]): drawn by
+    /// `rollback_view`.
+    pub rollback: bool,
 }
 
 /// Screenshots on a timer.
@@ -75,8 +78,12 @@ impl Plugin for ViewPlugin {
                 ..default()
             })
             .add_systems(Startup, spawn_static)
-            .init_resource::<RenderWarm>()
-            .add_systems(
+            .init_resource::<RenderWarm>();
+        if self.0.rollback {
+            crate::rollback_view::add_systems(app);
+            return;
+        }
+        app.add_systems(
                 Update,
                 (
                     sync_objects,
@@ -107,7 +114,7 @@ impl Plugin for ViewPlugin {
 /// and the first frames on lavapipe under load are the clear colour alone (measured).
 /// Screenshots wait for this.
 #[derive(Resource, Clone, Default)]
-struct RenderWarm(Arc<AtomicBool>);
+pub(crate) struct RenderWarm(pub(crate) Arc<AtomicBool>);
 
 fn note_render_warm(cache: Option<Res<PipelineCache>>, warm: Res<RenderWarm>) {
     let ready = cache
@@ -151,23 +158,29 @@ struct ObjView {
 }
 
 #[derive(Component)]
-struct Hud;
+pub(crate) struct Hud;
 
 #[derive(Resource, Default)]
-struct ScreenshotState {
-    next: Duration,
-    taken: u32,
+pub(crate) struct ScreenshotState {
+    pub(crate) next: Duration,
+    pub(crate) taken: u32,
 }
 
 fn spawn_static(
     mut commands: Commands,
-    room: NonSend<Room>,
+    room: Option<NonSend<Room>>,
+    rollback: Option<Res<softsync_bevy::RollbackRoom>>,
     mut meshes: ResMut<Assets<Mesh>>,
     mut materials: ResMut<Assets<StandardMaterial>>,
     cfg: Res<ViewConfig>,
 ) {
+    let scene = match (&room, &rollback) {
+        (Some(r), _) => r.peer.scene(),
+        (None, Some(r)) => r.scene(),
+        (None, None) => return,
+    };
     // The scene's fixed boxes (the floor, the table), as the peer's world has them.
-    for b in &room.peer.scene().fixed {
+    for b in &scene.fixed {
         let [r, g, bl] = b.colour;
         let material = materials.add(StandardMaterial {
             base_color: Color::srgb(r, g, bl),
@@ -224,12 +237,12 @@ fn soft_mesh(peer: &Peer, h: softsync_softbody::SoftBodyHandle) -> Option<Mesh> 
     Some(m)
 }
 
-fn to_arrays(v: &[glam::Vec3]) -> Vec<[f32; 3]> {
+pub(crate) fn to_arrays(v: &[glam::Vec3]) -> Vec<[f32; 3]> {
     v.iter().map(|p| p.to_array()).collect()
 }
 
 /// A rigid or avatar class's mesh, from its shape in the scene.
-fn rigid_mesh(scene: &Scene, kind: Kind) -> Mesh {
+pub(crate) fn rigid_mesh(scene: &Scene, kind: Kind) -> Mesh {
     let Some(class) = scene.class(kind) else {
         return Sphere::new(0.05).into();
     };
@@ -469,7 +482,7 @@ fn update_hud(
 }
 
 /// A peer id, short enough for the HUD (its low 24 bits in hex; the log has the full id).
-fn short(id: u64) -> String {
+pub(crate) fn short(id: u64) -> String {
     format!("{:06x}", id & 0xff_ffff)
 }
 
@@ -599,7 +612,7 @@ pub fn deformation_m(peer: &Peer, h: softsync_softbody::SoftBodyHandle) -> Optio
 
 /// ` KEY=x0,y0,x1,y1`: the screen box (pixels) of the points in front of the camera, or
 /// nothing if none is.
-fn screen_box(
+pub(crate) fn screen_box(
     (c, gt): (&Camera, &GlobalTransform),
     key: &str,
     points: impl Iterator<Item = Vec3>,

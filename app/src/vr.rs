@@ -370,7 +370,7 @@ struct Seen {
 
 /// Headset and controllers → the device frame, in room coordinates.
 fn read_device(
-    mut driver: NonSendMut<Driver>,
+    mut device: ResMut<softsync_bevy::LocalDevice>,
     origin: Res<StageOrigin>,
     session: Res<OxrSession>,
     actions: Option<Res<Actions>>,
@@ -452,17 +452,19 @@ fn read_device(
             f(frame.hands[1])
         );
     }
-    driver.device = Some(frame);
+    device.0 = Some(frame);
 }
 
 /// Frames the XR session renders before the network starts (session start stalls the loop).
 const WARMUP_FRAMES: u32 = 30;
 
 fn ready_when_running(
-    mut room: NonSendMut<Room>,
+    room: Option<NonSendMut<Room>>,
     state: Option<Res<XrState>>,
     mut running: Local<u32>,
 ) {
+    // (a rollback room runs on its own thread: no frame holds it up)
+    let Some(mut room) = room else { return };
     if state.is_some_and(|s| *s == XrState::Running) {
         *running += 1;
         if *running >= WARMUP_FRAMES {

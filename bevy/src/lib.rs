@@ -66,6 +66,7 @@ mod keep;
 pub mod options;
 pub mod plugin;
 pub mod pump;
+pub mod rollback;
 pub mod room;
 mod scene_fetch;
 mod signal_move;
@@ -73,8 +74,12 @@ pub mod voice;
 
 pub use connect::{connect, first_contact, scene_server, ConnectTimes, Connected};
 pub use plugin::{
-    AvatarPart, Hand, NetEntities, NetObject, Received, RoomEvent, RoomFailed, RoomStats, SoftBody,
-    SoftsyncApp, SoftsyncPlugin, SoftsyncSet,
+    AvatarPart, Hand, LocalDevice, NetEntities, NetObject, Received, RoomEvent, RoomFailed,
+    RoomStats, SoftBody, SoftsyncApp, SoftsyncPlugin, SoftsyncSet,
+};
+pub use rollback::{
+    RollbackHooks, RollbackObject, RollbackPlugin, RollbackRoom, RollbackRoomEvent, RollbackView,
+    TickInfo,
 };
 pub use room::{wall_ms, Clock, OpenError, Room, RoomOptions, LEAVE_GRACE};
 pub use scene_fetch::FetchedScene;
@@ -82,14 +87,17 @@ pub use scene_fetch::FetchedScene;
 pub use softsync_net as net;
 /// The engine-agnostic peer (scenes, hands, bots, the built-in messages).
 pub use softsync_peer as peer;
+/// Rollback rooms (ggrs): the peer, its world and inputs.
+pub use softsync_rollback as rollback_core;
 pub use softsync_store::keeper::{Keeper, StoreOptions};
 
 /// What an app on this crate uses most.
 pub mod prelude {
     pub use crate::plugin::{
-        AvatarPart, Hand, NetEntities, NetObject, Received, RoomEvent, RoomFailed, RoomStats,
-        SoftBody, SoftsyncApp, SoftsyncPlugin, SoftsyncSet,
+        AvatarPart, Hand, LocalDevice, NetEntities, NetObject, Received, RoomEvent, RoomFailed,
+        RoomStats, SoftBody, SoftsyncApp, SoftsyncPlugin, SoftsyncSet,
     };
+    pub use crate::rollback::{RollbackPlugin, RollbackRoom, RollbackRoomEvent};
     pub use crate::room::{Room, RoomOptions};
     pub use softsync_net::messages::Message as RoomMessage;
     pub use softsync_net::Event as RoomNews;

@@ -40,7 +40,7 @@ use bevy::time::{Fixed, Time};
 use bevy::transform::components::Transform;
 use softsync_net::messages::Message as RoomMessage;
 use softsync_net::{Delivery, MessageTarget, NetId, PeerId, Stats, Term};
-use softsync_peer::{Event, Kind, LocalBody};
+use softsync_peer::{DeviceFrame, Event, Kind, LocalBody};
 
 use crate::glue::transform;
 use crate::pump::NetPump;
@@ -115,6 +115,15 @@ pub struct RoomStats {
     /// The session's traffic, drops and message counters.
     pub session: Stats,
 }
+
+/// This peer's tracked device for the next fixed steps (a headset's poses and buttons, the
+/// mouse hands): write it in [`SoftsyncSet::Input`] or earlier. In a state-sync room the
+/// plugin's step applies it to the peer's hands (unless a system of [`SoftsyncSet::Input`]
+/// took it: the binary's driver composes it with a bot); in a rollback room
+/// ([`crate::rollback::RollbackPlugin`]) it becomes the player's input. The same system drives
+/// either.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct LocalDevice(pub Option<DeviceFrame>);
 
 /// A networked object's entity. Rigid objects and avatar parts carry a `Transform` at their
 /// drawn pose; a soft body's `Transform` stays the identity (its particles and mesh are in
@@ -223,6 +232,7 @@ impl Plugin for SoftsyncPlugin {
             .add_message::<RoomFailed>()
             .init_resource::<RoomStats>()
             .init_resource::<NetEntities>()
+            .init_resource::<LocalDevice>()
             .insert_resource(PluginSettings {
                 exit_on_failure: self.exit_on_failure,
             })
@@ -428,8 +438,11 @@ fn decode<M: RoomMessage + Send + Sync + 'static>(
     }
 }
 
-fn step(room: Option<NonSendMut<Room>>) {
+fn step(room: Option<NonSendMut<Room>>, device: bevy::ecs::system::Res<LocalDevice>) {
     if let Some(mut room) = room {
+        if let Some(d) = &device.0 {
+            d.apply(&mut room.peer);
+        }
         room.step();
     }
 }

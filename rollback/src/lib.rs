@@ -18,7 +18,7 @@ pub mod socket;
 pub mod world;
 
 pub use input::{PartInput, PlayerInput};
-pub use room::{Epoch, RollbackConfig, RollbackEvent, RollbackPeer, RollbackStats};
+pub use room::{Correction, Epoch, RollbackConfig, RollbackEvent, RollbackPeer, RollbackStats};
 pub use world::{RollbackWorld, Snapshot, WorldError, WorldState};
 
 /// ggrs's compile-time configuration for a softsync room.

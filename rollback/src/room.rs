@@ -222,6 +222,21 @@ pub struct RollbackStats {
     pub repairs: u64,
     /// The longest repair here, from detection to the new epoch's ggrs session running, ms.
     pub repair_ms_max: f32,
+    /// Per rollback that moved something: the largest jump of an object's center at the
+    /// newest frame shown before it, mm (the last 18 000 to 36 000; what a renderer's
+    /// smoothing hides: [`RollbackPeer::take_corrections`]).
+    pub correction_mm: Vec<f32>,
+}
+
+/// How a rollback moved an object at the frame shown before it: add `pos` to the corrected
+/// position and turn by `rot` (about its center) to get where it was drawn. A renderer starts
+/// its offset there and lets it decay, so the correction is seen as a short glide, not a jump.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Correction {
+    /// Drawn minus corrected position, metres.
+    pub pos: glam::Vec3,
+    /// Drawn rotation times the inverse of the corrected one.
+    pub rot: glam::Quat,
 }
 
 /// A pending switch to an announced epoch.
@@ -270,6 +285,9 @@ pub struct RollbackPeer {
     /// A joiner's way in: the next connected peer is asked when a contact stays silent (it
     /// may be another joiner), as a state-sync peer does.
     joining: Joining,
+    /// Per object (scene order): the corrections of the rollbacks since the last
+    /// [`take_corrections`](Self::take_corrections), composed.
+    corrections: Option<Vec<Correction>>,
 }
 
 impl RollbackPeer {
@@ -318,6 +336,7 @@ impl RollbackPeer {
             switch_started: None,
             ticks: 0,
             joining: Joining::new(now, session_is_host, contact),
+            corrections: None,
         })
     }
 
@@ -939,6 +958,9 @@ impl RollbackPeer {
             return;
         };
         let mut advances = 0u64;
+        // the newest frame as it was before a rollback (what was drawn), to measure how the
+        // re-simulation moved each object there
+        let mut before: Option<(i32, Vec<Option<(glam::Vec3, glam::Quat)>>)> = None;
         for r in requests {
             match r {
                 GgrsRequest::SaveGameState { cell, frame } => {
@@ -954,6 +976,12 @@ impl RollbackPeer {
                     }
                 }
                 GgrsRequest::LoadGameState { cell, .. } => {
+                    if before.is_none() {
+                        let poses = (0..world.objects().len())
+                            .map(|i| world.object_pose(i))
+                            .collect();
+                        before = Some((world.frame(), poses));
+                    }
                     let s0 = std::time::Instant::now();
                     if let Some(s) = cell.load() {
                         world.load(&s);
@@ -965,6 +993,15 @@ impl RollbackPeer {
                     let inputs: Vec<PlayerInput> = inputs.iter().map(|(i, _)| *i).collect();
                     world.step(&inputs);
                     advances += 1;
+                    let frame = world.frame();
+                    if let Some((_, poses)) = before.take_if(|(f, _)| *f == frame) {
+                        Self::note_correction(
+                            world,
+                            &poses,
+                            &mut self.corrections,
+                            &mut self.stats.correction_mm,
+                        );
+                    }
                 }
             }
         }
@@ -977,6 +1014,43 @@ impl RollbackPeer {
         self.stats
             .frame_ms
             .push(t0.elapsed().as_secs_f32() * 1000.0);
+    }
+
+    /// How the rollback re-simulation moved each object at the frame drawn before it.
+    fn note_correction(
+        world: &RollbackWorld,
+        before: &[Option<(glam::Vec3, glam::Quat)>],
+        acc: &mut Option<Vec<Correction>>,
+        mm: &mut Vec<f32>,
+    ) {
+        let none = Correction {
+            pos: glam::Vec3::ZERO,
+            rot: glam::Quat::IDENTITY,
+        };
+        let acc = acc.get_or_insert_with(|| vec![none; before.len()]);
+        acc.resize(before.len(), none);
+        let mut largest = 0.0f32;
+        for (i, b) in before.iter().enumerate() {
+            let (Some((p0, r0)), Some((p1, r1))) = (b, world.object_pose(i)) else {
+                continue;
+            };
+            let c = &mut acc[i];
+            c.pos += *p0 - p1;
+            c.rot = (*r0 * r1.inverse()).normalize() * c.rot;
+            largest = largest.max(p0.distance(p1));
+        }
+        if largest > 1e-6 {
+            if mm.len() >= 36_000 {
+                mm.drain(..18_000);
+            }
+            mm.push(largest * 1000.0);
+        }
+    }
+
+    /// The corrections of the rollbacks since the last call, per object in scene order (`None`
+    /// when nothing rolled back): see [`Correction`].
+    pub fn take_corrections(&mut self) -> Option<Vec<Correction>> {
+        self.corrections.take()
     }
 
     /// Next datagram to send: the session's, then ggrs's and the snapshot's.

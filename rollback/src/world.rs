@@ -396,6 +396,16 @@ impl RollbackWorld {
         }
     }
 
+    /// Linear and angular velocity of object `i`'s center body (a soft body's center follows
+    /// its particles' mean): what a renderer extrapolates with between two ticks.
+    pub fn object_velocity(&self, i: usize) -> Option<(Vec3, Vec3)> {
+        let h = *self.objects.get(i)?.handles.first()?;
+        self.world
+            .bodies
+            .get(h)
+            .map(|b| (b.linvel(), b.angvel()))
+    }
+
     /// Particle positions of object `i` if it is soft.
     pub fn particles(&self, i: usize) -> Option<Vec<Vec3>> {
         match self.objects.get(i)?.body {
