@@ -141,12 +141,9 @@ fn desktop_input(
                     .and_then(|id| room.peer.shown_state(now, id))
                     .map(|s| s.pos)
             }
-            (None, Some(rb)) => rb.with_view(|v| {
-                v.objects
-                    .iter()
-                    .find(|o| o.kind == kind)
-                    .map(|o| o.pos)
-            }),
+            (None, Some(rb)) => {
+                rb.with_view(|v| v.objects.iter().find(|o| o.kind == kind).map(|o| o.pos))
+            }
             (None, None) => None,
         };
         if let Some(pos) = at {

@@ -327,7 +327,8 @@ pub fn run(
     }
     // the bot's hands (else: the front end's device, or none)
     let mut bot: Option<SqueezeThrow> = None;
-    let idle = matches!(script, Some(Script::Idle)) || (script.is_none() && front == FrontEnd::Headless);
+    let idle =
+        matches!(script, Some(Script::Idle)) || (script.is_none() && front == FrontEnd::Headless);
     if idle {
         hooks.input = Some(Box::new(|_, _| PlayerInput::default()));
     } else if let Some(Script::Squeeze(slot)) = script {
@@ -382,7 +383,10 @@ pub fn run(
             {
                 if !joined.load(Ordering::SeqCst) && started.elapsed() > a.connect_timeout {
                     let f = Failure::connect("no welcome from the room's host in time");
-                    failure.lock().unwrap_or_else(|e| e.into_inner()).get_or_insert(f);
+                    failure
+                        .lock()
+                        .unwrap_or_else(|e| e.into_inner())
+                        .get_or_insert(f);
                     break;
                 }
                 std::thread::sleep(Duration::from_millis(20));
@@ -423,11 +427,7 @@ fn run_front(
     let mut app = App::new();
     match front {
         FrontEnd::Desktop => {
-            let focus = a
-                .view
-                .focus
-                .as_deref()
-                .and_then(|f| room.scene().kind(f));
+            let focus = a.view.focus.as_deref().and_then(|f| room.scene().kind(f));
             app.add_plugins(crate::desktop_plugins(a))
                 .add_plugins(crate::view::ViewPlugin(crate::view_config(a, true)))
                 .add_plugins(crate::desktop::DesktopPlugin(
@@ -457,7 +457,10 @@ fn run_front(
         let failed = failure.lock().unwrap_or_else(|e| e.into_inner()).is_some();
         if !joined.load(Ordering::SeqCst) && started.elapsed() > timeout {
             let f = Failure::connect("no welcome from the room's host in time");
-            failure.lock().unwrap_or_else(|e| e.into_inner()).get_or_insert(f);
+            failure
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .get_or_insert(f);
         }
         let failed = failed || failure.lock().unwrap_or_else(|e| e.into_inner()).is_some();
         if failed || !room.running() || duration.is_some_and(|d| started.elapsed() >= d) {

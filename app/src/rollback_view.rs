@@ -65,11 +65,7 @@ fn ahead(v: &RollbackView) -> f32 {
     v.at.map_or(0.0, |t| t.elapsed().as_secs_f32())
 }
 
-fn soft_mesh(
-    positions: Vec<[f32; 3]>,
-    normals: Vec<[f32; 3]>,
-    triangles: &[[u32; 3]],
-) -> Mesh {
+fn soft_mesh(positions: Vec<[f32; 3]>, normals: Vec<[f32; 3]>, triangles: &[[u32; 3]]) -> Mesh {
     let mut m = Mesh::new(
         PrimitiveTopology::TriangleList,
         RenderAssetUsages::MAIN_WORLD | RenderAssetUsages::RENDER_WORLD,
@@ -80,9 +76,12 @@ fn soft_mesh(
     m
 }
 
+/// Vertex data as bevy's mesh takes it.
+type Points = Vec<[f32; 3]>;
+
 /// The shown positions and normals of soft object `i` (the tick's mesh moved as the object's
 /// shown pose is: extrapolation and correction).
-fn shown_soft(v: &RollbackView, i: usize, ahead_s: f32) -> Option<(Vec<[f32; 3]>, Vec<[f32; 3]>)> {
+fn shown_soft(v: &RollbackView, i: usize, ahead_s: f32) -> Option<(Points, Points)> {
     let s = v.objects.get(i)?.soft.as_ref()?;
     let map = v.shown_map(i, ahead_s)?;
     let turn = v.objects[i].offset.rot;
@@ -253,7 +252,13 @@ fn draw_avatars(
 
 /// The HUD's text in a rollback room.
 fn hud_text(room: &RollbackRoom, v: &RollbackView, costs: &FrameCosts) -> String {
-    let mut draw = costs.draw_us.iter().rev().take(300).copied().collect::<Vec<_>>();
+    let mut draw = costs
+        .draw_us
+        .iter()
+        .rev()
+        .take(300)
+        .copied()
+        .collect::<Vec<_>>();
     draw.sort_by(f32::total_cmp);
     let p50 = draw.get(draw.len() / 2).copied().unwrap_or(0.0);
     let held: Vec<String> = v
@@ -330,7 +335,13 @@ fn take_screenshots(
     state.taken += 1;
     let cam = cams.iter().find(|(c, _)| c.is_active);
     let scene = room.scene();
-    let mut draw = costs.draw_us.iter().rev().take(300).copied().collect::<Vec<_>>();
+    let mut draw = costs
+        .draw_us
+        .iter()
+        .rev()
+        .take(300)
+        .copied()
+        .collect::<Vec<_>>();
     draw.sort_by(f32::total_cmp);
     let fields = room.with_view(|v| {
         let ahead = ahead(v);

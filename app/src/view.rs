@@ -84,18 +84,18 @@ impl Plugin for ViewPlugin {
             return;
         }
         app.add_systems(
-                Update,
-                (
-                    sync_objects,
-                    crate::labels::update_labels.run_if(|c: Res<ViewConfig>| !c.world_labels),
-                    crate::labels::update_world_labels.run_if(|c: Res<ViewConfig>| c.world_labels),
-                    draw_overlay,
-                    update_hud,
-                    take_screenshots,
-                )
-                    .chain()
-                    .after(SoftsyncSet::Mirror),
-            );
+            Update,
+            (
+                sync_objects,
+                crate::labels::update_labels.run_if(|c: Res<ViewConfig>| !c.world_labels),
+                crate::labels::update_world_labels.run_if(|c: Res<ViewConfig>| c.world_labels),
+                draw_overlay,
+                update_hud,
+                take_screenshots,
+            )
+                .chain()
+                .after(SoftsyncSet::Mirror),
+        );
     }
 
     fn finish(&self, app: &mut App) {

@@ -45,9 +45,7 @@ use softsync_net::share::BlobServer;
 use softsync_net::{door, Instant, LinkConditioner, NetId, PeerId, Session, Transport};
 use softsync_peer::{DeviceFrame, Kind, Scene};
 use softsync_rollback::room::register;
-use softsync_rollback::{
-    Correction, PlayerInput, RollbackConfig, RollbackEvent, RollbackPeer,
-};
+use softsync_rollback::{Correction, PlayerInput, RollbackConfig, RollbackEvent, RollbackPeer};
 
 use crate::connect::{connect, first_contact, scene_server};
 use crate::glue::{to_bevy, to_bevy_quat};
@@ -142,7 +140,10 @@ impl RollbackView {
         let o = self.objects.get(i)?;
         let (off, ahead) = self.offset_at(o, ahead_s);
         let spin = Quat::from_scaled_axis(o.angvel * ahead);
-        Some((o.pos + o.linvel * ahead + off.pos, (off.rot * spin * o.rot).normalize()))
+        Some((
+            o.pos + o.linvel * ahead + off.pos,
+            (off.rot * spin * o.rot).normalize(),
+        ))
     }
 
     /// The map from a soft body's tick positions to its shown ones (see
@@ -191,6 +192,7 @@ pub struct RollbackHooks {
     #[allow(clippy::type_complexity)]
     pub after_tick: Option<Box<dyn FnMut(&RollbackPeer, &TickInfo<'_>) + Send>>,
     /// Once, after leaving.
+    #[allow(clippy::type_complexity)]
     pub at_end: Option<Box<dyn FnOnce(&RollbackPeer) + Send>>,
 }
 
@@ -267,13 +269,14 @@ impl RollbackRoom {
             std::thread::Builder::new()
                 .name("softsync-rollback".into())
                 .spawn(move || {
-                    let peer = RollbackPeer::new(clock.now(), scene.clone(), rcfg, session, contact)
-                        .and_then(|mut p| {
-                            if host {
-                                p.open(clock.now())?;
-                            }
-                            Ok(p)
-                        });
+                    let peer =
+                        RollbackPeer::new(clock.now(), scene.clone(), rcfg, session, contact)
+                            .and_then(|mut p| {
+                                if host {
+                                    p.open(clock.now())?;
+                                }
+                                Ok(p)
+                            });
                     match peer {
                         Ok(peer) => {
                             let _ = ready_tx.send(Ok(()));
@@ -413,7 +416,7 @@ impl Ticker {
         while !stop.load(Ordering::SeqCst) {
             let now = self.clock.now();
             self.network_in(now);
-            let device = self.lock().device.clone();
+            let device = self.lock().device;
             let input = match self.hooks.input.as_mut() {
                 Some(f) => f(&self.peer, device.as_ref()),
                 None => device
@@ -693,7 +696,7 @@ fn rollback_events(
 /// The device of the frame, for the next ticks.
 fn rollback_device(room: Option<Res<RollbackRoom>>, device: Res<LocalDevice>) {
     if let Some(room) = room {
-        room.set_device(device.0.clone());
+        room.set_device(device.0);
     }
 }
 
@@ -746,16 +749,16 @@ fn rollback_mirror(
                 net.mine = o.held_by_us;
             }
             match (soft, &o.soft) {
-                (Some(mut s), Some(m)) => {
-                    if s.topology != m.topology || s.particles != m.particles {
-                        s.topology = m.topology;
-                        s.particles = m.particles;
-                    }
+                (Some(mut s), Some(m))
+                    if s.topology != m.topology || s.particles != m.particles =>
+                {
+                    s.topology = m.topology;
+                    s.particles = m.particles;
                 }
                 (None, None) => {
                     if let Some((p, q)) = v.shown_pose(r.index, ahead) {
-                        *tf = Transform::from_translation(to_bevy(p))
-                            .with_rotation(to_bevy_quat(q));
+                        *tf =
+                            Transform::from_translation(to_bevy(p)).with_rotation(to_bevy_quat(q));
                     }
                 }
                 _ => {}

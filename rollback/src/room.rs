@@ -60,6 +60,9 @@ use crate::socket::{self, Datagram, GgrsSocket, Queues};
 use crate::world::{RollbackWorld, Snapshot, WorldError};
 use crate::GgrsConfig;
 
+/// A position and rotation.
+type Pose = (glam::Vec3, glam::Quat);
+
 /// Largest snapshot a joiner accepts, bytes.
 pub const MAX_SNAPSHOT_BYTES: u64 = 8 << 20;
 
@@ -960,7 +963,7 @@ impl RollbackPeer {
         let mut advances = 0u64;
         // the newest frame as it was before a rollback (what was drawn), to measure how the
         // re-simulation moved each object there
-        let mut before: Option<(i32, Vec<Option<(glam::Vec3, glam::Quat)>>)> = None;
+        let mut before: Option<(i32, Vec<Option<Pose>>)> = None;
         for r in requests {
             match r {
                 GgrsRequest::SaveGameState { cell, frame } => {
@@ -1019,7 +1022,7 @@ impl RollbackPeer {
     /// How the rollback re-simulation moved each object at the frame drawn before it.
     fn note_correction(
         world: &RollbackWorld,
-        before: &[Option<(glam::Vec3, glam::Quat)>],
+        before: &[Option<Pose>],
         acc: &mut Option<Vec<Correction>>,
         mm: &mut Vec<f32>,
     ) {

@@ -400,10 +400,7 @@ impl RollbackWorld {
     /// its particles' mean): what a renderer extrapolates with between two ticks.
     pub fn object_velocity(&self, i: usize) -> Option<(Vec3, Vec3)> {
         let h = *self.objects.get(i)?.handles.first()?;
-        self.world
-            .bodies
-            .get(h)
-            .map(|b| (b.linvel(), b.angvel()))
+        self.world.bodies.get(h).map(|b| (b.linvel(), b.angvel()))
     }
 
     /// Particle positions of object `i` if it is soft.

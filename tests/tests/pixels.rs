@@ -1074,3 +1074,179 @@ fn magenta_at_label(line: &str, min: u8) -> (Vec<f64>, usize) {
         .count();
     (at, n)
 }
+
+/// The `rollback.check` lines of a peer: (epoch, frame) → checksum.
+fn rollback_checks(p: &Proc) -> std::collections::BTreeMap<(u32, i64), String> {
+    p.stdout()
+        .lines()
+        .filter(|l| l.starts_with("rollback.check "))
+        .map(|l| {
+            (
+                (
+                    field(l, "epoch").parse().unwrap(),
+                    field(l, "frame").parse().unwrap(),
+                ),
+                field(l, "checksum").to_owned(),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn a_desktop_peer_stands_in_a_rollback_room_draws_the_bots_throw_and_agrees_with_it() {
+    require_netns();
+    let dir = scratch("pixels-rollback");
+    let x = Xvfb::start(&dir);
+    // The host is a bot that reaches for the soft box (the scene's object 3), grips it, lifts
+    // it and throws it, every 4 s, starting once the desktop peer is a player.
+    let (host, url) = embedded_host(
+        &dir,
+        "rbpx",
+        &[
+            "--sync",
+            "rollback",
+            "--bot",
+            "throw:3",
+            "--duration",
+            "150",
+        ],
+    );
+    let shots = dir.join("shots");
+    let shots_s = shots.to_str().unwrap().to_owned();
+    let mut desktop = Proc::spawn_env(
+        &dir,
+        "desktop",
+        &[
+            "join",
+            "--room",
+            "rbpx",
+            "--signal",
+            &url,
+            "--sync",
+            "rollback",
+            "--desktop",
+            "--window",
+            "320x240",
+            "--focus",
+            "softbox",
+            "--no-hud",
+            "--screenshot-dir",
+            &shots_s,
+            "--screenshot-every",
+            "0.25",
+            "--screenshots",
+            "400",
+            "--duration",
+            "140",
+            "--quiet",
+        ],
+        &x.env(&[]),
+    );
+    // Both are players of one epoch.
+    let me = desktop.wait_line("joining room=", Duration::from_secs(60));
+    let me = field(&me, "peer").to_owned();
+    let start = Instant::now();
+    loop {
+        let both = desktop
+            .stdout()
+            .lines()
+            .any(|l| l.starts_with("epoch ") && field(l, "players").split(',').count() == 2);
+        if both {
+            break;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "no epoch of two players on the desktop peer\n{}\n{}",
+            desktop.logs(),
+            host.logs()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    // Frames of two players showing the box, then the bot's grab of it (in the desktop's view
+    // too: a grab is a frame of the shared world, the same everywhere).
+    let shot_lines = |p: &Proc| -> Vec<String> {
+        p.stdout()
+            .lines()
+            .filter(|l| {
+                l.starts_with("screenshot ")
+                    && field(l, "players") == "2"
+                    && l.contains(" softbox_px=")
+            })
+            .map(str::to_owned)
+            .collect()
+    };
+    let start = Instant::now();
+    while shot_lines(&desktop).len() < 3 {
+        assert!(
+            start.elapsed() < Duration::from_secs(90),
+            "fewer than 3 screenshots of two players within 90 s\n{}",
+            desktop.logs()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    host.wait_line("grab object=3", Duration::from_secs(30));
+    // A few seconds more: throws seen, checksums confirmed on both sides.
+    std::thread::sleep(Duration::from_secs(6));
+    let lines = shot_lines(&desktop);
+    let first = &lines[0];
+    let rest = Rgb::load(Path::new(field(first, "path")));
+    assert_eq!((rest.w, rest.h), (320, 240), "screenshot size");
+    let bbox = px_box(field(first, "softbox_px"));
+    let orange = rest
+        .region(bbox, 0.0)
+        .filter(|&(x, y)| is_orange(rest.at(x, y)))
+        .count();
+    let area = ((bbox[2] - bbox[0]) * (bbox[3] - bbox[1])).max(1.0);
+    println!("box at {bbox:?}: {orange} orange pixels of {area:.0}");
+    assert!(
+        orange as f64 > 0.3 * area && orange > 200,
+        "the soft box is not drawn where the rollback view projects it ({orange} orange \
+         pixels in {area:.0})\n{first}"
+    );
+    // The throw moves the box: some later frame differs from the first over the box.
+    let most = lines[1..]
+        .iter()
+        .map(|l| {
+            let img = Rgb::load(Path::new(field(l, "path")));
+            let (_, diff, _) = count_changed(&rest, &img, bbox, 4.0);
+            diff
+        })
+        .max()
+        .unwrap_or(0);
+    println!(
+        "{} frames of two players; the most changed over the box: {most} pixels",
+        lines.len()
+    );
+    assert!(
+        most > 300,
+        "no frame shows the box moved by the bot's throw ({most} pixels changed)"
+    );
+    // The drawn world is the shared one: the desktop peer's confirmed frames agree with the
+    // bot's, checksum for checksum.
+    let (h, d) = (rollback_checks(&host), rollback_checks(&desktop));
+    let common: Vec<_> = d.keys().filter(|k| h.contains_key(k)).collect();
+    let differ: Vec<_> = common.iter().filter(|k| h[k] != d[k]).collect();
+    println!(
+        "checksums: {} common frames, {} differ (desktop {me})",
+        common.len(),
+        differ.len()
+    );
+    assert!(
+        common.len() >= 5,
+        "fewer than 5 common checked frames\n{}\n{}",
+        desktop.logs(),
+        host.logs()
+    );
+    assert!(differ.is_empty(), "checksums differ at {differ:?}");
+    assert!(
+        !desktop.stdout().contains("desync "),
+        "a desync on the desktop peer\n{}",
+        desktop.logs()
+    );
+    // A clean end with the summary and its corrections.
+    send_signal("-TERM", &desktop);
+    desktop.wait_exit(Duration::from_secs(20));
+    let s = desktop.wait_line("rollback.summary", Duration::from_secs(1));
+    println!("{s}");
+    assert!(field(&s, "frames").parse::<u64>().unwrap() > 300, "{s}");
+}
