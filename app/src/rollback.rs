@@ -11,7 +11,9 @@
 //! - a stats line a second, and `rollback.summary …` at the end;
 //! - with `--dump FILE`, a dump line at `--dump-hz` and one at the end, in the state-sync
 //!   peer's format (`softsync_peer::dump`): the world as this peer shows it (its newest,
-//!   possibly predicted, frame), objects numbered in the scene's order, owned by nobody.
+//!   possibly predicted, frame), objects numbered in the scene's order, owned by nobody, then
+//!   every player's head and hands (`head`, `hand`, owned by their player) where its last
+//!   input put them.
 
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -57,7 +59,7 @@ fn dump_line(peer: &RollbackPeer, now: softsync_net::Instant) -> Option<DumpLine
     let world = peer.world()?;
     let session = peer.session();
     let scene = peer.scene();
-    let objects = world
+    let mut objects: Vec<DumpObject> = world
         .objects()
         .iter()
         .enumerate()
@@ -83,6 +85,33 @@ fn dump_line(peer: &RollbackPeer, now: softsync_net::Instant) -> Option<DumpLine
             })
         })
         .collect();
+    // every player's head and hands where its last input put them, as a state-sync dump
+    // lists avatar parts: kind `head`/`hand`, owned by their player
+    let first = objects.len();
+    for (i, who) in world.players().iter().enumerate() {
+        let Some(d) = world.player_input(i).map(|p| p.to_device()) else {
+            continue;
+        };
+        for (k, (part, pose)) in [("head", d.head), ("hand", d.hands[0]), ("hand", d.hands[1])]
+            .into_iter()
+            .enumerate()
+        {
+            let Some((pos, rot)) = pose else { continue };
+            objects.push(DumpObject {
+                id: u32::try_from(first + 3 * i + k).unwrap_or(u32::MAX),
+                kind: part.to_owned(),
+                owner: who.0,
+                pos: pos.to_array(),
+                rot: rot.to_array(),
+                particles: Vec::new(),
+                src: None,
+                src_from: None,
+                log: None,
+                topology: None,
+                holders: Vec::new(),
+            });
+        }
+    }
     let t = now.as_secs_f64();
     Some(DumpLine {
         t,

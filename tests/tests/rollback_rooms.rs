@@ -114,15 +114,30 @@ fn a_two_process_rollback_room_under_50_ms_and_5_percent_loss_agrees_60_s_withou
             lines.len(),
             p.logs()
         );
-        let objects = lines[0].objects.len();
+        // the scene's objects (owned by nobody), then the players' heads and hands
+        let scene_objects = |l: &softsync_peer::dump::DumpLine| {
+            l.objects.iter().filter(|o| o.owner == 0).count()
+        };
+        let objects = scene_objects(&lines[0]);
         assert!(objects >= 3, "{:?}", lines[0].objects);
         for l in &lines {
-            assert_eq!(l.objects.len(), objects);
+            assert_eq!(scene_objects(l), objects);
             assert!(l
                 .objects
                 .iter()
                 .all(|o| o.pos.iter().all(|v| v.is_finite())));
         }
+        // both bots' hands, where their inputs put them (both hands tracked: 2 each)
+        assert!(
+            lines.iter().any(|l| [hid, bid].iter().all(|p| l
+                .objects
+                .iter()
+                .filter(|o| o.owner == *p && o.kind == "hand")
+                .count()
+                == 2)),
+            "{}: no line with both players' hands",
+            path.display()
+        );
         assert!(
             lines
                 .iter()

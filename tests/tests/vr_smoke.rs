@@ -490,3 +490,105 @@ fn vr_remote_controllers_grab_and_lift_through_openxr_actions() {
         held[1] - box0[1]
     );
 }
+
+#[test]
+fn a_vr_peer_in_a_rollback_room_plays_with_its_controllers_as_input() {
+    require_netns();
+    let root = vr_root();
+    assert!(
+        root.join(".softsync-vr-sim-ready").exists(),
+        "no simulated-headset chroot at {}: run `scripts/vr-sim setup` (scripts/test does)",
+        root.display()
+    );
+    let dir = scratch("vr-rollback");
+    let host_dump = dir.join("host.jsonl");
+    let (host, url) = embedded_host(
+        &dir,
+        "vrrb",
+        &[
+            "--sync",
+            "rollback",
+            "--bot",
+            "idle",
+            "--duration",
+            "150",
+            "--dump",
+            host_dump.to_str().unwrap(),
+            "--dump-hz",
+            "5",
+        ],
+    );
+    let vr = vr_peer(&dir, &url, "vrrb", &["--sync", "rollback"], &[]);
+    vr.wait_line("xr state=Running", Duration::from_secs(90));
+    let me: u64 = field(
+        &vr.wait_line("joining room=", Duration::from_secs(30)),
+        "peer",
+    )
+    .parse()
+    .unwrap();
+    // one epoch of both
+    let start = Instant::now();
+    while !vr
+        .stdout()
+        .lines()
+        .any(|l| l.starts_with("epoch ") && field(l, "players").split(',').count() == 2)
+    {
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "no epoch of two players on the VR peer\n{}\n{}",
+            vr.logs(),
+            host.logs()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let tracked = vr.wait_line("xr tracked ", Duration::from_secs(60));
+    let left = xyz(field(&tracked, "left"));
+    println!("{tracked}");
+    // the host's world has the VR player's hands where OpenXR put them (the left controller
+    // of Monado's simulated set stands still): the headset's poses are the rollback input
+    let start = Instant::now();
+    let err = loop {
+        let lines = dump(&host_dump);
+        let best = lines
+            .iter()
+            .rev()
+            .take(10)
+            .flat_map(|l| l["objects"].as_array().unwrap().clone())
+            .filter(|o| o["owner"].as_u64() == Some(me) && o["kind"] == "hand")
+            .map(|o| dist(pos(&o), left))
+            .fold(f64::MAX, f64::min);
+        if best < 0.01 {
+            break best;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "the host's rollback world never had the VR player's left hand within 1 cm of \
+             OpenXR's ({best} m)\n{}\n{}",
+            vr.logs(),
+            host.logs()
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    println!("the host has the VR player's left hand {:.1} mm from OpenXR's", err * 1e3);
+    // and they agree on the world, checksum for checksum
+    std::thread::sleep(Duration::from_secs(3));
+    let checks = |p: &Proc| -> std::collections::BTreeMap<String, String> {
+        p.stdout()
+            .lines()
+            .filter(|l| l.starts_with("rollback.check "))
+            .map(|l| {
+                (
+                    format!("{}/{}", field(l, "epoch"), field(l, "frame")),
+                    field(l, "checksum").to_owned(),
+                )
+            })
+            .collect()
+    };
+    let (h, v) = (checks(&host), checks(&vr));
+    let common: Vec<_> = v.keys().filter(|k| h.contains_key(*k)).collect();
+    assert!(common.len() >= 2, "{h:?}\n{v:?}");
+    assert!(
+        common.iter().all(|k| h[*k] == v[*k]),
+        "checksums differ: {h:?}\n{v:?}"
+    );
+}
