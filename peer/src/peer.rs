@@ -15,12 +15,12 @@ mod bounds;
 mod builds;
 mod comanip;
 pub mod cost;
-pub(crate) mod cutter;
+pub mod cutter;
 pub mod keep;
 mod orphans;
 pub mod replay;
 mod show;
-pub(crate) mod topology;
+pub mod topology;
 
 use std::collections::{BTreeSet, HashMap, VecDeque};
 use std::time::Duration;

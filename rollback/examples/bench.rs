@@ -42,7 +42,7 @@ use softsync_peer::{Peer, PeerConfig, Scene};
 use softsync_rollback::room::register;
 use softsync_rollback::script::SqueezeThrow;
 use softsync_rollback::world::bot_hand;
-use softsync_rollback::{RollbackConfig, RollbackPeer};
+use softsync_rollback::{PlayerInput, RollbackConfig, RollbackPeer};
 
 const DT: f32 = 1.0 / 60.0;
 
@@ -413,14 +413,54 @@ fn run(cfg: Config, seconds: f64) -> Outcome {
     }
 }
 
+/// Scalpel strokes (player 0's right hand, trigger held) through the thesis room's soft box
+/// and bunny, then 1 s for the slits to open: a torn room for [`step_cost`].
+fn tear_the_room(w: &mut softsync_rollback::RollbackWorld) {
+    use glam::Quat;
+    let input = |pos: Vec3, trigger: bool| {
+        let d = softsync_peer::DeviceFrame {
+            head: Some((Vec3::new(0.0, 1.5, 0.6), Quat::IDENTITY)),
+            hands: [None, Some((pos, Quat::IDENTITY))],
+            grip: [0.0; 2],
+            trigger: [0.0, if trigger { 1.0 } else { 0.0 }],
+            tool: Default::default(),
+            talk: false,
+        };
+        [PlayerInput::from_device(&d), PlayerInput::default()]
+    };
+    let away = Vec3::new(0.0, 1.1, 0.3);
+    for _ in 0..60 {
+        w.step(&input(away, false));
+    }
+    // the soft box at x 0.32 and the bunny at x −0.32, each crossed at its upper part
+    for (x0, y) in [(0.25f32, 0.83f32), (-0.42, 0.86)] {
+        for f in 0..=40 {
+            w.step(&input(Vec3::new(x0 + 0.18 * f as f32 / 40.0, y, 0.05), true));
+        }
+        for _ in 0..10 {
+            w.step(&input(away, false));
+        }
+    }
+    for _ in 0..60 {
+        w.step(&input(away, false));
+    }
+}
+
 /// What one frame of a scene costs a rollback peer: the median step of the world with two
-/// players' hands, and its save and load; how many frames fit a 60 Hz frame's budget.
-fn step_cost(name: &str) -> (usize, f64, f64, f64) {
+/// players' hands, and its save and load; how many frames fit a 60 Hz frame's budget. With
+/// `torn`, the room's soft box and bunny are torn first ([`tear_the_room`]): save and load
+/// then carry the torn meshes.
+fn step_cost(name: &str, torn: bool) -> (usize, f64, f64, f64) {
     use softsync_rollback::RollbackWorld;
     let assets = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets");
     let sc = Scene::by_name(name, &assets).unwrap();
     let players = [PeerId(1), PeerId(2)];
     let mut w = RollbackWorld::new(&sc, DT, &players).unwrap();
+    if torn {
+        tear_the_room(&mut w);
+        let tears = w.topology_log().len();
+        assert!(tears > 10, "the strokes tore nothing ({tears} log entries)");
+    }
     let particles: usize = w.soft_bodies().iter().map(|(_, b)| b.num_particles()).sum();
     let mut bots = [
         SqueezeThrow::new(players[0], 1),
@@ -469,8 +509,12 @@ fn main() {
         "load_ms",
         "frames_per_16ms",
     ]);
-    for name in ["bench-ball", "thesis-room"] {
-        let (particles, step, save, load) = step_cost(name);
+    for (name, torn) in [
+        ("bench-ball", false),
+        ("thesis-room", false),
+        ("thesis-room-torn", true),
+    ] {
+        let (particles, step, save, load) = step_cost(name.trim_end_matches("-torn"), torn);
         // a re-simulated frame costs a load (once), a step and a save
         let fit = (16.7 / (step + save)).floor();
         println!(

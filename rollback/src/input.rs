@@ -8,6 +8,7 @@ use glam::{Quat, Vec3};
 use serde::{Deserialize, Serialize};
 use softsync_net::quant::{dequantize_quat, quantize_quat, QuatQ};
 use softsync_peer::device::DeviceFrame;
+use softsync_peer::HandTool;
 
 /// Bits per rotation component (the state codec's default for objects).
 pub const ROT_BITS: u32 = 11;
@@ -77,6 +78,11 @@ pub struct PlayerInput {
     pub grip: [u8; 2],
     /// Trigger per hand, 0..=255.
     pub trigger: [u8; 2],
+    /// Per hand (bit 0 left, bit 1 right): its trigger works the cutter (a sweep cuts the
+    /// body in two) rather than the scalpel (the hand's path tears it). A stroke or a cut is
+    /// part of the input this way: the world turns the hand's path into tears and cuts the
+    /// same on every peer (`world.rs`).
+    pub cutter: u8,
 }
 
 fn unit(v: f32) -> u8 {
@@ -96,6 +102,9 @@ impl PlayerInput {
             parts: [part(d.head), part(d.hands[0]), part(d.hands[1])],
             grip: [unit(d.grip[0]), unit(d.grip[1])],
             trigger: [unit(d.trigger[0]), unit(d.trigger[1])],
+            cutter: (0..2)
+                .filter(|&h| d.tool[h] == HandTool::Cutter)
+                .fold(0, |bits, h| bits | 1 << h),
         }
     }
 
@@ -112,9 +121,14 @@ impl PlayerInput {
                 f32::from(self.trigger[0]) / 255.0,
                 f32::from(self.trigger[1]) / 255.0,
             ],
-            // rollback rooms do not cut: the input carries no tool (nor the talk key: voice
-            // is not part of the game's input)
-            tool: Default::default(),
+            tool: [0, 1].map(|h| {
+                if self.cutter & 1 << h != 0 {
+                    HandTool::Cutter
+                } else {
+                    HandTool::Scalpel
+                }
+            }),
+            // the talk key is not part of the game's input (voice is the room's, not ggrs's)
             talk: false,
         }
     }
@@ -154,5 +168,14 @@ mod tests {
         assert_eq!(i.grip, [0, 255]);
         assert_eq!(i.trigger, [0, 0]);
         assert_eq!(PlayerInput::default().to_device().grip, [0.0, 0.0]);
+    }
+
+    #[test]
+    fn each_hands_tool_crosses_as_a_bit() {
+        let mut d = PlayerInput::default().to_device();
+        d.tool = [HandTool::Scalpel, HandTool::Cutter];
+        let i = PlayerInput::from_device(&d);
+        assert_eq!(i.cutter, 0b10);
+        assert_eq!(i.to_device().tool, d.tool);
     }
 }

@@ -7,17 +7,40 @@
 //! into the same floats everywhere; hand sample times from the frame number, never a clock;
 //! players in one agreed order; no iteration over unordered maps in the step.
 //!
+//! # Cuts and tears
+//! A scalpel stroke or a cutter's sweep is part of a player's input: its hand's pose, its
+//! trigger and which tool the trigger works ([`PlayerInput::cutter`]). Each step, after the
+//! hands moved, every player's hands (players in their agreed order, left then right) work
+//! their blades as a state-sync peer's do (`softsync_peer::peer::topology`, `…::cutter`): a
+//! scalpel held in a soft body tears it every 5 mm of the tip's path (and where the path
+//! turns), mapped through the body's deformation into its rest frame; letting go lifts it; a
+//! cutter swept 2 cm through a body cuts it in two by the sweep's plane, and each piece after
+//! the first becomes a new object at the end of [`RollbackWorld::objects`]. Each change is
+//! quantised as the wire's topology events are and kept in the world's topology log (object,
+//! event). The blades' strokes, the objects and the log's length are part of [`WorldState`],
+//! so rolling back across a tear or a cut restores the mesh and objects before it exactly;
+//! a [`Snapshot`] carries the log, and a world rebuilt from it replays the log on the scene
+//! before taking the bodies' states.
+//!
 //! [`WorldState`] is what ggrs saves and loads (a clone of every part that changes: cost
 //! measured by the `rollback` bench). [`Snapshot`] is the portable state a membership change
 //! starts from: positions and velocities of every object's bodies, as bits. Every member —
 //! the host, the others, a late joiner — rebuilds the world from the scene and the same
 //! snapshot, so their worlds are identical again whatever rapier's caches held.
 
+use std::sync::Arc;
+
 use glam::{Quat, Vec3};
 use serde::{Deserialize, Serialize};
 use softsync_interaction::{AllLocal, HandConfig, HandInput, HandSample, Interaction};
 use softsync_net::PeerId;
-use softsync_peer::{build_body, Kind, LocalBody, Scene};
+use softsync_net::wire::TopologyEvent;
+use softsync_peer::peer::cutter::sweep_plane;
+use softsync_peer::peer::topology::{
+    plane_of, scalpel_samples, segment_of, SCALPEL_BLADE_M, SCALPEL_TRIGGER,
+};
+use softsync_peer::{build_body, HandTool, Kind, LocalBody, Scene};
+use softsync_softbody::BuildStep;
 use softsync_softbody::rapier3d::dynamics::{
     ImpulseJointSet, IslandManager, MultibodyJointSet, RigidBodySet,
 };
@@ -38,7 +61,7 @@ pub enum WorldError {
     Snapshot(String),
 }
 
-/// One of the scene's objects in the world.
+/// One of the room's objects in the world: the scene's, in its order, then a cut's pieces.
 #[derive(Clone, Debug)]
 pub struct WorldObject {
     /// Its class.
@@ -49,6 +72,81 @@ pub struct WorldObject {
     pub handles: Vec<RigidBodyHandle>,
 }
 
+/// One entry of a rollback world's topology log: object `object` (index) changed by `event`
+/// (rest frame, quantised as on the wire).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LogEntry {
+    /// The object's index in [`RollbackWorld::objects`] when it changed.
+    pub object: u32,
+    /// What happened to it.
+    pub event: TopologyEvent,
+}
+
+/// The topology log as a persistent list: a save shares it (one pointer), an append adds a
+/// node, a load takes the saved list back, whatever happened since.
+#[derive(Clone, Debug, Default)]
+struct TopologyLog {
+    head: Option<Arc<LogNode>>,
+}
+
+#[derive(Debug)]
+struct LogNode {
+    entry: LogEntry,
+    prev: Option<Arc<LogNode>>,
+    len: usize,
+}
+
+impl TopologyLog {
+    fn len(&self) -> usize {
+        self.head.as_ref().map_or(0, |n| n.len)
+    }
+
+    fn push(&mut self, entry: LogEntry) {
+        let prev = self.head.take();
+        let len = prev.as_ref().map_or(0, |n| n.len) + 1;
+        self.head = Some(Arc::new(LogNode { entry, prev, len }));
+    }
+
+    fn to_vec(&self) -> Vec<LogEntry> {
+        let mut out = Vec::with_capacity(self.len());
+        let mut at = self.head.as_deref();
+        while let Some(n) = at {
+            out.push(n.entry.clone());
+            at = n.prev.as_deref();
+        }
+        out.reverse();
+        out
+    }
+}
+
+impl Drop for TopologyLog {
+    /// Iteratively: a long log dropped node by node would recurse once per entry.
+    fn drop(&mut self) {
+        let mut at = self.head.take();
+        while let Some(n) = at {
+            at = match Arc::try_unwrap(n) {
+                Ok(mut node) => node.prev.take(),
+                Err(_) => None,
+            };
+        }
+    }
+}
+
+/// A hand's blade between steps: its scalpel's stroke and its cutter's sweep.
+#[derive(Clone, Debug, Default)]
+struct Blade {
+    /// The object the scalpel is in.
+    target: Option<usize>,
+    /// The tip where the stroke's last segment ended.
+    last: Option<Vec3>,
+    /// The tip a step ago.
+    prev: Option<Vec3>,
+    /// The object the cutter entered and where its tip was then.
+    entered: Option<(usize, Vec3)>,
+    /// This press of the cutter cut already (or gave up).
+    done: bool,
+}
+
 #[derive(Clone, Debug)]
 struct Player {
     id: PeerId,
@@ -57,6 +155,8 @@ struct Player {
     last: [Option<(Vec3, Quat)>; 2],
     /// The last input this player's frame was stepped with (what others draw of its avatar).
     input: PlayerInput,
+    /// Each hand's blade.
+    blades: [Blade; 2],
 }
 
 /// Everything a step changes, as ggrs saves and loads it.
@@ -72,6 +172,9 @@ pub struct WorldState {
     multibody_joints: MultibodyJointSet,
     soft: SoftBodySet,
     players: Vec<Player>,
+    objects: Vec<WorldObject>,
+    /// The topology log up to this state (shared with the world's: see [`TopologyLog`]).
+    log: TopologyLog,
 }
 
 /// The portable state a membership change starts from (bincode on the wire).
@@ -82,7 +185,13 @@ pub struct Snapshot {
     /// Per object body (in [`WorldObject::handles`] order, objects in scene order):
     /// translation, rotation (xyzw), linear and angular velocity, as `f32` bits.
     pub bodies: Vec<[u32; 13]>,
+    /// The topology log: replayed on the scene's objects before the bodies' states are set.
+    #[serde(default)]
+    pub log: Vec<LogEntry>,
 }
+
+/// Topology entries a snapshot may carry (a hostile one is refused before any replay).
+pub const MAX_LOG_ENTRIES: usize = 100_000;
 
 /// The world of a rollback room.
 pub struct RollbackWorld {
@@ -93,6 +202,11 @@ pub struct RollbackWorld {
     objects: Vec<WorldObject>,
     players: Vec<Player>,
     frame: i32,
+    /// Every topology change so far, in order (see the module docs).
+    log: TopologyLog,
+    /// Blade actions the world refused (a segment a tear refused, a plane that misses): the
+    /// same on every peer, so they change nothing anywhere.
+    refused: u64,
     /// A deliberate non-determinism for the tests that show it is caught: when set, every
     /// step nudges the first object by a value that differs between a step and its re-run.
     debug_noise: Option<u32>,
@@ -150,6 +264,8 @@ impl RollbackWorld {
             objects,
             players: Vec::new(),
             frame: 0,
+            log: TopologyLog::default(),
+            refused: 0,
             debug_noise: None,
             #[cfg(feature = "testing")]
             debug_kick: false,
@@ -166,6 +282,16 @@ impl RollbackWorld {
         snapshot: &Snapshot,
     ) -> Result<Self, WorldError> {
         let mut w = Self::new(scene, dt_s, players)?;
+        if snapshot.log.len() > MAX_LOG_ENTRIES {
+            return Err(WorldError::Snapshot(format!(
+                "{} topology entries (at most {MAX_LOG_ENTRIES})",
+                snapshot.log.len()
+            )));
+        }
+        for (k, e) in snapshot.log.iter().enumerate() {
+            w.record(e.object as usize, e.event.clone())
+                .map_err(|why| WorldError::Snapshot(format!("topology entry {k}: {why}")))?;
+        }
         let n: usize = w.objects.iter().map(|o| o.handles.len()).sum();
         if n != snapshot.bodies.len() {
             return Err(WorldError::Snapshot(format!(
@@ -217,6 +343,7 @@ impl RollbackWorld {
                 hands,
                 last: [None, None],
                 input: PlayerInput::default(),
+                blades: Default::default(),
             });
         }
         Ok(())
@@ -228,6 +355,7 @@ impl RollbackWorld {
         Snapshot {
             frame: self.frame,
             bodies,
+            log: self.log.to_vec(),
         }
     }
 
@@ -235,7 +363,8 @@ impl RollbackWorld {
     pub fn snapshot_of(&self, state: &WorldState) -> Snapshot {
         Snapshot {
             frame: state.frame,
-            bodies: body_bits(&self.objects, &state.bodies),
+            bodies: body_bits(&state.objects, &state.bodies),
+            log: state.log.to_vec(),
         }
     }
 
@@ -275,6 +404,12 @@ impl RollbackWorld {
                 .update(&mut self.world, &mut self.soft, &AllLocal, dt);
             while p.hands.poll_event().is_some() {}
         }
+        for i in 0..self.players.len() {
+            let d = self.players[i].input.to_device();
+            for h in 0..2 {
+                self.work_blade(i, h, &d);
+            }
+        }
         #[cfg(feature = "testing")]
         if std::mem::take(&mut self.debug_kick) {
             if let Some(h) = self.objects.first().and_then(|o| o.handles.first()) {
@@ -310,6 +445,8 @@ impl RollbackWorld {
             multibody_joints: w.multibody_joints.clone(),
             soft: self.soft.clone(),
             players: self.players.clone(),
+            objects: self.objects.clone(),
+            log: self.log.clone(),
         }
     }
 
@@ -327,17 +464,29 @@ impl RollbackWorld {
         w.multibody_joints = s.multibody_joints.clone();
         self.soft = s.soft.clone();
         self.players = s.players.clone();
+        self.objects = s.objects.clone();
+        self.log = s.log.clone();
     }
 
     /// A hash of every body's position, rotation and velocities (bits) and the frame: equal on
     /// two peers exactly when their worlds agree.
     pub fn checksum(&self) -> u128 {
-        checksum(self.frame, &self.world.bodies)
+        checksum(self.frame, self.log.len(), &self.world.bodies)
     }
 
     /// The checksum of a saved state.
     pub fn checksum_of(state: &WorldState) -> u128 {
-        checksum(state.frame, &state.bodies)
+        checksum(state.frame, state.log.len(), &state.bodies)
+    }
+
+    /// The topology log so far (see the module docs).
+    pub fn topology_log(&self) -> Vec<LogEntry> {
+        self.log.to_vec()
+    }
+
+    /// Blade actions refused so far (the same on every peer).
+    pub fn refused_blades(&self) -> u64 {
+        self.refused
     }
 
     /// Tests: a non-determinism once (the next step pushes the first body aside).
@@ -427,9 +576,10 @@ impl RollbackWorld {
     }
 }
 
-fn checksum(frame: i32, bodies: &RigidBodySet) -> u128 {
+fn checksum(frame: i32, log_len: usize, bodies: &RigidBodySet) -> u128 {
     let mut h = Fnv128::new();
     h.word(frame as u32);
+    h.word(log_len as u32);
     for (_, b) in bodies.iter() {
         let t = b.translation();
         let r = *b.rotation();
@@ -451,6 +601,212 @@ pub fn bot_hand() -> HandConfig {
         physical_controller: false,
         hover_radius_m: 0.03,
         ..HandConfig::default()
+    }
+}
+
+impl RollbackWorld {
+    /// Player `p`'s hand `h` works its blade this step (see the module docs): the same rules
+    /// as a state-sync peer's scalpel and cutter, on the world's own bodies.
+    fn work_blade(&mut self, p: usize, h: usize, d: &softsync_peer::DeviceFrame) {
+        let Some((tip, rot)) = d.hands[h] else {
+            self.lift_blade(p, h);
+            return;
+        };
+        let blade = rot * Vec3::Y * SCALPEL_BLADE_M;
+        let cutter = d.tool[h] == HandTool::Cutter;
+        // the cutter: one cut per press, once the tip has swept far enough through a body
+        if cutter && d.trigger[h] >= SCALPEL_TRIGGER {
+            let b = &self.players[p].blades[h];
+            if !b.done {
+                match b.entered {
+                    None => {
+                        let at = self.soft_object_at(tip);
+                        self.players[p].blades[h].entered = at.map(|i| (i, tip));
+                    }
+                    Some((i, entry)) => {
+                        if let Some((point, normal)) = sweep_plane(entry, tip, blade) {
+                            self.players[p].blades[h].done = true;
+                            if self.cut(i, point, normal).is_err() {
+                                self.refused += 1;
+                            }
+                        }
+                    }
+                }
+            }
+        } else {
+            let b = &mut self.players[p].blades[h];
+            (b.entered, b.done) = (None, false);
+        }
+        // the scalpel
+        let trigger = if cutter { 0.0 } else { d.trigger[h] };
+        if trigger < SCALPEL_TRIGGER {
+            self.lift_blade(p, h);
+            return;
+        }
+        let target = match self.players[p].blades[h].target {
+            Some(i) if i < self.objects.len() => i,
+            _ => match self.soft_object_at(tip) {
+                Some(i) => {
+                    let b = &mut self.players[p].blades[h];
+                    (b.target, b.last, b.prev) = (Some(i), None, None);
+                    i
+                }
+                None => return,
+            },
+        };
+        let b = &mut self.players[p].blades[h];
+        let prev = b.prev.replace(tip);
+        let Some(mut last) = b.last else {
+            b.last = Some(tip);
+            return;
+        };
+        for s in scalpel_samples(last, prev.unwrap_or(last), tip) {
+            if self.tear(target, last, s, blade).is_err() {
+                self.refused += 1;
+            }
+            last = s;
+        }
+        self.players[p].blades[h].last = Some(last);
+    }
+
+    /// The scalpel of player `p`'s hand `h` leaves the body: its stroke ends.
+    fn lift_blade(&mut self, p: usize, h: usize) {
+        let b = &mut self.players[p].blades[h];
+        let stroke = (b.target.take(), b.last.take());
+        b.prev = None;
+        if let (Some(i), Some(_)) = stroke {
+            if self.record(i, TopologyEvent::Lift).is_err() {
+                self.refused += 1;
+            }
+        }
+    }
+
+    /// The soft object whose drawn surface's bounds (1 cm wider) hold `p`, nearest center
+    /// first (ties: the lower index).
+    fn soft_object_at(&self, p: Vec3) -> Option<usize> {
+        let mut best: Option<(f32, usize)> = None;
+        for (i, o) in self.objects.iter().enumerate() {
+            let LocalBody::Soft(h) = o.body else { continue };
+            let Some(b) = self.soft.get(h) else { continue };
+            let (lo, hi) = softsync_softbody::mesh::bounds(b.render_positions());
+            let pad = Vec3::splat(0.01);
+            if !(p.cmpge(lo - pad).all() && p.cmple(hi + pad).all()) {
+                continue;
+            }
+            let d = p.distance((lo + hi) * 0.5);
+            if best.is_none_or(|(bd, _)| d < bd) {
+                best = Some((d, i));
+            }
+        }
+        best.map(|(_, i)| i)
+    }
+
+    /// Tears object `i` along the tip's move `from → to` (room frame), through its
+    /// deformation now, quantised into its rest frame as the wire's events are.
+    fn tear(&mut self, i: usize, from: Vec3, to: Vec3, blade: Vec3) -> Result<(), String> {
+        let LocalBody::Soft(h) = self.objects.get(i).ok_or("no such object")?.body else {
+            return Err("not a soft body".into());
+        };
+        let b = self.soft.get(h).ok_or("no body")?;
+        let map = |x: Vec3| b.rest_point(&self.world, x);
+        let (from_r, to_r) = (map(from), map(to));
+        let blade_r = map(to + blade) - to_r;
+        let q = |v: Vec3| TopologyEvent::quantise(v.to_array()).ok_or("out of range");
+        let event = TopologyEvent::Tear {
+            from: q(from_r)?,
+            to: q(to_r)?,
+            blade: q(blade_r)?,
+        };
+        self.record(i, event)
+    }
+
+    /// Cuts object `i` by the plane through `point` with `normal` (room frame).
+    fn cut(&mut self, i: usize, point: Vec3, normal: Vec3) -> Result<(), String> {
+        let LocalBody::Soft(h) = self.objects.get(i).ok_or("no such object")?.body else {
+            return Err("not a soft body".into());
+        };
+        let (pos, rot) = self.soft.get(h).ok_or("no body")?.center_pose(&self.world);
+        let inv = rot.inverse();
+        let event = TopologyEvent::Cut {
+            point: TopologyEvent::quantise((inv * (point - pos)).to_array())
+                .ok_or("cut point out of range")?,
+            normal: TopologyEvent::quantise_normal((inv * normal).to_array())
+                .ok_or("cut normal is zero")?,
+            keep: 0,
+        };
+        self.record(i, event)
+    }
+
+    /// Applies `event` to object `i` and logs it.
+    fn record(&mut self, i: usize, event: TopologyEvent) -> Result<(), String> {
+        self.apply(i, &event)?;
+        self.log.push(LogEntry {
+            object: u32::try_from(i).map_err(|e| e.to_string())?,
+            event,
+        });
+        Ok(())
+    }
+
+    /// Applies a topology event to object `i` (live, or replaying a snapshot's log): a cut
+    /// replaces the body by its first piece and appends the others as new objects of its
+    /// class. Refused with why, changing nothing.
+    fn apply(&mut self, i: usize, event: &TopologyEvent) -> Result<(), String> {
+        let o = self.objects.get(i).ok_or("no such object")?;
+        let (kind, LocalBody::Soft(h)) = (o.kind, o.body) else {
+            return Err("not a soft body".into());
+        };
+        match event {
+            TopologyEvent::Tear { .. } => {
+                let seg = segment_of(event).ok_or("not a tear")?;
+                seg.validate().map_err(|e| e.to_string())?;
+                BuildStep::Tear(seg).apply(&mut self.soft, &mut self.world, h)?;
+                self.refresh_handles(i);
+            }
+            TopologyEvent::Lift => {
+                BuildStep::Lift.apply(&mut self.soft, &mut self.world, h)?;
+            }
+            TopologyEvent::Cut { .. } => {
+                let plane = plane_of(event).map_err(|e| e.0)?;
+                let pieces = self
+                    .soft
+                    .cut(h, &mut self.world, &plane)
+                    .map_err(|e| e.to_string())?;
+                let mut pieces = pieces.into_iter();
+                if let Some(first) = pieces.next() {
+                    self.objects[i].body = LocalBody::Soft(first);
+                    self.refresh_handles(i);
+                }
+                for piece in pieces {
+                    self.objects.push(WorldObject {
+                        kind,
+                        body: LocalBody::Soft(piece),
+                        handles: Vec::new(),
+                    });
+                    self.refresh_handles(self.objects.len() - 1);
+                }
+            }
+            TopologyEvent::Resolution { .. } => {
+                return Err("a rollback world has no resolution changes".into())
+            }
+        }
+        Ok(())
+    }
+
+    /// Object `i`'s rapier bodies again (a tear adds particles, a cut makes new bodies).
+    fn refresh_handles(&mut self, i: usize) {
+        let Some(o) = self.objects.get(i) else { return };
+        if let LocalBody::Soft(h) = o.body {
+            let handles = self
+                .soft
+                .get(h)
+                .map(|b| {
+                    std::iter::once(b.center())
+                        .chain(b.particles().iter().copied())
+                        .collect()
+                })
+                .unwrap_or_default();
+            self.objects[i].handles = handles;
+        }
     }
 }
 

@@ -45,7 +45,7 @@ pub(crate) struct Sweep {
 /// The plane through the point `entry` and the blade's ends now (`tip`, `tip + blade`), as
 /// (a point on it, its unit normal); `None` until the tip is [`CUT_SWEEP_M`] from `entry`
 /// and the three points are not nearly on one line.
-pub(crate) fn sweep_plane(entry: Vec3, tip: Vec3, blade: Vec3) -> Option<(Vec3, Vec3)> {
+pub fn sweep_plane(entry: Vec3, tip: Vec3, blade: Vec3) -> Option<(Vec3, Vec3)> {
     let sweep = tip - entry;
     if sweep.length() < CUT_SWEEP_M || blade.length() < 1e-4 {
         return None;

@@ -35,7 +35,7 @@ pub const SCALPEL_TURN_DEG: f32 = 30.0;
 /// tip was at `prev` a frame ago and is at `tip` now. A sample every [`SCALPEL_SAMPLE_M`] of
 /// the way from `last` (the tip itself when it has gone that far), and the previous tip when
 /// the path turned there by more than [`SCALPEL_TURN_DEG`] (at least 1 mm from `last`).
-pub(crate) fn scalpel_samples(last: Vec3, prev: Vec3, tip: Vec3) -> Vec<Vec3> {
+pub fn scalpel_samples(last: Vec3, prev: Vec3, tip: Vec3) -> Vec<Vec3> {
     let mut out = Vec::new();
     let mut from = last;
     let (before, after) = (prev - last, tip - prev);
@@ -384,7 +384,7 @@ impl Peer {
 }
 
 /// The plane a cut event names, in metres.
-pub(crate) fn plane_of(event: &TopologyEvent) -> Result<CutPlane, TopologyError> {
+pub fn plane_of(event: &TopologyEvent) -> Result<CutPlane, TopologyError> {
     let TopologyEvent::Cut { point, normal, .. } = event else {
         return Err(TopologyError("not a cut".into()));
     };
@@ -400,7 +400,7 @@ pub(crate) fn plane_of(event: &TopologyEvent) -> Result<CutPlane, TopologyError>
 }
 
 /// A tear event's segment, in metres.
-pub(crate) fn segment_of(event: &TopologyEvent) -> Option<TearSegment> {
+pub fn segment_of(event: &TopologyEvent) -> Option<TearSegment> {
     let TopologyEvent::Tear { from, to, blade } = event else {
         return None;
     };
