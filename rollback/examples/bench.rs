@@ -435,7 +435,10 @@ fn tear_the_room(w: &mut softsync_rollback::RollbackWorld) {
     // the soft box at x 0.32 and the bunny at x −0.32, each crossed at its upper part
     for (x0, y) in [(0.25f32, 0.83f32), (-0.42, 0.86)] {
         for f in 0..=40 {
-            w.step(&input(Vec3::new(x0 + 0.18 * f as f32 / 40.0, y, 0.05), true));
+            w.step(&input(
+                Vec3::new(x0 + 0.18 * f as f32 / 40.0, y, 0.05),
+                true,
+            ));
         }
         for _ in 0..10 {
             w.step(&input(away, false));

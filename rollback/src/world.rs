@@ -33,19 +33,19 @@ use std::sync::Arc;
 use glam::{Quat, Vec3};
 use serde::{Deserialize, Serialize};
 use softsync_interaction::{AllLocal, HandConfig, HandInput, HandSample, Interaction};
-use softsync_net::PeerId;
 use softsync_net::wire::TopologyEvent;
+use softsync_net::PeerId;
 use softsync_peer::peer::cutter::sweep_plane;
 use softsync_peer::peer::topology::{
     plane_of, scalpel_samples, segment_of, SCALPEL_BLADE_M, SCALPEL_TRIGGER,
 };
 use softsync_peer::{build_body, HandTool, Kind, LocalBody, Scene};
-use softsync_softbody::BuildStep;
 use softsync_softbody::rapier3d::dynamics::{
     ImpulseJointSet, IslandManager, MultibodyJointSet, RigidBodySet,
 };
 use softsync_softbody::rapier3d::geometry::{BroadPhaseBvh, ColliderSet, NarrowPhase};
 use softsync_softbody::rapier3d::prelude::{PhysicsWorld, Pose, RigidBodyHandle};
+use softsync_softbody::BuildStep;
 use softsync_softbody::SoftBodySet;
 
 use crate::input::PlayerInput;

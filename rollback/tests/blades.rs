@@ -67,7 +67,12 @@ fn sweep() -> Vec<[PlayerInput; 2]> {
     }
     for f in 0..=20 {
         let y = 0.90 - 0.10 * f as f32 / 20.0;
-        v.push(hand(Vec3::new(0.32, y, 0.03), blade_z, true, HandTool::Cutter));
+        v.push(hand(
+            Vec3::new(0.32, y, 0.03),
+            blade_z,
+            true,
+            HandTool::Cutter,
+        ));
     }
     for _ in 0..40 {
         v.push(hand(away, blade_z, false, HandTool::Cutter));

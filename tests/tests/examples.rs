@@ -199,3 +199,61 @@ fn a_users_bevy_app_hosts_and_a_bot_of_the_binary_is_welcomed_in_its_message_typ
     assert_eq!(bot.wait_exit(Duration::from_secs(30)), 0, "{}", bot.logs());
     app.kill();
 }
+
+#[test]
+fn a_users_app_runs_either_sync_mode_with_the_same_systems() {
+    require_netns();
+    // where `either_mode` holds its right hand (its HAND_AT)
+    let hand_at = [0.1, 1.05, 0.45];
+    for mode in ["state", "rollback"] {
+        let dir = scratch(&format!("example-either-{mode}"));
+        let dump = dir.join("host.jsonl");
+        let room = format!("either{mode}");
+        let mut extra = vec![
+            "--duration",
+            "60",
+            "--dump",
+            dump.to_str().unwrap(),
+            "--dump-hz",
+            "5",
+        ];
+        if mode == "rollback" {
+            extra.extend(["--sync", "rollback", "--bot", "idle"]);
+        }
+        let (mut host, url) = embedded_host(&dir, &room, &extra);
+        let app_args = ["join", &room, &url, "--sync", mode, "--seconds", "40"];
+        let mut app = Proc::spawn_program(&dir, "app", &example("either_mode"), &app_args, &[]);
+        let me = app.peer_id();
+        // the same systems see the scene's objects as entities (7, 3 of them soft) ...
+        app.wait_line("objects n=7 soft=3", Duration::from_secs(40));
+        // ... and drive the hands: the host has the app's right hand where the app holds it
+        let start = std::time::Instant::now();
+        let err = loop {
+            let best = read_dump(&dump)
+                .iter()
+                .rev()
+                .take(10)
+                .flat_map(|l| l["objects"].as_array().cloned().unwrap_or_default())
+                .filter(|o| o["owner"].as_u64() == Some(me) && o["kind"] == "hand")
+                .map(|o| dist(common::dump::pos(&o), hand_at))
+                .fold(f64::MAX, f64::min);
+            if best < 0.01 {
+                break best;
+            }
+            assert!(
+                start.elapsed() < Duration::from_secs(40),
+                "{mode}: the host never had the app's hand within 1 cm of where it holds it \
+                 ({best} m)\n{}\n{}",
+                app.logs(),
+                host.logs()
+            );
+            std::thread::sleep(Duration::from_millis(200));
+        };
+        println!(
+            "{mode}: the host has the app's hand {:.1} mm from where it holds it",
+            err * 1e3
+        );
+        app.kill();
+        host.kill();
+    }
+}

@@ -115,9 +115,8 @@ fn a_two_process_rollback_room_under_50_ms_and_5_percent_loss_agrees_60_s_withou
             p.logs()
         );
         // the scene's objects (owned by nobody), then the players' heads and hands
-        let scene_objects = |l: &softsync_peer::dump::DumpLine| {
-            l.objects.iter().filter(|o| o.owner == 0).count()
-        };
+        let scene_objects =
+            |l: &softsync_peer::dump::DumpLine| l.objects.iter().filter(|o| o.owner == 0).count();
         let objects = scene_objects(&lines[0]);
         assert!(objects >= 3, "{:?}", lines[0].objects);
         for l in &lines {

@@ -569,7 +569,10 @@ fn a_vr_peer_in_a_rollback_room_plays_with_its_controllers_as_input() {
         );
         std::thread::sleep(Duration::from_millis(200));
     };
-    println!("the host has the VR player's left hand {:.1} mm from OpenXR's", err * 1e3);
+    println!(
+        "the host has the VR player's left hand {:.1} mm from OpenXR's",
+        err * 1e3
+    );
     // and they agree on the world, checksum for checksum
     std::thread::sleep(Duration::from_secs(3));
     let checks = |p: &Proc| -> std::collections::BTreeMap<String, String> {
