@@ -289,7 +289,7 @@ impl RollbackWorld {
             )));
         }
         for (k, e) in snapshot.log.iter().enumerate() {
-            w.record(e.object as usize, e.event.clone())
+            w.record(e.object as usize, e.event)
                 .map_err(|why| WorldError::Snapshot(format!("topology entry {k}: {why}")))?;
         }
         let n: usize = w.objects.iter().map(|o| o.handles.len()).sum();
