@@ -540,7 +540,7 @@ fn peer(a: PeerArgs) -> Result<ExitCode, Failure> {
             None => Scene::by_name(DEFAULT_SCENE, &assets_dir(a.assets.as_deref()))
                 .map_err(Failure::usage)?,
         };
-        return rollback::run(&a, front, scene, opts, dump);
+        return rollback::run(&a, front, scene, opts, dump, bot);
     }
     // A desktop or VR peer enters the room once its front end renders (`Room::set_ready`).
     opts.start_ready = front == FrontEnd::Headless;

@@ -24,7 +24,7 @@ use softsync_bevy::{RollbackHooks, RollbackRoom, RoomOptions, TickInfo};
 use softsync_net::Event;
 use softsync_peer::dump::{Dump, DumpLine, DumpObject};
 use softsync_peer::Scene;
-use softsync_rollback::script::SqueezeThrow;
+use softsync_rollback::script::{ScriptedPlayer, SqueezeThrow};
 use softsync_rollback::{PlayerInput, RollbackConfig, RollbackEvent, RollbackPeer};
 
 use crate::cli::{FrontEnd, PeerArgs};
@@ -35,6 +35,8 @@ enum Script {
     Idle,
     /// The squeeze-and-throw motion, starting with this object (default: from our id).
     Squeeze(Option<usize>),
+    /// A script of the bot language (over the front end's device, if any).
+    Language(Box<softsync_peer::Bot>),
 }
 
 /// Flags a rollback peer cannot honour: refused with the reason, never ignored.
@@ -59,12 +61,31 @@ fn dump_line(peer: &RollbackPeer, now: softsync_net::Instant) -> Option<DumpLine
     let world = peer.world()?;
     let session = peer.session();
     let scene = peer.scene();
+    let log = world.topology_log();
     let mut objects: Vec<DumpObject> = world
         .objects()
         .iter()
         .enumerate()
         .filter_map(|(i, o)| {
             let (pos, rot) = world.object_pose(i)?;
+            // soft bodies: the log entries that changed it and its rest mesh's hash, as a
+            // state-sync dump has them (equal hashes: the identical torn or cut mesh)
+            let soft = match o.body {
+                softsync_peer::LocalBody::Soft(h) => world.soft_bodies().get(h),
+                _ => None,
+            };
+            let topology = soft.map(|b| {
+                let mesh = softsync_softbody::Mesh {
+                    positions: b.rest_vertices().to_vec(),
+                    normals: None,
+                    triangles: b.welded().triangles.clone(),
+                };
+                format!(
+                    "{:016x}",
+                    softsync_softbody::cut::topology_hash(&mesh, 1e-5)
+                )
+            });
+            let entries = log.iter().filter(|e| e.object as usize == i).count();
             Some(DumpObject {
                 id: u32::try_from(i).ok()?,
                 kind: scene.name_of(o.kind).to_owned(),
@@ -79,8 +100,8 @@ fn dump_line(peer: &RollbackPeer, now: softsync_net::Instant) -> Option<DumpLine
                     .collect(),
                 src: None,
                 src_from: None,
-                log: None,
-                topology: None,
+                log: soft.map(|_| entries as u32),
+                topology,
                 holders: Vec::new(),
             })
         })
@@ -303,6 +324,7 @@ pub fn run(
     scene: Scene,
     opts: RoomOptions,
     dump: Option<Dump>,
+    bot: Option<softsync_peer::Bot>,
 ) -> Result<ExitCode, Failure> {
     refuse_unhonoured(a)?;
     let rcfg = RollbackConfig {
@@ -315,12 +337,14 @@ pub fn run(
         Some(b) if b == "squeeze" || crate::throw_slot(b).is_some() => {
             Some(Script::Squeeze(crate::throw_slot(b).flatten()))
         }
-        Some(other) => {
-            return Err(Failure::usage(format!(
-                "--bot {other:?}: a rollback peer runs the built-in `throw` (also `squeeze`) or \
-                 `idle` (the script language drives a state-sync peer)"
-            )))
-        }
+        Some(other) => match bot {
+            Some(b) => Some(Script::Language(Box::new(b))),
+            None => {
+                return Err(Failure::usage(format!(
+                    "--bot {other:?}: not a script, a built-in or a file"
+                )))
+            }
+        },
     };
     let failure = Arc::new(Mutex::new(None));
     let joined = Arc::new(AtomicBool::new(a.host));
@@ -355,22 +379,32 @@ pub fn run(
         }));
     }
     // the bot's hands (else: the front end's device, or none)
-    let mut bot: Option<SqueezeThrow> = None;
+    let mut squeeze: Option<SqueezeThrow> = None;
     let idle =
         matches!(script, Some(Script::Idle)) || (script.is_none() && front == FrontEnd::Headless);
     if idle {
-        hooks.input = Some(Box::new(|_, _| PlayerInput::default()));
+        hooks.input = Some(Box::new(|_, _, _| PlayerInput::default()));
     } else if let Some(Script::Squeeze(slot)) = script {
         let slot_cell = Arc::new(Mutex::new(slot));
-        hooks.input = Some(Box::new(move |peer, _| {
+        hooks.input = Some(Box::new(move |peer, _, _| {
             let (Some(w), me) = (peer.world(), peer.me()) else {
                 return PlayerInput::default();
             };
-            let s = bot.get_or_insert_with(|| {
+            let s = squeeze.get_or_insert_with(|| {
                 let slot = *slot_cell.lock().unwrap_or_else(|e| e.into_inner());
                 SqueezeThrow::new(me, slot.unwrap_or((me.0 % 5) as usize))
             });
             s.input(w)
+        }));
+    } else if let Some(Script::Language(b)) = script {
+        let mut player = ScriptedPlayer::new(*b);
+        hooks.input = Some(Box::new(move |peer, device, now| {
+            let input = player.input(now, peer, device);
+            let me = peer.me().0;
+            while let Some(msg) = player.poll_message() {
+                println!("bot peer={me} t={:.2} {msg}", now.as_secs_f64());
+            }
+            input
         }));
     }
     let mut room = RollbackRoom::open(scene, opts, rcfg, hooks).map_err(|e| Failure {

@@ -185,9 +185,12 @@ pub struct TickInfo<'a> {
 /// They run on the room's thread, with the peer.
 #[derive(Default)]
 pub struct RollbackHooks {
-    /// The input for the next tick, given the peer and this tick's device frame (if any).
+    /// The input for the next tick, given the peer (a script may send it messages), this
+    /// tick's device frame (if any) and the time.
     #[allow(clippy::type_complexity)]
-    pub input: Option<Box<dyn FnMut(&RollbackPeer, Option<&DeviceFrame>) -> PlayerInput + Send>>,
+    pub input: Option<
+        Box<dyn FnMut(&mut RollbackPeer, Option<&DeviceFrame>, Instant) -> PlayerInput + Send>,
+    >,
     /// After each tick: the peer, and the tick's events, time and traffic.
     #[allow(clippy::type_complexity)]
     pub after_tick: Option<Box<dyn FnMut(&RollbackPeer, &TickInfo<'_>) + Send>>,
@@ -418,7 +421,7 @@ impl Ticker {
             self.network_in(now);
             let device = self.lock().device;
             let input = match self.hooks.input.as_mut() {
-                Some(f) => f(&self.peer, device.as_ref()),
+                Some(f) => f(&mut self.peer, device.as_ref(), now),
                 None => device
                     .as_ref()
                     .map(PlayerInput::from_device)

@@ -304,3 +304,93 @@ fn a_joiner_of_the_other_sync_mode_is_refused_and_told_which_the_room_uses() {
         rb.logs()
     );
 }
+
+#[test]
+fn a_rollback_bot_runs_the_script_language_grabs_lifts_and_tears_and_the_other_peer_sees_it() {
+    require_netns();
+    let dir = scratch("rollback-script");
+    let host_dump = dir.join("host.jsonl");
+    let bot_dump = dir.join("bot.jsonl");
+    // (the box taken at its middle, where the soft box stands: a hand holding one of its
+    // corner particles stretches it without lifting it)
+    let script = "wait 5; move right 0.32 0.83 0.05 in 0.8; grab right timeout 5; \
+                  offset right 0 0.25 0 in 1; wait 0.5; release right; wait 1; \
+                  tear right bunny -0.08 0.02 0 0.08 0.02 0 in 0.4; say done tearing; wait 60";
+    let (host, url) = embedded_host(
+        &dir,
+        "rbscript",
+        &[
+            "--sync",
+            "rollback",
+            "--bot",
+            script,
+            "--duration",
+            "40",
+            "--dump",
+            host_dump.to_str().unwrap(),
+            "--dump-hz",
+            "5",
+        ],
+    );
+    let bot = peer_on(
+        &dir,
+        "bot",
+        "join",
+        &url,
+        "rbscript",
+        &[
+            "--sync",
+            "rollback",
+            "--bot",
+            "idle",
+            "--duration",
+            "36",
+            "--dump",
+            bot_dump.to_str().unwrap(),
+            "--dump-hz",
+            "5",
+        ],
+    );
+    // the script's own words, as a state-sync bot says them
+    host.wait_line("grabbed object 3", Duration::from_secs(30));
+    host.wait_line("tore object 2", Duration::from_secs(20));
+    host.wait_line("said \"done tearing\"", Duration::from_secs(10));
+    std::thread::sleep(Duration::from_secs(3));
+    // the other peer saw the box lifted and the bunny torn: the same torn mesh as the host's
+    let lines = softsync_peer::dump::read_dump(&bot_dump).unwrap();
+    let obj = |l: &softsync_peer::dump::DumpLine, id: u32| {
+        l.objects
+            .iter()
+            .find(|o| o.id == id && o.owner == 0)
+            .cloned()
+    };
+    let highest = lines
+        .iter()
+        .filter_map(|l| obj(l, 3))
+        .map(|o| o.pos[1])
+        .fold(f32::MIN, f32::max);
+    assert!(
+        highest > 0.95,
+        "the other peer never saw the soft box lifted (highest {highest} m)\n{}\n{}",
+        host.logs(),
+        bot.logs()
+    );
+    let first = obj(&lines[0], 2).unwrap();
+    let last = obj(lines.last().unwrap(), 2).unwrap();
+    let host_last = softsync_peer::dump::read_dump(&host_dump)
+        .unwrap()
+        .last()
+        .and_then(|l| obj(l, 2))
+        .unwrap();
+    println!(
+        "soft box up to {highest:.3} m; bunny log {:?} → {:?}, mesh {:?} → {:?} (host {:?})",
+        first.log, last.log, first.topology, last.topology, host_last.topology
+    );
+    assert!(last.log.unwrap() >= 3, "the bunny's log: {:?}", last.log);
+    assert_ne!(
+        first.topology, last.topology,
+        "the bunny's mesh did not change"
+    );
+    assert_eq!(last.topology, host_last.topology, "the torn meshes differ");
+    assert_agree(&host, &bot, 3);
+}
