@@ -13,10 +13,8 @@ use std::sync::atomic::Ordering;
 
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::Camera;
-use bevy::ecs::observer::On;
 use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::prelude::*;
-use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
 use softsync_bevy::glue::{to_bevy, to_bevy_quat};
 use softsync_bevy::{RollbackObject, RollbackRoom, RollbackView, SoftsyncSet};
 use softsync_net::PeerId;
@@ -58,6 +56,15 @@ struct RbAvatar {
 #[derive(Resource, Default)]
 struct FrameCosts {
     draw_us: Vec<f32>,
+}
+
+impl FrameCosts {
+    /// The median of the last 300 frames' costs, µs.
+    fn recent_p50(&self) -> f32 {
+        let mut v: Vec<f32> = self.draw_us.iter().rev().take(300).copied().collect();
+        v.sort_by(f32::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(0.0)
+    }
 }
 
 /// Seconds since the frame was published (the display extrapolates by this).
@@ -378,24 +385,6 @@ fn take_screenshots(
         }
         fields
     });
-    let fields = format!(
-        "{fields} draw_us_p50={:.0}",
-        draw.get(draw.len() / 2).copied().unwrap_or(0.0)
-    );
-    let path = plan.dir.join(format!("frame-{n:04}.png"));
-    let line = format!("{fields} path={}", path.display());
-    commands
-        .spawn(Screenshot::primary_window())
-        .observe(move |shot: On<ScreenshotCaptured>| {
-            let saved = shot
-                .image
-                .clone()
-                .try_into_dynamic()
-                .map_err(|e| e.to_string())
-                .and_then(|img| img.to_rgb8().save(&path).map_err(|e| e.to_string()));
-            match saved {
-                Ok(()) => println!("{line}"),
-                Err(e) => eprintln!("screenshot {}: {e}", path.display()),
-            }
-        });
+    let fields = format!("{fields} draw_us_p50={:.0}", costs.recent_p50());
+    crate::view::save_screenshot(&mut commands, plan, n, &fields);
 }

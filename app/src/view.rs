@@ -783,6 +783,17 @@ fn take_screenshots(
             ));
         }
     }
+    save_screenshot(&mut commands, plan, n, &fields);
+}
+
+/// Takes screenshot `n` of the window into `plan`'s folder and prints `fields` with its path
+/// once it is saved.
+pub(crate) fn save_screenshot(
+    commands: &mut Commands,
+    plan: &ScreenshotPlan,
+    n: u32,
+    fields: &str,
+) {
     let path = plan.dir.join(format!("frame-{n:04}.png"));
     let line = format!("{fields} path={}", path.display());
     commands

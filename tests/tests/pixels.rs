@@ -17,7 +17,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{embedded_host, field, require_netns, scratch, send_signal, Proc};
+use common::{embedded_host, field, require_netns, rollback_checks, scratch, send_signal, Proc};
 
 /// An Xvfb server on a free display, killed when dropped.
 struct Xvfb {
@@ -1073,23 +1073,6 @@ fn magenta_at_label(line: &str, min: u8) -> (Vec<f64>, usize) {
         })
         .count();
     (at, n)
-}
-
-/// The `rollback.check` lines of a peer: (epoch, frame) → checksum.
-fn rollback_checks(p: &Proc) -> std::collections::BTreeMap<(u32, i64), String> {
-    p.stdout()
-        .lines()
-        .filter(|l| l.starts_with("rollback.check "))
-        .map(|l| {
-            (
-                (
-                    field(l, "epoch").parse().unwrap(),
-                    field(l, "frame").parse().unwrap(),
-                ),
-                field(l, "checksum").to_owned(),
-            )
-        })
-        .collect()
 }
 
 #[test]

@@ -8,32 +8,15 @@
 //! epoch, and a peer may have confirmed it in the old one before it switched).
 #![allow(clippy::unwrap_used, clippy::disallowed_methods, missing_docs)]
 
-use std::collections::BTreeMap;
 use std::time::Duration;
 
 mod common;
-use common::{embedded_host, field, peer_on, require_netns, scratch, Proc};
+use common::{embedded_host, field, peer_on, require_netns, rollback_checks, scratch, Proc};
 
 /// (epoch, frame) → checksum, from a process's lines.
-fn checks(p: &Proc) -> BTreeMap<(u32, i64), String> {
-    p.stdout()
-        .lines()
-        .filter(|l| l.starts_with("rollback.check "))
-        .map(|l| {
-            (
-                (
-                    field(l, "epoch").parse().unwrap(),
-                    field(l, "frame").parse().unwrap(),
-                ),
-                field(l, "checksum").to_owned(),
-            )
-        })
-        .collect()
-}
-
 /// The frames both processes checked, and that they agree on every one (at least `min`).
 fn assert_agree(a: &Proc, b: &Proc, min: usize) -> usize {
-    let (ca, cb) = (checks(a), checks(b));
+    let (ca, cb) = (rollback_checks(a), rollback_checks(b));
     let common: Vec<(u32, i64)> = ca.keys().filter(|f| cb.contains_key(f)).copied().collect();
     assert!(
         common.len() >= min,

@@ -28,7 +28,7 @@ use serde_json::Value;
 
 mod common;
 use common::dump::{dist, pos, read_dump as dump};
-use common::{binary, embedded_host, field, require_netns, scratch, Proc};
+use common::{binary, embedded_host, field, require_netns, rollback_checks, scratch, Proc};
 
 fn vr_root() -> PathBuf {
     std::env::var_os("SOFTSYNC_VR_ROOT")
@@ -575,23 +575,11 @@ fn a_vr_peer_in_a_rollback_room_plays_with_its_controllers_as_input() {
     );
     // and they agree on the world, checksum for checksum
     std::thread::sleep(Duration::from_secs(3));
-    let checks = |p: &Proc| -> std::collections::BTreeMap<String, String> {
-        p.stdout()
-            .lines()
-            .filter(|l| l.starts_with("rollback.check "))
-            .map(|l| {
-                (
-                    format!("{}/{}", field(l, "epoch"), field(l, "frame")),
-                    field(l, "checksum").to_owned(),
-                )
-            })
-            .collect()
-    };
-    let (h, v) = (checks(&host), checks(&vr));
-    let common: Vec<_> = v.keys().filter(|k| h.contains_key(*k)).collect();
+    let (h, v) = (rollback_checks(&host), rollback_checks(&vr));
+    let common: Vec<_> = v.keys().filter(|k| h.contains_key(k)).collect();
     assert!(common.len() >= 2, "{h:?}\n{v:?}");
     assert!(
-        common.iter().all(|k| h[*k] == v[*k]),
+        common.iter().all(|k| h[k] == v[k]),
         "checksums differ: {h:?}\n{v:?}"
     );
 }

@@ -256,6 +256,23 @@ impl Drop for Proc {
     }
 }
 
+/// A rollback peer's `rollback.check` lines: (epoch, frame) → checksum.
+pub fn rollback_checks(p: &Proc) -> std::collections::BTreeMap<(u32, i64), String> {
+    p.stdout()
+        .lines()
+        .filter(|l| l.starts_with("rollback.check "))
+        .map(|l| {
+            (
+                (
+                    field(l, "epoch").parse().unwrap(),
+                    field(l, "frame").parse().unwrap(),
+                ),
+                field(l, "checksum").to_owned(),
+            )
+        })
+        .collect()
+}
+
 pub fn field<'a>(line: &'a str, key: &str) -> &'a str {
     line.split_whitespace()
         .find_map(|w| w.strip_prefix(&format!("{key}=")))
