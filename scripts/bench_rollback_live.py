@@ -7,6 +7,8 @@ import subprocess
 import sys
 import time
 
+from benchproc import Proc
+
 BIN = "target/release/softsync"
 OUT = "docs/results/rollback"
 TICK = os.sysconf("SC_CLK_TCK")
@@ -21,28 +23,6 @@ def cpu_s(pid):
         return None
 
 
-class Proc:
-    def __init__(self, name, args, logdir):
-        self.path = os.path.join(logdir, name + ".log")
-        self.log = open(self.path, "w")
-        self.p = subprocess.Popen([BIN] + args, stdout=self.log, stderr=subprocess.STDOUT)
-
-    def text(self):
-        with open(self.path) as f:
-            return f.read()
-
-    def wait_for(self, pattern, within):
-        end = time.time() + within
-        while time.time() < end:
-            m = re.search(pattern, self.text())
-            if m:
-                return m
-            if self.p.poll() is not None:
-                break
-            time.sleep(0.05)
-        raise RuntimeError(f"{self.path}: no {pattern!r} within {within}s:\n{self.text()[-2000:]}")
-
-
 def run(mode, peers, lat, seconds, logdir):
     room = f"{mode}{peers}l{lat}"
     cond = f"lat={lat}ms,jitter={lat // 10}ms,loss=5%,seed=7"
@@ -50,11 +30,11 @@ def run(mode, peers, lat, seconds, logdir):
     if mode == "rollback":
         common += ["--sync", "rollback"]
     # peer k starts with the scene's object 2k+1, as in the in-process bench
-    host = Proc(f"{room}-host", ["host", "--bind", "127.0.0.1:0", "--bot", "throw:1"] + common, logdir)
+    host = Proc(BIN, f"{room}-host", ["host", "--bind", "127.0.0.1:0", "--bot", "throw:1"] + common, logdir)
     url = host.wait_for(r"signaling on (\S+)", 20).group(1)
     procs = [host]
     for k in range(1, peers):
-        procs.append(Proc(f"{room}-j{k}", ["join", "--signal", url, "--bot", f"throw:{2 * k + 1}"] + common, logdir))
+        procs.append(Proc(BIN, f"{room}-j{k}", ["join", "--signal", url, "--bot", f"throw:{2 * k + 1}"] + common, logdir))
     ready = rf"epoch n=\d+ frame=\d+ players=(\d+,){{{peers - 1}}}\d+" if mode == "rollback" else r"joined"
     for p in procs[1:]:
         p.wait_for(ready, 40)

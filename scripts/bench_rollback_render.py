@@ -7,39 +7,10 @@ import subprocess
 import tempfile
 import time
 
+from benchproc import Proc
+
 BIN = "target/debug/softsync"
 OUT = "docs/results/rollback"
-
-
-class Proc:
-    def __init__(self, name, args, logdir, env=None):
-        self.path = os.path.join(logdir, name + ".log")
-        self.log = open(self.path, "w")
-        self.p = subprocess.Popen([BIN] + args, stdout=self.log, stderr=subprocess.STDOUT,
-                                  env=env)
-
-    def text(self):
-        with open(self.path) as f:
-            return f.read()
-
-    def wait_for(self, pattern, within):
-        end = time.time() + within
-        while time.time() < end:
-            m = re.search(pattern, self.text())
-            if m:
-                return m
-            if self.p.poll() is not None:
-                break
-            time.sleep(0.05)
-        raise RuntimeError(f"{self.path}: no {pattern!r} within {within}s:\n{self.text()[-2000:]}")
-
-    def stop(self):
-        if self.p.poll() is None:
-            self.p.terminate()
-        try:
-            self.p.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            self.p.kill()
 
 
 def xvfb(logdir):
@@ -68,7 +39,7 @@ def run(front, lat, seconds, logdir, display):
     room = f"render-{front}"
     cond = f"lat={lat}ms,jitter={lat // 10}ms,loss=5%,seed=7"
     common = ["--room", room, "--sync", "rollback", "--net-condition", cond, "--quiet"]
-    host = Proc(f"{room}-host", ["host", "--bind", "127.0.0.1:0", "--bot", "throw:3",
+    host = Proc(BIN, f"{room}-host", ["host", "--bind", "127.0.0.1:0", "--bot", "throw:3",
                                  "--duration", str(seconds + 60)] + common, logdir)
     url = host.wait_for(r"signaling on (\S+)", 20).group(1)
     args = ["join", "--signal", url, "--duration", str(seconds + 40)] + common
@@ -80,7 +51,7 @@ def run(front, lat, seconds, logdir, display):
                    VK_ICD_FILENAMES="/usr/share/vulkan/icd.d/lvp_icd.x86_64.json")
     else:
         args += ["--bot", "idle"]
-    joiner = Proc(f"{room}-joiner", args, logdir, env)
+    joiner = Proc(BIN, f"{room}-joiner", args, logdir, env)
     joiner.wait_for(r"epoch n=\d+ frame=\d+ players=\d+,\d+", 90)
     time.sleep(seconds)
     joiner.stop()
