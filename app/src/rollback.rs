@@ -496,6 +496,7 @@ fn run_front(
                 .add_plugins(crate::desktop::DesktopPlugin(
                     crate::desktop::OrbitCamera::at_home(home, focus),
                 ));
+            crate::rollback_view::add_systems(&mut app);
         }
         #[cfg(feature = "vr")]
         FrontEnd::Vr => {
@@ -505,6 +506,7 @@ fn run_front(
                     pos: softsync_bevy::glue::to_bevy(glam::Vec3::new(home.0.x, 0.0, home.0.z)),
                     rot: softsync_bevy::glue::to_bevy_quat(home.1),
                 }));
+            crate::rollback_view::add_systems(&mut app);
         }
         _ => return Err(Failure::usage("this front end is not in this build")),
     }

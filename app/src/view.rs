@@ -80,7 +80,7 @@ impl Plugin for ViewPlugin {
             .add_systems(Startup, spawn_static)
             .init_resource::<RenderWarm>();
         if self.0.rollback {
-            crate::rollback_view::add_systems(app);
+            // a rollback room's view adds its own systems (`rollback_view::add_systems`)
             return;
         }
         app.add_systems(
