@@ -17,7 +17,7 @@
 //! fits 11.1 ms; what is left of the frame goes to rendering, the network and the rest (a
 //! headset's compositor needs most of it on a real GPU).
 //!
-//! Writes `limits.csv`, `limits.svg` (p99 against particles, one line per player count) and
+//! Writes `limits.csv`, `limits.txt` (the RESULT lines), `limits.svg` (p99 against particles, one line per player count) and
 //! `RESULT rollback.limits …` lines, then `RESULT rollback.limit …`: per player count, the
 //! largest scene that kept 90 Hz.
 #![allow(clippy::unwrap_used, clippy::disallowed_methods, missing_docs)]
@@ -132,7 +132,7 @@ fn main() {
     let copies: &[usize] = if quick {
         &[0, 3, 7]
     } else {
-        &[0, 1, 3, 7, 15, 23]
+        &[0, 1, 3, 4, 5, 6, 7, 15]
     };
     let players: &[usize] = if quick { &[2, 4] } else { &[2, 4, 8] };
     let mut csv = Csv::new(&[
@@ -144,6 +144,7 @@ fn main() {
         "keeps_90hz",
     ]);
     let mut lines: Vec<(usize, Vec<(f64, f64)>)> = Vec::new();
+    let mut results: Vec<String> = Vec::new();
     let mut limits = Vec::new();
     for &p in players {
         let mut points = Vec::new();
@@ -155,17 +156,17 @@ fn main() {
             if keeps {
                 largest = Some(largest.map_or(particles, |l| l.max(particles)));
             }
-            println!(
-                "{}",
-                ResultLine::new("rollback.limits")
-                    .field("players", p)
-                    .field("particles", particles)
-                    .field("lat_ms", 50)
-                    .field("hz", 90)
-                    .fixed("tick_ms_p50", p50, 2)
-                    .fixed("tick_ms_p99", p99, 2)
-                    .field("keeps_90hz", keeps)
-            );
+            let line = ResultLine::new("rollback.limits")
+                .field("players", p)
+                .field("particles", particles)
+                .field("lat_ms", 50)
+                .field("hz", 90)
+                .fixed("tick_ms_p50", p50, 2)
+                .fixed("tick_ms_p99", p99, 2)
+                .field("keeps_90hz", keeps)
+                .to_string();
+            println!("{line}");
+            results.push(line);
             csv.row([
                 p.to_string(),
                 k.to_string(),
@@ -184,19 +185,20 @@ fn main() {
         limits.push((p, largest));
     }
     for (p, largest) in &limits {
-        println!(
-            "{}",
-            ResultLine::new("rollback.limit")
-                .field("players", p)
-                .field("lat_ms", 50)
-                .field("hz", 90)
-                .field(
-                    "max_particles",
-                    largest.map_or("none".to_owned(), |l| l.to_string())
-                )
-        );
+        let line = ResultLine::new("rollback.limit")
+            .field("players", p)
+            .field("lat_ms", 50)
+            .field("hz", 90)
+            .field(
+                "max_particles",
+                largest.map_or("none".to_owned(), |l| l.to_string()),
+            )
+            .to_string();
+        println!("{line}");
+        results.push(line);
     }
     csv.write(out.join("limits.csv")).unwrap();
+    std::fs::write(out.join("limits.txt"), results.join("\n") + "\n").unwrap();
     let colors = [(31u8, 119u8, 180u8), (214, 39, 40), (44, 160, 44)];
     let x_max = lines
         .iter()

@@ -4,7 +4,7 @@
 //! the host is killed: the earliest joiner takes over; then a late joiner arrives. Prints what
 //! each peer syncs once per simulated second.
 //!
-//! `cargo run --release -p softsync-net --example demo -- [--seconds 14]`
+//! `cargo run --release -p softsync-net --example net_demo -- [--seconds 14]`
 #![allow(
     clippy::unwrap_used,
     clippy::print_stdout,

@@ -1,7 +1,7 @@
 //! Headless soft-body demo: the bunny, an icosphere and a soft box dropped on a table in one
 //! rapier world; a plate squeezes the bunny; prints what it simulates twice a second.
 //!
-//! `cargo run --release -p softsync-softbody --example demo -- [--seconds 6] [--hz 90]`
+//! `cargo run --release -p softsync-softbody --example softbody_demo -- [--seconds 6] [--hz 90]`
 #![allow(
     clippy::disallowed_methods,
     clippy::unwrap_used,
