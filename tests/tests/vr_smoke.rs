@@ -502,6 +502,8 @@ fn a_vr_peer_in_a_rollback_room_plays_with_its_controllers_as_input() {
     );
     let dir = scratch("vr-rollback");
     let host_dump = dir.join("host.jsonl");
+    let vr_dump = dir.join("vr.jsonl");
+    // the host is a bot that keeps reaching for the soft box (object 3), lifting and throwing it
     let (host, url) = embedded_host(
         &dir,
         "vrrb",
@@ -509,7 +511,7 @@ fn a_vr_peer_in_a_rollback_room_plays_with_its_controllers_as_input() {
             "--sync",
             "rollback",
             "--bot",
-            "idle",
+            "throw:3",
             "--duration",
             "150",
             "--dump",
@@ -518,7 +520,20 @@ fn a_vr_peer_in_a_rollback_room_plays_with_its_controllers_as_input() {
             "5",
         ],
     );
-    let vr = vr_peer(&dir, &url, "vrrb", &["--sync", "rollback"], &[]);
+    let vr = vr_peer(
+        &dir,
+        &url,
+        "vrrb",
+        &[
+            "--sync",
+            "rollback",
+            "--dump",
+            vr_dump.to_str().unwrap(),
+            "--dump-hz",
+            "10",
+        ],
+        &[],
+    );
     vr.wait_line("xr state=Running", Duration::from_secs(90));
     let me: u64 = field(
         &vr.wait_line("joining room=", Duration::from_secs(30)),
