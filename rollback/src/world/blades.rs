@@ -13,7 +13,7 @@ use softsync_peer::peer::topology::{
 use softsync_peer::{HandTool, LocalBody};
 use softsync_softbody::BuildStep;
 
-use super::{LogEntry, RollbackWorld, WorldObject};
+use super::{LogEntry, RollbackWorld, WorldObject, MAX_LOG_ENTRIES};
 
 /// The topology log as a persistent list: a save shares it (one pointer), an append adds a
 /// node, a load takes the saved list back, whatever happened since.
@@ -214,7 +214,12 @@ impl RollbackWorld {
     }
 
     /// Applies `event` to object `i` and logs it.
+    /// Refused once the log holds [`MAX_LOG_ENTRIES`] (the same on every peer): a snapshot
+    /// must stay loadable for joiners, whatever a player does with its blade.
     pub(super) fn record(&mut self, i: usize, event: TopologyEvent) -> Result<(), String> {
+        if self.log.len() >= MAX_LOG_ENTRIES {
+            return Err(format!("the topology log is full ({MAX_LOG_ENTRIES} entries)"));
+        }
         self.apply(i, &event)?;
         self.log.push(LogEntry {
             object: u32::try_from(i).map_err(|e| e.to_string())?,
