@@ -433,6 +433,11 @@ impl Default for SessionConfig {
 }
 
 impl SessionConfig {
+    /// The configuration of class `c` (none for a class this room does not have).
+    pub fn class(&self, c: crate::ClassId) -> Option<&ClassConfig> {
+        self.classes.get(usize::from(c.0))
+    }
+
     /// This configuration with the adaptive failure detector ([`FailureDetector::ADAPTIVE`])
     /// and 50 ms heartbeats (the default): a dead host is noticed in about a third of a
     /// second on a good link, a host stopped for less than

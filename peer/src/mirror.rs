@@ -19,22 +19,9 @@ use softsync_softbody::{BuildStep, SoftBodyHandle, SoftBodySet};
 
 use crate::events::{PeerError, TopologyError};
 use crate::peer::topology::{plane_of, segment_of};
+/// Where a scene's class becomes a body (`scene/body.rs`), re-exported where it was.
+pub use crate::scene::body::{build_body, LocalBody};
 use crate::scene::{Kind, Scene};
-
-/// How a networked object exists in the local world.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum LocalBody {
-    /// A pose only (avatar parts).
-    Pose,
-    /// A rigid body.
-    Rigid(RigidBodyHandle),
-    /// A soft body.
-    Soft(SoftBodyHandle),
-    /// A soft body being built off the frame: an object that came with a topology history
-    /// (a cut's piece, a torn body at a late join), replayed on a worker thread. Nothing is
-    /// in the world until it lands (then it is `Soft`).
-    Building,
-}
 
 /// A networked object as this peer knows it.
 #[derive(Clone, Debug)]
@@ -449,37 +436,6 @@ pub(crate) fn build_step(
             particles: check_particles.then_some(*particles as usize),
         },
     })
-}
-
-/// Build a body of `kind` at a pose in a world: a rigid body, or a soft body built around the
-/// origin and then placed (its rest shape stays in its own frame); avatar parts have no body.
-/// The mirror builds the room's objects with it, and a rollback world (`softsync-rollback`)
-/// builds the same bodies.
-pub fn build_body(
-    scene: &Scene,
-    kind: Kind,
-    world: &mut PhysicsWorld,
-    soft: &mut SoftBodySet,
-    pos: Vec3,
-    rot: Quat,
-) -> Result<LocalBody, PeerError> {
-    if kind.is_avatar() {
-        return Ok(LocalBody::Pose);
-    }
-    if scene.soft_config(kind).is_none() {
-        return scene
-            .build_rigid(kind, world, pos, rot)
-            .map(LocalBody::Rigid)
-            .ok_or_else(|| {
-                PeerError::Build(format!("class {} is not in scene {}", kind.0, scene.name))
-            });
-    }
-    // planned once per class (the clustering), copied into the world each time
-    let plan = scene.soft_plan(kind).map_err(PeerError::Build)?;
-    let h = soft
-        .insert_plan_at(&plan, world, pos, rot)
-        .map_err(|e| PeerError::Build(e.to_string()))?;
-    Ok(LocalBody::Soft(h))
 }
 
 #[cfg(test)]

@@ -459,7 +459,7 @@ impl Session {
         let mut parts = Vec::new();
         for o in self.objects.iter() {
             parts.push((o.info.id, 0));
-            let Some(class) = self.cfg.classes.get(usize::from(o.info.class.0)) else {
+            let Some(class) = self.cfg.class(o.info.class) else {
                 continue;
             };
             if class.soft_body_mode == SoftBodyMode::Particles {

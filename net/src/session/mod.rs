@@ -498,7 +498,7 @@ impl Session {
     }
 
     fn class(&self, c: ClassId) -> Option<&ClassConfig> {
-        self.cfg.classes.get(usize::from(c.0))
+        self.cfg.class(c)
     }
 
     // ---------------------------------------------------------------- outputs

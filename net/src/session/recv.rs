@@ -300,7 +300,7 @@ impl Session {
             let parsed = decode_state_block_sized(count, bits, |id| {
                 let o = objects.get(id)?;
                 Some(EntryLayout {
-                    class: cfg.classes.get(usize::from(o.info.class.0))?,
+                    class: cfg.class(o.info.class)?,
                     particles: o.info.particles,
                     generation: o.topology.generation(),
                 })
@@ -321,7 +321,7 @@ impl Session {
                 if let Some(class) = self
                     .objects
                     .get(e.id)
-                    .and_then(|o| self.cfg.classes.get(usize::from(o.info.class.0)))
+                    .and_then(|o| self.cfg.class(o.info.class))
                 {
                     *self
                         .stats
@@ -424,7 +424,7 @@ impl Session {
             self.stats.dropped_stale_epoch += 1;
             return Applied::Dropped;
         }
-        let Some(class) = self.cfg.classes.get(usize::from(o.info.class.0)) else {
+        let Some(class) = self.cfg.class(o.info.class) else {
             return Applied::Dropped;
         };
         let pq = class.position_quantizer();

@@ -401,7 +401,7 @@ impl Session {
         let Some(o) = self.objects.get(id) else {
             return false;
         };
-        let Some(class) = self.cfg.classes.get(usize::from(o.info.class.0)) else {
+        let Some(class) = self.cfg.class(o.info.class) else {
             return false;
         };
         let Some(link) = self.links.get_mut(&to) else {

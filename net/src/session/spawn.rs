@@ -285,7 +285,7 @@ impl Session {
 
     /// Add a replica of `info`; `request`: our spawn request it answers.
     pub(super) fn insert_object(&mut self, now: Instant, info: SpawnInfo, request: Option<u32>) {
-        let Some(class) = self.cfg.classes.get(usize::from(info.class.0)) else {
+        let Some(class) = self.cfg.class(info.class) else {
             return;
         };
         let ev = Event::Spawned {

@@ -264,7 +264,7 @@ impl Session {
         let Some(class) = self
             .objects
             .get(id)
-            .and_then(|o| self.cfg.classes.get(usize::from(o.info.class.0)))
+            .and_then(|o| self.cfg.class(o.info.class))
         else {
             return;
         };

@@ -7,6 +7,7 @@
 //! settings and meshes (see [`Scene::content_digest`]), so a joiner with another scene is
 //! refused at the handshake with a clear reason.
 
+pub mod body;
 mod bundle;
 pub mod cache;
 mod file;

@@ -218,7 +218,9 @@ impl RollbackWorld {
     /// must stay loadable for joiners, whatever a player does with its blade.
     pub(super) fn record(&mut self, i: usize, event: TopologyEvent) -> Result<(), String> {
         if self.log.len() >= MAX_LOG_ENTRIES {
-            return Err(format!("the topology log is full ({MAX_LOG_ENTRIES} entries)"));
+            return Err(format!(
+                "the topology log is full ({MAX_LOG_ENTRIES} entries)"
+            ));
         }
         self.apply(i, &event)?;
         self.log.push(LogEntry {
