@@ -16,6 +16,8 @@ mod report;
 mod rollback;
 #[cfg(feature = "desktop")]
 mod rollback_view;
+#[cfg(feature = "desktop")]
+mod screenshot;
 mod stderr_log;
 #[cfg(feature = "desktop")]
 mod view;

@@ -20,9 +20,10 @@ use softsync_bevy::{RollbackObject, RollbackRoom, RollbackView, SoftsyncSet};
 use softsync_net::PeerId;
 use softsync_peer::Kind;
 
+use crate::screenshot::{save_screenshot, screen_box};
 use crate::view::{
-    kind_color, peer_color, rigid_mesh, screen_box, short, to_arrays, Hud, RenderWarm,
-    ScreenshotState, ViewConfig,
+    kind_color, peer_color, rigid_mesh, short, to_arrays, Hud, RenderWarm, ScreenshotState,
+    ViewConfig,
 };
 
 /// The view's systems for a rollback room.
@@ -386,5 +387,5 @@ fn take_screenshots(
         fields
     });
     let fields = format!("{fields} draw_us_p50={:.0}", costs.recent_p50());
-    crate::view::save_screenshot(&mut commands, plan, n, &fields);
+    save_screenshot(&mut commands, plan, n, &fields);
 }
