@@ -260,15 +260,7 @@ fn draw_avatars(
 
 /// The HUD's text in a rollback room.
 fn hud_text(room: &RollbackRoom, v: &RollbackView, costs: &FrameCosts) -> String {
-    let mut draw = costs
-        .draw_us
-        .iter()
-        .rev()
-        .take(300)
-        .copied()
-        .collect::<Vec<_>>();
-    draw.sort_by(f32::total_cmp);
-    let p50 = draw.get(draw.len() / 2).copied().unwrap_or(0.0);
+    let p50 = costs.recent_p50();
     let held: Vec<String> = v
         .objects
         .iter()
@@ -343,14 +335,6 @@ fn take_screenshots(
     state.taken += 1;
     let cam = cams.iter().find(|(c, _)| c.is_active);
     let scene = room.scene();
-    let mut draw = costs
-        .draw_us
-        .iter()
-        .rev()
-        .take(300)
-        .copied()
-        .collect::<Vec<_>>();
-    draw.sort_by(f32::total_cmp);
     let fields = room.with_view(|v| {
         let ahead = ahead(v);
         let mut fields = format!(
